@@ -1,0 +1,306 @@
+"""Octave bank of recursive Allan accumulators with staggered phases: the default online estimator.
+
+Why: Miao et al. 2014 measure only the Allan variance at tau0 (their eq. (3.7), M = 1), one number
+dominated by N^2/tau0, so B and K are hardly observable from it (see docs/online.md). Here the whole
+Allan curve is tracked recursively at the octave cluster sizes m_j = 2^j (j = 0 .. levels-1) and the
+coefficients are solved from it.
+
+Accumulators (per level j, bounded memory). Cluster sums are built as a pyramid of aligned pair sums
+(level-u block = sum of two level-(u-1) blocks; this is eq. (3.3), cluster mean = block sum / m, kept as a
+sum so that the arithmetic is exact-order and chunk-independent). Level j uses ``P_j = min(phases, m_j)``
+staggered phases: blocks of step s_j = m_j / P_j samples; a cluster sum ending at block i is
+c_i = b_{i-P_j+1} + ... + b_i, and each new block closes one cluster of one phase, whose Allan
+difference with the previous cluster of the same phase is d_i = c_i - c_{i-P_j}. Each phase alone is the
+classic non-overlapping estimator; all P_j phases together are the overlapping estimator decimated by s_j
+(P_j = m_j: fully overlapping, levels 0..log2(phases)). The Allan variance is the recursion of eq. (3.4)
+written on sums, with optional exponential forgetting lambda_j = exp(-s_j / (forgetting_s rate_hz)) per
+difference:
+
+    S_j <- lambda_j S_j + d_i^2 / (2 m_j^2),   W_j <- lambda_j W_j + 1,   sigma_j^2 = S_j / W_j
+
+(lambda = 1 gives exactly eq. (3.4): sigma_k^2 = (k-2)/(k-1) sigma_{k-1}^2 + d_k^2 / (2 (k-1)), per phase
+pooled). Memory: ``levels x (2 phases - 1)`` block sums, independent of run length.
+
+Coefficients: the Allan variance is linear in theta = [Q^2, N^2, B^2, K^2, R^2] (Miao eq. (3.6);
+:func:`companion.allan.terms.linear_basis`), sigma_j^2 = A_j theta. theta is the weighted non-negative
+least-squares solution over the levels with var(sigma_j^2) = 2 (A_j theta)^2 / edf_j (chi-square with
+edf_j degrees of freedom; edf_j = effective number of differences / P_j, i.e. about the number of
+non-overlapping clusters; Kish's n_eff = W^2 / sum(w^2) under forgetting), iterated (weights from the
+model, not from the noisy measurement, to avoid the low bias of self-weighting). Because S_j, W_j are
+sufficient statistics of the whole history, re-solving from them at each report is the information-form
+Kalman filter of the constant state theta with those measurement variances, without counting any data
+twice. 1-sigma uncertainty of theta from (A^T W A)^-1 (free parameters; the marginal of the unconstrained
+problem for parameters at the zero bound), propagated to p = sqrt(theta) as sqrt(theta + s) - sqrt(theta)
+(= s / (2 p) when s << theta, sqrt(s) at the bound).
+
+Streaming and block updates give bit-identical results: scalar samples are buffered (at most
+``_BUF`` of them) and every path runs the same chunk-independent block code (element-wise operations in
+a fixed order, sequential recursions via ``scipy.signal.lfilter`` with carried state).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import nnls
+from scipy.signal import lfilter
+
+from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, linear_basis
+
+DEFAULT_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
+_BUF = 2048
+
+
+def check_effects(effects) -> tuple[str, ...]:
+    effects = tuple(effects)
+    bad = [e for e in effects if e not in LINEAR_EFFECTS]
+    if bad or not effects:
+        raise ValueError(
+            f"online estimator effects must be a non-empty subset of {', '.join(LINEAR_EFFECTS)}; got {list(effects)}"
+        )
+    return tuple(e for e in LINEAR_EFFECTS if e in effects)  # canonical order
+
+
+class OctaveBankEstimator:
+    """Online Allan coefficients from octave accumulators with staggered phases (see module docstring).
+
+    Parameters: ``rate_hz`` sample rate; ``effects`` subset of the five linear effects; ``forgetting_s``
+    exponential memory in seconds (None: infinite memory); ``phases`` staggered phases per level (power of
+    2); ``max_tau_s`` largest cluster time kept (fixes the number of levels, hence the state size);
+    ``min_edf`` smallest degrees of freedom for a level to enter the fit.
+    """
+
+    kind = "octave"
+
+    def __init__(self, rate_hz, effects=DEFAULT_EFFECTS, forgetting_s=None, phases=8, max_tau_s=20000.0,
+                 min_edf=2.0):
+        rate_hz = float(rate_hz)
+        if not (rate_hz > 0 and math.isfinite(rate_hz)):
+            raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
+        phases = int(phases)
+        if phases < 1 or phases & (phases - 1):
+            raise ValueError(f"phases must be a power of 2 (1, 2, 4, 8, ...), got {phases}")
+        if forgetting_s is not None:
+            forgetting_s = float(forgetting_s)
+            if not forgetting_s > 0:
+                raise ValueError(f"forgetting_s must be positive (or null for no forgetting), got {forgetting_s}")
+        max_tau_s = float(max_tau_s)
+        if not max_tau_s > 0:
+            raise ValueError(f"max_tau_s must be positive, got {max_tau_s}")
+        self.rate_hz = rate_hz
+        self.effects = check_effects(effects)
+        self.forgetting_s = forgetting_s
+        self.phases = phases
+        self.max_tau_s = max_tau_s
+        self.min_edf = float(min_edf)
+        self.levels = max(1, int(math.floor(math.log2(max(max_tau_s * rate_hz, 1.0)))) + 1)
+        j = np.arange(self.levels)
+        self._m = 2.0 ** j
+        self._P = np.minimum(phases, 2 ** j).astype(np.int64)  # phases per level
+        self._u = j - np.log2(self._P).astype(np.int64)  # pyramid level of the step blocks
+        self._s = 2 ** self._u  # step in samples
+        if forgetting_s is None:
+            self._lam = np.ones(self.levels)
+        else:
+            self._lam = np.exp(-self._s / (forgetting_s * rate_hz))
+        self._n = 0  # samples processed (not counting the buffer)
+        self._y_ref = None  # first sample, subtracted from all (a constant does not change AVAR)
+        self._pending = [None] * (int(self._u.max()) + 1)  # unpaired block per pyramid level (index u: level-u block)
+        self._hist = [np.zeros(0) for _ in range(self.levels)]
+        self._S = np.zeros(self.levels)
+        self._buf: list[float] = []
+        self.n_rejected = 0
+
+    # ------------------------------------------------------------------ updates
+    @property
+    def n_samples(self) -> int:
+        return self._n + len(self._buf)
+
+    def update(self, y) -> None:
+        """Add one rate sample (float) or a 1-D block (SI, at ``rate_hz``). Non-finite samples are skipped
+        and counted in ``n_rejected``. Identical results for any split of the same sequence."""
+        if np.ndim(y) == 0:
+            v = float(y)
+            if math.isfinite(v):
+                self._buf.append(v)
+                if len(self._buf) >= _BUF:
+                    self._flush()
+            else:
+                self.n_rejected += 1
+            return
+        y = np.asarray(y, dtype=float).ravel()
+        self._flush()
+        self._process(y)
+
+    def _flush(self) -> None:
+        if self._buf:
+            buf = np.array(self._buf)
+            self._buf = []
+            self._process(buf)
+
+    def _process(self, y: np.ndarray) -> None:
+        ok = np.isfinite(y)
+        if not ok.all():
+            self.n_rejected += int(y.size - ok.sum())
+            y = y[ok]
+        if y.size == 0:
+            return
+        if self._y_ref is None:
+            self._y_ref = float(y[0])
+        blocks = [y - self._y_ref]  # level-0 blocks are the samples
+        for u in range(1, len(self._pending)):
+            prev = blocks[u - 1]
+            if self._pending[u] is not None:
+                prev = np.concatenate(([self._pending[u]], prev))
+            k = prev.size // 2
+            blocks.append(prev[0:2 * k:2] + prev[1:2 * k:2])
+            self._pending[u] = float(prev[-1]) if prev.size % 2 else None
+        self._n += y.size
+        for j in range(self.levels):
+            P = int(self._P[j])
+            new = blocks[self._u[j]]
+            if new.size == 0:
+                continue
+            ext = np.concatenate((self._hist[j], new)) if self._hist[j].size else new
+            h = self._hist[j].size
+            keep = min(2 * P - 1, ext.size)
+            self._hist[j] = ext[ext.size - keep:].copy()
+            if ext.size < 2 * P:
+                continue
+            # cluster sums ending at local index k >= P-1, summed in a fixed order
+            L = ext.size - P + 1
+            c = ext[0:L].copy()
+            for q in range(1, P):
+                c += ext[q:q + L]
+            # differences at local end index k >= 2P-1 and k >= h (new blocks only); c index = k - (P-1)
+            k = np.arange(max(2 * P - 1, h), ext.size)
+            if k.size == 0:
+                continue
+            d = c[k - (P - 1)] - c[k - (2 * P - 1)]
+            x = d * d / (2.0 * self._m[j] ** 2)
+            lam = self._lam[j]
+            out, zf = lfilter([1.0], [1.0, -lam], x, zi=[lam * self._S[j]])
+            self._S[j] = out[-1]
+
+    # ------------------------------------------------------------------ read-out
+    def _events(self) -> np.ndarray:
+        """Number of Allan differences seen per level."""
+        count = self._n // self._s
+        return np.maximum(count - (2 * self._P - 1), 0)
+
+    def avar(self):
+        """Current Allan variance per level: ``(tau, avar, edf)`` for levels with at least one difference."""
+        self._flush()
+        e = self._events()
+        ok = e > 0
+        lam = self._lam
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if self.forgetting_s is None:
+                W = e.astype(float)
+                n_eff = W
+            else:
+                r = self._s / (self.forgetting_s * self.rate_hz)
+                W = np.expm1(-e * r) / np.expm1(-r)
+                W2 = np.expm1(-2 * e * r) / np.expm1(-2 * r)
+                n_eff = W * W / W2
+            avar = self._S / W
+        edf = n_eff / self._P
+        tau = self._m / self.rate_hz
+        return tau[ok], avar[ok], edf[ok]
+
+    def terms(self) -> list[dict]:
+        """Current coefficients, one term per configured effect (0 when not supported by the data):
+        ``[{"effect": "white_noise", "N": v, "std": {"N": one_sigma}}, ...]`` in SI units."""
+        tau, avar, edf = self.avar()
+        use = edf >= self.min_edf
+        theta, s_theta = fit_theta(tau[use], avar[use], edf[use], self.effects)
+        out = []
+        for e, th, st in zip(self.effects, theta, s_theta):
+            p = LINEAR_PARAM[e]
+            val = math.sqrt(max(th, 0.0))
+            std = math.sqrt(max(th, 0.0) + st) - val if math.isfinite(st) else float("inf")
+            out.append({"effect": e, p: val, "std": {p: std}})
+        return out
+
+    # ------------------------------------------------------------------ persistence
+    def state_dict(self) -> dict:
+        """JSON-serialisable state; its size depends on the configuration only, not on the run length."""
+        self._flush()
+        return {
+            "kind": self.kind,
+            "version": 1,
+            "config": {"rate_hz": self.rate_hz, "effects": list(self.effects), "forgetting_s": self.forgetting_s,
+                       "phases": self.phases, "max_tau_s": self.max_tau_s, "min_edf": self.min_edf},
+            "n": self._n,
+            "n_rejected": self.n_rejected,
+            "y_ref": self._y_ref,
+            "pending": list(self._pending),
+            "hist": [h.tolist() for h in self._hist],
+            "S": self._S.tolist(),
+        }
+
+    @classmethod
+    def from_state_dict(cls, d: dict) -> "OctaveBankEstimator":
+        if d.get("kind") != cls.kind:
+            raise ValueError(f"state is for estimator kind {d.get('kind')!r}, not {cls.kind!r}")
+        est = cls(**d["config"])
+        if len(d["S"]) != est.levels or len(d["pending"]) != len(est._pending):
+            raise ValueError("estimator state does not match its configuration")
+        est._n = int(d["n"])
+        est.n_rejected = int(d.get("n_rejected", 0))
+        est._y_ref = d["y_ref"]
+        est._pending = [None if v is None else float(v) for v in d["pending"]]
+        est._hist = [np.asarray(h, dtype=float) for h in d["hist"]]
+        est._S = np.asarray(d["S"], dtype=float)
+        return est
+
+
+def fit_theta(tau, avar, edf, effects, iterations=6):
+    """Weighted NNLS of AVAR = A theta, theta = squared coefficients; var(avar_j) = 2 model_j^2 / edf_j.
+
+    Returns ``(theta, std_theta)`` (arrays over ``effects``); std is inf where nothing constrains it.
+    """
+    n_par = len(effects)
+    tau = np.asarray(tau, float)
+    avar = np.asarray(avar, float)
+    edf = np.asarray(edf, float)
+    if tau.size == 0:
+        return np.zeros(n_par), np.full(n_par, np.inf)
+    A = linear_basis(tau, effects)
+    model = avar.copy()
+    theta = np.zeros(n_par)
+    floor = 1e-300
+    for _ in range(iterations):
+        sw = np.sqrt(edf / 2.0) / np.maximum(model, avar * 1e-3 + floor)
+        Aw = A * sw[:, None]
+        scale = np.linalg.norm(Aw, axis=0)
+        scale[scale == 0] = 1.0
+        sol, _ = nnls(Aw / scale, avar * sw)
+        theta = sol / scale
+        new_model = A @ theta
+        if np.allclose(new_model, model, rtol=1e-9, atol=0):
+            model = new_model
+            break
+        model = new_model
+    sw = np.sqrt(edf / 2.0) / np.maximum(model, avar * 1e-3 + floor)
+    Aw = A * sw[:, None]
+    F = Aw.T @ Aw  # Fisher information of theta
+    std = np.full(n_par, np.inf)
+    free = theta > 0
+    if free.any():
+        try:
+            cov = np.linalg.inv(F[np.ix_(free, free)])
+            std[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        except np.linalg.LinAlgError:
+            pass
+    for i in np.flatnonzero(~free):
+        idx = np.flatnonzero(free | (np.arange(n_par) == i))
+        sub = F[np.ix_(idx, idx)]
+        try:
+            cov = np.linalg.pinv(sub)
+            v = cov[list(idx).index(i), list(idx).index(i)]
+            std[i] = math.sqrt(v) if v > 0 else np.inf
+        except np.linalg.LinAlgError:
+            pass
+    return theta, std

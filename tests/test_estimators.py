@@ -1,0 +1,102 @@
+"""Online estimators: streaming == block, bounded state, recovery of known coefficients (simulated)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from companion.allan.adev import avar_nonoverlapping, oavar
+from companion.estimators import OctaveBankEstimator, from_state_dict, make_estimator
+
+
+def white_rw(rng, n, fs, N, K=0.0, bias=0.0):
+    """Test-only generator: white rate noise of density N (std N sqrt(fs)) plus rate random walk K."""
+    y = rng.normal(0.0, N * np.sqrt(fs), n) + bias
+    if K:
+        y += np.cumsum(rng.normal(0.0, K * np.sqrt(1.0 / fs), n))
+    return y
+
+
+def test_streaming_equals_block_bitwise():
+    rng = np.random.default_rng(11)
+    y = white_rw(rng, 50_000, 100.0, 2e-3, 1e-4, bias=0.3)
+    a = OctaveBankEstimator(100.0, forgetting_s=60.0)
+    a.update(y)
+    b = OctaveBankEstimator(100.0, forgetting_s=60.0)
+    for v in y[:7001]:
+        b.update(v)
+    for chunk in np.array_split(y[7001:], 13):
+        b.update(chunk)
+    assert a.n_samples == b.n_samples == y.size
+    assert np.array_equal(a.avar()[1], b.avar()[1])
+    assert a.terms() == b.terms()
+
+
+def test_one_phase_is_classic_nonoverlapping_avar():
+    rng = np.random.default_rng(3)
+    y = white_rw(rng, 40_000, 50.0, 1e-3, 5e-5)
+    est = OctaveBankEstimator(50.0, phases=1)
+    est.update(y)
+    tau, avar, _ = est.avar()
+    t2, a2, _ = avar_nonoverlapping(y, 50.0, m=np.round(tau * 50.0).astype(int))
+    assert np.allclose(avar[: t2.size], a2, rtol=1e-9)
+
+
+def test_full_phases_small_levels_equal_overlapping_avar():
+    rng = np.random.default_rng(4)
+    y = white_rw(rng, 20_000, 50.0, 1e-3, 5e-5)
+    est = OctaveBankEstimator(50.0, phases=8)
+    est.update(y)
+    tau, avar, _ = est.avar()
+    _, a2, _, _ = oavar(y, 50.0, m=[1, 2, 4, 8])  # m <= phases: fully overlapping
+    assert np.allclose(avar[:4], a2, rtol=1e-9)
+
+
+def test_state_roundtrip_json_and_bounded_size():
+    rng = np.random.default_rng(5)
+    y = white_rw(rng, 30_000, 200.0, 1e-3)
+    a = OctaveBankEstimator(200.0, forgetting_s=100.0)
+    a.update(y[:12_345])
+    d = json.loads(json.dumps(a.state_dict()))
+    b = from_state_dict(d)
+    a.update(y[12_345:])
+    b.update(y[12_345:])
+    assert a.terms() == b.terms()
+    c = OctaveBankEstimator(200.0, forgetting_s=100.0)
+    c.update(white_rw(rng, 300_000, 200.0, 1e-3))
+    assert len(json.dumps(c.state_dict())) < 1.3 * len(json.dumps(a.state_dict())) + 2000
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_white_and_random_walk_recovered(seed):
+    rng = np.random.default_rng(100 + seed)
+    fs, N, K = 100.0, 2e-3, 2e-5
+    y = white_rw(rng, 200_000, fs, N, K, bias=0.01)
+    est = make_estimator("octave", rate_hz=fs, effects=("white_noise", "random_walk"))
+    est.update(y)
+    t = {d["effect"]: d for d in est.terms()}
+    # N: AVAR at tau0 has ~2e5 degrees of freedom -> relative error of N well under 1 %
+    assert t["white_noise"]["N"] == pytest.approx(N, rel=0.01)
+    assert t["white_noise"]["std"]["N"] < 0.01 * N
+    # K from a 2000 s run: few long clusters -> loose statistical tolerance (4 sigma of its own std)
+    assert abs(t["random_walk"]["K"] - K) < 4 * t["random_walk"]["std"]["K"] + 0.05 * K
+
+
+def test_bad_config_is_a_clear_error():
+    with pytest.raises(ValueError, match="phases"):
+        OctaveBankEstimator(100.0, phases=3)
+    with pytest.raises(ValueError, match="effects"):
+        OctaveBankEstimator(100.0, effects=("gauss_markov",))
+    with pytest.raises(ValueError, match="no setting"):
+        make_estimator("octave", rate_hz=100.0, colour="blue")
+    with pytest.raises(ValueError, match="kind"):
+        make_estimator("kalman", rate_hz=100.0)
+
+
+def test_non_finite_samples_are_skipped_and_counted():
+    est = OctaveBankEstimator(100.0)
+    est.update([1.0, float("nan"), 2.0])
+    est.update(float("inf"))
+    assert est.n_samples == 2 and est.n_rejected == 2
