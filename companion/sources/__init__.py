@@ -1,0 +1,195 @@
+"""Ingestion: IMU samples from a .tlog, a CSV file or a live MAVLink link, in SI, with their timing.
+
+>>> from companion.sources import load
+>>> res = load("flight.tlog")                 # or "imu.csv.gz", or "udpin:0.0.0.0:14550" (duration=...)
+>>> [s.key.label() for s in res.streams], res.totals
+
+``load`` returns a :class:`LoadResult`: ``streams`` (one :class:`companion.samples.ImuStream` per
+(sysid, compid, message, instance), sorted by key, compass-only instances included with
+``is_imu=False``) and ``totals`` (``frames``, ``bad_bytes``, ``bad_frames``, ``imu_messages``).
+Messages: RAW_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, HIGHRES_IMU. Units and per-stream scale
+overrides: :mod:`companion.sources.decode`; timing rules: :mod:`companion.sources.timing`; the tlog
+walker: :mod:`companion.sources.tlog`; links: :mod:`companion.sources.connection`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from companion.errors import CompanionError
+from companion.samples import ImuStream
+from companion.sources import timing as _timing
+from companion.sources.decode import RawStream, ScaleTable, imu_sample_from_message
+
+__all__ = ["load", "LoadResult", "ScaleTable", "build_stream", "imu_sample_from_message", "load_config"]
+
+
+@dataclass
+class LoadResult:
+    """What a source held: IMU streams in SI and the frame totals."""
+
+    source: str
+    streams: list[ImuStream]
+    totals: dict = field(default_factory=dict)  # frames, bad_bytes, bad_frames, imu_messages
+    messages: dict = field(default_factory=dict)  # message name -> valid frames (tlog / live)
+
+    def imu_streams(self) -> list[ImuStream]:
+        return [s for s in self.streams if s.is_imu]
+
+
+def load_config(config) -> dict:
+    """``config`` as a dict: None, a dict, or a path to a YAML file."""
+    if config is None:
+        return {}
+    if isinstance(config, dict):
+        return config
+    import yaml
+
+    path = Path(config)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise CompanionError(f"{path}: no such config file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CompanionError(f"{path}: cannot read config ({exc})") from None
+    except yaml.YAMLError as exc:
+        raise CompanionError(f"{path}: invalid YAML ({str(exc).splitlines()[0]})") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise CompanionError(f"{path}: the configuration must be a YAML mapping")
+    return data
+
+
+def build_stream(raw: RawStream, split_periods: float = _timing.SPLIT_PERIODS) -> ImuStream:
+    """Apply the timing rules to decoded samples: drop duplicates/backward steps, segment, report."""
+    keep, segments, report = _timing.analyse(raw.t, raw.time_resolution, split_periods)
+    all_kept = bool(keep.all())
+
+    def k(a):
+        return a if (a is None or all_kept) else a[keep]
+
+    return ImuStream(key=raw.key, t=k(raw.t), gyro=k(raw.gyro), accel=k(raw.accel),
+                     temperature=k(raw.temperature), is_imu=raw.is_imu, segments=segments, timing=report,
+                     gyro_lsb=raw.gyro_lsb, accel_lsb=raw.accel_lsb)
+
+
+def _check_has_imu(res: LoadResult, require_imu: bool) -> LoadResult:
+    if require_imu and not res.imu_streams():
+        if res.streams:
+            what = ", ".join(s.key.label() for s in res.streams)
+            raise CompanionError(f"{res.source}: no IMU data (only compass-only streams: {what})")
+        raise CompanionError(f"{res.source}: no IMU messages (RAW_IMU, SCALED_IMU*, HIGHRES_IMU) in "
+                             f"{res.totals.get('frames', 0)} valid frames")
+    return res
+
+
+def load_tlog(path, config=None, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+    from companion.sources import tlog
+    from companion.sources.decode import decode_index
+
+    path = Path(path)
+    try:
+        data = tlog.read_file(path)
+    except FileNotFoundError:
+        raise CompanionError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise CompanionError(f"{path}: is a directory, expected a .tlog file") from None
+    except OSError as exc:
+        raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    index = tlog.scan(data)
+    raws = decode_index(index, ScaleTable(load_config(config)))
+    streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
+    totals = {"frames": index.frames, "bad_bytes": index.bad_bytes, "bad_frames": index.bad_frames,
+              "imu_messages": int(sum(r.t.shape[0] for r in raws))}
+    return LoadResult(str(path), streams, totals, dict(index.counts))
+
+
+def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+    from companion.sources.csvfile import read_csv
+
+    raw = read_csv(path)
+    n = raw.t.shape[0]
+    return LoadResult(str(path), [build_stream(raw, split_periods)],
+                      {"frames": n, "bad_bytes": 0, "bad_frames": 0, "imu_messages": n}, {"CSV": n})
+
+
+def load_live(spec: str, duration: float, config=None, baud=None, split_periods: float = _timing.SPLIT_PERIODS,
+              clock=time.monotonic) -> LoadResult:
+    """Listen to a link for ``duration`` seconds and return what arrived (message timestamps, not arrival)."""
+    from companion.sources.connection import open_connection
+
+    if not duration or duration <= 0:
+        raise CompanionError("a live source needs --duration SECONDS > 0")
+    scales = ScaleTable(load_config(config))
+    conn = open_connection(spec, baud=baud)
+    acc: dict = {}
+    counts: dict = {}
+    bad = 0
+    end = clock() + float(duration)
+    try:
+        while True:
+            left = end - clock()
+            if left <= 0:
+                break
+            msg = conn.recv_match(blocking=True, timeout=min(left, 0.5))
+            if msg is None:
+                continue
+            name = msg.get_type()
+            if name == "BAD_DATA":
+                bad += 1
+                continue
+            counts[name] = counts.get(name, 0) + 1
+            s = imu_sample_from_message(msg, scales)
+            if s is None:
+                continue
+            acc.setdefault(s.key, []).append((s.t_s, *s.gyro, *s.accel, s.temperature))
+    finally:
+        conn.close()
+    raws = []
+    for key, rows in acc.items():
+        a = np.array([r[:7] for r in rows], dtype=np.float64)
+        temp = np.array([np.nan if r[7] is None else r[7] for r in rows])
+        from companion.sources.decode import TIME_RESOLUTION, COMPASS_ONLY_CAN
+
+        gs, as_ = scales.lookup(key) if key.message != "HIGHRES_IMU" else (None, None)
+        is_imu = not (key.message in COMPASS_ONLY_CAN and not np.any(a[:, 1:7]))
+        raws.append(RawStream(key, a[:, 0], a[:, 1:4], a[:, 4:7],
+                              None if np.all(np.isnan(temp)) else np.nan_to_num(temp),
+                              is_imu, gs, as_, TIME_RESOLUTION[key.message]))
+    streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
+    totals = {"frames": int(sum(counts.values())), "bad_bytes": 0, "bad_frames": bad,
+              "imu_messages": int(sum(len(v) for v in acc.values()))}
+    return LoadResult(str(spec), streams, totals, counts)
+
+
+def load(spec, config=None, *, duration: float | None = None, baud: int | None = None,
+         require_imu: bool = True, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+    """Load IMU streams from ``spec``: a ``.tlog`` file, a ``.csv``/``.csv.gz`` file, or a connection
+    string (listened to for ``duration`` seconds).
+
+    ``config``: None, a dict (the whole configuration; its ``streams:`` list overrides scales) or a
+    YAML path. ``require_imu``: raise :class:`CompanionError` when no stream is an IMU.
+    Any user-caused problem raises :class:`CompanionError` (one line).
+    """
+    from companion.sources.connection import is_connection_string, parse_connection
+
+    s = str(spec)
+    low = s.lower()
+    if low.endswith(".csv") or low.endswith(".csv.gz"):
+        res = load_csv(s, split_periods)
+    elif low.endswith(".tlog") or low.endswith(".tlog.bin") or low.endswith(".mavlink"):
+        res = load_tlog(s, config, split_periods)
+    elif is_connection_string(s):
+        parse_connection(s, baud)  # validate before anything else
+        res = load_live(s, duration or 0.0, config, baud, split_periods)
+    elif Path(s).is_file():
+        raise CompanionError(f"{s}: unknown file type; expected .tlog, .csv or .csv.gz")
+    else:
+        parse_connection(s, baud)  # raises the 'unknown source' error
+        raise CompanionError(f"{s}: unknown source")  # pragma: no cover - parse_connection raised
+    return _check_has_imu(res, require_imu)

@@ -1,0 +1,82 @@
+"""Live MAVLink links through pymavlink, with the connection string checked first.
+
+Accepted (pymavlink's syntax)::
+
+    udpin:HOST:PORT    listen for UDP (e.g. udpin:0.0.0.0:14550, what a GCS forward sends to)
+    udpout:HOST:PORT   send to / receive from a UDP peer
+    udp:HOST:PORT      same as udpin
+    tcp:HOST:PORT      connect to a TCP server (e.g. tcp:127.0.0.1:5760, SITL)
+    tcpin:HOST:PORT    accept a TCP connection
+    /dev/ttyACM0, /dev/serial/by-id/..., COM3   a serial device, with --baud (default 115200)
+
+Anything else is refused with one clear line. Files are never handed to
+``mavutil.mavlink_connection`` (it EXECUTES paths containing ``/bin/`` or ending ``.elf``): tlogs and
+CSVs are opened by :mod:`companion.sources.tlog` and :mod:`companion.sources.csvfile`.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+
+from companion.errors import CompanionError
+
+NET_PREFIXES = ("udpin", "udpout", "udp", "tcp", "tcpin")
+_NET = re.compile(r"^(udpin|udpout|udp|tcp|tcpin):([A-Za-z0-9.\-_]+|\[[0-9a-fA-F:]+\]):(\d{1,5})$")
+_COM = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
+DEFAULT_BAUD = 115200
+
+
+def is_connection_string(spec: str) -> bool:
+    """True if ``spec`` looks like a network link (prefix) or a serial device."""
+    s = str(spec)
+    return s.split(":", 1)[0].lower() in NET_PREFIXES or bool(_COM.match(s)) or s.startswith("/dev/")
+
+
+def parse_connection(spec: str, baud: int | None = None) -> tuple[str, str]:
+    """Validate ``spec``; returns (kind, canonical string) with kind ``net`` or ``serial``."""
+    s = str(spec).strip()
+    m = _NET.match(s)
+    if m:
+        port = int(m.group(3))
+        if not 0 < port < 65536:
+            raise CompanionError(f"{s}: port must be 1-65535")
+        return "net", f"{m.group(1).lower()}:{m.group(2)}:{port}"
+    if s.split(":", 1)[0].lower() in NET_PREFIXES:
+        raise CompanionError(f"{s}: expected {s.split(':', 1)[0].lower()}:HOST:PORT, e.g. udpin:0.0.0.0:14550")
+    if "/bin/" in s or s.lower().endswith(".elf"):
+        raise CompanionError(f"{s}: not a connection string or serial device")
+    if _COM.match(s) or (s.startswith("/dev/") and re.match(r"^/dev/[A-Za-z0-9._/\-:]+$", s)):
+        if s.startswith("/dev/") and not os.path.exists(s):
+            raise CompanionError(f"{s}: no such serial device")
+        if baud is not None and int(baud) <= 0:
+            raise CompanionError(f"--baud must be positive, got {baud}")
+        return "serial", s
+    raise CompanionError(f"{s}: unknown source; expected a .tlog, .csv/.csv.gz file or a connection string "
+                         "(udpin:HOST:PORT, udpout:, udp:, tcp:, tcpin:, or a serial device with --baud)")
+
+
+def open_connection(spec: str, baud: int | None = None, source_system: int = 1, source_component: int = 191,
+                    dialect: str = "ardupilotmega", **kwargs):
+    """Open a pymavlink link after :func:`parse_connection` accepted ``spec``.
+
+    ``source_system``/``source_component`` identify us when we send (default compid 191 =
+    MAV_COMP_ID_ONBOARD_COMPUTER; use the vehicle's sysid). ``robust_parsing`` is on, so corrupted bytes
+    come back as BAD_DATA messages instead of exceptions. Extra ``kwargs`` go to
+    ``mavutil.mavlink_connection`` (e.g. ``input=False`` for udpout). Returns the pymavlink connection.
+    """
+    kind, s = parse_connection(spec, baud)
+    from pymavlink import mavutil
+
+    try:
+        return mavutil.mavlink_connection(s, baud=int(baud or DEFAULT_BAUD), source_system=source_system,
+                                          source_component=source_component, dialect=dialect,
+                                          robust_parsing=True, autoreconnect=kind == "serial", **kwargs)
+    except Exception as exc:  # socket errors, serial errors: the user's link is not usable
+        reason = getattr(exc, "strerror", None) or str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CompanionError(f"{s}: cannot open link ({reason})") from None
+
+
+def platform_serial_hint() -> str:
+    return "COM3" if sys.platform.startswith("win") else "/dev/ttyACM0"

@@ -1,0 +1,76 @@
+"""CSV IMU files: ``time_s,gx,gy,gz,ax,ay,az`` (gyro rad/s, accel m/s^2), plain or gzip-compressed.
+
+The header names the columns (any order; extra columns are ignored); every row must be numeric.
+This is the format of ../shared/data/adis16405. One stream, keyed ``StreamKey(0, 0, "CSV", 0)``.
+Any problem (missing file, not a CSV, not gzip, missing columns, a non-numeric value) is a
+:class:`CompanionError` naming the file and, where it can, the line.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from companion.errors import CompanionError
+from companion.samples import AXES, StreamKey
+from companion.sources.decode import RawStream
+
+COLUMNS = ("time_s",) + AXES
+CSV_KEY = StreamKey(0, 0, "CSV", 0)
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        if path.name.endswith(".gz"):
+            with gzip.open(path, "rb") as fh:
+                return fh.read()
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise CompanionError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise CompanionError(f"{path}: is a directory, expected a CSV file") from None
+    except (gzip.BadGzipFile, zlib.error, EOFError) as exc:
+        raise CompanionError(f"{path}: not a readable gzip file ({exc})") from None
+    except OSError as exc:
+        raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+
+
+def read_csv(path) -> RawStream:
+    """Read an IMU CSV file into a :class:`RawStream` (arrival order; timing is analysed by the caller)."""
+    path = Path(path)
+    data = _read_bytes(path)
+    head, _, body = data.partition(b"\n")
+    try:
+        header = head.decode("utf-8-sig").strip()
+    except UnicodeDecodeError:
+        raise CompanionError(f"{path}: not a text CSV file (expected header {','.join(COLUMNS)})") from None
+    names = [c.strip().lower() for c in header.split(",")]
+    missing = [c for c in COLUMNS if c not in names]
+    if missing:
+        raise CompanionError(f"{path}: missing column(s) {', '.join(missing)}; expected header "
+                             f"{','.join(COLUMNS)} (gyro rad/s, accel m/s^2)")
+    usecols = [names.index(c) for c in COLUMNS]
+    try:
+        arr = np.loadtxt(io.BytesIO(body), delimiter=",", usecols=usecols, ndmin=2, dtype=np.float64)
+    except (ValueError, IndexError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if "line" in msg:  # numpy counts lines of the body; the file has a header line first
+            msg = _shift_line_numbers(msg)
+        raise CompanionError(f"{path}: bad CSV data: {msg}") from None
+    if arr.shape[0] == 0:
+        raise CompanionError(f"{path}: no data rows after the header")
+    if not np.all(np.isfinite(arr)):
+        row = int(np.flatnonzero(~np.all(np.isfinite(arr), axis=1))[0])
+        raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {row + 1}")
+    return RawStream(CSV_KEY, arr[:, 0].copy(), arr[:, 1:4].copy(), arr[:, 4:7].copy(), None, True,
+                     None, None, 0.0)
+
+
+def _shift_line_numbers(msg: str) -> str:
+    import re
+
+    return re.sub(r"line (\d+)", lambda m: f"line {int(m.group(1)) + 1}", msg)

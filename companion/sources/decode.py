@@ -1,0 +1,179 @@
+"""IMU payloads -> SI samples, identical for tlog frames (numpy, vectorised) and live pymavlink messages.
+
+Default scales follow ArduPilot (../shared/REFERENCE.md): RAW_IMU and SCALED_IMU* carry int16 gyro in
+mrad/s (1e-3 rad/s per LSB) and accel in mG (9.80665e-3 m/s^2 per LSB); HIGHRES_IMU carries float SI.
+A ``streams:`` list in the YAML configuration overrides the scale per stream, first match wins::
+
+    streams:
+      - {message: RAW_IMU, sysid: 1, instance: 0, gyro_scale: 8.7266e-4, accel_scale: 0.0326561}
+
+(``gyro_scale`` in rad/s per LSB, ``accel_scale`` in m/s^2 per LSB; ``sysid``, ``compid``, ``instance``
+optional). The scale of an int16 format is also its quantisation step (``ImuStream.gyro_lsb``).
+
+Time: RAW_IMU/HIGHRES_IMU ``time_usec`` * 1e-6 s, SCALED_IMU* ``time_boot_ms`` * 1e-3 s (resolution 1 ms).
+Temperature: int16 cdegC (RAW_IMU extension, SCALED_IMU*) or float degC (HIGHRES_IMU); an all-zero
+column means "not provided" (None). A SCALED_IMU2/3 (or SCALED_IMU) whose accel and gyro are zero in
+every sample only carries a compass: ``is_imu`` False.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.errors import CompanionError
+from companion.samples import StreamKey
+from companion.sources import messages as M
+
+G0 = 9.80665
+DEFAULT_SCALES = {"gyro_scale": 1e-3, "accel_scale": G0 * 1e-3}
+TIME_RESOLUTION = {"RAW_IMU": 1e-6, "HIGHRES_IMU": 1e-6, "SCALED_IMU": 1e-3, "SCALED_IMU2": 1e-3,
+                   "SCALED_IMU3": 1e-3, "CSV": 0.0}
+COMPASS_ONLY_CAN = ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3")
+_MATCH_KEYS = ("message", "sysid", "compid", "instance")
+
+
+class ScaleTable:
+    """Per-stream scale overrides from the ``streams:`` configuration section (a list of dicts)."""
+
+    def __init__(self, entries=None):
+        if entries is None:
+            entries = []
+        if isinstance(entries, dict):  # a whole configuration
+            entries = entries.get("streams") or []
+        if not isinstance(entries, list):
+            raise CompanionError("config 'streams' must be a list of {message, instance?, sysid?, compid?, "
+                                 "gyro_scale?, accel_scale?}")
+        self.entries = []
+        for i, e in enumerate(entries):
+            if not isinstance(e, dict) or "message" not in e:
+                raise CompanionError(f"config streams[{i}] must be a mapping with at least 'message'")
+            unknown = set(e) - set(_MATCH_KEYS) - set(DEFAULT_SCALES)
+            if unknown:
+                raise CompanionError(f"config streams[{i}]: unknown key(s) {', '.join(sorted(unknown))}")
+            if str(e["message"]) not in M.IMU_LAYOUTS:
+                raise CompanionError(f"config streams[{i}]: message {e['message']!r} is not one of "
+                                     f"{', '.join(M.IMU_LAYOUTS)}")
+            for k in DEFAULT_SCALES:
+                if k in e:
+                    try:
+                        v = float(e[k])
+                    except (TypeError, ValueError):
+                        v = float("nan")
+                    if not (np.isfinite(v) and v > 0):
+                        raise CompanionError(f"config streams[{i}]: {k} must be a positive number")
+            self.entries.append(dict(e))
+
+    def lookup(self, key: StreamKey) -> tuple[float, float]:
+        """(gyro_scale rad/s per LSB, accel_scale m/s^2 per LSB) for an int16 stream."""
+        for e in self.entries:
+            if all(k not in e or str(e[k]) == str(getattr(key, k)) for k in _MATCH_KEYS):
+                return (float(e.get("gyro_scale", DEFAULT_SCALES["gyro_scale"])),
+                        float(e.get("accel_scale", DEFAULT_SCALES["accel_scale"])))
+        return DEFAULT_SCALES["gyro_scale"], DEFAULT_SCALES["accel_scale"]
+
+
+@dataclass
+class RawStream:
+    """Decoded samples of one stream in arrival order (before timing analysis)."""
+
+    key: StreamKey
+    t: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    temperature: np.ndarray | None
+    is_imu: bool
+    gyro_lsb: float | None
+    accel_lsb: float | None
+    time_resolution: float
+
+
+def _instance(layout: M.MessageLayout, rec: np.ndarray) -> np.ndarray:
+    if layout.name in M.FIXED_INSTANCE:
+        return np.full(rec.shape[0], M.FIXED_INSTANCE[layout.name], dtype=np.int64)
+    return rec["id"].astype(np.int64)
+
+
+def streams_from_records(layout: M.MessageLayout, rec: np.ndarray, sysid: np.ndarray, compid: np.ndarray,
+                         scales: ScaleTable) -> list[RawStream]:
+    """Split decoded payload records of one message type into streams (sysid, compid, instance) in SI."""
+    inst = _instance(layout, rec)
+    key3 = sysid.astype(np.int64) * 65536 + compid.astype(np.int64) * 256 + inst
+    out = []
+    keys = np.unique(key3)
+    for k in keys:
+        r = rec if keys.shape[0] == 1 else rec[key3 == k]
+        key = StreamKey(int(k >> 16), int((k >> 8) & 0xFF), layout.name, int(k & 0xFF))
+        out.append(_to_si(layout, key, r, scales))
+    return out
+
+
+def _to_si(layout: M.MessageLayout, key: StreamKey, r: np.ndarray, scales: ScaleTable) -> RawStream:
+    n = r.shape[0]
+    if "time_usec" in r.dtype.names:
+        t = r["time_usec"].astype(np.float64) * 1e-6
+    else:
+        t = r["time_boot_ms"].astype(np.float64) * 1e-3
+    gyro = np.empty((n, 3))
+    accel = np.empty((n, 3))
+    for j, ax in enumerate("xyz"):
+        gyro[:, j] = r[ax + "gyro"]
+        accel[:, j] = r[ax + "acc"]
+    temp = r["temperature"].astype(np.float64)
+    if layout.name == "HIGHRES_IMU":
+        glsb = alsb = None
+    else:
+        gs, as_ = scales.lookup(key)
+        gyro *= gs
+        accel *= as_
+        temp *= 0.01
+        glsb, alsb = gs, as_
+    temperature = None if not np.any(temp) else temp
+    is_imu = not (layout.name in COMPASS_ONLY_CAN and n > 0 and not np.any(gyro) and not np.any(accel))
+    return RawStream(key, t, gyro, accel, temperature, is_imu, glsb, alsb, TIME_RESOLUTION[layout.name])
+
+
+def decode_index(index, scales: ScaleTable | None = None) -> list[RawStream]:
+    """Every IMU stream of a :class:`companion.sources.tlog.FrameIndex`, in SI, arrival order."""
+    scales = scales or ScaleTable()
+    out: list[RawStream] = []
+    for msgid, layout in M.IMU_BY_ID.items():
+        sel = np.flatnonzero(index.msgid == msgid)
+        if sel.shape[0] == 0:
+            continue
+        rec = index.payloads(sel, layout.full_len).view(layout.dtype).reshape(-1)
+        out.extend(streams_from_records(layout, rec, index.sysid[sel], index.compid[sel], scales))
+    return out
+
+
+@dataclass
+class ImuSample:
+    """One live IMU message in SI (what :func:`imu_sample_from_message` returns)."""
+
+    key: StreamKey
+    t_s: float
+    gyro: tuple[float, float, float]
+    accel: tuple[float, float, float]
+    temperature: float | None
+    is_imu: bool
+
+
+def imu_sample_from_message(msg, scales: ScaleTable | None = None) -> ImuSample | None:
+    """A pymavlink message -> :class:`ImuSample` (None for non-IMU messages), same rules as the file path.
+
+    ``is_imu`` is False for a SCALED_IMU* message whose accel and gyro are all zero (a compass-only
+    instance: the stream is not an IMU if every sample is like that).
+    """
+    name = msg.get_type()
+    layout = M.IMU_LAYOUTS.get(name)
+    if layout is None:
+        return None
+    rec = np.zeros(1, dtype=layout.dtype)
+    for f in layout.dtype.names:
+        rec[f] = getattr(msg, f, 0) or 0
+    s = _to_si(layout, StreamKey(int(msg.get_srcSystem()), int(msg.get_srcComponent()), name,
+                                 int(_instance(layout, rec)[0])), rec, scales or ScaleTable())
+    temp = None if s.temperature is None else float(s.temperature[0])
+    return ImuSample(s.key, float(s.t[0]), tuple(float(v) for v in s.gyro[0]),
+                     tuple(float(v) for v in s.accel[0]), temp, s.is_imu)

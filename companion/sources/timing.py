@@ -1,0 +1,103 @@
+"""Time base of a stream from the messages' own timestamps: rate, jitter, gaps, duplicates, resets.
+
+Rules (applied in arrival order, never resampling, never reordering):
+
+- **reset** (autopilot reboot): a timestamp more than ``reset_s`` = max(1 s, 10 periods) *behind* the
+  newest one so far starts a new segment;
+- **duplicate**: a timestamp equal to the newest one so far -> sample dropped, counted;
+- **backwards**: a timestamp behind the newest one by less than ``reset_s`` -> dropped, counted;
+- **rate**: ``P0`` = median of the kept intervals; the period ``P`` is the mean of the intervals
+  ``<= 1.5 P0 + r`` (``r`` = timestamp resolution, 1 ms for ``time_boot_ms``), so a 400 Hz stream
+  stamped in whole milliseconds (intervals of 2 and 3 ms) gets 2.5 ms, not 2 or 3;
+- **gap**: an interval ``> 1.5 P + r`` (1-ms jitter is not a gap); a gap longer than
+  ``split_periods`` (default 10) periods also splits the segment (Allan analysis needs contiguous
+  samples), shorter gaps are only counted;
+- **jitter**: rms of (interval - P) over the intervals that are not gaps;
+- **duration**: sum over segments of (last - first timestamp).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from companion.samples import TimingReport
+
+SPLIT_PERIODS = 10.0
+
+
+def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT_PERIODS,
+            rate_hz: float | None = None) -> tuple[np.ndarray, list[tuple[int, int]], TimingReport]:
+    """Timing of arrival-ordered timestamps ``t`` (s).
+
+    Returns ``(keep, segments, report)``: ``keep`` is a boolean mask of the samples kept (duplicates
+    and small backward steps dropped), ``segments`` half-open ranges into the KEPT samples.
+    ``rate_hz`` forces the nominal rate instead of detecting it.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    n = t.shape[0]
+    rep = TimingReport()
+    if n == 0:
+        return np.zeros(0, dtype=bool), [], rep
+    # 1. resets: a jump far behind the running maximum (threshold needs a period estimate)
+    d = np.diff(t)
+    pos = d[d > 0]
+    p0 = float(np.median(pos)) if pos.shape[0] else 1.0
+    if rate_hz:
+        p0 = 1.0 / rate_hz
+    reset_s = max(1.0, 10.0 * p0)
+    starts = [0]
+    while True:
+        s = starts[-1]
+        runmax = np.maximum.accumulate(t[s:])
+        jump = np.flatnonzero(t[s + 1:] < runmax[:-1] - reset_s)
+        if jump.shape[0] == 0:
+            break
+        starts.append(s + 1 + int(jump[0]))
+    rep.resets = len(starts) - 1
+    # 2. duplicates and small backward steps, per reset segment
+    keep = np.ones(n, dtype=bool)
+    bounds = starts + [n]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        seg = t[a:b]
+        prev_max = np.maximum.accumulate(seg)[:-1]
+        later = seg[1:]
+        dup = later == prev_max
+        back = later < prev_max
+        rep.duplicates += int(dup.sum())
+        rep.backwards += int(back.sum())
+        keep[a + 1:b] = ~(dup | back)
+    # indices of reset starts among kept samples
+    kept_idx = np.cumsum(keep) - 1
+    reset_kept = [int(kept_idx[s]) for s in starts]
+    tk = t[keep]
+    nk = tk.shape[0]
+    dk = np.diff(tk)
+    inside = np.ones(max(nk - 1, 0), dtype=bool)  # intervals that do not cross a reset
+    for s in reset_kept[1:]:
+        inside[s - 1] = False
+    di = dk[inside]
+    # 3. rate
+    if rate_hz:
+        period = 1.0 / rate_hz
+    elif di.shape[0]:
+        p0 = float(np.median(di))
+        normal = di[di <= 1.5 * p0 + resolution]
+        period = float(normal.mean()) if normal.shape[0] else p0
+    else:
+        period = float("nan")
+    rep.rate_hz = 1.0 / period if period and np.isfinite(period) and period > 0 else float("nan")
+    # 4. gaps and splits
+    if np.isfinite(period):
+        gap = inside & (dk > 1.5 * period + resolution)
+        split = inside & (dk > split_periods * period + resolution)
+        normal = inside & ~gap
+        if normal.any():
+            rep.jitter_rms = float(np.sqrt(np.mean((dk[normal] - period) ** 2)))
+    else:
+        gap = split = np.zeros_like(inside)
+    rep.gaps = int(gap.sum())
+    cuts = sorted(set(reset_kept[1:]) | set((np.flatnonzero(split) + 1).tolist()))
+    edges = [0] + cuts + [nk]
+    segments = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    rep.duration_s = float(sum(tk[b - 1] - tk[a] for a, b in segments))
+    return keep, segments, rep
