@@ -1,0 +1,148 @@
+"""Baseline noise coefficients of each gyro axis: what "healthy" looked like.
+
+A baseline holds, per IMU and axis, the linear Allan terms (Q, N, B, K, R; SI units) with a one-sigma
+uncertainty each: ``{"N": (value, std), "B": (value, std), ...}``. It is learned from the first
+seconds of still data of a run (an estimator's ``terms()``, whose ``std`` entries are used as is) or
+read from a file written by ``companion analyze`` (fitted terms with 95 % intervals ``ci95``, turned
+into a one-sigma figure as std = (hi - lo) / (2 * 1.96), the normal approximation).
+
+numpy only; no I/O here except plain dicts (the caller reads JSON/YAML).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable, Mapping
+
+from companion.allan.terms import LINEAR_PARAM
+
+#: parameter -> effect, for the linear terms (Miao 2014 eq. (3.5): x = [Q N B K R]).
+PARAM_EFFECT = {p: e for e, p in LINEAR_PARAM.items()}
+Z95 = 1.959963984540054
+
+
+def params_from_terms(terms: Iterable[Mapping]) -> dict[str, tuple[float, float]]:
+    """Terms (canonical dicts) -> ``{param: (value, std)}`` for the linear parameters present.
+
+    ``std`` comes from ``term["std"][param]`` (online estimators) or from ``term["ci95"][param]``
+    (offline fits); it is ``inf`` when neither is given (such a value never triggers a flag).
+    """
+    out: dict[str, tuple[float, float]] = {}
+    for term in terms or ():
+        effect = term.get("effect")
+        p = LINEAR_PARAM.get(effect)
+        if p is None or p not in term:
+            continue
+        value = float(term[p])
+        std = math.inf
+        if isinstance(term.get("std"), Mapping) and p in term["std"]:
+            std = float(term["std"][p])
+        elif isinstance(term.get("ci95"), Mapping) and p in term["ci95"]:
+            lo, hi = term["ci95"][p]
+            std = (float(hi) - float(lo)) / (2.0 * Z95)
+        if math.isfinite(value) and value >= 0.0 and not math.isnan(std):
+            out[p] = (value, abs(std))
+    return out
+
+
+class Baseline:
+    """Healthy reference per ``(imu, axis)``: ``{param: (value, std)}`` in SI units.
+
+    ``source`` says where it came from ("learned" from still data of this run, or a file name).
+    """
+
+    FORMAT = "companion-baseline"
+
+    def __init__(self, source: str = "learned"):
+        self.source = source
+        self.axes: dict[tuple[int, str], dict[str, tuple[float, float]]] = {}
+
+    def set_axis(self, imu: int, axis: str, params: Mapping[str, tuple[float, float]]) -> None:
+        self.axes[(int(imu), str(axis))] = {p: (float(v), float(s)) for p, (v, s) in params.items()}
+
+    def get(self, imu: int, axis: str) -> dict[str, tuple[float, float]] | None:
+        return self.axes.get((int(imu), str(axis)))
+
+    def has_imu(self, imu: int) -> bool:
+        return any(k[0] == int(imu) for k in self.axes)
+
+    def __len__(self) -> int:
+        return len(self.axes)
+
+    # --- persistence (plain dicts, JSON-safe) ---
+    def to_dict(self) -> dict:
+        axes = {}
+        for (imu, axis), params in sorted(self.axes.items()):
+            axes.setdefault(f"IMU{imu}", {})[axis] = {p: {"value": v, "std": _finite_or_none(s)} for p, (v, s) in params.items()}
+        return {"format": self.FORMAT, "version": 1, "source": self.source, "imus": axes}
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "Baseline":
+        """Read what :meth:`to_dict` wrote, or the JSON/YAML report of ``companion analyze``.
+
+        Raises ValueError with one clear line when nothing usable is found.
+        """
+        if not isinstance(data, Mapping):
+            raise ValueError("baseline file does not hold a mapping")
+        if data.get("format") == cls.FORMAT:
+            b = cls(str(data.get("source", "file")))
+            for imu_name, axes in (data.get("imus") or {}).items():
+                imu = _imu_index(imu_name)
+                for axis, params in (axes or {}).items():
+                    b.set_axis(imu, axis, {p: (float(d["value"]), math.inf if d.get("std") is None else float(d["std"]))
+                                           for p, d in params.items()})
+            if not b.axes:
+                raise ValueError("baseline file holds no axes")
+            return b
+        return cls._from_analyze(data)
+
+    @classmethod
+    def _from_analyze(cls, data: Mapping) -> "Baseline":
+        """Walk an ``analyze`` report: any mapping with an axis name (gx, gy, gz) whose value holds ``terms``.
+
+        The IMU index is taken from the nearest enclosing ``instance`` key (StreamKey.instance), else 0.
+        """
+        b = cls("analyze")
+        _walk_analyze(data, b, imu=0)
+        if not b.axes:
+            raise ValueError("no fitted gyro terms found in the baseline file (expected a companion analyze report)")
+        return b
+
+
+def _walk_analyze(node, b: Baseline, imu: int) -> None:
+    if isinstance(node, Mapping):
+        if "instance" in node and isinstance(node["instance"], int):
+            imu = node["instance"]
+        elif isinstance(node.get("key"), Mapping) and isinstance(node["key"].get("instance"), int):
+            imu = node["key"]["instance"]
+        for k, v in node.items():
+            if k in ("gx", "gy", "gz") and isinstance(v, (Mapping, list)):
+                terms = v.get("terms") if isinstance(v, Mapping) else v
+                if isinstance(terms, list):
+                    params = params_from_terms(t for t in terms if isinstance(t, Mapping))
+                    if params:
+                        b.set_axis(imu, k, params)
+                        continue
+            if isinstance(node.get("axis"), str) and k == "terms" and isinstance(v, list):
+                params = params_from_terms(t for t in v if isinstance(t, Mapping))
+                if params and node["axis"] in ("gx", "gy", "gz"):
+                    b.set_axis(imu, node["axis"], params)
+                continue
+            _walk_analyze(v, b, imu)
+    elif isinstance(node, list):
+        for v in node:
+            _walk_analyze(v, b, imu)
+
+
+def _imu_index(name) -> int:
+    s = str(name)
+    if s.upper().startswith("IMU"):
+        s = s[3:]
+    try:
+        return int(s)
+    except ValueError:
+        raise ValueError(f"baseline: bad IMU name {name!r} (expected IMU0, IMU1, ...)") from None
+
+
+def _finite_or_none(x: float):
+    return x if math.isfinite(x) else None

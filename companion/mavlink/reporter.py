@@ -1,0 +1,119 @@
+"""NAMED_VALUE_FLOAT reports and STATUSTEXT health transitions, scheduled in message time.
+
+Names (MAVLink NAMED_VALUE_FLOAT ``name`` is char[10]; MAVProxy's ``graph`` only accepts [A-Z0-9_]+):
+
+==================  ==========================================  =========================
+name                value                                        unit
+==================  ==========================================  =========================
+``IMU{i}G{a}_N``    angle random walk N of gyro axis a (X Y Z)   deg/sqrt(h)
+``IMU{i}G{a}_B``    bias instability B                           deg/h
+``IMU{i}G{a}_K``    rate random walk K                           deg/h^1.5
+``IMU{i}G{a}_Q``    quantisation Q (when estimated)              arcsec
+``IMU{i}G{a}_R``    rate ramp R (when estimated)                 deg/h^2
+``IMU{i}A{a}_N``    accel velocity random walk (optional)        m/s/sqrt(h)
+``IMU{i}A{a}_B``    accel bias instability (optional)            mg
+``IMU{i}A{a}_K``    accel random walk (optional)                 m/s/h^1.5
+``IMU{i}G_HLTH``    0 healthy, 1 degrading, 2 learning, 3 stale  -
+==================  ==========================================  =========================
+
+Datasheet units come from :mod:`companion.units` (the only place they are defined). Cadence: every name
+once per ``period_s`` of *message* time (the IMU timestamps), the M names of a period spread evenly at
+offsets j * period_s / M so the link sees one small message at a time, never a burst. A jump of message
+time (replay, reboot) never produces a flood: at most one period's worth is sent per call.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Mapping, Protocol
+
+from companion import units
+
+NAME_RE = re.compile(r"^[A-Z0-9_]{1,10}$")
+MAV_SEVERITY_WARNING = 4
+MAV_SEVERITY_NOTICE = 5
+MAV_SEVERITY_INFO = 6
+
+
+class Sink(Protocol):
+    def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None: ...
+    def send_statustext(self, severity: int, text: str) -> None: ...
+
+
+def value_name(imu: int, axis: str, param: str) -> str:
+    """``IMU0GX_N`` for imu 0, axis ``gx``, param ``N``; ValueError if it does not fit 10 characters."""
+    kind = "G" if axis.startswith("g") else "A"
+    name = f"IMU{int(imu)}{kind}{axis[1].upper()}_{param}"
+    if not NAME_RE.match(name):
+        raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} is not <= 10 characters of [A-Z0-9_]")
+    return name
+
+
+def health_name(imu: int) -> str:
+    name = f"IMU{int(imu)}G_HLTH"
+    if not NAME_RE.match(name):
+        raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} is not <= 10 characters of [A-Z0-9_]")
+    return name
+
+
+def to_report_units(param: str, axis: str, value_si: float) -> float:
+    """SI -> datasheet unit of the report table above (companion.units)."""
+    return units.to_datasheet(param, value_si, axis)
+
+
+class Reporter:
+    """Holds the latest value of every name and sends them, spread over each period of message time."""
+
+    def __init__(self, sink: Sink, period_s: float = 1.0):
+        if not (period_s > 0):
+            raise ValueError("run.report_period_s must be > 0")
+        self.sink = sink
+        self.period_s = float(period_s)
+        self.values: dict[str, float] = {}
+        self._slot = 0
+        self._next_t: float | None = None
+        self.sent = 0
+        self.texts = 0
+
+    def set_value(self, name: str, value: float) -> None:
+        """Remember a value (already in report units) under ``name``; NaN removes it from the reports."""
+        if not NAME_RE.match(name):
+            raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} is not <= 10 characters of [A-Z0-9_]")
+        if value is None or not math.isfinite(value):
+            self.values.pop(name, None)
+        else:
+            self.values[name] = float(value)
+
+    def set_terms(self, imu: int, axis: str, params_si: Mapping[str, float]) -> None:
+        """Set ``IMU{i}{G|A}{a}_{P}`` from SI parameter values, converting to datasheet units."""
+        for p, v in params_si.items():
+            self.set_value(value_name(imu, axis, p), to_report_units(p, axis, v) if v is not None else math.nan)
+
+    def set_health(self, imu: int, state: int) -> None:
+        self.set_value(health_name(imu), float(state))
+
+    def tick(self, t_s: float) -> int:
+        """Send what is due at message time ``t_s``; return the number of messages sent."""
+        if self._next_t is None or t_s < self._next_t - self.period_s:  # first call, or time went back
+            self._next_t = t_s
+        names = sorted(self.values)
+        if not names:
+            return 0
+        step = self.period_s / len(names)
+        if t_s - self._next_t > self.period_s:  # a jump forward: resume from now, no burst
+            self._next_t = t_s - self.period_s + step
+        sent = 0
+        while self._next_t <= t_s and sent < len(names):
+            name = names[self._slot % len(names)]
+            self._slot = (self._slot + 1) % len(names)
+            self.sink.send_named_value_float(int(round(self._next_t * 1000.0)) & 0xFFFFFFFF, name, self.values[name])
+            self._next_t += step
+            sent += 1
+        self.sent += sent
+        return sent
+
+    def statustext(self, text: str, severity: int = MAV_SEVERITY_WARNING) -> None:
+        """One STATUSTEXT (cut to 50 characters, the MAVLink 1 field size)."""
+        self.sink.send_statustext(int(severity), text[:50])
+        self.texts += 1
