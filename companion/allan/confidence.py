@@ -1,0 +1,206 @@
+"""Confidence of overlapping Allan variance estimates: equivalent degrees of freedom and chi-square intervals.
+
+Two ways to the EDF, both published:
+
+* :func:`edf_simple`: the approximations of Howe, Allan & Barnes (1981) tabulated in NIST SP 1065
+  (Riley 2008), Table 5 ("Simple EDF approximations for the overlapping Allan variance"), one formula per
+  power-law noise alpha = 2 (white PM), 1 (flicker PM), 0 (white FM), -1 (flicker FM), -2 (random-walk FM),
+  with N the number of *phase* points and m the averaging factor.
+* :func:`oavar_covariance` / :func:`edf_model`: the exact second moments of the overlapping estimator for
+  Gaussian noise with a *given* mixture of terms -- the computation Greenhall's EDF (Greenhall & Riley
+  2003, "Uncertainty of stability variances based on finite differences") carries out for one power law,
+  here for the sum of the IEEE 952 terms actually fitted, and also across cluster sizes (the covariance of
+  the estimates at tau_m and tau_m', which the fit needs because neighbouring points are strongly
+  correlated). With the second differences d_i(m) = x_{i+2m} - 2 x_{i+m} + x_i of the phase x and
+  M = N_phase - 2m of them,
+
+      v_m = sum_i d_i(m)^2 / (2 tau_m^2 M),
+      Cov(v_m, v_m') = 2 sum_{i<M} sum_{j<M'} c(j - i)^2 / (4 tau_m^2 tau_m'^2 M M'),
+      c(l) = Cov(d_0(m), d_l(m')) = sum_p sum_q a_p b_q G(l + q - p),
+
+  with the taps a = (1, -2, 1) at (0, m, 2m), b at (0, m', 2m') and G the generalised covariance of the
+  phase of each term (h in samples, tau0 = 1/fs); independent terms add in G:
+
+      quantization      G = Q^2 [h = 0]                          (white PM)
+      white_noise       G = -N^2 tau0 |h| / 2                     (white FM)
+      bias_instability  G = (B^2 tau0^2 / 2 pi) h^2 ln|h|         (flicker FM)
+      random_walk       G = K^2 tau0^3 |h|^3 / 12                 (random-walk FM)
+      gauss_markov      G = -sigma^2 Tc^2 (u - 1 + e^-u), u = |h| tau0 / Tc
+      sinusoid          G = A^2 / (2 w^2) cos(w h tau0), w = 2 pi f (random phase, Gaussian approximation)
+
+  Each G reproduces its AVAR of :mod:`companion.allan.terms` exactly through 6 G(0) - 8 G(m) + 2 G(2m) =
+  2 tau^2 sigma^2(tau). A deterministic ramp R adds d_r = R tau^2 to every d_i and the cross term
+  4 d_r(m) d_r(m') sum sum c(j - i) / (4 tau^2 tau'^2 M M'). Then EDF = 2 v_m^2 / Var(v_m).
+
+Intervals (:func:`adev_ci`): v_hat EDF / v ~ chi^2(EDF), so the ``level`` interval of ADEV is
+[adev sqrt(EDF / chi2_{(1+level)/2}), adev sqrt(EDF / chi2_{(1-level)/2})] (NIST SP 1065 eq. (37)).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable, Mapping
+
+import numpy as np
+from scipy.stats import chi2
+
+#: power-law exponent alpha of the rate PSD (S_y ~ f^alpha) for the effects that are power laws
+ALPHA = {"quantization": 2, "white_noise": 0, "bias_instability": -1, "random_walk": -2}
+
+
+def edf_simple(n_phase, m, alpha) -> np.ndarray:
+    """EDF of the overlapping AVAR, NIST SP 1065 Table 5 (Howe, Allan & Barnes 1981).
+
+    ``n_phase``: number of phase points (rate samples + 1); ``m``: averaging factor(s); ``alpha`` in
+    {2, 1, 0, -1, -2}. Matches ``allantools.edf_simple``.
+    """
+    N = float(n_phase)
+    m = np.asarray(m, dtype=float)
+    if alpha == 2:
+        edf = (N + 1.0) * (N - 2.0 * m) / (2.0 * (N - m))
+    elif alpha == 1:
+        edf = np.exp(np.sqrt(np.log((N - 1.0) / (2.0 * m)) * np.log((2.0 * m + 1.0) * (N - 1.0) / 4.0)))
+    elif alpha == 0:
+        edf = (3.0 * (N - 1.0) / (2.0 * m) - 2.0 * (N - 2.0) / N) * 4.0 * m**2 / (4.0 * m**2 + 5.0)
+    elif alpha == -1:
+        edf = np.where(m == 1, 2.0 * (N - 2.0) / (2.3 * N - 4.9), 5.0 * N**2 / (4.0 * m * (N + 3.0 * m)))
+    elif alpha == -2:
+        edf = (N - 2.0) / m * ((N - 1.0) ** 2 - 3.0 * m * (N - 1.0) + 4.0 * m**2) / (N - 3.0) ** 2
+    else:
+        raise ValueError(f"alpha must be one of 2, 1, 0, -1, -2, got {alpha!r}")
+    return edf
+
+
+def adev_ci(adev, edf, level: float = 0.95):
+    """Chi-square interval ``(lo, hi)`` of an Allan deviation estimate with ``edf`` degrees of freedom."""
+    adev = np.asarray(adev, dtype=float)
+    edf = np.maximum(np.asarray(edf, dtype=float), 1e-3)
+    a = (1.0 - level) / 2.0
+    lo = adev * np.sqrt(edf / chi2.ppf(1.0 - a, edf))
+    hi = adev * np.sqrt(edf / chi2.ppf(a, edf))
+    return lo, hi
+
+
+def _gcov(term: Mapping, h: np.ndarray, tau0: float):
+    """Generalised covariance G(h) of the phase of one term (see the module docstring); None if deterministic."""
+    e = term["effect"]
+    ah = np.abs(h).astype(float)
+    if e == "quantization":
+        return None  # white phase: summed exactly in _quantization_sums
+    if e == "white_noise":
+        return -0.5 * term["N"] ** 2 * tau0 * ah
+    if e == "bias_instability":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = ah**2 * np.log(np.where(ah > 0, ah, 1.0))
+        return term["B"] ** 2 * tau0**2 / (2.0 * math.pi) * g
+    if e == "random_walk":
+        return term["K"] ** 2 * tau0**3 * ah**3 / 12.0
+    if e == "gauss_markov":
+        Tc = float(term["tau_c"])
+        u = ah * tau0 / Tc
+        return -term["sigma"] ** 2 * Tc**2 * (u - 1.0 + np.exp(-u))
+    if e == "sinusoid":
+        w = 2.0 * math.pi * term["freq_hz"]
+        return term["amplitude"] ** 2 / (2.0 * w * w) * np.cos(w * ah * tau0)
+    return None  # ramp: deterministic
+
+
+def _tail(terms, m2: int, tau0: float) -> int:
+    """How far beyond the filter support c(l) must be summed for the long-memory terms."""
+    t = 0
+    for term in terms:
+        e = term["effect"]
+        if e in ("bias_instability", "sinusoid"):
+            t = max(t, 8 * m2)
+        elif e == "gauss_markov":
+            t = max(t, min(8 * m2, int(math.ceil(30.0 * term["tau_c"] / tau0))))
+    return t
+
+
+def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div: int = 32):
+    """(sum_ij c(j-i)^2, sum_ij c(j-i)) for cluster sizes m1 <= m2 (Riemann sum with step ~ m1/step_div)."""
+    tail = _tail(terms, m2, tau0) if m2 <= 16 * m1 else 0  # long-memory tails: only near pairs correlate
+    lo = -(2 * m2 + tail)
+    hi = 2 * m1 + tail
+    lo, hi = max(lo, -(M1 - 1)), min(hi, M2 - 1)
+    step = max(1, m1 // step_div)
+    l = np.arange(lo, hi + 1, step, dtype=np.int64)
+    c = np.zeros(l.shape[0])
+    taps_a = ((0, 1.0), (m1, -2.0), (2 * m1, 1.0))
+    taps_b = ((0, 1.0), (m2, -2.0), (2 * m2, 1.0))
+    for term in terms:
+        for p, ap in taps_a:
+            for q, bq in taps_b:
+                g = _gcov(term, l + q - p, tau0)
+                if g is not None:
+                    c += ap * bq * g
+    # number of (i, j) pairs, 0 <= i < M1, 0 <= j < M2, with j - i = l
+    count = np.minimum(M1 - 1, M2 - 1 - l) - np.maximum(0, -l) + 1
+    count = np.maximum(count, 0).astype(float)
+    s2, s1 = step * float(np.sum(count * c * c)), step * float(np.sum(count * c))
+    Q2 = sum(t["Q"] ** 2 for t in terms if t["effect"] == "quantization")
+    if Q2:
+        # white phase: c_Q(l) = Q^2 sum a_p b_q [l = p - q], spikes at nine lags; the smooth part c(l) is
+        # evaluated there exactly (cross term 2 c c_Q) and the spikes add c_Q^2.
+        spikes: dict[int, float] = {}
+        for p, ap in taps_a:
+            for q, bq in taps_b:
+                spikes[p - q] = spikes.get(p - q, 0.0) + Q2 * ap * bq
+        for lag, cq in spikes.items():
+            if cq == 0.0:
+                continue
+            cnt = max(0, min(M1 - 1, M2 - 1 - lag) - max(0, -lag) + 1)
+            cs = 0.0
+            for term in terms:
+                for p, ap in taps_a:
+                    for q, bq in taps_b:
+                        g = _gcov(term, np.array([lag + q - p]), tau0)
+                        if g is not None:
+                            cs += ap * bq * float(g[0])
+            s2 += cnt * (2.0 * cs * cq + cq * cq)
+            s1 += cnt * cq
+    return s2, s1
+
+
+def oavar_covariance(terms: Iterable[Mapping], m, n: int, rate_hz: float, max_ratio: int = 256) -> np.ndarray:
+    """Covariance matrix of the overlapping AVAR estimates at cluster sizes ``m`` for ``n`` rate samples
+    of Gaussian noise made of ``terms`` (SI term dicts). Pairs farther apart than ``max_ratio`` in m are
+    taken as uncorrelated (their correlation is small)."""
+    terms = list(terms)
+    m = np.asarray(m, dtype=np.int64)
+    tau0 = 1.0 / rate_hz
+    n_phase = int(n) + 1
+    M = n_phase - 2 * m
+    tau = m * tau0
+    ramp = sum(t["R"] for t in terms if t["effect"] == "ramp") if terms else 0.0
+    ramp_sq = sum(t["R"] ** 2 for t in terms if t["effect"] == "ramp")
+    k = m.shape[0]
+    cov = np.zeros((k, k))
+    for i in range(k):
+        for j in range(i, k):
+            if m[j] > max_ratio * m[i]:
+                break
+            s2, s1 = _pair_sums(terms, int(m[i]), int(m[j]), int(M[i]), int(M[j]), tau0)
+            v = 2.0 * s2
+            if ramp_sq:
+                v += 4.0 * ramp_sq * tau[i] ** 2 * tau[j] ** 2 * s1
+            cov[i, j] = cov[j, i] = v / (4.0 * tau[i] ** 2 * tau[j] ** 2 * M[i] * M[j])
+    del ramp
+    return cov
+
+
+def edf_model(terms: Iterable[Mapping], m, n: int, rate_hz: float) -> np.ndarray:
+    """EDF of each overlapping AVAR estimate for a noise made of ``terms``: 2 sigma^4 / Var(v_m)."""
+    from companion.allan.terms import avar_model
+
+    terms = list(terms)
+    m = np.asarray(m, dtype=np.int64)
+    avar = avar_model(terms, m / rate_hz)
+    var = np.array([_var_one(terms, int(mi), n, rate_hz) for mi in m])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        edf = np.where(var > 0, 2.0 * avar**2 / np.where(var > 0, var, 1.0), np.inf)
+    return edf
+
+
+def _var_one(terms, m: int, n: int, rate_hz: float) -> float:
+    return float(oavar_covariance(terms, [m], n, rate_hz)[0, 0])

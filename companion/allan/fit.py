@@ -1,0 +1,332 @@
+"""Automatic fit of a measured Allan variance with the IEEE Std 952 terms, with calibrated 95 % intervals.
+
+Model (IEEE 952 Annex C; Miao et al. 2014 eq. (3.6)): sigma^2(tau) = sum_j theta_j phi_j(tau) + nonlinear terms,
+theta = [Q^2, N^2, B^2, K^2, R^2] with phi = [3/tau^2, 1/tau, 2 ln2/pi, tau/3, tau^2/2]
+(:func:`companion.allan.terms.linear_basis`), plus optionally one Gauss-Markov term (sigma^2 linear,
+tau_c nonlinear) and one sinusoid (A^2 linear, freq_hz nonlinear).
+
+Estimator: generalised least squares with theta >= 0,
+    theta_hat = argmin_{theta >= 0} (v - A theta)^T C^-1 (v - A theta),
+solved as NNLS after whitening with the Cholesky factor of C. C is the covariance of the overlapping AVAR
+estimates computed from the *model* (not from the noisy measured points, whose use biases the fit low) by
+:func:`companion.allan.confidence.oavar_covariance`: it holds the variances (the EDF) and the strong
+correlation between neighbouring cluster times, so the fit neither over-weights a run of correlated points
+nor reports intervals that are too narrow. C is recomputed from each new fit (iterated, ``max_iter``).
+When the caller gives no ``n``/``rate_hz`` (only tau, avar and the EDF), C is diagonal,
+2 model^2 / EDF, inflated by 2 x (points per octave) for the correlation of neighbouring points
+(an approximation; analyze always uses the full C).
+
+Term selection (``effects=None``): every subset of the usual gyro model {white_noise, bias_instability,
+random_walk} is fitted and the one with the least Bayesian information criterion BIC = chi^2 + k ln(n_points)
+is kept (k = non-zero coefficients; Schwarz 1978). Then quantization, ramp and one Gauss-Markov term
+(2 parameters; tau_c found by a grid over the tau range refined by a bounded 1-D minimisation) are tried in
+turn (a sinusoid, same way, only when ``effects`` names it) and kept only if they lower the BIC by more than EXTRA_BIC_MARGIN = 10
+("very strong" evidence, Kass & Raftery 1995): with ~18 strongly correlated points, plain BIC lets a ramp
+stand in for a random walk in about one seed out of five. A slope region
+absent from the data simply leaves its coefficient at 0: never NaN.
+
+Intervals: the covariance of the selected coefficients is (A^T C^-1 A)^-1; each theta_j is treated as a
+scaled chi-square with nu_j = 2 theta_j^2 / var(theta_j) degrees of freedom (Satterthwaite 1946), so its
+``level`` interval is [theta nu / chi2_{(1+level)/2}(nu), theta nu / chi2_{(1-level)/2}(nu)]; parameters
+are the square roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1).
+Coverage is measured in benchmarks/bench_fit.py.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import minimize_scalar, nnls
+from scipy.stats import chi2 as chi2_dist
+
+from companion.allan.confidence import oavar_covariance
+from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term, linear_basis
+
+NONLINEAR_EFFECTS = ("gauss_markov", "sinusoid")
+#: the usual gyro model (IEEE 952): every subset of these is compared by BIC
+BASE_EFFECTS = ("white_noise", "bias_instability", "random_walk")
+#: quantization, ramp, gauss_markov and sinusoid enter only if they lower the BIC by more than this
+#: ("very strong" evidence on the scale of Kass & Raftery 1995: 2 ln(Bayes factor) > 10)
+EXTRA_BIC_MARGIN = 10.0
+#: what effects=None tries; a sinusoid is fitted only when asked for (on octave-spaced points its
+#: oscillating AVAR fits chance bumps too easily)
+AUTO_EFFECTS = LINEAR_EFFECTS + ("gauss_markov",)
+_NL_LINEAR = {"gauss_markov": "sigma", "sinusoid": "amplitude"}
+_NL_SHAPE = {"gauss_markov": "tau_c", "sinusoid": "freq_hz"}
+
+
+@dataclass
+class FitResult:
+    """Result of :func:`fit_avar`. ``terms``: fitted term dicts (SI) each with ``"ci95"``."""
+
+    terms: list[dict]
+    tau: np.ndarray
+    avar_fit: np.ndarray
+    chi2: float = 0.0
+    dof: int = 0
+    criterion: str = "bic"
+    score: float = 0.0
+    covariance_mode: str = "full"
+    avar_cov: np.ndarray | None = field(default=None, repr=False)
+    notes: list[str] = field(default_factory=list)
+
+    def term(self, effect: str) -> dict | None:
+        for t in self.terms:
+            if t["effect"] == effect:
+                return t
+        return None
+
+    def to_dict(self) -> dict:
+        return {"terms": self.terms, "chi2": self.chi2, "dof": self.dof, "criterion": self.criterion,
+                "score": self.score, "covariance": self.covariance_mode, "notes": list(self.notes)}
+
+
+def _shape_column(effect: str, shape: float, tau) -> np.ndarray:
+    """AVAR per unit of the linear parameter squared for a nonlinear effect at fixed shape parameter."""
+    if effect == "gauss_markov":
+        return avar_term({"effect": effect, "sigma": 1.0, "tau_c": shape}, tau)
+    return avar_term({"effect": effect, "amplitude": 1.0, "freq_hz": shape}, tau)
+
+
+def _shape_range(effect: str, tau) -> tuple[float, float]:
+    """Shape parameters whose AVAR peak (1.89 tau_c; 0.371/f) lies inside [2 tau_min, tau_max / 2]."""
+    lo, hi = 2.0 * tau[0], tau[-1] / 2.0
+    if effect == "gauss_markov":
+        return lo / 1.89, hi / 1.89
+    return 0.371 / hi, 0.371 / lo
+
+
+class _Problem:
+    """Whitened GLS problem for a fixed covariance C (scaled so the data are O(1))."""
+
+    def __init__(self, tau, v, cov):
+        self.tau, self.v = tau, v
+        cov = 0.5 * (cov + cov.T)
+        d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        corr = cov / np.outer(d, d)
+        # the truncated sums of oavar_covariance can leave the matrix slightly indefinite: clip eigenvalues
+        w, U = np.linalg.eigh(0.5 * (corr + corr.T))
+        corr = (U * np.maximum(w, 1e-6)) @ U.T
+        self.L = np.linalg.cholesky(corr) * d[:, None]
+        self.vw = self._w(v)
+
+    def _w(self, x):
+        return np.linalg.solve(self.L, x) if np.ndim(x) == 1 else np.linalg.solve(self.L, x)
+
+    def solve(self, A):
+        Aw = self._w(A)
+        scale = np.maximum(np.sqrt((Aw**2).sum(axis=0)), 1e-300)
+        theta, _ = nnls(Aw / scale, self.vw, maxiter=50 * A.shape[1] + 50)
+        theta = theta / scale
+        r = self.vw - Aw @ theta
+        return theta, float(r @ r)
+
+    def cov_theta(self, A):
+        Aw = self._w(A)
+        return np.linalg.pinv(Aw.T @ Aw)
+
+
+def _columns(linear, nonlinear, tau):
+    cols = [linear_basis(tau, [e]) [:, 0] for e in linear]
+    cols += [_shape_column(e, s, tau) for e, s in nonlinear]
+    return np.column_stack(cols) if cols else np.zeros((len(tau), 0))
+
+
+def _best_shape(prob, effect, linear, others, tau):
+    """Grid + bounded refinement of the shape parameter of ``effect``; returns (shape, chi2, theta)."""
+    lo, hi = _shape_range(effect, tau)
+    if not hi > lo > 0:
+        return None
+
+    def chi(log_s):
+        A = _columns(linear, others + [(effect, math.exp(log_s))], tau)
+        return prob.solve(A)[1]
+
+    grid = np.linspace(math.log(lo), math.log(hi), 25 if effect == "gauss_markov" else 61)
+    vals = np.array([chi(g) for g in grid])
+    i = int(np.argmin(vals))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    res = minimize_scalar(chi, bounds=(a, b), method="bounded", options={"xatol": 1e-3})
+    best = float(res.x) if res.fun < vals[i] else float(grid[i])
+    return math.exp(best), min(float(res.fun), float(vals[i])), grid, vals
+
+
+def _select(prob, tau, effects, n_pts, auto):
+    """Model selection for fixed C: returns (linear effects, [(nonlinear effect, shape)], chi2)."""
+    lin_cand = [e for e in effects if e in LINEAR_EFFECTS]
+    nl_cand = [e for e in effects if e in NONLINEAR_EFFECTS]
+    if not auto:
+        nonlin = []
+        for e in nl_cand:
+            r = _best_shape(prob, e, lin_cand, nonlin, tau)
+            if r:
+                nonlin.append((e, r[0]))
+        theta, c2 = prob.solve(_columns(lin_cand, nonlin, tau))
+        return lin_cand, nonlin, c2
+    base = [e for e in lin_cand if e in BASE_EFFECTS]
+    extra_lin = [e for e in lin_cand if e not in BASE_EFFECTS]
+    best = None
+    for k in range(1, len(base) + 1):
+        for subset in itertools.combinations(base, k):
+            theta, c2 = prob.solve(_columns(list(subset), [], tau))
+            kk = int(np.count_nonzero(theta > 0))
+            bic = c2 + kk * math.log(n_pts)
+            if best is None or bic < best[0] - 1e-9:
+                best = (bic, [e for e, t in zip(subset, theta) if t > 0], c2)
+    if best is None:
+        best = (float("inf"), [], 0.0)
+    bic, linear, c2 = best
+    nonlin: list = []
+    # extra effects, each kept only on strong evidence (BIC lower by more than EXTRA_BIC_MARGIN)
+    for e in extra_lin + nl_cand:
+        if e in LINEAR_EFFECTS:
+            cand_lin, cand_nl = linear + [e], nonlin
+
+        else:
+            r = _best_shape(prob, e, linear, nonlin, tau)
+            if r is None:
+                continue
+            cand_lin, cand_nl = linear, nonlin + [(e, r[0])]
+
+        theta, c2n = prob.solve(_columns(cand_lin, cand_nl, tau))
+        if theta[len(cand_lin) - 1 if e in LINEAR_EFFECTS else -1] <= 0:
+            continue
+        kk = int(np.count_nonzero(theta > 0)) + len(cand_nl)
+        bic_n = c2n + kk * math.log(n_pts)
+        if bic_n < bic - EXTRA_BIC_MARGIN:
+            # the base terms may now be redundant: keep only those with a non-zero coefficient
+            keep = theta[: len(cand_lin)] > 0
+            linear = [x for x, kp in zip(cand_lin, keep) if kp]
+            nonlin = cand_nl
+            bic, c2 = bic_n, c2n
+    return linear, nonlin, c2
+
+
+def _terms_from(linear, nonlinear, theta, scale):
+    terms = []
+    for e, t in zip(linear, theta[: len(linear)]):
+        terms.append({"effect": e, LINEAR_PARAM[e]: math.sqrt(max(t, 0.0) * scale)})
+    for (e, s), t in zip(nonlinear, theta[len(linear):]):
+        terms.append({"effect": e, _NL_LINEAR[e]: math.sqrt(max(t, 0.0) * scale), _NL_SHAPE[e]: s})
+    return [t for t in terms if any(v > 0 for k, v in t.items() if k in ("Q", "N", "B", "K", "R", "sigma", "amplitude"))]
+
+
+def _scaled_chi2_ci(theta, var, level):
+    """Interval of a positive quadratic-form estimate theta ~ theta_true chi2(nu)/nu, nu = 2 theta^2/var."""
+    if theta <= 0:
+        return 0.0, 0.0
+    if not var > 0:
+        return theta, theta
+    nu = max(2.0 * theta**2 / var, 1e-3)
+    a = (1.0 - level) / 2.0
+    return theta * nu / chi2_dist.ppf(1.0 - a, nu), theta * nu / chi2_dist.ppf(a, nu)
+
+
+def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
+             max_iter=4, max_ratio=256) -> FitResult:
+    """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring.
+
+    ``edf``: EDF of each point (used for the first weights, and for the diagonal covariance when ``n`` or
+    ``rate_hz`` is not given). ``effects``: None = automatic selection among all effects, or a list of effect
+    names to fit (all kept unless their NNLS coefficient is 0). ``n``, ``rate_hz`` (and ``m``, default
+    round(tau rate_hz)): number of rate samples and their rate, for the full model covariance.
+    """
+    tau = np.asarray(tau, dtype=float)
+    avar = np.asarray(avar, dtype=float)
+    ok = np.isfinite(avar) & np.isfinite(tau) & (tau > 0) & (avar >= 0)
+    notes = []
+    edf_all = np.full(tau.shape, 10.0) if edf is None else np.broadcast_to(np.asarray(edf, dtype=float), tau.shape)
+    ok &= np.isfinite(edf_all) & (edf_all > 0)
+    tau, avar, edf_v = tau[ok], avar[ok], edf_all[ok]
+    full = n is not None and rate_hz is not None
+    if full:
+        m = np.round(tau * rate_hz).astype(np.int64) if m is None else np.asarray(m, dtype=np.int64)[ok]
+    if tau.size == 0 or not np.any(avar > 0):
+        return FitResult([], tau, np.zeros_like(tau), covariance_mode="full" if full else "diagonal",
+                         notes=["no variance to fit (constant data)"])
+    auto = effects is None
+    effects = list(AUTO_EFFECTS) if auto else list(effects)
+    bad = [e for e in effects if e not in LINEAR_EFFECTS + NONLINEAR_EFFECTS]
+    if bad:
+        raise ValueError(f"unknown effect {bad[0]!r}")
+    if tau.size < 3:
+        effects = [e for e in effects if e in ("white_noise",)] or effects[:1]
+        notes.append("fewer than 3 cluster times: only white noise fitted")
+    scale = float(np.median(avar[avar > 0]))
+    v = avar / scale
+    n_pts = tau.size
+    if not full:
+        dens = (n_pts - 1) / max(math.log2(tau[-1] / tau[0]), 1e-9) if n_pts > 1 else 1.0
+        inflate = 2.0 * max(1.0, dens)
+
+    def covariance(terms_si, v_model):
+        if full and terms_si:
+            return oavar_covariance(terms_si, m, n, rate_hz, max_ratio=max_ratio) / scale**2
+        base = v_model if np.all(v_model > 0) else np.maximum(v_model, 1e-6 * np.max(v))
+        c = 2.0 * base**2 / edf_v
+        return np.diag(c * (1.0 if full else inflate))
+
+    # start: weights from the measured points (only to get a first model)
+    cov = np.diag(2.0 * np.maximum(v, 1e-6 * v.max()) ** 2 / edf_v)
+    # The covariance is computed from a *superset* model (all base effects plus the extras selected so
+    # far, NNLS-fitted): computing it from a model that lacks a term actually present would make the
+    # points dominated by that term look far too precise and trap the iteration.
+    base = [e for e in LINEAR_EFFECTS if e in effects and (e in BASE_EFFECTS or not auto)]
+    linear, nonlin, c2 = list(base), [], 0.0
+    prev = None
+    for it in range(max_iter):
+        prob = _Problem(tau, v, cov)
+        sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
+        A_sup = _columns(sup_lin, nonlin, tau)
+        th_sup, _ = prob.solve(A_sup)
+        cov = covariance(_terms_from(sup_lin, nonlin, th_sup, scale), A_sup @ th_sup)
+        prob = _Problem(tau, v, cov)
+        linear, nonlin, c2 = _select(prob, tau, effects, n_pts, auto)
+        theta, c2 = prob.solve(_columns(linear, nonlin, tau))
+        key = (tuple(linear), tuple(e for e, _ in nonlin))
+        if prev is not None and key == prev[0] and np.allclose(theta, prev[1], rtol=1e-3, atol=1e-12):
+            break
+        prev = (key, theta)
+    prob = _Problem(tau, v, cov)
+    A = _columns(linear, nonlin, tau)
+    theta, c2 = prob.solve(A)
+    active = theta > 0
+    cov_t = np.zeros((len(theta), len(theta)))
+    if np.any(active):
+        cov_t[np.ix_(active, active)] = prob.cov_theta(A[:, active])
+    terms = []
+    for j, e in enumerate(linear + [e for e, _ in nonlin]):
+        if theta[j] <= 0:
+            continue
+        lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
+        if e in LINEAR_EFFECTS:
+            p = LINEAR_PARAM[e]
+            t = {"effect": e, p: math.sqrt(theta[j] * scale), "ci95": {p: [math.sqrt(lo * scale), math.sqrt(hi * scale)]}}
+        else:
+            shape = dict(nonlin)[e]
+            p, s = _NL_LINEAR[e], _NL_SHAPE[e]
+            t = {"effect": e, p: math.sqrt(theta[j] * scale), s: shape,
+                 "ci95": {p: [math.sqrt(lo * scale), math.sqrt(hi * scale)],
+                          s: list(_profile_ci(prob, e, shape, linear, [x for x in nonlin if x[0] != e], tau, c2, level))}}
+        terms.append(t)
+    kk = int(np.count_nonzero(active)) + len(nonlin)
+    avar_fit = avar_model([{k: v_ for k, v_ in t.items() if k != "ci95"} for t in terms], tau)
+    return FitResult(terms=terms, tau=tau, avar_fit=avar_fit, chi2=c2, dof=max(n_pts - kk, 0),
+                     criterion="bic", score=c2 + kk * math.log(n_pts),
+                     covariance_mode="full" if full else "diagonal", avar_cov=cov * scale**2, notes=notes)
+
+
+def _profile_ci(prob, effect, shape, linear, others, tau, c2min, level):
+    """Profile-likelihood interval of a shape parameter (tau_c or freq_hz) on a log grid."""
+    lo, hi = _shape_range(effect, tau)
+    lo, hi = min(lo, shape), max(hi, shape)
+    grid = np.exp(np.linspace(math.log(lo) - 1.0, math.log(hi) + 1.0, 121))
+    thr = c2min + chi2_dist.ppf(level, 1)
+    chis = np.array([prob.solve(_columns(linear, others + [(effect, g)], tau))[1] for g in grid])
+    inside = grid[chis <= thr]
+    if inside.size == 0:
+        return shape, shape
+    return float(min(inside.min(), shape)), float(max(inside.max(), shape))
