@@ -39,7 +39,7 @@ watch it in MAVProxy:   graph NAMED_VALUE_FLOAT[IMU0GX_N].value
             in Mission Planner: Ctrl-F > Tuning > MAV_IMU0GX_N
 """
 
-LINK_KEYS = ("rate_hz", "messages", "compid", "heartbeat_s", "request_timeout_s", "stale_s", "retry_s")
+LINK_KEYS = ("rate_hz", "messages", "compid", "heartbeat_s", "stale_s", "retry_s")
 RUN_KEYS = ("report_period_s", "state_file", "save_period_s")
 
 

@@ -4,8 +4,8 @@
   autopilot ``MAV_AUTOPILOT_INVALID`` (8), component id 191 (``MAV_COMP_ID_ONBOARD_COMPUTER``) by default,
   system id of the vehicle (the configured one, else the first system sending IMU data).
 - Asking for IMU data: ``MAV_CMD_SET_MESSAGE_INTERVAL`` (511) per message at the configured rate; when the
-  autopilot refuses (COMMAND_ACK result != ACCEPTED) or no IMU data arrives within ``request_timeout_s``,
-  also ``REQUEST_DATA_STREAM`` (``MAV_DATA_STREAM_RAW_SENSORS``) at min(rate, 50) Hz. If IMU data stops for
+  autopilot refuses (COMMAND_ACK result != ACCEPTED) or two requests ``retry_s`` apart get neither an ACK
+  nor data (an autopilot without the command), also ``REQUEST_DATA_STREAM`` (``MAV_DATA_STREAM_RAW_SENSORS``) at min(rate, 50) Hz. If IMU data stops for
   ``stale_s`` the requests are repeated every ``retry_s`` (link loss and return, autopilot reboot).
 - Replies go where the IMU data came from: on a ``udpin:`` link (several peers may write to our port),
   every message we send goes to the address of the last IMU message of the vehicle, not to all peers.
@@ -36,7 +36,6 @@ class LinkConfig:
     messages: tuple[str, ...] = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
     compid: int = MAV_COMP_ID_ONBOARD_COMPUTER
     heartbeat_s: float = 1.0
-    request_timeout_s: float = 3.0
     stale_s: float = 3.0
     retry_s: float = 5.0
 
@@ -60,6 +59,7 @@ class Link:
         self.last_heartbeat_wall = -1e18
         self.last_request_wall: float | None = None
         self.use_data_stream = False
+        self.acked = False  # the autopilot accepted a SET_MESSAGE_INTERVAL
         self.requests = 0
         self.sent = 0
         self.recorder = None  # a TlogWriter: every frame we send is also recorded
@@ -107,7 +107,9 @@ class Link:
             if msg.autopilot != MAV_AUTOPILOT_INVALID and msg.type not in (MAV_TYPE_GCS, MAV_TYPE_ONBOARD_CONTROLLER):
                 self.autopilot_compid = msg.get_srcComponent()
         elif mtype == "COMMAND_ACK":
-            if msg.command == MAV_CMD_SET_MESSAGE_INTERVAL and msg.result != MAV_RESULT_ACCEPTED and not self.use_data_stream:
+            if msg.command == MAV_CMD_SET_MESSAGE_INTERVAL and msg.result == MAV_RESULT_ACCEPTED:
+                self.acked = True
+            elif msg.command == MAV_CMD_SET_MESSAGE_INTERVAL and not self.use_data_stream:
                 self.log(f"autopilot refused SET_MESSAGE_INTERVAL (result {msg.result}); using REQUEST_DATA_STREAM")
                 self.use_data_stream = True
                 self.last_request_wall = None  # ask again right away
@@ -142,8 +144,8 @@ class Link:
             waited = now - self.last_request_wall
             if waited < self.cfg.retry_s:
                 return
-            if self.requests >= 1 and not self.use_data_stream and waited >= self.cfg.request_timeout_s:
-                self.use_data_stream = True  # no data after asking with SET_MESSAGE_INTERVAL: fall back as well
+            if self.requests >= 2 and not self.acked and not self.use_data_stream:
+                self.use_data_stream = True  # two requests without an answer nor data: old autopilot? fall back too
         self.request_streams()
         self.last_request_wall = now
 

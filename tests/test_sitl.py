@@ -1,0 +1,168 @@
+"""SITL loopback: `companion sim-autopilot` against `companion run` over UDP on 127.0.0.1, directly and
+through MAVProxy as a router. Processes are always killed; every wait is bounded.
+
+Test model: white noise N = 3e-3 rad/s/sqrt(Hz) on each gyro axis at 100 Hz, i.e. 30 mrad/s per sample,
+30x the 1 mrad/s LSB of RAW_IMU. The truth accounts for the rounding anyway: rounding adds white noise of
+variance LSB^2/12 per sample, so N_true = sqrt(N^2 + LSB^2 / (12 rate)) (+0.005 %).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.network
+
+ROOT = Path(__file__).resolve().parent.parent
+N_SI = 3e-3
+RATE = 100.0
+LSB = 1e-3
+N_TRUE_SI = math.sqrt(N_SI**2 + LSB**2 / (12 * RATE))
+N_TRUE = N_TRUE_SI * 180 / math.pi * 60  # deg/sqrt(h)
+MODEL = f"""rate_hz: {RATE}
+axes:
+  gx: [{{effect: white_noise, N: {N_SI}}}]
+  gy: [{{effect: white_noise, N: {N_SI}}}]
+  gz: [{{effect: white_noise, N: {N_SI}}}]
+"""
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def env():
+    e = dict(os.environ)
+    e["PYTHONPATH"] = str(ROOT) + os.pathsep + e.get("PYTHONPATH", "")
+    return e
+
+
+def start(args, cwd, out_name):
+    out = open(Path(cwd) / out_name, "w")
+    return subprocess.Popen([sys.executable, "-m", "companion", *args], cwd=cwd, env=env(), stdout=out,
+                            stderr=subprocess.STDOUT, start_new_session=True), out
+
+
+def stop(proc, sig=signal.SIGTERM, timeout=10.0):
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            pass
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(5)
+    return proc.returncode
+
+
+def read_record(path):
+    nvf, texts = [], []
+    for line in Path(path).read_text().splitlines():
+        d = json.loads(line)
+        (nvf if d["type"] == "NAMED_VALUE_FLOAT" else texts).append(d)
+    return nvf, texts
+
+
+def last_before(nvf, name, t_sim):
+    vals = [d["value"] for d in nvf if d["name"] == name and d["t_sim"] - 1.0 < t_sim]
+    return vals[-1] if vals else None
+
+
+def check_loop(tmp_path, nvf, texts, degrade_at, duration):
+    names = {d["name"] for d in nvf}
+    for ax in "XYZ":
+        for p in "NBK":
+            assert f"IMU0G{ax}_{p}" in names
+    assert "IMU0G_HLTH" in names
+    assert all(re.match(r"^[A-Z0-9_]{1,10}$", n) for n in names)
+    # N within 10 % of truth before the degradation (all axes) and at the end (Y, Z)
+    for ax in "XYZ":
+        v = last_before(nvf, f"IMU0G{ax}_N", degrade_at)
+        assert v == pytest.approx(N_TRUE, rel=0.10), (ax, v, N_TRUE)
+    for ax in "YZ":
+        assert last_before(nvf, f"IMU0G{ax}_N", duration + 10) == pytest.approx(N_TRUE, rel=0.10)
+    hl = [(d["t_sim"] - 1.0, d["value"]) for d in nvf if d["name"] == "IMU0G_HLTH"]
+    assert hl[0][1] == 2.0  # learning first
+    assert any(v == 0.0 for t, v in hl if t < degrade_at)  # healthy once the baseline is learned
+    assert not any(v == 1.0 for t, v in hl if t < degrade_at)  # no false alarm
+    assert hl[-1][1] == 1.0  # degrading at the end
+    deg = [d for d in texts if "degrading" in d["text"]]
+    assert len(deg) == 1, texts
+    assert deg[0]["severity"] == 4
+    assert re.match(r"^IMU0 gyro X degrading: N \d\.\dx baseline$", deg[0]["text"])
+    assert degrade_at < deg[0]["t_sim"] - 1.0 < degrade_at + 300.0  # within 5 minutes at 100 Hz
+    assert any(d["text"] == "IMU0 gyro baseline learned" for d in texts)
+
+
+def run_loop(tmp_path, via_mavproxy=False, speedup=30.0, duration=900.0, degrade_at=500.0, baseline_s=120.0):
+    (tmp_path / "model.yaml").write_text(MODEL)
+    p_run = free_udp_port()
+    procs = []
+    try:
+        if via_mavproxy:
+            p_master = free_udp_port()
+            mp = shutil.which("mavproxy.py")
+            proxy = subprocess.Popen([mp, f"--master=udpin:127.0.0.1:{p_master}", f"--out=udpout:127.0.0.1:{p_run}",
+                                      "--daemon", "--non-interactive", "--no-state", "--streamrate=-1",
+                                      "--default-modules=", "--nowait"],
+                                     cwd=tmp_path, stdout=open(tmp_path / "mavproxy.out", "w"),
+                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+            procs.append(proxy)
+            sim_target = p_master
+        else:
+            sim_target = p_run
+        wall = duration / speedup
+        run, _ = start(["run", "--source", f"udpin:127.0.0.1:{p_run}", "--state", str(tmp_path / "state.json"),
+                        "--baseline-s", str(baseline_s), "--duration", str(wall + 15), "--out-tlog",
+                        str(tmp_path / "rx.tlog")], tmp_path, "run.out")
+        procs.append(run)
+        time.sleep(1.0)
+        sim, _ = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{sim_target}",
+                        "--speedup", str(speedup), "--duration", str(duration), "--degrade-at", str(degrade_at),
+                        "--degrade-factor", "2", "--degrade-axis", "gx", "--wait-request", "--wall-limit",
+                        str(wall + 20), "--record", "rx.jsonl", "--quiet"], tmp_path, "sim.out")
+        procs.append(sim)
+        sim.wait(wall + 40)
+        assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
+        rc = stop(run)  # SIGTERM: saves its state and prints the summary
+        assert rc == 0, (tmp_path / "run.out").read_text()
+    finally:
+        for p in procs:
+            stop(p, signal.SIGKILL if p is procs[0] and via_mavproxy else signal.SIGTERM)
+    assert (tmp_path / "state.json").exists()
+    nvf, texts = read_record(tmp_path / "rx.jsonl")
+    return nvf, texts
+
+
+def test_sim_autopilot_against_run_direct(tmp_path):
+    nvf, texts = run_loop(tmp_path)
+    check_loop(tmp_path, nvf, texts, 500.0, 900.0)
+    out = (tmp_path / "run.out").read_text()
+    # the same messages replayed from the recording as fast as possible: the same estimates
+    live = out[out.index("IMU0 (RAW_IMU"):]
+    rep = subprocess.run([sys.executable, "-m", "companion", "run", "--source", str(tmp_path / "rx.tlog"),
+                          "--baseline-s", "120", "--quiet"], cwd=tmp_path, env=env(), capture_output=True,
+                         text=True, timeout=120)
+    assert rep.returncode == 0, rep.stderr
+    assert rep.stdout == live
+
+
+@pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")
+def test_sim_autopilot_against_run_through_mavproxy(tmp_path):
+    nvf, texts = run_loop(tmp_path, via_mavproxy=True, speedup=10.0, duration=480.0, degrade_at=280.0)
+    check_loop(tmp_path, nvf, texts, 280.0, 480.0)
