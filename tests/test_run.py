@@ -1,0 +1,249 @@
+"""`companion run` pipeline: still detection, reboots, duplicates, other systems, state, signals, the link."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.cli.main import main
+from companion.health.detector import LEARNING
+from companion.mavlink.reporter import Reporter
+from companion.samples import StreamKey
+from companion.service.pipeline import Pipeline, PipelineConfig
+from companion.service.state import load_state, save_state
+
+ROOT = Path(__file__).resolve().parent.parent
+KEY = StreamKey(1, 1, "RAW_IMU", 0)
+N = 3e-3
+FS = 100.0
+G = np.array([0.0, 0.0, -9.80665])
+
+
+class Sink:
+    def __init__(self):
+        self.values, self.texts = {}, []
+
+    def send_named_value_float(self, ms, name, value):
+        self.values[name] = value
+
+    def send_statustext(self, sev, text):
+        self.texts.append((sev, text))
+
+
+def make_pipeline(**cfg):
+    sink = Sink()
+    p = Pipeline(PipelineConfig.from_mapping({"baseline_s": 200, **cfg}), Reporter(sink, 1.0))
+    return p, sink
+
+
+def still(rng, n):
+    return rng.normal(0, N * math.sqrt(FS), (n, 3)), G + rng.normal(0, 0.02, (n, 3))
+
+
+def feed(p, t, g, a, key=KEY):
+    for k in range(t.size):
+        p.on_sample(key, t[k], g[k], a[k])
+
+
+def n_estimate(p, ax="gx"):
+    ch = p.channels[0]
+    return p.current_params(ch, ax)["N"][0]
+
+
+def test_flight_and_handling_neither_corrupt_nor_flag():
+    rng = np.random.default_rng(3)
+    p, sink = make_pipeline()
+    t0 = 1.0
+    segs = []
+    g, a = still(rng, 30_000)  # 300 s still: baseline
+    segs.append((g, a, False))
+    g, a = still(rng, 12_000)  # 120 s armed flight: turning, vibrating
+    tt = np.arange(12_000) / FS
+    g = g + 0.5 * np.sin(2 * np.pi * 0.3 * tt)[:, None]
+    a = a + rng.normal(0, 2.0, a.shape)
+    segs.append((g, a, True))
+    g, a = still(rng, 6_000)  # 60 s disarmed handling: picked up, tilted, put down in another attitude
+    tilt = np.clip(np.arange(6_000) / 3_000.0, 0, 1)[:, None]
+    a = a + tilt * np.array([3.0, 0.0, 0.5]) + rng.normal(0, 0.8, a.shape) * (tilt < 1)
+    g = g + 0.3 * np.sin(2 * np.pi * 0.2 * np.arange(6_000) / FS)[:, None] * (tilt < 1)
+    segs.append((g, a, False))
+    g, a = still(rng, 60_000)  # 600 s still again, in the new attitude
+    a = a + np.array([3.0, 0.0, 0.5])
+    segs.append((g, a, False))
+    for g, a, armed in segs:
+        p.on_heartbeat(1, 2, 3, 128 if armed else 0)
+        t = t0 + np.arange(g.shape[0]) / FS
+        t0 = t[-1] + 1 / FS
+        feed(p, t, g, a)
+    ch = p.channels[0]
+    assert ch.counts["blocks_moving"] >= 150 - 2  # flight (120 s) + handling (30 s) seen as moving
+    assert ch.fed_s < 300 + 30 + 600 + 1  # the still parts only (the last 30 s of handling are still)
+    assert p.transitions == [] and not any("degrading" in t for _, t in sink.texts)
+    n_true = math.sqrt(N**2 + 0.0)  # no rounding here
+    for ax in ("gx", "gy", "gz"):
+        assert n_estimate(p, ax) == pytest.approx(n_true, rel=0.03)
+    assert sink.values["IMU0G_HLTH"] == 0.0
+
+
+def test_reboot_duplicates_and_other_systems():
+    rng = np.random.default_rng(5)
+    p, sink = make_pipeline()
+    g, a = still(rng, 40_000)
+    t = 1.0 + np.arange(40_000) / FS
+    t[25_000:] -= t[25_000] - 0.5  # autopilot reboot: time since boot starts again
+    other = StreamKey(2, 1, "RAW_IMU", 0)
+    for k in range(t.size):
+        p.on_sample(KEY, t[k], g[k], a[k])
+        if k % 1000 == 0:
+            p.on_sample(KEY, t[k], g[k], a[k])  # duplicated packet
+        if k % 3 == 0:  # another vehicle on the same link, ten times noisier
+            p.on_sample(other, t[k], 10 * g[k], a[k])
+    p.on_sample(StreamKey(1, 1, "SCALED_IMU", 0), 500.0, (9.0, 9.0, 9.0), G)  # same IMU, other message: ignored
+    c = p.channels[0].counts
+    assert c["resets"] == 1 and c["duplicates"] == 40
+    assert p.ignored["other_sysid"] == math.ceil(40_000 / 3) and p.ignored["other_message"] == 1
+    assert n_estimate(p) == pytest.approx(N, rel=0.03)
+    assert p.transitions == []
+
+
+def test_state_round_trip_keeps_baseline_and_estimates(tmp_path):
+    rng = np.random.default_rng(11)
+    g, a = still(rng, 60_000)
+    t = 1.0 + np.arange(60_000) / FS
+    p1, _ = make_pipeline()
+    feed(p1, t[:30_000], g[:30_000], a[:30_000])
+    save_state(tmp_path / "s.json", p1.state_dict())
+    p2, sink2 = make_pipeline()
+    assert load_state(tmp_path / "s.json", p2.load_state_dict, warn=pytest.fail)
+    assert p2.baseline is not None and p2.baseline.get(0, "gx")["N"] == p1.baseline.get(0, "gx")["N"]
+    assert p2.channels[0].learn == {}
+    feed(p2, t[30_000:], g[30_000:], a[30_000:])
+    p3, _ = make_pipeline()  # the same data without a restart
+    feed(p3, t, g, a)
+    assert n_estimate(p2) == pytest.approx(n_estimate(p3), rel=0.01)
+    assert not any("baseline learned" in s for _, s in sink2.texts)  # not learned again
+    assert sink2.values["IMU0G_HLTH"] == 0.0
+
+
+def test_corrupt_and_foreign_state_give_a_warning_and_a_fresh_start(tmp_path):
+    warnings = []
+    for name, text in (("garbage.json", "{not json"), ("foreign.json", json.dumps({"format": "other", "x": 1})),
+                       ("bad.json", json.dumps({"format": "companion-run-state", "version": 1,
+                                                "channels": {"0": {"message": "RAW_IMU"}}}))):
+        f = tmp_path / name
+        f.write_text(text)
+        p, _ = make_pipeline()
+        assert not load_state(f, p.load_state_dict, warnings.append)
+        assert p.channels == {} and p.baseline is None
+        assert (tmp_path / (name + ".bad")).exists() and not f.exists()
+    assert len(warnings) == 3 and all("starting fresh" in w for w in warnings)
+
+
+def test_replay_cli_with_corrupt_state_file(tmp_path, capsys):
+    from companion.mavlink.tlog_writer import write_imu_tlog
+
+    rng = np.random.default_rng(2)
+    g, a = still(rng, 40_000)
+    write_imu_tlog(tmp_path / "x.tlog", 1.0 + np.arange(40_000) / FS, g, a)
+    (tmp_path / "state.json").write_text("\x00\x01garbage")
+    rc = main(["run", "--source", str(tmp_path / "x.tlog"), "--state", str(tmp_path / "state.json"), "--quiet",
+               "--baseline-s", "200"])
+    cap = capsys.readouterr()
+    assert rc == 0
+    assert "not usable" in cap.err and "Traceback" not in cap.err
+    assert "IMU0 (RAW_IMU, 100.0 Hz): healthy" in cap.out
+    assert json.loads((tmp_path / "state.json").read_text())["format"] == "companion-run-state"
+    # second run: restored from the state, the baseline is kept (no second "baseline learned")
+    rc = main(["run", "--source", str(tmp_path / "x.tlog"), "--state", str(tmp_path / "state.json")])
+    cap = capsys.readouterr()
+    assert rc == 0 and "state restored" in cap.err and "baseline learned" not in cap.out
+
+
+@pytest.mark.parametrize("argv, msg", [
+    (["run", "--source", "nonsense"], "unknown source"),
+    (["run", "--source", "missing.tlog"], "no such file"),
+    (["run", "--source", "x.tlog", "--baseline", "missing.json"], "no such file"),
+    (["run", "--source", "udpin:127.0.0.1:99999"], "port"),
+    (["sim-autopilot", "--model", "missing.yaml", "--connect", "udpout:127.0.0.1:14550"], "missing.yaml"),
+])
+def test_user_errors_are_one_line(argv, msg, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rc = main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2 and msg in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.network
+def test_sigterm_saves_state_and_exits_cleanly(tmp_path):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-m", "companion", "run", "--source", f"udpin:127.0.0.1:{port}",
+                             "--state", str(tmp_path / "st.json"), "--duration", "30"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(2.0)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+    assert json.loads((tmp_path / "st.json").read_text())["format"] == "companion-run-state"
+
+
+@pytest.mark.network
+def test_link_identity_and_replies_only_to_the_imu_sender():
+    from pymavlink import mavutil
+
+    from companion.mavlink.link import Link, LinkConfig
+    from companion.sources.connection import open_connection
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    conn = open_connection(f"udpin:127.0.0.1:{port}")
+    vehicle = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=7, source_component=1)
+    intruder = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=9, source_component=1)
+    try:
+        link = Link(conn, LinkConfig(), sysid=None)
+        intruder.mav.heartbeat_send(6, 8, 0, 0, 4)
+        vehicle.mav.heartbeat_send(2, 3, 0, 0, 3)
+        vehicle.mav.raw_imu_send(1_000_000, 0, 0, -1000, 1, 2, 3, 0, 0, 0)
+        got = []
+        deadline = time.monotonic() + 5
+        while len(got) < 3 and time.monotonic() < deadline:
+            m = conn.recv_match(blocking=True, timeout=0.2)
+            if m is not None:
+                got.append(m)
+                link.on_message(m, is_vehicle_imu=m.get_type() == "RAW_IMU")
+        assert [m.get_type() for m in got] == ["HEARTBEAT", "HEARTBEAT", "RAW_IMU"]
+        assert link.sysid == 7 and link.autopilot_compid == 1
+        link.service()  # our heartbeat
+        link.send_named_value_float(1000, "IMU0GX_N", 1.5)
+        rx = []
+        deadline = time.monotonic() + 3
+        while len(rx) < 2 and time.monotonic() < deadline:
+            m = vehicle.recv_match(blocking=True, timeout=0.2)
+            if m is not None:
+                rx.append(m)
+        hb = [m for m in rx if m.get_type() == "HEARTBEAT"][0]
+        assert hb.type == 18 and hb.get_srcSystem() == 7 and hb.get_srcComponent() == 191
+        assert any(m.get_type() == "NAMED_VALUE_FLOAT" and m.name == "IMU0GX_N" for m in rx)
+        assert intruder.recv_match(blocking=True, timeout=0.5) is None  # nothing for the other peer
+    finally:
+        for c in (conn, vehicle, intruder):
+            c.close()
