@@ -27,8 +27,8 @@ absent from the data simply leaves its coefficient at 0: never NaN.
 
 Intervals: the covariance of the selected coefficients is (A^T C^-1 A)^-1; each theta_j is treated as a
 scaled chi-square with nu_j = 2 theta_j^2 / var(theta_j) degrees of freedom (Satterthwaite 1946), so its
-``level`` interval is [theta nu / chi2_{(1+level)/2}(nu), theta nu / chi2_{(1-level)/2}(nu)]; parameters
-are the square roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1).
+``level`` interval is [theta nu / chi2_{(1+level)/2}(nu), theta nu / chi2_{(1-level)/2}(nu)] (for nu < 4,
+a barely identified term, the normal interval theta +- z sd truncated at 0); parameters are the square roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1).
 Coverage is measured in benchmarks/bench_fit.py.
 """
 
@@ -220,8 +220,14 @@ def _scaled_chi2_ci(theta, var, level):
         return 0.0, 0.0
     if not var > 0:
         return theta, theta
-    nu = max(2.0 * theta**2 / var, 1e-3)
+    nu = 2.0 * theta**2 / var
     a = (1.0 - level) / 2.0
+    if nu < 4.0:
+        # barely identified (sd > theta / sqrt 2): the chi-square pivot's upper end explodes; use the
+        # normal interval on theta, truncated at 0
+        z = float(chi2_dist.ppf(level, 1)) ** 0.5
+        sd = math.sqrt(var)
+        return max(theta - z * sd, 0.0), theta + z * sd
     return theta * nu / chi2_dist.ppf(1.0 - a, nu), theta * nu / chi2_dist.ppf(a, nu)
 
 

@@ -1,0 +1,114 @@
+"""Allan deviation figure for a report: measured ADEV with its 95 % band, each fitted term and their sum.
+
+Gyro panels in deg/h, accel panels in mg (ADEV of the rate), against the cluster time in seconds; the
+legend gives each fitted coefficient in datasheet units with its 95 % interval.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from companion import units
+from companion.allan.terms import PARAMS, avar_term
+from companion.plots import require_matplotlib
+from companion.samples import ACCEL_AXES, GYRO_AXES
+
+_LABEL = {"white_noise": "white noise", "bias_instability": "bias instability", "random_walk": "rate random walk",
+          "quantization": "quantization", "ramp": "rate ramp", "gauss_markov": "Gauss-Markov",
+          "sinusoid": "sinusoid"}
+_COLORS = {"quantization": "tab:purple", "white_noise": "tab:blue", "bias_instability": "tab:green",
+           "random_walk": "tab:red", "ramp": "tab:brown", "gauss_markov": "tab:orange", "sinusoid": "tab:pink"}
+
+
+def _value_text(t, axis):
+    parts = []
+    for p in PARAMS[t["effect"]]:
+        v = units.to_datasheet(p, t[p], axis)
+        ci = t.get("ci95", {}).get(p)
+        s = f"{p}={v:.3g}"
+        if ci:
+            s += f" [{units.to_datasheet(p, ci[0], axis):.3g}, {units.to_datasheet(p, ci[1], axis):.3g}]"
+        parts.append(s + " " + units.datasheet_unit(p, axis))
+    return ", ".join(parts)
+
+
+def draw_axis(ax, axis: str, r: dict) -> None:
+    """Draw one axis result (the JSON ``axes`` entry) on matplotlib axes ``ax``."""
+    gyro = axis in GYRO_AXES
+    f = units.to_datasheet("B", 1.0, axis)  # rad/s -> deg/h, m/s^2 -> mg
+    unit = "deg/h" if gyro else "mg"
+    ax.set_title(axis + (" (gyro)" if gyro else " (accel)"), fontsize=10)
+    if r.get("status") != "ok" or not r.get("tau"):
+        ax.text(0.5, 0.5, f"{r.get('status')}\n{r.get('note', '')}", ha="center", va="center",
+                transform=ax.transAxes, fontsize=9, wrap=True)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        return
+    tau = np.asarray(r["tau"])
+    adev = np.asarray(r["adev"]) * f
+    ax.fill_between(tau, np.asarray(r["adev_lo"]) * f, np.asarray(r["adev_hi"]) * f, color="0.8",
+                    label="95 % interval", linewidth=0)
+    ax.loglog(tau, adev, "o", ms=3.5, color="k", label="overlapping ADEV")
+    if r["terms"]:
+        tt = np.logspace(np.log10(tau[0]), np.log10(tau[-1]), 200)
+        total = np.zeros_like(tt)
+        for t in r["terms"]:
+            plain = {k: v for k, v in t.items() if k != "ci95"}
+            av = avar_term(plain, tt)
+            total += av
+            ax.loglog(tt, np.sqrt(av) * f, "--", lw=1.2, color=_COLORS.get(t["effect"]),
+                      label=f"{_LABEL[t['effect']]}: {_value_text(t, axis)}")
+        ax.loglog(tt, np.sqrt(total) * f, "-", lw=1.6, color="tab:cyan", label="sum of fitted terms")
+        lo = np.nanmin(np.asarray(r["adev_lo"]) * f)
+        hi = np.nanmax(np.asarray(r["adev_hi"]) * f)
+        ax.set_ylim(lo / 2.0, hi * 2.0)
+    q = r.get("quantization")
+    if q:
+        ax.loglog(tau, q["N_q"] / np.sqrt(tau) * f, color="0.5", lw=0.9, ls=":",
+                  label=f"1-LSB rounding, N_q={units.to_datasheet('N', q['N_q'], axis):.3g} "
+                        f"{units.datasheet_unit('N', axis)} ({'dithered' if q['dithered'] else 'NOT dithered'})")
+    ax.set_xlabel("cluster time tau [s]")
+    ax.set_ylabel(f"Allan deviation [{unit}]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=6.5, loc="best", framealpha=0.85)
+
+
+def plot_stream(stream: dict, path, title: str | None = None) -> None:
+    plt = require_matplotlib()
+    rows = [[a for a in names if a in stream["axes"]] for names in (GYRO_AXES, ACCEL_AXES)]
+    rows = [r for r in rows if r]
+    ncol = max(len(r) for r in rows)
+    fig, axs = plt.subplots(len(rows), ncol, figsize=(5.2 * ncol, 4.4 * len(rows)), squeeze=False)
+    for i, row in enumerate(rows):
+        for j in range(ncol):
+            if j < len(row):
+                draw_axis(axs[i][j], row[j], stream["axes"][row[j]])
+            else:
+                axs[i][j].set_visible(False)
+    fig.suptitle(title or (f"{stream['message']}[{stream['instance']}] sys{stream['sysid']}/comp{stream['compid']}: "
+                           f"{stream['samples']} samples at {stream['rate_hz']:.4g} Hz ({stream['duration_s']:.0f} s)"),
+                 fontsize=11)
+    fig.tight_layout()
+    try:
+        fig.savefig(path, dpi=110)
+    except OSError as exc:
+        from companion.errors import CompanionError
+
+        raise CompanionError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        plt.close(fig)
+
+
+def plot_report(report: dict, path) -> list[str]:
+    """One PNG per stream: ``path`` itself for a single stream, else ``<stem>_<message><instance>_sys<id><suffix>``."""
+    streams = report["streams"]
+    p = Path(path)
+    out = []
+    for st in streams:
+        target = p if len(streams) == 1 else p.with_name(
+            f"{p.stem}_{st['message']}{st['instance']}_sys{st['sysid']}{p.suffix or '.png'}")
+        plot_stream(st, target)
+        out.append(str(target))
+    return out
