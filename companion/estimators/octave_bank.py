@@ -46,6 +46,7 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.signal import lfilter
 
+from companion.allan.confidence import oavar_covariance
 from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, linear_basis
 
 DEFAULT_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
@@ -73,8 +74,8 @@ class OctaveBankEstimator:
 
     kind = "octave"
 
-    def __init__(self, rate_hz, effects=DEFAULT_EFFECTS, forgetting_s=None, phases=8, max_tau_s=20000.0,
-                 min_edf=2.0):
+    def __init__(self, rate_hz, effects=DEFAULT_EFFECTS, forgetting_s=None, phases=16, max_tau_s=20000.0,
+                 min_edf=2.0, fit="gls", gls_max_ratio=16):
         rate_hz = float(rate_hz)
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
@@ -94,6 +95,10 @@ class OctaveBankEstimator:
         self.phases = phases
         self.max_tau_s = max_tau_s
         self.min_edf = float(min_edf)
+        if fit not in ("gls", "diag"):
+            raise ValueError(f"fit must be 'gls' or 'diag', got {fit!r}")
+        self.fit = fit
+        self.gls_max_ratio = int(gls_max_ratio)
         self.levels = max(1, int(math.floor(math.log2(max(max_tau_s * rate_hz, 1.0)))) + 1)
         j = np.arange(self.levels)
         self._m = 2.0 ** j
@@ -110,6 +115,7 @@ class OctaveBankEstimator:
         self._hist = [np.zeros(0) for _ in range(self.levels)]
         self._S = np.zeros(self.levels)
         self._buf: list[float] = []
+        self._cache: dict = {}  # Cholesky factors of the GLS covariance (derived data, not state)
         self.n_rejected = 0
 
     # ------------------------------------------------------------------ updates
@@ -209,12 +215,23 @@ class OctaveBankEstimator:
         tau = self._m / self.rate_hz
         return tau[ok], avar[ok], edf[ok]
 
+    def n_effective(self) -> float:
+        """Effective number of samples behind the estimates: n, or Kish's (1+l)/(1-l) ~ 2 T fs with forgetting."""
+        n = float(self._n)
+        if self.forgetting_s is None:
+            return n
+        r = 1.0 / (self.forgetting_s * self.rate_hz)
+        return min(n, (1.0 + math.exp(-r)) / -math.expm1(-r))
+
     def terms(self) -> list[dict]:
         """Current coefficients, one term per configured effect (0 when not supported by the data):
         ``[{"effect": "white_noise", "N": v, "std": {"N": one_sigma}}, ...]`` in SI units."""
         tau, avar, edf = self.avar()
         use = edf >= self.min_edf
         theta, s_theta = fit_theta(tau[use], avar[use], edf[use], self.effects)
+        if self.fit == "gls" and use.sum() > len(self.effects):
+            theta, s_theta = fit_theta_gls(tau[use], avar[use], theta, self.effects, self.n_effective(),
+                                           self.rate_hz, self.gls_max_ratio, cache=self._cache)
         out = []
         for e, th, st in zip(self.effects, theta, s_theta):
             p = LINEAR_PARAM[e]
@@ -231,7 +248,8 @@ class OctaveBankEstimator:
             "kind": self.kind,
             "version": 1,
             "config": {"rate_hz": self.rate_hz, "effects": list(self.effects), "forgetting_s": self.forgetting_s,
-                       "phases": self.phases, "max_tau_s": self.max_tau_s, "min_edf": self.min_edf},
+                       "phases": self.phases, "max_tau_s": self.max_tau_s, "min_edf": self.min_edf,
+                       "fit": self.fit, "gls_max_ratio": self.gls_max_ratio},
             "n": self._n,
             "n_rejected": self.n_rejected,
             "y_ref": self._y_ref,
@@ -304,3 +322,67 @@ def fit_theta(tau, avar, edf, effects, iterations=6):
         except np.linalg.LinAlgError:
             pass
     return theta, std
+
+
+def _quantise(x: float) -> float:
+    """Round a positive number to the nearest power of sqrt(2) (41 % steps; C only weights the fit)."""
+    return float(2.0 ** (round(2.0 * math.log2(x)) / 2.0))
+
+
+def fit_theta_gls(tau, avar, theta0, effects, n, rate_hz, max_ratio=16, iterations=2, cache=None):
+    """Generalised NNLS with the model covariance of the Allan estimates at the levels (including the strong
+    correlation of neighbouring cluster times), as the offline fit :func:`companion.allan.fit.fit_avar`:
+    C = oavar_covariance(model, m, n) (overlapping estimator; the staggered phases are close to it; model
+    and n rounded to sqrt(2) steps, which changes the weights only, and cached),
+    theta = argmin_{theta >= 0} (v - A theta)^T C^-1 (v - A theta), C recomputed from the new model.
+    Starts from ``theta0`` (the diagonal fit). Returns ``(theta, std_theta)``."""
+    tau = np.asarray(tau, float)
+    avar = np.asarray(avar, float)
+    m = np.round(tau * rate_hz).astype(np.int64)
+    A = linear_basis(tau, effects)
+    scale = float(np.median(avar)) if np.any(avar > 0) else 1.0
+    v = avar / scale
+    theta = np.asarray(theta0, float) / scale
+    n_par = len(effects)
+    n = _quantise(max(float(n), float(2 * m.max() + 2)))
+    F = None
+    for _ in range(iterations):
+        # C is computed from the model and n rounded to sqrt(2) steps: a deterministic function of the
+        # state (so results never depend on when terms() was called before), cached because it costs ~0.1 s
+        # terms contributing less than 5 % of the model at every level are left out of C
+        frac = (A * theta) / np.maximum((A @ theta)[:, None], 1e-300)
+        th_q = tuple(_quantise(t * scale) if t > 0 and frac[:, i].max() >= 0.05 else 0.0
+                     for i, t in enumerate(theta))
+        key = (tuple(m.tolist()), th_q, n, float(rate_hz), int(max_ratio), tuple(effects))
+        L = cache.get(key) if cache is not None else None
+        if L is None:
+            model = [{"effect": e, LINEAR_PARAM[e]: math.sqrt(t)} for e, t in zip(effects, th_q)]
+            C = oavar_covariance(model, m, int(n), rate_hz, max_ratio=max_ratio)
+            C = C + np.diag(np.maximum(np.diag(C), 1e-300) * 1e-9)
+            try:
+                L = np.linalg.cholesky(C)
+            except np.linalg.LinAlgError:
+                return np.asarray(theta0, float), np.full(n_par, np.inf)
+            if cache is not None:
+                if len(cache) >= 16:
+                    cache.pop(next(iter(cache)))
+                cache[key] = L
+        L = L / scale
+        Aw = np.linalg.solve(L, A)
+        vw = np.linalg.solve(L, v)
+        cs = np.linalg.norm(Aw, axis=0)
+        cs[cs == 0] = 1.0
+        sol, _ = nnls(Aw / cs, vw)
+        theta = sol / cs
+        F = Aw.T @ Aw
+    std = np.full(n_par, np.inf)
+    free = theta > 0
+    for i in range(n_par):
+        idx = np.flatnonzero(free | (np.arange(n_par) == i))
+        try:
+            cov = np.linalg.pinv(F[np.ix_(idx, idx)])
+            vv = cov[list(idx).index(i), list(idx).index(i)]
+            std[i] = math.sqrt(vv) if vv > 0 else np.inf
+        except np.linalg.LinAlgError:
+            pass
+    return theta * scale, std * scale

@@ -1,0 +1,284 @@
+"""Benchmark of the online Allan-coefficient estimators (issue #4): agreement with the offline fit,
+accuracy against truth, convergence, bounded state and memory, speed.
+
+    python benchmarks/bench_online.py                 # everything (a few minutes on one core)
+    python benchmarks/bench_online.py sim real        # only some sections: sim real miao memory speed conv
+    python benchmarks/bench_online.py --seeds 10 sim
+
+Offline reference: overlapping ADEV at octave cluster sizes (companion.allan.adev.oavar) fitted by
+companion.allan.fit.fit_avar with the same effects and its full model covariance. Online: the octave
+bank (default) and Miao et al. 2014's Sage-Husa EKF (paper-faithful). Relative difference as in the
+paper: |offline - online| / offline. Real data: ../shared/data/adis16405 (not in the repo).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import math
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from companion.allan.adev import oavar  # noqa: E402
+from companion.allan.fit import fit_avar  # noqa: E402
+from companion.estimators import make_estimator  # noqa: E402
+from companion.sim.synth import synthesize_axis  # noqa: E402
+
+SHARED = ROOT.parent / "shared" / "data" / "adis16405"
+D2R = math.pi / 180.0
+# the paper's gyro Y (Table 2, offline Allan): N 2.2437 deg/sqrt(h), B 28.3976 deg/h, K 62.1752 deg/h^1.5
+TRUTH = {"N": 2.2437 * D2R / 60.0, "B": 28.3976 * D2R / 3600.0, "K": 62.1752 * D2R / 3600.0**1.5}
+EFF = ("white_noise", "bias_instability", "random_walk")
+PAR = ("N", "B", "K")
+# the paper's initial guesses relative to its offline values (0.48/2.2437, 20.8/28.3976, 55.44/62.1752)
+PAPER_X0_REL = {"N": 0.48 / 2.2437, "B": 20.8 / 28.3976, "K": 55.44 / 62.1752}
+
+
+def sim_terms():
+    return [{"effect": "white_noise", "N": TRUTH["N"]}, {"effect": "bias_instability", "B": TRUTH["B"]},
+            {"effect": "random_walk", "K": TRUTH["K"]}]
+
+
+def as_dict(terms):
+    return {p: next((t[p] for t in terms if p in t), 0.0) for p in PAR}
+
+
+def offline(y, fs):
+    tau, av, _, _ = oavar(y, fs)
+    return as_dict(fit_avar(tau, av, effects=list(EFF), n=y.size, rate_hz=fs).terms)
+
+
+def rel(a, b):
+    return abs(a - b) / b * 100.0 if b > 0 else float("inf")
+
+
+def online_octave(y, fs, **kw):
+    est = make_estimator("octave", rate_hz=fs, effects=EFF, **kw)
+    t = time.perf_counter()
+    est.update(y)
+    out = as_dict(est.terms())
+    return out, time.perf_counter() - t
+
+
+def online_miao(y, fs, x0=None, **kw):
+    est = make_estimator("miao", rate_hz=fs, effects=EFF, x0=x0, **kw)
+    est.update(y)
+    return as_dict(est.terms())
+
+
+def table(title, rows):
+    print(f"\n{title}")
+    print(f"{'case':<22}" + "".join(f"{'off ' + p:>11}{'on ' + p:>11}{'diff%':>7}" for p in PAR))
+    for name, off, on in rows:
+        print(f"{name:<22}" + "".join(f"{off[p]:11.4g}{on[p]:11.4g}{rel(on[p], off[p]):7.2f}" for p in PAR))
+    d = np.array([[rel(on[p], off[p]) for p in PAR] for _, off, on in rows])
+    print(f"{'max |off-on|/off %':<22}" + "".join(f"{'':22}{m:7.2f}" for m in d.max(0)))
+    print(f"{'mean |off-on|/off %':<22}" + "".join(f"{'':22}{m:7.2f}" for m in d.mean(0)))
+    return d
+
+
+def section_sim(seeds, n=1_000_000, fs=100.0, phases=(16, 8)):
+    print(f"\n== simulated paper gyro Y (N {TRUTH['N']:.4g}, B {TRUTH['B']:.4g}, K {TRUTH['K']:.4g} SI), "
+          f"{n} samples at {fs:g} Hz ({n / fs / 3600:.2f} h), {seeds} seeds")
+    res = {P: [] for P in phases}
+    truth_err = []
+    for seed in range(seeds):
+        y = synthesize_axis(sim_terms(), fs, n, np.random.default_rng(seed))
+        off = offline(y, fs)
+        for P in phases:
+            on, _ = online_octave(y, fs, phases=P)
+            res[P].append((f"seed {seed}", off, on))
+            if P == phases[0]:
+                truth_err.append([rel(on[p], TRUTH[p]) for p in PAR] + [rel(off[p], TRUTH[p]) for p in PAR])
+    for P in phases:
+        table(f"octave bank, {P} phases: offline fit vs online", res[P])
+    te = np.array(truth_err)
+    print("\nagainst truth (%):      online N     B      K  | offline N     B      K")
+    print(f"{'max':<22}" + "".join(f"{v:7.2f}" for v in te.max(0)))
+    print(f"{'mean':<22}" + "".join(f"{v:7.2f}" for v in te.mean(0)))
+
+
+def load_adis(i):
+    path = SHARED / f"adis16405_imu{i}.csv.gz"
+    with gzip.open(path, "rt") as f:
+        data = np.loadtxt(f, delimiter=",", skiprows=1, usecols=(1, 2, 3))
+    return data
+
+
+def section_real(fs=100.0):
+    if not SHARED.is_dir():
+        print("\n== real data: ../shared/data/adis16405 absent, skipped")
+        return
+    print("\n== real ADIS16405 static recordings (1e6 samples, 100 Hz, each gyro axis); effects N, B, K")
+    rows = []
+    for i in (1, 2, 3):
+        g = load_adis(i)
+        for a, name in enumerate(("gx", "gy", "gz")):
+            y = g[:, a]
+            rows.append((f"imu{i} {name}", offline(y, fs), online_octave(y, fs)[0]))
+    table("octave bank (default) vs offline fit, real data", rows)
+
+
+def section_miao(seeds, n=1_000_000, fs=100.0):
+    print(f"\n== paper-faithful Miao SHAKF vs offline fit (x0 = offline x paper's initial ratios "
+          f"{ {k: round(v, 3) for k, v in PAPER_X0_REL.items()} }), {n} samples")
+    rows, rows_nm, rows_def = [], [], []
+    for seed in range(seeds):
+        y = synthesize_axis(sim_terms(), fs, n, np.random.default_rng(seed))
+        off = offline(y, fs)
+        x0 = {p: off[p] * PAPER_X0_REL[p] for p in PAR if off[p] > 0}
+        rows.append((f"sim seed {seed}", off, online_miao(y, fs, x0=x0)))
+        rows_nm.append((f"sim seed {seed}", off, online_miao(y, fs, x0=x0, noise_mean=False)))
+        rows_def.append((f"sim seed {seed}", off, online_miao(y, fs)))
+    if SHARED.is_dir():
+        y = load_adis(1)[:, 1]
+        off = offline(y, fs)
+        x0 = {p: off[p] * PAPER_X0_REL[p] for p in PAR if off[p] > 0}
+        rows.append(("real imu1 gy", off, online_miao(y, fs, x0=x0)))
+        rows_nm.append(("real imu1 gy", off, online_miao(y, fs, x0=x0, noise_mean=False)))
+        rows_def.append(("real imu1 gy", off, online_miao(y, fs)))
+    table("Miao SHAKF as published (noise means q, r estimated), paper-like x0", rows)
+    table("Miao SHAKF without noise means (noise_mean=False), paper-like x0", rows_nm)
+    table("Miao SHAKF with the default x0 (from the first 100 samples)", rows_def)
+
+
+def section_memory(fs=400.0, chunk=100_000):
+    print(f"\n== state size and peak memory, white + random walk at {fs:g} Hz, fed in blocks of {chunk}")
+    out = {}
+    for hours in (1, 10):
+        n = int(hours * 3600 * fs)
+        rng = np.random.default_rng(hours)
+        est = make_estimator("octave", rate_hz=fs, forgetting_s=None)
+        walk = 0.0
+        tracemalloc.start()
+        base = tracemalloc.get_traced_memory()[0]
+        t = time.perf_counter()
+        for start in range(0, n, chunk):
+            k = min(chunk, n - start)
+            w = walk + np.cumsum(rng.normal(0.0, 1e-5 / math.sqrt(fs), k))
+            walk = float(w[-1])
+            est.update(rng.normal(0.0, 1e-3 * math.sqrt(fs), k) + w)
+            del w
+        est.terms()
+        peak = tracemalloc.get_traced_memory()[1] - base
+        tracemalloc.stop()
+        size = len(json.dumps(est.state_dict()))
+        out[hours] = (size, peak)
+        print(f"{hours:3d} h: {n:>9d} samples, state_dict {size} bytes (JSON), peak traced memory "
+              f"{peak / 1e6:.2f} MB, {time.perf_counter() - t:.1f} s")
+    print(f"ratio 10 h / 1 h: state {out[10][0] / out[1][0]:.3f}, peak memory {out[10][1] / out[1][1]:.3f}")
+
+
+def section_speed(fs=400.0):
+    print("\n== speed (one core), axis-samples per second")
+    y = np.random.default_rng(0).normal(0.0, 0.02, 2_000_000)
+    est = make_estimator("octave", rate_hz=fs)
+    t = time.perf_counter()
+    est.update(y)
+    tb = time.perf_counter() - t
+    est2 = make_estimator("octave", rate_hz=fs)
+    n1 = 300_000
+    t = time.perf_counter()
+    for v in y[:n1]:
+        est2.update(v)
+    ts = time.perf_counter() - t
+    t = time.perf_counter()
+    est.terms()
+    tt = time.perf_counter() - t
+    m = make_estimator("miao", rate_hz=fs)
+    n2 = 50_000
+    t = time.perf_counter()
+    m.update(y[:n2])
+    tm = time.perf_counter() - t
+    print(f"octave bank block mode      {y.size / tb:12,.0f} /s   (target >= 1,000,000)")
+    print(f"octave bank sample by sample{n1 / ts:12,.0f} /s   (target >= 50,000)")
+    print(f"octave bank terms() (GLS)   {tt * 1e3:9.1f} ms per call")
+    print(f"Miao SHAKF sample by sample {n2 / tm:12,.0f} /s")
+
+
+def enter_and_stay(t, v, final, tol=0.05):
+    """First time after which |v - final| <= tol |final| holds at every later checkpoint."""
+    bad = np.abs(v - final) > tol * abs(final)
+    if not bad.any():
+        return t[0]
+    last = np.flatnonzero(bad)[-1]
+    return t[last + 1] if last + 1 < t.size else float("nan")
+
+
+def section_convergence(fs=100.0, n=1_800_000, plot=True):
+    print(f"\n== convergence (like the paper's Fig. 6-8), {n / fs / 3600:.1f} h at {fs:g} Hz")
+    cases = [("simulated", synthesize_axis(sim_terms(), fs, n, np.random.default_rng(0)))]
+    if SHARED.is_dir():
+        cases.append(("real imu1 gy", load_adis(1)[:, 1]))
+    fig_data = []
+    for name, y in cases:
+        y = y[:n]
+        checkpoints = np.unique(np.round(np.geomspace(2000, y.size, 80)).astype(int))
+        oct_ = make_estimator("octave", rate_hz=fs, effects=EFF)
+        off = offline(y, fs)
+        x0 = {p: off[p] * PAPER_X0_REL[p] for p in PAR if off[p] > 0}
+        mia = make_estimator("miao", rate_hz=fs, effects=EFF, x0=x0)
+        hist_o, hist_m = [], []
+        prev = 0
+        for c in checkpoints:
+            oct_.update(y[prev:c])
+            mia.update(y[prev:c]) if c <= 200_000 else None
+            prev = c
+            hist_o.append(as_dict(oct_.terms()))
+            hist_m.append(as_dict(mia.terms()) if c <= 200_000 else None)
+        t = checkpoints / fs
+        print(f"{name}: time to enter and stay within 5 % of the final online value (octave bank)")
+        for p in PAR:
+            v = np.array([h[p] for h in hist_o])
+            print(f"  {p}: final {v[-1]:.4g} (offline {off[p]:.4g}), within 5 % from t = "
+                  f"{enter_and_stay(t, v, v[-1]):.0f} s of {t[-1]:.0f} s")
+        fig_data.append((name, t, hist_o, hist_m, off))
+    if plot:
+        try:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+        except ImportError:
+            print("matplotlib absent: no plot")
+            return
+        fig, axes = plt.subplots(len(fig_data), 3, figsize=(13, 3.6 * len(fig_data)), squeeze=False)
+        units = {"N": (60.0 / D2R, "deg/sqrt(h)"), "B": (3600.0 / D2R, "deg/h"), "K": (3600.0**1.5 / D2R, "deg/h^1.5")}
+        for row, (name, t, ho, hm, off) in zip(axes, fig_data):
+            for ax, p in zip(row, PAR):
+                f, u = units[p]
+                ax.semilogx(t, [h[p] * f for h in ho], label="octave bank (online)")
+                tm = [ti for ti, h in zip(t, hm) if h is not None]
+                ax.semilogx(tm, [h[p] * f for h in hm if h is not None], label="Miao SHAKF (paper x0)")
+                ax.axhline(off[p] * f, color="k", ls="--", lw=0.8, label="offline fit (all data)")
+                ax.set_title(f"{name}: {p} ({u})")
+                ax.set_xlabel("time (s)")
+            row[0].legend(fontsize=8)
+        fig.tight_layout()
+        out = ROOT / "docs" / "img" / "online_convergence.png"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=90)
+        print(f"plot: {out.relative_to(ROOT)}")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("sections", nargs="*", default=["sim", "real", "miao", "memory", "speed", "conv"])
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--miao-seeds", type=int, default=2)
+    a = ap.parse_args()
+    for s in a.sections:
+        {"sim": lambda: section_sim(a.seeds), "real": section_real, "miao": lambda: section_miao(a.miao_seeds),
+         "memory": section_memory, "speed": section_speed, "conv": section_convergence}[s]()
+
+
+if __name__ == "__main__":
+    main()
