@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import gzip
 import io
+import warnings
 import zlib
 from pathlib import Path
 
@@ -55,11 +56,15 @@ def read_csv(path) -> RawStream:
                              f"{','.join(COLUMNS)} (gyro rad/s, accel m/s^2)")
     usecols = [names.index(c) for c in COLUMNS]
     try:
-        arr = np.loadtxt(io.BytesIO(body), delimiter=",", usecols=usecols, ndmin=2, dtype=np.float64)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+            arr = np.loadtxt(io.BytesIO(body), delimiter=",", usecols=usecols, ndmin=2, dtype=np.float64)
     except (ValueError, IndexError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        if "line" in msg:  # numpy counts lines of the body; the file has a header line first
-            msg = _shift_line_numbers(msg)
+        if "invalid column index" in msg:
+            raise CompanionError(f"{path}: a data row has fewer columns than the header "
+                                 f"({len(names)})") from None
+        msg = _to_file_lines(msg)  # numpy counts data rows from 0; the file has a header line first
         raise CompanionError(f"{path}: bad CSV data: {msg}") from None
     if arr.shape[0] == 0:
         raise CompanionError(f"{path}: no data rows after the header")
@@ -70,7 +75,9 @@ def read_csv(path) -> RawStream:
                      None, None, 0.0)
 
 
-def _shift_line_numbers(msg: str) -> str:
+def _to_file_lines(msg: str) -> str:
     import re
 
-    return re.sub(r"line (\d+)", lambda m: f"line {int(m.group(1)) + 1}", msg)
+    msg = re.sub(r"at row (\d+)", lambda m: f"on line {int(m.group(1)) + 2}", msg)
+    return re.sub(r"the number of columns changed from (\d+) to (\d+) at row (\d+)",
+                  lambda m: f"line {int(m.group(3)) + 2} has {m.group(2)} columns, expected {m.group(1)}", msg)
