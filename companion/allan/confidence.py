@@ -72,9 +72,14 @@ def edf_simple(n_phase, m, alpha) -> np.ndarray:
 
 
 def adev_ci(adev, edf, level: float = 0.95):
-    """Chi-square interval ``(lo, hi)`` of an Allan deviation estimate with ``edf`` degrees of freedom."""
+    """Chi-square interval ``(lo, hi)`` of an Allan deviation estimate with ``edf`` degrees of freedom.
+
+    The EDF is floored at 1 (one squared second difference: the last cluster time of a record), which
+    keeps the upper end finite.
+    """
     adev = np.asarray(adev, dtype=float)
-    edf = np.maximum(np.asarray(edf, dtype=float), 1e-3)
+    edf = np.asarray(edf, dtype=float)
+    edf = np.where(np.isfinite(edf), np.maximum(edf, 1.0), 1e12)
     a = (1.0 - level) / 2.0
     lo = adev * np.sqrt(edf / chi2.ppf(1.0 - a, edf))
     hi = adev * np.sqrt(edf / chi2.ppf(a, edf))

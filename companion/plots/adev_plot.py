@@ -61,9 +61,10 @@ def draw_axis(ax, axis: str, r: dict) -> None:
             ax.loglog(tt, np.sqrt(av) * f, "--", lw=1.2, color=_COLORS.get(t["effect"]),
                       label=f"{_LABEL[t['effect']]}: {_value_text(t, axis)}")
         ax.loglog(tt, np.sqrt(total) * f, "-", lw=1.6, color="tab:cyan", label="sum of fitted terms")
-        lo = np.nanmin(np.asarray(r["adev_lo"]) * f)
-        hi = np.nanmax(np.asarray(r["adev_hi"]) * f)
-        ax.set_ylim(lo / 2.0, hi * 2.0)
+        lo_v, hi_v = np.asarray(r["adev_lo"]) * f, np.asarray(r["adev_hi"]) * f
+        lo_v, hi_v = lo_v[np.isfinite(lo_v) & (lo_v > 0)], hi_v[np.isfinite(hi_v)]
+        if lo_v.size and hi_v.size:
+            ax.set_ylim(lo_v.min() / 2.0, min(hi_v.max(), 30.0 * adev.max()) * 2.0)
     q = r.get("quantization")
     if q:
         ax.loglog(tau, q["N_q"] / np.sqrt(tau) * f, color="0.5", lw=0.9, ls=":",

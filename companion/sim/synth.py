@@ -14,9 +14,11 @@ quantization       angle quantisation: white angle error e_k of std Q, y_k = (e_
 bias_instability   flicker rate noise by spectral shaping: unit white noise of length L = 2^ceil(log2 4n)
                    is filtered in the frequency domain by |H(f)|^2 = fs (B^2 / 2 pi) / f, i.e. two-sided
                    PSD (B^2/2pi)/f (one-sided B^2/(pi f)) between the low cut-off f_L = fs/L (< 1/(4 T))
-                   and the high cut-off f0 = fs/2; DC removed.  AVAR: the cosine-integral form with
+                   and the high cut-off f0 = fs/2; DC removed. (Sampling aliases a little: +40 % AVAR at tau0, <1 %
+                   beyond 5 tau0.)  AVAR: the cosine-integral form with
                    f0 = fs/2 (thesis eq. (3.16)), i.e. the plateau 2 ln2/pi B^2 for tau >> tau0.
-random_walk        y_k = sum_{j<=k} w_j, w_j ~ N(0, K^2 tau0): PSD (K/2pi)^2 / f^2, AVAR K^2 tau/3 (C.4)
+random_walk        y_k = sum_{j<=k} w_j, w_j ~ N(0, K^2 tau0): PSD (K/2pi)^2 / f^2, AVAR K^2 tau/3 (C.4);
+                   sampled exactly: K^2 tau/3 (1 + 1/(2 m^2)), m = tau/tau0 (+50 % at tau0, +3 % at 4 tau0)
 ramp               y_k = R t_k, t_k = k tau0: AVAR R^2 tau^2 / 2 (C.5)
 gauss_markov       exact discretisation of the first-order Markov process: y_0 ~ N(0, sigma^2),
                    y_k = phi y_{k-1} + sqrt(1 - phi^2) sigma w_k, phi = exp(-tau0/tau_c) (C.6); the

@@ -1,0 +1,109 @@
+"""`companion analyze` and `companion simulate` end to end: tlog/CSV round trips, JSON structure, Kalibr,
+plot, constant axes, user errors (one line, exit 2)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from companion.cli.analyze import analyze_axis, parse_taus
+from companion.cli.main import main
+from companion.errors import CompanionError
+
+MODEL = """\
+rate_hz: 50.0
+axes:
+  gx:
+    - {effect: white_noise, N: 2.0e-3}
+  gy:
+    - {effect: white_noise, N: 1.0e-3}
+    - {effect: random_walk, K: 1.0e-4}
+"""
+
+
+@pytest.fixture
+def model(tmp_path):
+    p = tmp_path / "m.yaml"
+    p.write_text(MODEL)
+    return p
+
+
+def test_simulate_tlog_then_analyze_json(tmp_path, model, capsys):
+    tlog = tmp_path / "s.tlog"
+    assert main(["simulate", str(model), "--duration", "400", "--out", str(tlog), "--seed", "2"]) == 0
+    out = tmp_path / "r.json"
+    kal = tmp_path / "imu.yaml"
+    assert main(["analyze", str(tlog), "--json", str(out), "--kalibr", str(kal)]) == 0
+    table = capsys.readouterr().out
+    rep = json.loads(out.read_text())
+    (st,) = rep["streams"]
+    for k in ("message", "instance", "sysid", "compid", "rate_hz", "samples", "duration_s", "axes"):
+        assert k in st
+    assert st["message"] == "RAW_IMU" and st["samples"] == 20000 and st["rate_hz"] == pytest.approx(50.0)
+    gx = st["axes"]["gx"]
+    for k in ("tau", "adev", "adev_lo", "adev_hi", "terms"):
+        assert k in gx
+    assert all(lo <= a <= hi for lo, a, hi in zip(gx["adev_lo"], gx["adev"], gx["adev_hi"]))
+    (wn,) = [t for t in gx["terms"] if t["effect"] == "white_noise"]
+    # tlog rounding to 1 mrad/s adds white noise LSB^2/12 per sample: N^2 + 1e-6 * 0.02 / 12
+    n_expected = np.sqrt(2e-3**2 + 1e-6 * 0.02 / 12)
+    assert wn["ci95"]["N"][0] <= n_expected <= wn["ci95"]["N"][1]
+    q = gx["quantization"]
+    assert q["lsb"] == pytest.approx(1e-3) and q["dithered"] and q["N_q"] == pytest.approx(1e-3 * np.sqrt(0.02 / 12))
+    # gz is not in the model: all zero -> reported as constant, no NaN anywhere
+    assert st["axes"]["gz"]["status"] == "constant" and "constant" in table
+    assert "NaN" not in out.read_text() and "nan" not in table.lower()
+    kal_text = kal.read_text()
+    for key in ("gyroscope_noise_density", "gyroscope_random_walk", "accelerometer_noise_density",
+                "accelerometer_random_walk", "update_rate"):
+        assert key in kal_text
+
+
+def test_quantization_not_dithered_is_reported():
+    y = np.round(np.random.default_rng(0).normal(0, 1e-4, 20000) / 1e-3) * 1e-3  # noise 0.1 LSB
+    r = analyze_axis(y, 50.0, lsb=1e-3)
+    assert r["status"] in ("ok", "constant")
+    if r["status"] == "ok":
+        assert r["quantization"]["dithered"] is False and "not dithered" in r["quantization"]["note"]
+
+
+def test_csv_and_plot(tmp_path, model, capsys):
+    pytest.importorskip("matplotlib")
+    csv = tmp_path / "s.csv"
+    assert main(["simulate", str(model), "--duration", "200", "--out", str(csv)]) == 0
+    head = csv.read_text().splitlines()[:2]
+    assert head[0] == "time_s,gx,gy,gz,ax,ay,az" and len(head[1].split(",")) == 7
+    png = tmp_path / "a.png"
+    assert main(["analyze", str(csv), "--plot", str(png), "--axes", "gx,gy", "--taus", "log:5"]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20000
+
+
+def test_taus_parsing():
+    assert list(parse_taus("0.1,1,10", 10000, 50.0)) == [5, 50, 500]
+    assert list(parse_taus("octave", 9, 1.0)) == [1, 2, 4]
+    for bad in ("weekly", "0,-1", "log:x"):
+        with pytest.raises(CompanionError):
+            parse_taus(bad, 1000, 1.0)
+
+
+def test_user_errors_exit_2(tmp_path, capsys):
+    assert main(["analyze", str(tmp_path / "missing.tlog")]) == 2
+    assert main(["analyze", "x.tlog", "--axes", "gq"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(e.startswith("companion: error:") for e in err)
+
+
+def test_sample_tlog_analyses(repo_root):
+    """The README's first command: tlogs/sample.tlog, made from tlogs/sample_model.yaml."""
+    from companion.cli.analyze import analyze_stream
+    from companion.sim.model import load_model
+    from companion.sources import load
+
+    model = load_model(repo_root / "tlogs" / "sample_model.yaml")
+    (st,) = load(repo_root / "tlogs" / "sample.tlog").imu_streams()
+    rep = analyze_stream(st, ["gx", "gz"], "octave")
+    for axis in ("gx", "gz"):
+        n_true = next(t["N"] for t in model.axes[axis] if t["effect"] == "white_noise")
+        n_true = np.sqrt(n_true**2 + 1e-6 * (1 / model.rate_hz) / 12)
+        (wn,) = [t for t in rep["axes"][axis]["terms"] if t["effect"] == "white_noise"]
+        assert wn["N"] == pytest.approx(n_true, rel=0.02)
