@@ -1,0 +1,69 @@
+"""Timing rules: rate, gaps, duplicates, backward steps, resets, millisecond stamps, through load() too."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from companion.mavlink.tlog_writer import write_imu_tlog
+from companion.sources import load
+from companion.sources.timing import analyse
+
+
+def test_clean_stream():
+    t = 5.0 + np.arange(1000) / 200.0
+    keep, seg, rep = analyse(t, 1e-6)
+    assert keep.all() and seg == [(0, 1000)]
+    assert rep.rate_hz == pytest.approx(200.0) and rep.gaps == 0 and rep.resets == 0
+    assert rep.duration_s == pytest.approx(999 / 200.0)
+
+
+def test_gap_duplicate_backwards_reset():
+    base = np.arange(400) / 100.0  # 100 Hz
+    t = list(base[:100])
+    t += list(base[103:200])  # 3 samples missing: one gap, short (counted, not split)
+    t += [t[-1]]  # duplicate
+    t += [t[-1] - 0.015]  # small step back
+    t += list(base[200:300] + 2.0)  # 2 s hole: a gap that splits
+    t += list(np.arange(50) / 100.0)  # reboot: time starts again near 0
+    t = np.array(t)
+    keep, seg, rep = analyse(t, 1e-6)
+    assert rep.duplicates == 1 and rep.backwards == 1 and rep.resets == 1
+    assert rep.gaps == 2
+    assert keep.sum() == len(t) - 2
+    assert seg == [(0, 197), (197, 297), (297, 347)]
+    assert rep.rate_hz == pytest.approx(100.0)
+    tk = t[keep]
+    assert all(np.all(np.diff(tk[a:b]) > 0) for a, b in seg)
+
+
+def test_millisecond_stamps_at_400hz_are_not_gaps():
+    rng = np.random.default_rng(2)
+    n = 4000
+    t_true = 1.0 + np.arange(n) / 400.0 + rng.uniform(-2e-4, 2e-4, n)
+    t_ms = np.round(t_true * 1e3) / 1e3  # time_boot_ms: intervals of 2 and 3 ms
+    assert set(np.round(np.diff(t_ms) * 1e3).astype(int)) <= {2, 3}
+    keep, seg, rep = analyse(t_ms, 1e-3)
+    assert rep.gaps == 0 and keep.all() and seg == [(0, n)]
+    assert rep.rate_hz == pytest.approx(400.0, rel=2e-3)
+    # two dropped samples (7.5 ms) are a gap; one (5 ms, stamped 4-6 ms) is only provably one when
+    # its interval exceeds 1.5 P + 1 ms = 4.75 ms
+    t2 = np.delete(t_ms, [2000, 2001])
+    assert analyse(t2, 1e-3)[2].gaps == 1
+    t3 = np.delete(t_ms, [1000])
+    assert analyse(t3, 1e-3)[2].gaps == int(round((t_ms[1001] - t_ms[999]) * 1e3) > 4.75)
+
+
+@pytest.mark.parametrize("message", ["RAW_IMU", "SCALED_IMU2"])
+def test_reboot_and_gap_in_a_tlog(tmp_path, message):
+    rate = 50.0
+    t = np.r_[np.arange(500) / rate + 100.0, np.arange(300) / rate + 0.5]  # reboot after 10 s
+    t = np.delete(t, 250)  # one missing sample
+    n = t.shape[0]
+    path = tmp_path / "r.tlog"
+    write_imu_tlog(path, t, np.full((n, 3), 0.004), np.full((n, 3), 0.5), message=message)
+    s = load(path).streams[0]
+    assert s.timing.resets == 1 and s.timing.gaps == 1
+    assert s.segments == [(0, 499), (499, 799)]
+    assert s.timing.rate_hz == pytest.approx(rate, rel=1e-6)
+    assert s.samples == 799
