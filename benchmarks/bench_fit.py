@@ -1,0 +1,80 @@
+"""Accuracy and interval coverage of the automatic fit on the issue's case, side by side with a plain
+weighted NNLS (weights from the measured points, N/B/K columns given, no selection, no intervals).
+
+2 h at 50 Hz of white noise N = 1e-3 rad/s/sqrt(Hz), flicker B = 5e-4 rad/s and rate random walk
+K = 6e-5 rad/s^1.5 (white meets the flicker floor near 10 s, the floor meets the random walk near 100 s).
+
+    python benchmarks/bench_fit.py [seeds=40]
+"""
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import nnls
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from companion.allan.adev import cluster_sizes, oavar  # noqa: E402
+from companion.allan.confidence import edf_simple  # noqa: E402
+from companion.allan.fit import fit_avar  # noqa: E402
+from companion.allan.terms import linear_basis  # noqa: E402
+from companion.sim.synth import synthesize_axis  # noqa: E402
+
+RATE, N = 50.0, int(2 * 3600 * 50)
+TRUTH = {"N": 1e-3, "B": 5e-4, "K": 6e-5}
+TERMS = [{"effect": "white_noise", "N": TRUTH["N"]}, {"effect": "bias_instability", "B": TRUTH["B"]},
+         {"effect": "random_walk", "K": TRUTH["K"]}]
+EFFECTS = {"N": "white_noise", "B": "bias_instability", "K": "random_walk"}
+
+
+def plain_nnls(tau, av, edf):
+    A = linear_basis(tau, ["white_noise", "bias_instability", "random_walk"])
+    w = np.sqrt(edf / 2.0) / av  # 1 / sd of each point, from the measured AVAR
+    th, _ = nnls(A * w[:, None], av * w)
+    return dict(zip("NBK", np.sqrt(th)))
+
+
+def main():
+    seeds = int(sys.argv[1]) if len(sys.argv) > 1 else 40
+    m = cluster_sizes(N)
+    edf = edf_simple(N + 1, m, 0)
+    err = {p: [] for p in TRUTH}
+    err_plain = {p: [] for p in TRUTH}
+    inside = {p: 0 for p in TRUTH}
+    width = {p: [] for p in TRUTH}
+    missing = {p: 0 for p in TRUTH}
+    extra = 0
+    t_fit = []
+    for seed in range(seeds):
+        y = synthesize_axis(TERMS, RATE, N, np.random.default_rng(1000 + seed))
+        tau, av, _, _ = oavar(y, RATE, m=m)
+        t0 = time.perf_counter()
+        r = fit_avar(tau, av, edf, n=N, rate_hz=RATE, m=m)
+        t_fit.append(time.perf_counter() - t0)
+        extra += any(t["effect"] not in EFFECTS.values() for t in r.terms)
+        pl = plain_nnls(tau, av, edf)
+        for p, true in TRUTH.items():
+            err_plain[p].append(abs(pl[p] / true - 1))
+            t = r.term(EFFECTS[p])
+            if t is None:
+                missing[p] += 1
+                err[p].append(1.0)
+                continue
+            lo, hi = t["ci95"][p]
+            err[p].append(abs(t[p] / true - 1))
+            inside[p] += lo <= true <= hi
+            width[p].append((hi - lo) / true)
+    print(f"{seeds} seeds, 2 h at 50 Hz, truth N={TRUTH['N']:g} B={TRUTH['B']:g} K={TRUTH['K']:g} (SI)")
+    print(f"fit time per axis: median {np.median(t_fit):.2f} s")
+    print(f"{'':3}{'auto fit median/max err':>26}{'plain NNLS median/max err':>28}{'95% CI coverage':>18}"
+          f"{'median CI width':>17}{'term missed':>13}")
+    for p in TRUTH:
+        e, q = np.array(err[p]) * 100, np.array(err_plain[p]) * 100
+        print(f"{p:3}{np.median(e):>15.2f} % / {e.max():5.1f} %{np.median(q):>17.2f} % / {q.max():5.1f} %"
+              f"{inside[p] / seeds * 100:>15.0f} %{np.median(width[p]) * 100:>15.1f} %{missing[p]:>13d}")
+    print(f"seeds with an extra (spurious) term: {extra}")
+
+
+if __name__ == "__main__":
+    main()
