@@ -1,0 +1,196 @@
+"""Fit noise terms to a measured Allan variance by maximum likelihood, and weigh candidate effects.
+
+Likelihood: each overlapping AVAR estimate a_i is s_i chi^2_{nu_i} / nu_i (NIST SP 1065 sec. 5.3), so
+-2 ln L = D + const with the Gamma deviance D = sum nu_i (a_i/s_i - 1 - ln(a_i/s_i)) (see compare.py).
+The model AVAR s = s_fixed + A c is linear in the squared magnitudes c_j = p_j^2 (Q^2, N^2, B^2, K^2, R^2,
+sigma^2, amplitude^2; IEEE 952 Annex C, Miao 2014 eq. (3.6)) once the shape parameters (tau_c,
+freq_hz) are fixed.
+
+* Magnitudes: Fisher scoring for the Gamma family with identity link, i.e. iteratively reweighted
+  non-negative least squares  c <- argmin_{c >= 0} sum nu_i (a_i - s_fixed,i - (A c)_i)^2 / s_i^2  with
+  s from the previous step (its fixed point solves the likelihood equations on the active set).
+* Shape parameters: profile likelihood, D_p(theta) = min_c D(c, theta), on a log grid then a bounded scalar
+  refinement (tau_c: 8 per decade; freq_hz: 30 per decade, the sinusoid's profile being rugged).
+* Uncertainty: Fisher information I = 1/2 sum nu_i / s_i^2 (ds_i/dtheta)(ds_i/dtheta)^T for theta = ln p,
+  inflated by sqrt(max(1, G)) (quasi-likelihood overdispersion, G the gap metric of the fit).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import minimize_scalar, nnls
+
+from companion.gap.compare import Measured, deviance, gap_metric, term_avar
+
+#: The magnitude parameter of each effect (AVAR proportional to its square).
+MAGNITUDE = {"quantization": "Q", "white_noise": "N", "bias_instability": "B", "random_walk": "K",
+             "ramp": "R", "gauss_markov": "sigma", "sinusoid": "amplitude"}
+#: The shape parameter of effects that have one.
+SHAPE = {"gauss_markov": "tau_c", "sinusoid": "freq_hz"}
+#: Number of free parameters a candidate adds (its magnitude and its shape).
+N_PARAMS = {e: 1 + (e in SHAPE) for e in MAGNITUDE}
+
+
+def unit_column(term, tau, rate_hz):
+    """AVAR of ``term`` with its magnitude set to 1 (the column of A)."""
+    t = dict(term)
+    t[MAGNITUDE[t["effect"]]] = 1.0
+    return term_avar(t, tau, rate_hz)
+
+
+@dataclass
+class Fit:
+    """Fitted terms, their deviance and gap, and 95 % intervals of the magnitudes (and shapes)."""
+
+    terms: list
+    fixed: list  # indices of terms held fixed (not refitted)
+    dev: float
+    gap: float
+    s: np.ndarray
+    ci95: list = field(default_factory=list)  # per term: {param: [lo, hi]}
+    se_log: list = field(default_factory=list)  # per term: {param: se of ln(param)}
+
+
+def fit_magnitudes(meas: Measured, A: np.ndarray, s_fixed: np.ndarray, iters: int = 80):
+    """IRLS-NNLS for c >= 0 in s = s_fixed + A c; returns (c, s, D)."""
+    a, nu = meas.avar, meas.nu
+    floor = 1e-9 * a
+    k = A.shape[1]
+    if k == 0:
+        s = np.maximum(s_fixed, floor)
+        return np.zeros(0), s, deviance(meas, s)
+    s = a.copy()
+    best = (np.inf, None, None)
+    for _ in range(iters):
+        w = np.sqrt(nu) / s
+        M = w[:, None] * A
+        norms = np.linalg.norm(M, axis=0)
+        norms[norms == 0] = 1.0
+        c, _ = nnls(M / norms, w * (a - s_fixed), maxiter=50 * k)
+        c = c / norms
+        s_new = np.maximum(s_fixed + A @ c, floor)
+        d = deviance(meas, s_new)
+        if d < best[0]:
+            best = (d, c, s_new)
+        if np.max(np.abs(s_new - s) / s) < 1e-9:
+            break
+        s = s_new
+    d, c, s = best
+    return c, s, d
+
+
+def _assemble(meas, terms, fixed):
+    rate = meas.rate_hz
+    s_fixed = np.zeros_like(meas.tau)
+    cols, free = [], []
+    for i, t in enumerate(terms):
+        if i in fixed:
+            s_fixed = s_fixed + term_avar(t, meas.tau, rate)
+        else:
+            cols.append(unit_column(t, meas.tau, rate))
+            free.append(i)
+    A = np.column_stack(cols) if cols else np.zeros((meas.tau.shape[0], 0))
+    return A, s_fixed, free
+
+
+def fit_terms(meas: Measured, terms, fixed=(), intervals: bool = True) -> Fit:
+    """Refit the magnitudes of every term not in ``fixed`` (shapes as given)."""
+    terms = [dict(t) for t in terms]
+    fixed = sorted(set(fixed))
+    A, s_fixed, free = _assemble(meas, terms, fixed)
+    c, s, d = fit_magnitudes(meas, A, s_fixed)
+    for j, i in enumerate(free):
+        terms[i][MAGNITUDE[terms[i]["effect"]]] = float(math.sqrt(max(c[j], 0.0)))
+    fit = Fit(terms=terms, fixed=fixed, dev=d, gap=gap_metric(meas, s), s=s)
+    if intervals:
+        _intervals(meas, fit, free)
+    return fit
+
+
+def _intervals(meas: Measured, fit: Fit, free, shape_free=()) -> None:
+    """Fisher-information 95 % intervals of the free magnitudes (and listed shape params), in log space."""
+    rate, s = meas.rate_hz, fit.s
+    grads, labels = [], []
+    for i in free:
+        t = fit.terms[i]
+        p = MAGNITUDE[t["effect"]]
+        if t[p] > 0:
+            grads.append(2.0 * term_avar(t, meas.tau, rate))  # d s / d ln p
+        else:
+            grads.append(unit_column(t, meas.tau, rate) * 1e-300)  # placeholder, handled below
+        labels.append((i, p))
+    for i in shape_free:
+        t = fit.terms[i]
+        q = SHAPE[t["effect"]]
+        h = 1e-4
+        up, dn = dict(t), dict(t)
+        up[q] = t[q] * math.exp(h)
+        dn[q] = t[q] * math.exp(-h)
+        grads.append((term_avar(up, meas.tau, rate) - term_avar(dn, meas.tau, rate)) / (2 * h))
+        labels.append((i, q))
+    fit.ci95 = [dict() for _ in fit.terms]
+    fit.se_log = [dict() for _ in fit.terms]
+    if not grads:
+        return
+    G = np.column_stack(grads)
+    info = 0.5 * (G * (meas.nu / s**2)[:, None]).T @ G
+    infl = math.sqrt(max(1.0, fit.gap))
+    try:
+        cov = np.linalg.pinv(info)
+    except np.linalg.LinAlgError:
+        return
+    for j, (i, p) in enumerate(labels):
+        val = fit.terms[i][p]
+        if val > 0 and cov[j, j] > 0:
+            se = min(math.sqrt(cov[j, j]) * infl, 300.0)
+            fit.se_log[i][p] = se
+            fit.ci95[i][p] = [val * math.exp(-1.96 * se), val * math.exp(1.96 * se)]
+        elif val == 0:
+            # upper bound from the curvature in c = p^2 at c = 0
+            col = unit_column(fit.terms[i], meas.tau, rate)
+            info_c = 0.5 * np.sum(meas.nu * col**2 / s**2)
+            fit.ci95[i][p] = [0.0, math.sqrt(1.96 * infl / math.sqrt(info_c)) if info_c > 0 else math.inf]
+
+
+def shape_grid(effect: str, meas: Measured) -> np.ndarray:
+    """Log grid of the shape parameter over values whose signature falls inside the measured tau range."""
+    t0, t1 = float(meas.tau[0]), float(meas.tau[-1])
+    if effect == "gauss_markov":  # ADEV peak at 1.89 tau_c
+        lo, hi, per = t0 / 2.0, 2.0 * t1, 8
+    else:  # sinusoid: ADEV peak at 0.371 / f0, below Nyquist
+        lo, hi, per = 0.371 / (2.0 * t1), min(0.371 / (t0 / 2.0), 0.45 * meas.rate_hz), 30
+    n = max(int(math.ceil(math.log10(hi / lo) * per)) + 1, 2)
+    return np.logspace(math.log10(lo), math.log10(hi), n)
+
+
+def fit_with_candidate(meas: Measured, base_terms, fixed, effect: str) -> Fit:
+    """Fit ``base_terms`` (magnitudes free except ``fixed``) plus one new term of ``effect``."""
+    mag = MAGNITUDE[effect]
+    new_index = len(base_terms)
+    if effect not in SHAPE:
+        fit = fit_terms(meas, list(base_terms) + [{"effect": effect, mag: 1.0}], fixed)
+        return fit
+    q = SHAPE[effect]
+    grid = shape_grid(effect, meas)
+
+    def profile(log_v):
+        return fit_terms(meas, list(base_terms) + [{"effect": effect, mag: 1.0, q: float(math.exp(log_v))}],
+                         fixed, intervals=False)
+
+    devs = [profile(math.log(v)).dev for v in grid]
+    k = int(np.argmin(devs))
+    lo = math.log(grid[max(k - 1, 0)])
+    hi = math.log(grid[min(k + 1, len(grid) - 1)])
+    if hi > lo:
+        res = minimize_scalar(lambda u: profile(u).dev, bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-4})
+        u = res.x if res.fun < devs[k] else math.log(grid[k])
+    else:
+        u = math.log(grid[k])
+    fit = profile(u)
+    free = [i for i in range(len(fit.terms)) if i not in fit.fixed]
+    _intervals(meas, fit, free, shape_free=[new_index] if fit.terms[new_index][mag] > 0 else [])
+    return fit

@@ -1,0 +1,196 @@
+"""Measured Allan variance with its confidence, the gap metric, and where model and measurement disagree.
+
+Statistics (NIST SP 1065 sec. 5.3; IEEE Std 952 Annex C):
+
+* An overlapping AVAR estimate a at cluster time tau with nu equivalent degrees of freedom (EDF) is
+  distributed as s chi^2_nu / nu around the true AVAR s. Its 95 % band is
+  [nu a / chi^2_{0.975,nu}, nu a / chi^2_{0.025,nu}] (SP 1065 eq. (32)).
+* The EDF come from :mod:`companion.gap._edf` (SP 1065 Table 5), with the noise type taken from the local
+  log-log slope of the *measured* curve, so that every model compared against the same measurement is judged
+  by the same likelihood.
+* Deviance of a model s against the measurement (twice the negative log-likelihood ratio against the
+  saturated fit, Gamma family):  d_i = nu_i (a_i/s_i - 1 - ln(a_i/s_i)).  Its expectation when the model is
+  right is E0(nu) = nu (ln(nu/2) - psi(nu/2)) (psi: digamma), about 1 + 1/(3 nu).
+* **Gap metric** G = mean_i d_i / E0(nu_i): 1 on average when the model is right, whatever the EDF; a model
+  off by a factor r in AVAR over a region with nu EDF adds about nu (r - 1 - ln r) per point.
+* Per-point score z_i = Phi^-1( F_chi2(nu_i a_i / s_i; nu_i) ): the measurement is outside the model's band
+  where |z_i| > 1.96; the disagreement table groups consecutive such points of the same sign.
+* Measured vs *simulated* curve (both estimates): z_i = ln(a_i / b_i) / sqrt(psi'(nu_a/2) + psi'(nu_b/2))
+  (psi': trigamma, the variance of ln chi^2_nu), G_sim = mean z_i^2, 1 on average when they agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import special, stats
+
+from companion.allan.adev import oavar
+from companion.allan.terms import avar_term
+from companion.gap._edf import local_slope, oavar_edf
+
+
+@dataclass
+class Measured:
+    """Overlapping AVAR of one axis with EDF and 95 % band (all arrays aligned on ``tau``)."""
+
+    tau: np.ndarray
+    avar: np.ndarray
+    m: np.ndarray
+    nu: np.ndarray
+    rate_hz: float
+    n: int
+    lo: np.ndarray = field(default=None)
+    hi: np.ndarray = field(default=None)
+    nu_raw: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        if self.nu_raw is None:
+            self.nu_raw = self.nu
+        if self.lo is None:
+            self.lo = self.nu * self.avar / stats.chi2.ppf(0.975, self.nu)
+            self.hi = self.nu * self.avar / stats.chi2.ppf(0.025, self.nu)
+
+
+#: Relative accuracy (in AVAR) to which any model, or simulation, can be expected to hold: 5 %.
+MODEL_FLOOR = 0.05
+
+
+def measure(y, rate_hz: float, spec="octave", min_terms: int = 1, model_floor: float = MODEL_FLOOR) -> Measured:
+    """Overlapping AVAR of rate samples ``y`` at ``rate_hz`` with EDF and 95 % band.
+
+    ``nu_raw`` are the EDF of the estimates (band of the plot); the statistics use
+    nu = 1 / (1/nu_raw + model_floor^2 / 2), i.e. var(ln a) = 2/nu_raw + model_floor^2: a model is not
+    asked to be better than ``model_floor`` (5 % in AVAR, 2.5 % in ADEV), which also absorbs the
+    correlation of neighbouring octave estimates where the EDF run into the thousands.
+    """
+    y = np.asarray(y, dtype=float)
+    if y.shape[0] < 16:
+        raise ValueError(f"too few samples for an Allan analysis ({y.shape[0]}); need at least 16")
+    tau, avar, m, n_terms = oavar(y, rate_hz, spec=spec)
+    keep = (n_terms >= min_terms) & (avar > 0)
+    tau, avar, m = tau[keep], avar[keep], m[keep]
+    n_phase = y.shape[0] + 1
+    meas = Measured(tau=tau, avar=avar, m=m, nu=oavar_edf(n_phase, m, np.full(m.shape, -1.0)),
+                    rate_hz=float(rate_hz), n=int(y.shape[0]))
+    for _ in range(2):  # EDF from the slopes of a smooth reference curve, refined once
+        ref = reference_curve(meas)
+        meas.nu = oavar_edf(n_phase, m, local_slope(tau, ref))
+    meas.nu_raw = meas.nu
+    meas.nu = 1.0 / (1.0 / meas.nu + model_floor**2 / 2.0)
+    meas.lo = meas.nu_raw * meas.avar / stats.chi2.ppf(0.975, meas.nu_raw)
+    meas.hi = meas.nu_raw * meas.avar / stats.chi2.ppf(0.025, meas.nu_raw)
+    return meas
+
+
+def reference_curve(meas: Measured) -> np.ndarray:
+    """Smooth reference AVAR: maximum-likelihood sum of the five power-law terms Q, N, B, K, R.
+
+    Its local slope picks the noise type, hence the EDF, of each point. The measured curve's own slope is
+    useless for that where its estimates scatter (long tau). Being a sum of power laws, the reference cannot
+    fall after a Gauss-Markov or sinusoid bump; there it takes the flatter slope, whose EDF is smaller, the
+    cautious side.
+    """
+    from companion.gap.candidates import fit_terms  # late import: candidates imports this module
+
+    terms = [{"effect": e, p: 1.0} for e, p in (("quantization", "Q"), ("white_noise", "N"),
+                                                 ("bias_instability", "B"), ("random_walk", "K"),
+                                                 ("ramp", "R"))]
+    return fit_terms(meas, terms).s
+
+
+def term_avar(term, tau, rate_hz: float) -> np.ndarray:
+    """AVAR of one term as the simulator produces it: a bias_instability term without ``f0`` gets the
+    cut-off at the Nyquist frequency rate_hz/2 (thesis eq. (3.16)), which is how
+    :func:`companion.sim.synth.flicker` synthesises it; every other term as in :mod:`companion.allan.terms`."""
+    if term["effect"] == "bias_instability" and term.get("f0") is None:
+        term = dict(term, f0=rate_hz / 2.0)
+    return avar_term(term, tau)
+
+
+def model_avar(terms, tau, rate_hz: float) -> np.ndarray:
+    tau = np.asarray(tau, dtype=float)
+    total = np.zeros_like(tau)
+    for t in terms:
+        total = total + term_avar(t, tau, rate_hz)
+    return total
+
+
+def expected_deviance(nu) -> np.ndarray:
+    """E0(nu) = nu (ln(nu/2) - psi(nu/2)): the mean per-point deviance of a correct model."""
+    nu = np.asarray(nu, dtype=float)
+    return nu * (np.log(nu / 2.0) - special.digamma(nu / 2.0))
+
+
+def deviance_points(meas: Measured, s) -> np.ndarray:
+    """d_i = nu_i (a_i/s_i - 1 - ln(a_i/s_i)) (Gamma deviance)."""
+    s = np.maximum(np.asarray(s, dtype=float), 1e-300)
+    r = meas.avar / s
+    return meas.nu * (r - 1.0 - np.log(r))
+
+
+def deviance(meas: Measured, s) -> float:
+    return float(np.sum(deviance_points(meas, s)))
+
+
+def gap_metric(meas: Measured, s) -> float:
+    """G = mean d_i / E0(nu_i); about 1 when the model ``s`` (AVAR at meas.tau) is right."""
+    return float(np.mean(deviance_points(meas, s) / expected_deviance(meas.nu)))
+
+
+def z_scores(meas: Measured, s) -> np.ndarray:
+    """Signed score: + where the measurement lies above the model; |z| > 1.96 is outside the 95 % band."""
+    s = np.maximum(np.asarray(s, dtype=float), 1e-300)
+    x = meas.nu * meas.avar / s
+    # two tails computed separately keep precision far out in either tail
+    lower = stats.chi2.logcdf(x, meas.nu)
+    upper = stats.chi2.logsf(x, meas.nu)
+    z = np.where(lower < upper, stats.norm.ppf(np.exp(lower)), -stats.norm.ppf(np.exp(upper)))
+    return np.clip(np.nan_to_num(z, nan=0.0, posinf=40.0, neginf=-40.0), -40.0, 40.0)
+
+
+def gap_vs_simulation(meas: Measured, sim_avar, sim_nu) -> float:
+    """G_sim = mean z_i^2, z_i = ln(a_i/b_i) / sqrt(psi'(nu_a/2) + psi'(nu_b/2))."""
+    var = special.polygamma(1, meas.nu / 2.0) + special.polygamma(1, np.asarray(sim_nu) / 2.0)
+    z = np.log(meas.avar / np.maximum(sim_avar, 1e-300)) / np.sqrt(var)
+    return float(np.mean(z * z))
+
+
+@dataclass
+class Region:
+    """A tau range where the measurement leaves the model's 95 % band."""
+
+    tau_lo: float
+    tau_hi: float
+    direction: str  # "above" (measured above model) or "below"
+    points: int
+    worst_tau: float
+    worst_ratio: float  # measured ADEV / model ADEV at the worst point
+    worst_z: float
+
+    def as_dict(self) -> dict:
+        return {"tau_lo": self.tau_lo, "tau_hi": self.tau_hi, "direction": self.direction,
+                "points": self.points, "worst_tau": self.worst_tau, "adev_ratio": self.worst_ratio,
+                "z": self.worst_z}
+
+
+def disagreements(meas: Measured, s, z_limit: float = 1.96) -> list[Region]:
+    """Consecutive cluster times where |z| > z_limit with the same sign, worst point of each."""
+    z = z_scores(meas, s)
+    ratio = np.sqrt(meas.avar / np.maximum(s, 1e-300))
+    out: list[Region] = []
+    i, n = 0, z.shape[0]
+    while i < n:
+        if abs(z[i]) <= z_limit:
+            i += 1
+            continue
+        sign = np.sign(z[i])
+        j = i
+        while j + 1 < n and abs(z[j + 1]) > z_limit and np.sign(z[j + 1]) == sign:
+            j += 1
+        k = i + int(np.argmax(np.abs(z[i:j + 1])))
+        out.append(Region(float(meas.tau[i]), float(meas.tau[j]), "above" if sign > 0 else "below",
+                          j - i + 1, float(meas.tau[k]), float(ratio[k]), float(z[k])))
+        i = j + 1
+    return out

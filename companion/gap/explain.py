@@ -1,0 +1,82 @@
+"""Plain words for each effect: what it is on an Allan plot and what commonly causes it in a gyro.
+
+Sources for the physics: IEEE Std 952-1997 Annex C (the seven terms and their slopes), the thesis seed
+(sec. 3.1.4: ARW from white noise of the output, bias instability from flickering electronics, rate random
+walk as the long-correlation limit of a Markov process, exponentially correlated noise), and
+../shared/REFERENCE.md (rate rounding to an int16 LSB in ArduPilot RAW_IMU).
+"""
+
+from __future__ import annotations
+
+from companion.units import datasheet_unit, to_datasheet
+
+WHAT = {
+    "quantization": "angle quantisation: ADEV slope -1 at the shortest cluster times (IEEE 952 C.1)",
+    "white_noise": "white rate noise (angle random walk): ADEV slope -1/2 (IEEE 952 C.2)",
+    "bias_instability": "bias instability (flicker noise): a flat ADEV floor at 0.664 B (IEEE 952 C.3)",
+    "random_walk": "rate random walk: ADEV rising with slope +1/2 at long cluster times (IEEE 952 C.4)",
+    "ramp": "rate ramp (drift): ADEV rising with slope +1 at the longest cluster times (IEEE 952 C.5)",
+    "gauss_markov": "first-order Gauss-Markov (exponentially correlated) noise: an ADEV bump peaking at "
+                    "0.617 sigma near tau = 1.89 tau_c (IEEE 952 C.6)",
+    "sinusoid": "a sinusoidal rate: an ADEV bump peaking at 0.725 A near tau = 0.371 / f0, then falling "
+                "as 1/tau with notches (IEEE 952 C.7)",
+}
+
+CAUSES = {
+    "quantization": "the digital output resolution of the angle/rate integration (ADC or output word length)",
+    "white_noise": "thermo-mechanical and electronic noise of the sensing element; with int16 MAVLink fields "
+                   "also the rounding of the rate to one LSB when the noise dithers it",
+    "bias_instability": "flicker (1/f) noise of the electronics and of the sensing element",
+    "random_walk": "slow wandering of the bias (aging, slow temperature change); the limit of a correlated "
+                   "process whose correlation time is longer than the record",
+    "ramp": "a slow monotonic drift: warm-up after power-on, a steady temperature change, or a true slow "
+            "rotation (e.g. Earth rate on a tilting mount)",
+    "gauss_markov": "a correlated bias with a finite memory such as a thermal effect of the board or of the "
+                    "heater/fan cycle, or a mount or vibration-isolator effect",
+    "sinusoid": "a periodic disturbance: thermostat or heater cycling, a fan, a pump, building or vehicle "
+                "oscillation, or a beat between the sample clock and a vibration",
+}
+
+
+def fmt_param(param: str, value: float, axis: str) -> str:
+    """``N = 2.1 deg/sqrt(h) (6.1e-04 SI)``: datasheet unit first, SI in brackets."""
+    if param in ("tau_c", "freq_hz", "f0"):
+        unit = "s" if param == "tau_c" else "Hz"
+        return f"{param} = {value:.4g} {unit}"
+    return f"{param} = {to_datasheet(param, value, axis):.4g} {datasheet_unit(param, axis)} ({value:.3g} SI)"
+
+
+def describe_term(term, axis: str) -> str:
+    return term["effect"] + " " + ", ".join(fmt_param(k, v, axis) for k, v in term.items()
+                                            if k != "effect" and isinstance(v, (int, float)))
+
+
+def explain_added(term, axis: str) -> str:
+    """One paragraph for an added effect: what it is, its parameters, what commonly causes it."""
+    effect = term["effect"]
+    head = f"{describe_term(term, axis)}: {WHAT[effect]}."
+    if effect == "gauss_markov":
+        cause = (f"A correlated bias that forgets itself in about {term['tau_c']:.3g} s: commonly "
+                 f"{CAUSES[effect]}.")
+    elif effect == "sinusoid":
+        period = 1.0 / term["freq_hz"]
+        cause = (f"A periodic disturbance at {term['freq_hz']:.3g} Hz (period {period:.3g} s): commonly "
+                 f"{CAUSES[effect]}.")
+    else:
+        cause = f"Commonly caused by {CAUSES[effect]}."
+    return head + " " + cause
+
+
+def explain_missized(effect: str, param: str, ratio: float) -> str:
+    """``white_noise N is 1.8x too small in the model``."""
+    if ratio >= 1.0:
+        return f"{effect} {param} is {ratio:.2f}x too small in the model (measured {ratio:.2f}x the model value)"
+    return f"{effect} {param} is {1.0 / ratio:.2f}x too large in the model (measured {ratio:.2f}x the model value)"
+
+
+def explain_rate_quantization(lsb: float, N_q: float, axis: str) -> str:
+    return (f"rate quantisation: the samples are rounded to an LSB of {lsb:.4g} (SI); when the noise dithers "
+            f"the rounding this adds white rate noise of variance LSB^2/12 per sample, N_q = LSB sqrt(tau0/12) = "
+            f"{fmt_param('N', N_q, axis)[4:]}, slope -1/2 like the sensor's own white noise (not the -1 slope of "
+            f"angle quantisation Q). It is named because the LSB is known; the Allan curve alone cannot tell it "
+            f"from a larger N.")
