@@ -159,10 +159,10 @@ def crc_x25_rows(rows: np.ndarray, extra: np.ndarray | int) -> np.ndarray:
     crc = np.full(n, 0xFFFF, dtype=np.uint16)
     half = length // 2
     if half:
-        words = np.ascontiguousarray(rows[:, :2 * half]).view("<u2")
+        words = np.ascontiguousarray(rows[:, :2 * half]).view("<u2").T.copy()  # contiguous columns
         t16 = CRC_TABLE16
         for j in range(half):
-            crc = t16[crc ^ words[:, j]]
+            crc = t16[crc ^ words[j]]
     table = CRC_TABLE
     if length % 2:
         crc = (crc >> 8) ^ table[(crc ^ rows[:, length - 1]) & 0xFF]

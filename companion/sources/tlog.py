@@ -11,7 +11,11 @@ walker does not follow a chain, so it cannot lose sync:
    id must be known (CRC_EXTRA from :mod:`companion.sources.messages`);
 3. CRC-16/MCRF4XX of bytes [1, header + len) + CRC_EXTRA, vectorised per (header, length) group,
    column by column over a 2-D byte array (:func:`messages.crc_x25_rows`); compared with the
-   frame's two little-endian CRC bytes;
+   frame's two little-endian CRC bytes. Pass 1 checks the candidates whose implied end is followed
+   by another record's magic byte 8 bytes later (or the end of the file): in a clean tlog, all real
+   frames. Pass 2 checks the remaining candidates unless their record would start inside a frame
+   pass 1 accepted (such a candidate would be dropped in step 4 anyway), so magic-valued bytes
+   inside payloads cost no CRC;
 4. overlaps: valid candidates are taken in file order and a record ``[p-8, p+frame_len)`` that starts
    before the end of the last accepted one is dropped (a magic byte inside a payload that happens to
    pass the CRC, probability 2^-16). Runs where nothing overlaps are accepted in bulk; only the rare
@@ -88,6 +92,19 @@ def _crc_ok(buf: np.ndarray, pos: np.ndarray, hl: int, ln: int, extra: np.ndarra
     return ok
 
 
+def _crc_groups(buf, p, hl, ln, extra) -> np.ndarray:
+    """CRC validity of candidates, grouped by (header length, payload length)."""
+    ok = np.zeros(p.shape[0], dtype=bool)
+    if p.shape[0] == 0:
+        return ok
+    key = hl * 256 + ln
+    order = np.argsort(key, kind="stable")
+    bounds = np.flatnonzero(np.diff(key[order])) + 1
+    for grp in np.split(order, bounds):
+        ok[grp] = _crc_ok(buf, p[grp], int(hl[grp[0]]), int(ln[grp[0]]), extra[grp].astype(np.uint16))
+    return ok
+
+
 def scan(data) -> FrameIndex:
     """Index every intact frame of tlog bytes ``data`` (bytes, bytearray, memoryview or uint8 array)."""
     buf = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data
@@ -114,15 +131,24 @@ def scan(data) -> FrameIndex:
     plausible = (p + flen <= n) & (extra >= 0) & ((incompat & ~M.IFLAG_SIGNED) == 0)
     p, hl, ln, msgid, flen, extra = (a[plausible] for a in (p, hl, ln, msgid, flen, extra))
 
+    # pass 1: candidates followed by the next record's magic byte (or the end of the file): the chain
+    nxt = p + flen + 8
+    after = buf[np.minimum(nxt, n - 1)]
+    chain = (p + flen == n) | ((nxt < n) & (after >= M.MAGIC_V2) & (after <= M.MAGIC_V1))
     ok = np.zeros(p.shape[0], dtype=bool)
-    key = hl * 256 + ln
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    bounds = np.flatnonzero(np.diff(ks)) + 1
-    for grp in np.split(order, bounds):
-        if grp.shape[0] == 0:
-            continue
-        ok[grp] = _crc_ok(buf, p[grp], int(hl[grp[0]]), int(ln[grp[0]]), extra[grp].astype(np.uint16))
+    first = np.flatnonzero(chain)
+    ok[first] = _crc_groups(buf, p[first], hl[first], ln[first], extra[first])
+    # pass 2: the others (frames before garbage, garbage itself), unless inside a pass-1 frame's record
+    rest = np.flatnonzero(~chain)
+    skipped = np.zeros(p.shape[0], dtype=bool)
+    good1 = first[ok[first]]
+    if rest.shape[0] and good1.shape[0]:
+        cm_end = np.maximum.accumulate(p[good1] + flen[good1])
+        j = np.searchsorted(p[good1], p[rest], side="left") - 1
+        inside = (j >= 0) & (p[rest] - 8 < cm_end[np.maximum(j, 0)])
+        skipped[rest[inside]] = True
+        rest = rest[~inside]
+    ok[rest] = _crc_groups(buf, p[rest], hl[rest], ln[rest], extra[rest])
 
     # overlap resolution among CRC-valid candidates (already in file order)
     vp, vfl = p[ok], flen[ok]
@@ -148,7 +174,7 @@ def scan(data) -> FrameIndex:
     acc_start, acc_end = pos - 8, pos + flen[acc]
 
     # bad frames: plausible headers failing the CRC that are not inside an accepted record
-    bad = p[~ok]
+    bad = p[~ok & ~skipped]
     if bad.shape[0] and pos.shape[0]:
         j = np.searchsorted(acc_start, bad, side="right") - 1
         inside = (j >= 0) & (bad < acc_end[np.maximum(j, 0)])
