@@ -22,16 +22,25 @@ difference:
 pooled). Memory: ``levels x (2 phases - 1)`` block sums, independent of run length.
 
 Coefficients: the Allan variance is linear in theta = [Q^2, N^2, B^2, K^2, R^2] (Miao eq. (3.6);
-:func:`companion.allan.terms.linear_basis`), sigma_j^2 = A_j theta. theta is the weighted non-negative
-least-squares solution over the levels with var(sigma_j^2) = 2 (A_j theta)^2 / edf_j (chi-square with
-edf_j degrees of freedom; edf_j = effective number of differences / P_j, i.e. about the number of
-non-overlapping clusters; Kish's n_eff = W^2 / sum(w^2) under forgetting), iterated (weights from the
-model, not from the noisy measurement, to avoid the low bias of self-weighting). Because S_j, W_j are
-sufficient statistics of the whole history, re-solving from them at each report is the information-form
-Kalman filter of the constant state theta with those measurement variances, without counting any data
-twice. 1-sigma uncertainty of theta from (A^T W A)^-1 (free parameters; the marginal of the unconstrained
-problem for parameters at the zero bound), propagated to p = sqrt(theta) as sqrt(theta + s) - sqrt(theta)
-(= s / (2 p) when s << theta, sqrt(s) at the bound).
+:func:`companion.allan.terms.linear_basis`), sigma_j^2 = A_j theta, solved with theta >= 0 from the levels
+with edf_j >= ``min_edf`` (edf_j = effective number of differences / P_j, about the number of
+non-overlapping clusters; Kish's n_eff = W^2 / sum(w^2) under forgetting). ``fit``:
+
+- ``"fit_avar"`` (default): the project's offline fit :func:`companion.allan.fit.fit_avar` on the bank's
+  Allan variances: generalised NNLS with the full model covariance of the Allan estimates (neighbouring
+  cluster times are strongly correlated), iterated from measured weights. Same procedure as
+  ``companion analyze``, so online and offline differ only by the accumulators. 0.1-1 s per call.
+- ``"gls"``: the same kind of GLS (:func:`fit_theta_gls`), covariance from the model rounded to sqrt(2)
+  steps and cached: a few ms per call when the model is stable; for a slow companion computer.
+- ``"diag"``: weighted NNLS with var(sigma_j^2) = 2 (A_j theta)^2 / edf_j (chi-square), iterated with
+  weights from the model (not from the noisy measurement, to avoid the low bias of self-weighting).
+
+Because S_j, W_j are sufficient statistics of the whole (forgotten) history, re-solving from them at each
+report is the information-form filter of the constant state theta with those measurement covariances,
+without counting any data twice. 1-sigma of theta from the inverse information matrix (for parameters at
+the zero bound: the marginal of the problem with that parameter freed), propagated to p = sqrt(theta) as
+sqrt(theta + s) - sqrt(theta) (= s / (2 p) when s << theta, sqrt(s) at the bound); with ``fit_avar`` the
+1-sigma of p is its 95 % interval width / 3.92.
 
 Streaming and block updates give bit-identical results: scalar samples are buffered (at most
 ``_BUF`` of them) and every path runs the same chunk-independent block code (element-wise operations in
@@ -46,11 +55,13 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.signal import lfilter
 
-from companion.allan.confidence import oavar_covariance
+from companion.allan.confidence import edf_simple, oavar_covariance
 from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, linear_basis
 
 DEFAULT_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
 _BUF = 2048
+#: coefficient fits: the offline fit_avar (default), a fast cached GLS, a diagonal weighted NNLS (fastest)
+FITS = ("fit_avar", "gls", "diag")
 
 
 def check_effects(effects) -> tuple[str, ...]:
@@ -75,7 +86,7 @@ class OctaveBankEstimator:
     kind = "octave"
 
     def __init__(self, rate_hz, effects=DEFAULT_EFFECTS, forgetting_s=None, phases=16, max_tau_s=20000.0,
-                 min_edf=2.0, fit="gls", gls_max_ratio=16):
+                 min_edf=1.0, fit="fit_avar", gls_max_ratio=256):
         rate_hz = float(rate_hz)
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
@@ -95,8 +106,8 @@ class OctaveBankEstimator:
         self.phases = phases
         self.max_tau_s = max_tau_s
         self.min_edf = float(min_edf)
-        if fit not in ("gls", "diag"):
-            raise ValueError(f"fit must be 'gls' or 'diag', got {fit!r}")
+        if fit not in FITS:
+            raise ValueError(f"fit must be one of {', '.join(FITS)}, got {fit!r}")
         self.fit = fit
         self.gls_max_ratio = int(gls_max_ratio)
         self.levels = max(1, int(math.floor(math.log2(max(max_tau_s * rate_hz, 1.0)))) + 1)
@@ -229,7 +240,9 @@ class OctaveBankEstimator:
         tau, avar, edf = self.avar()
         use = edf >= self.min_edf
         theta, s_theta = fit_theta(tau[use], avar[use], edf[use], self.effects)
-        if self.fit == "gls" and use.sum() > len(self.effects):
+        if self.fit == "fit_avar" and use.sum() > len(self.effects):
+            theta, s_theta = self._fit_avar(tau[use], avar[use], edf[use], theta, s_theta)
+        elif self.fit == "gls" and use.sum() > len(self.effects):
             theta, s_theta = fit_theta_gls(tau[use], avar[use], theta, self.effects, self.n_effective(),
                                            self.rate_hz, self.gls_max_ratio, cache=self._cache)
         out = []
@@ -239,6 +252,31 @@ class OctaveBankEstimator:
             std = math.sqrt(max(th, 0.0) + st) - val if math.isfinite(st) else float("inf")
             out.append({"effect": e, p: val, "std": {p: std}})
         return out
+
+    def _fit_avar(self, tau, avar, edf, theta_diag, std_diag):
+        """The offline fit, :func:`companion.allan.fit.fit_avar` (GLS with the full model covariance of the
+        Allan estimates, iterated from measured weights), on this bank's Allan variances; 1-sigma from its
+        95 % interval as (hi - lo) / 3.92. Effects it sets to zero keep the diagonal fit's bound."""
+        from companion.allan.fit import fit_avar
+
+        m = np.round(tau * self.rate_hz).astype(np.int64)
+        n = max(int(self.n_effective()), int(2 * m.max() + 2))
+        # first weights as in `companion analyze`: white-noise EDF of the overlapping estimator (NIST SP 1065)
+        edf0 = np.maximum(edf_simple(n + 1, m, 0), 0.5)
+        fr = fit_avar(tau, avar, edf0, effects=list(self.effects), n=n, rate_hz=self.rate_hz, m=m,
+                      max_ratio=self.gls_max_ratio)
+        theta = np.zeros(len(self.effects))
+        std = np.asarray(std_diag, float).copy()
+        for i, e in enumerate(self.effects):
+            t = next((t for t in fr.terms if t["effect"] == e), None)
+            if t is None:
+                continue
+            p = LINEAR_PARAM[e]
+            theta[i] = t[p] ** 2
+            lo, hi = t["ci95"][p]
+            sp = (hi - lo) / 3.92  # 1-sigma of p; back to theta = p^2 for the common read-out below
+            std[i] = (t[p] + sp) ** 2 - t[p] ** 2
+        return theta, std
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict:
