@@ -37,6 +37,7 @@ examples:
   companion analyze flight.tlog --json report.json --kalibr imu.yaml
   companion analyze imu.csv.gz --taus log:10 --axes gx,gy,gz
   companion analyze imu.csv --taus 0.1,1,10,100          cluster times in seconds
+  companion analyze flight.tlog --online --json r.json    offline and online estimates side by side
 
 --taus: octave (1, 2, 4 ... samples), decade (1, 2, 4, 10, 20, 40 ...), all, log:N (N per decade), or a
 comma list of seconds. The fit always uses octave-spaced points with their full covariance; --taus
@@ -57,6 +58,9 @@ def register(subparsers) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds to listen on a live link")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--online", action="store_true",
+                   help="also run the online estimator (octave bank, docs/online.md) over each axis: JSON key "
+                        "'online' per axis, table row with |offline - online| / offline")
     p.set_defaults(func=run)
 
 
@@ -141,7 +145,7 @@ class Progress:
             sys.stderr.flush()
 
 
-def analyze_stream(stream, axes, taus, progress=None) -> dict:
+def analyze_stream(stream, axes, taus, progress=None, online=False) -> dict:
     """The JSON ``streams`` entry of one :class:`companion.samples.ImuStream` (longest segment)."""
     a, b = stream.longest_segment()
     rate = float(stream.rate_hz)
@@ -156,6 +160,11 @@ def analyze_stream(stream, axes, taus, progress=None) -> dict:
                                    "status": "too_short", "note": "no sample rate"}
         else:
             entry["axes"][axis] = analyze_axis(stream.axis(axis)[a:b], rate, taus, lsb=lsb)
+            if online and entry["axes"][axis]["status"] == "ok":
+                from companion.estimators import online_terms
+
+                y = stream.axis(axis)[a:b]
+                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate, entry["axes"][axis]["terms"])
         if progress:
             progress.step(f"{stream.key.message}[{stream.key.instance}] {axis}")
     return entry
@@ -212,7 +221,30 @@ def format_table(report: dict) -> str:
                     other.append(q["note"])
                 lines.append(f"  {a:<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26}"
                              + "; ".join(other))
+                if r.get("online") is not None:
+                    lines.append("  " + _online_row(r, a))
     return "\n".join(lines)
+
+
+def _online_row(r: dict, a: str) -> str:
+    """'online N 2.27 (0.41 %) ...': online values and the paper's |offline - online| / offline."""
+    off = {t["effect"]: t for t in r["terms"]}
+    cells, other = {}, []
+    for t in r["online"]:
+        p = PARAMS[t["effect"]][0]
+        v = units.to_datasheet(p, t[p], a)
+        o = off.get(t["effect"], {}).get(p)
+        d = f"{abs(o - t[p]) / o * 100:.2f} %" if o else "offline 0"
+        text = f"{_fmt(v)} ({d})"
+        if p in ("N", "B", "K"):
+            cells[p] = text
+        elif t[p] > 0 or o:
+            other.append(f"{p} {text} {units.datasheet_unit(p, a)}")
+    nonlin = sorted({t["effect"] for t in r["terms"]} - {t["effect"] for t in r["online"]})
+    if nonlin:
+        other.append(f"online has no {', '.join(nonlin)}: differences expected")
+    return (f"{'online':<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26}"
+            + "; ".join(other))
 
 
 def kalibr_yaml(report: dict) -> str:
@@ -268,7 +300,7 @@ def run(args) -> int:
     report = {"source": str(args.source), "streams": []}
     try:
         for s in streams:
-            report["streams"].append(analyze_stream(s, axes, args.taus, progress))
+            report["streams"].append(analyze_stream(s, axes, args.taus, progress, online=args.online))
     finally:
         progress.close()
     print(format_table(report))

@@ -44,6 +44,18 @@ def make_estimator(kind="octave", rate_hz=None, **cfg):
     return cls(rate_hz, **cfg)
 
 
+def online_terms(y, rate_hz, offline_terms=None, kind="octave", **cfg) -> list[dict]:
+    """Run an online estimator over the samples ``y`` and return its final terms. The effects are the linear
+    ones of ``offline_terms`` (so that online and offline fit the same model), else the default five."""
+    from companion.allan.terms import LINEAR_EFFECTS
+
+    effects = [t["effect"] for t in (offline_terms or []) if t["effect"] in LINEAR_EFFECTS]
+    cfg.setdefault("effects", tuple(effects) or DEFAULT_EFFECTS)
+    est = make_estimator(kind, rate_hz=rate_hz, **cfg)
+    est.update(y)
+    return est.terms()
+
+
 def from_state_dict(d: dict):
     """Rebuild an estimator of either kind from its ``state_dict()``."""
     kind = d.get("kind") if isinstance(d, dict) else None
@@ -54,4 +66,4 @@ def from_state_dict(d: dict):
     raise ValueError(f"not an estimator state (kind {kind!r})")
 
 
-__all__ = ["OctaveBankEstimator", "make_estimator", "from_state_dict", "DEFAULT_EFFECTS", "KINDS"]
+__all__ = ["OctaveBankEstimator", "make_estimator", "from_state_dict", "online_terms", "DEFAULT_EFFECTS", "KINDS"]
