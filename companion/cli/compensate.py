@@ -1,0 +1,174 @@
+"""``companion compensate``: ARIMA(1,1,1) gyro random-error compensation with STF, SR-UKF and SR-RSUKF
+(Shi et al.), and the Allan deviation of the raw and of each compensated series."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from companion.compensation.pipeline import METHODS, compensate
+from companion.errors import CompanionError
+from companion.samples import AXES, GYRO_AXES
+
+DESCRIPTION = """\
+Compensate the random error of one gyro axis with the three methods of Shi et al. ("Compensation of MEMS
+gyroscope random error based on square-root risk-sensitive UKF"):
+  stf      model L (linear ARIMA(1,1,1)) + strong tracking Kalman filter (fading factor)
+  srukf    model NL (ARIMA parameters as states) + square-root UKF
+  srrsukf  model NL + square-root risk-sensitive UKF (diagonal risk-sensitive matrix)
+The ARIMA(1,1,1) + white-noise model is first fitted to the data by least squares (no hand tuning);
+each filter then runs sample by sample. The compensated series is the filtered estimate x_k: the
+gyro output with the white measurement noise removed. The table compares the overlapping Allan
+deviation of each compensated series with that of the raw series (ratio < 1: lower noise) and the
+speed. Meant for data at rest; on a moving vehicle the filters also smooth real motion.
+The longest gap-free segment of the chosen IMU stream is used. Method and measurements:
+docs/compensation.md.
+"""
+
+EPILOG = """\
+examples:
+  companion compensate imu.csv.gz --axis gy --plot comp.png
+  companion compensate flight.tlog --axis gz --method srukf --json comp.json --out comp.csv
+  companion compensate imu.csv.gz --axis gx --max-samples 100000     first 1000 s at 100 Hz
+
+--out writes time_s, raw and one column per method (same unit as the input, rad/s for gyros).
+--json writes {"axis", "raw": {"tau", "adev"}, "methods": {name: {"tau", "adev", "adev_ratio",
+"samples_per_s", "factor_valid", ...}}, "arima": fitted parameters}.
+Speed: STF about 10^5-10^6 samples/s, the UKFs about 10^4 samples/s (pure numpy, one core).
+"""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("compensate", help="ARIMA random-error compensation (STF, SR-UKF, SR-RSUKF) and ADEV",
+                              description=DESCRIPTION, epilog=EPILOG,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("source", help=".tlog, .csv/.csv.gz, or a connection string (with --duration)")
+    p.add_argument("--axis", required=True, help=f"axis to compensate: {', '.join(AXES)}")
+    p.add_argument("--method", default="all", help="stf, srukf, srrsukf, all, or a comma list (default all)")
+    p.add_argument("--json", metavar="OUT", help="write ADEVs and fitted parameters as JSON (SI units)")
+    p.add_argument("--plot", metavar="PNG", help="raw and compensated series and their Allan deviations")
+    p.add_argument("--out", metavar="CSV", help="write the compensated series as CSV")
+    p.add_argument("--max-samples", type=int, default=None, metavar="N", help="use only the first N samples")
+    p.add_argument("--stream", type=int, default=0, metavar="I", help="index of the IMU stream (default 0, the first)")
+    p.add_argument("--split", default="auto", choices=("auto", "free", "canonical"),
+                   help="how the ARIMA fit shares white noise between error and measurement noise (default auto)")
+    p.add_argument("--duration", type=float, default=None, help="seconds to listen on a live link")
+    p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=run)
+
+
+def parse_methods(spec: str) -> tuple:
+    names = [s.strip().lower() for s in spec.split(",") if s.strip()]
+    if not names or names == ["all"]:
+        return METHODS
+    bad = [n for n in names if n not in METHODS]
+    if bad:
+        raise CompanionError(f"unknown --method {bad[0]!r}; expected {', '.join(METHODS)} or all")
+    return tuple(dict.fromkeys(names))
+
+
+def select_series(res, axis: str, stream_index: int, max_samples):
+    """(t, z, rate_hz, label) of the longest segment of the chosen IMU stream."""
+    streams = res.imu_streams()
+    if not streams:
+        raise CompanionError(f"{res.source}: no IMU stream")
+    if not 0 <= stream_index < len(streams):
+        labels = "; ".join(f"{i}: {s.key.label()}" for i, s in enumerate(streams))
+        raise CompanionError(f"--stream {stream_index} out of range; IMU streams: {labels}")
+    s = streams[stream_index]
+    a, b = s.longest_segment()
+    if max_samples is not None:
+        if max_samples < 1:
+            raise CompanionError("--max-samples must be at least 1")
+        b = min(b, a + max_samples)
+    rate = float(s.rate_hz)
+    if not rate > 0:
+        raise CompanionError(f"{s.key.label()}: no usable sample rate")
+    return s.t[a:b], np.asarray(s.axis(axis)[a:b], dtype=float), rate, s.key.label()
+
+
+class Progress:
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+
+    def __call__(self, name, done, total):
+        if self.enabled and total > 0:
+            sys.stderr.write(f"\rcompensate: {name:<8} {100.0 * done / total:5.1f} % of {total} samples ")
+            sys.stderr.flush()
+
+    def close(self):
+        if self.enabled:
+            sys.stderr.write("\r" + " " * 60 + "\r")
+            sys.stderr.flush()
+
+
+def _nearest(tau, value):
+    return int(np.argmin(np.abs(np.log(tau) - np.log(value))))
+
+
+def format_table(result, axis: str, label: str) -> str:
+    tau = result.raw_tau
+    picks = sorted({_nearest(tau, v) for v in (tau[0], 1.0, 100.0)})
+    lines = [f"{label} {axis}: {len(next(iter(result.methods.values())).x)} samples at {result.rate_hz:g} Hz; "
+             f"ARIMA(1,1,1) fit ({result.params.split}): phi={result.params.phi:.4f} theta={result.params.theta:.4f} "
+             f"delta1={result.params.delta1 * result.params.scale:.3g} "
+             f"sqrt(R)={np.sqrt(result.params.R) * result.params.scale:.3g} (input units)"]
+    head = f"{'method':<20}" + "".join(f"{'ADEV ratio @' + format(tau[i], '.3g') + ' s':>20}" for i in picks)
+    lines.append(head + f"{'samples/s':>12}{'factor ok':>11}")
+    lines.append(f"{'raw ADEV':<20}" + "".join(f"{result.raw_adev[i]:>20.4g}" for i in picks))
+    for m in result.methods.values():
+        ratio = m.adev / result.raw_adev
+        lines.append(f"{m.label:<20}" + "".join(f"{ratio[i]:>20.3f}" for i in picks)
+                     + f"{m.samples_per_s:>12.0f}{'yes' if m.factor_valid else 'NO':>11}")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    from companion.sources import load
+
+    axis = args.axis.strip().lower()
+    if axis not in AXES:
+        raise CompanionError(f"unknown --axis {args.axis!r}; expected one of {', '.join(AXES)}")
+    methods = parse_methods(args.method)
+    res = load(args.source, args.config, duration=args.duration)
+    t, z, rate, label = select_series(res, axis, args.stream, args.max_samples)
+    progress = Progress(not args.quiet and z.shape[0] > 50_000 and sys.stderr.isatty())
+    try:
+        result = compensate(z, rate, methods=methods, progress=progress, split=args.split)
+    finally:
+        progress.close()
+    print(format_table(result, axis, label))
+    bad = [m.name for m in result.methods.values() if not m.factor_valid]
+    if args.json:
+        report = result.to_json(axis)
+        report["stream"] = label
+        _write(args.json, json.dumps(report, indent=1), "JSON")
+    if args.out:
+        cols = [t, z] + [m.x for m in result.methods.values()]
+        header = ",".join(["time_s", f"{axis}_raw"] + [f"{axis}_{name}" for name in result.methods])
+        try:
+            np.savetxt(args.out, np.column_stack(cols), delimiter=",", header=header, comments="", fmt="%.9g")
+        except OSError as exc:
+            raise CompanionError(f"{args.out}: cannot write CSV ({exc.strerror or exc})") from None
+    if args.plot:
+        from companion.plots.compensation_plot import plot_compensation
+
+        gyro = axis in GYRO_AXES
+        plot_compensation(result, t, z, args.plot, title=f"{label} {axis}",
+                          unit_scale=180.0 / np.pi if gyro else 1.0, unit="deg/s" if gyro else "m/s^2")
+    if bad:
+        print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _write(path, text, what):
+    try:
+        with open(path, "w") as fh:
+            fh.write(text + "\n")
+    except OSError as exc:
+        raise CompanionError(f"{path}: cannot write {what} ({exc.strerror or exc})") from None
