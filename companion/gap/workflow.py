@@ -13,9 +13,11 @@
    Wilks' theorem), exceeds chi^2_k(1 - ALPHA), ALPHA = 1e-4 (a stringent level: grids over tau_c and
    freq_hz and correlated octave estimates make the nominal level optimistic; the null benchmark in
    benchmarks/bench_gap.py measures the real false-alarm rate). Repeat until no candidate passes.
-5. Mis-sized terms: a model term is recalibrated only when its 95 % interval excludes the model value;
-   otherwise the model value is kept. A term recalibrated to zero whose interval excludes the model value
-   is reported as not seen.
+5. Mis-sized terms: a model term is recalibrated only when holding it at its model value (all else
+   refitted) costs more deviance than chi^2_1(1 - ALPHA_RECAL), ALPHA_RECAL = 1e-3 (likelihood-ratio test);
+   otherwise the model value is kept. A term refitted to zero that fails the test is reported as not seen.
+   Among candidates, a two-parameter effect gives way to its one-parameter limit (Gauss-Markov -> random
+   walk or white noise) unless it is better by more than chi^2_1(1 - ALPHA).
 6. Noise floor: the model fits within the noise when the gap metric G <= NOISE_FLOOR_G = 2 (G is 1 on
    average for a right model; the null benchmark gives its spread) and nothing is added or recalibrated.
 7. Known LSB (rate rounding, e.g. int16 mrad/s RAW_IMU): a white term N_q = LSB sqrt(tau0/12) with no free
@@ -41,6 +43,11 @@ from companion.gap._edf import local_slope, oavar_edf
 from companion.sim.synth import synthesize_axis
 
 ALPHA = 1e-4
+#: level of the per-term likelihood-ratio test that declares a model term mis-sized
+ALPHA_RECAL = 1e-3
+#: one-parameter limits of two-parameter effects (Gauss-Markov: tau_c >> T is a rate random walk,
+#: tau_c << tau0 white noise; IEEE 952 C.6)
+NESTED = {"gauss_markov": ("random_walk", "white_noise")}
 NOISE_FLOOR_G = 2.0
 MAX_ITER = 4
 SIM_MAX_SAMPLES = 2_000_000
@@ -210,6 +217,11 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                   "params": _params(c[2].terms[-1])} for c in cands],
                   "threshold": {k: delta_crit(k) for k in (1, 2)}}
         best = next((c for c in cands if c[5] > 0), None)
+        if best is not None:  # Occam: a nested one-parameter limit that is not significantly worse wins
+            for c in cands:
+                if c[1] in NESTED.get(best[1], ()) and c[5] > 0 and best[3] - c[3] < delta_crit(1):
+                    best = c
+                    break
         if best is None or best[3] <= delta_crit(best[4]):
             record["chosen"] = None
             res.iterations.append(record)
@@ -235,7 +247,12 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         ratio = fitted / t0[p] if t0[p] > 0 else math.inf
         entry = {"effect": t0["effect"], "param": p, "model": t0[p], "fitted": fitted, "ratio": ratio,
                  "ci95": [lo, hi]}
-        if lo <= t0[p] <= hi:
+        # likelihood-ratio test: this term held at its model value, everything else refitted
+        held = [dict(t) for t in base.terms]
+        held[i][p] = t0[p]
+        lr = fit_terms(meas, held, fixed=sorted(set(fixed) | {i}), intervals=False).dev - base.dev
+        entry["lr"] = lr
+        if lr <= float(stats.chi2.isf(ALPHA_RECAL, 1)):
             final[i][p] = t0[p]
             entry["verdict"] = "consistent"
         elif fitted == 0:
