@@ -46,13 +46,19 @@ def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT
         p0 = 1.0 / rate_hz
     reset_s = max(1.0, 10.0 * p0)
     starts = [0]
-    while True:
-        s = starts[-1]
-        runmax = np.maximum.accumulate(t[s:])
-        jump = np.flatnonzero(t[s + 1:] < runmax[:-1] - reset_s)
-        if jump.shape[0] == 0:
+    s, w = 0, 1024
+    while s < n - 1:  # search windows double in size, so the total work stays O(n)
+        e = min(n, s + w)
+        runmax = np.maximum.accumulate(t[s:e])
+        jump = np.flatnonzero(t[s + 1:e] < runmax[:-1] - reset_s)
+        if jump.shape[0]:
+            s += 1 + int(jump[0])
+            starts.append(s)
+            w = 1024
+        elif e == n:
             break
-        starts.append(s + 1 + int(jump[0]))
+        else:
+            w *= 2
     rep.resets = len(starts) - 1
     # 2. duplicates and small backward steps, per reset segment
     keep = np.ones(n, dtype=bool)
