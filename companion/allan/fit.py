@@ -19,17 +19,27 @@ When the caller gives no ``n``/``rate_hz`` (only tau, avar and the EDF), C is di
 Term selection (``effects=None``): every subset of the usual gyro model {white_noise, bias_instability,
 random_walk} is fitted and the one with the least Bayesian information criterion BIC = chi^2 + k ln(n_points)
 is kept (k = non-zero coefficients; Schwarz 1978). Then quantization, ramp and one Gauss-Markov term
-(2 parameters; tau_c found by a grid over the tau range refined by a bounded 1-D minimisation) are tried in
-turn (a sinusoid, same way, only when ``effects`` names it) and kept only if they lower the BIC by more than EXTRA_BIC_MARGIN = 10
+(2 parameters; tau_c found by a grid over the tau range -- AVAR peak 1.89 tau_c within
+[4 tau_min, tau_max/4] -- refined by a bounded 1-D minimisation, and kept only at an interior optimum: a
+tau_c pinned to the edge of the range is not identified) are tried in turn (a sinusoid, same way, only when ``effects`` names it) and kept only if they lower the BIC by more than EXTRA_BIC_MARGIN = 10
 ("very strong" evidence, Kass & Raftery 1995): with ~18 strongly correlated points, plain BIC lets a ramp
-stand in for a random walk in about one seed out of five. A slope region
+stand in for a random walk in about one seed out of five. A backward pass then drops any term whose
+removal costs less than its penalty (a term picked early may have stood in for one picked later). A slope region
 absent from the data simply leaves its coefficient at 0: never NaN.
 
 Intervals: the covariance of the selected coefficients is (A^T C^-1 A)^-1; each theta_j is treated as a
 scaled chi-square with nu_j = 2 theta_j^2 / var(theta_j) degrees of freedom (Satterthwaite 1946), so its
 ``level`` interval is [theta nu / chi2_{(1+level)/2}(nu), theta nu / chi2_{(1-level)/2}(nu)] (for nu < 4,
-a barely identified term, the normal interval theta +- z sd truncated at 0); parameters are the square roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1).
+a barely identified term, the normal interval theta +- z sd truncated at 0); parameters are the square roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1); sigma and amplitude: the
+envelope of their conditional intervals over that range (they are correlated with the shape parameter).
 Coverage is measured in benchmarks/bench_fit.py.
+
+Model misfit (real sensors: an internal low-pass filter bends the ADEV at a few tau0, temperature drifts
+are no IEEE 952 term): when chi^2 exceeds dof + 3 sqrt(2 dof), a relative model error e (same for every
+point, added as (e sigma^2_model)^2 to the diagonal of C) is chosen so that chi^2 = dof -- the Birge-ratio /
+random-effects remedy -- and the selection and fit are redone. The intervals widen accordingly and the
+result carries ``model_error`` and a note. Without it the thousands of effective degrees of freedom of the
+short-tau points would let a small systematic misfit there outweigh the whole long-tau region.
 """
 
 from __future__ import annotations
@@ -39,7 +49,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import minimize_scalar, nnls
+from scipy.optimize import brentq, minimize_scalar, nnls
 from scipy.stats import chi2 as chi2_dist
 
 from companion.allan.confidence import oavar_covariance
@@ -72,6 +82,7 @@ class FitResult:
     covariance_mode: str = "full"
     avar_cov: np.ndarray | None = field(default=None, repr=False)
     notes: list[str] = field(default_factory=list)
+    model_error: float = 0.0  # relative AVAR model error added per point when the model misfits (0: none)
 
     def term(self, effect: str) -> dict | None:
         for t in self.terms:
@@ -81,6 +92,7 @@ class FitResult:
 
     def to_dict(self) -> dict:
         return {"terms": self.terms, "chi2": self.chi2, "dof": self.dof, "criterion": self.criterion,
+                "model_error": self.model_error,
                 "score": self.score, "covariance": self.covariance_mode, "notes": list(self.notes)}
 
 
@@ -92,8 +104,8 @@ def _shape_column(effect: str, shape: float, tau) -> np.ndarray:
 
 
 def _shape_range(effect: str, tau) -> tuple[float, float]:
-    """Shape parameters whose AVAR peak (1.89 tau_c; 0.371/f) lies inside [2 tau_min, tau_max / 2]."""
-    lo, hi = 2.0 * tau[0], tau[-1] / 2.0
+    """Shape parameters whose AVAR peak (1.89 tau_c; 0.371/f) lies inside [4 tau_min, tau_max / 4]."""
+    lo, hi = 4.0 * tau[0], tau[-1] / 4.0
     if effect == "gauss_markov":
         return lo / 1.89, hi / 1.89
     return 0.371 / hi, 0.371 / lo
@@ -151,7 +163,9 @@ def _best_shape(prob, effect, linear, others, tau):
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
     res = minimize_scalar(chi, bounds=(a, b), method="bounded", options={"xatol": 1e-3})
     best = float(res.x) if res.fun < vals[i] else float(grid[i])
-    return math.exp(best), min(float(res.fun), float(vals[i])), grid, vals
+    span = grid[-1] - grid[0]
+    interior = grid[0] + 0.02 * span < best < grid[-1] - 0.02 * span
+    return math.exp(best), min(float(res.fun), float(vals[i])), grid, vals, interior
 
 
 def _select(prob, tau, effects, n_pts, auto):
@@ -187,8 +201,8 @@ def _select(prob, tau, effects, n_pts, auto):
 
         else:
             r = _best_shape(prob, e, linear, nonlin, tau)
-            if r is None:
-                continue
+            if r is None or not r[4]:
+                continue  # no interior optimum of the shape parameter: the term is not identified
             cand_lin, cand_nl = linear, nonlin + [(e, r[0])]
 
         theta, c2n = prob.solve(_columns(cand_lin, cand_nl, tau))
@@ -202,6 +216,24 @@ def _select(prob, tau, effects, n_pts, auto):
             linear = [x for x, kp in zip(cand_lin, keep) if kp]
             nonlin = cand_nl
             bic, c2 = bic_n, c2n
+    # backward pass: a term added early may have stood in for one added later (e.g. a quantization or a
+    # bias-instability term for a Gauss-Markov bump); drop any term whose removal does not cost its
+    # penalty (ln n for a base term, ln n + EXTRA_BIC_MARGIN for an extra one)
+    while len(linear) + len(nonlin) > 1:
+        best_drop = None
+        for i in range(len(linear) + len(nonlin)):
+            lin2 = [e for j, e in enumerate(linear) if j != i]
+            nl2 = [x for j, x in enumerate(nonlin) if j + len(linear) != i]
+            name = linear[i] if i < len(linear) else nonlin[i - len(linear)][0]
+            th2, c2d = prob.solve(_columns(lin2, nl2, tau))
+            k_params = (1 if name in LINEAR_EFFECTS else 2)
+            margin = 0.0 if name in BASE_EFFECTS else EXTRA_BIC_MARGIN
+            gain = (c2 - c2d) + k_params * math.log(n_pts) + margin  # > 0: better without it
+            if gain > 0 and (best_drop is None or gain > best_drop[0]):
+                best_drop = (gain, lin2, nl2, c2d)
+        if best_drop is None:
+            break
+        _, linear, nonlin, c2 = best_drop
     return linear, nonlin, c2
 
 
@@ -268,34 +300,63 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         dens = (n_pts - 1) / max(math.log2(tau[-1] / tau[0]), 1e-9) if n_pts > 1 else 1.0
         inflate = 2.0 * max(1.0, dens)
 
-    def covariance(terms_si, v_model):
+    def covariance(terms_si, v_model, floor):
         if full and terms_si:
-            return oavar_covariance(terms_si, m, n, rate_hz, max_ratio=max_ratio) / scale**2
-        base = v_model if np.all(v_model > 0) else np.maximum(v_model, 1e-6 * np.max(v))
-        c = 2.0 * base**2 / edf_v
-        return np.diag(c * (1.0 if full else inflate))
+            c = oavar_covariance(terms_si, m, n, rate_hz, max_ratio=max_ratio) / scale**2
+        else:
+            base = v_model if np.all(v_model > 0) else np.maximum(v_model, 1e-6 * np.max(v))
+            c = np.diag(2.0 * base**2 / edf_v * (1.0 if full else inflate))
+        return c + np.diag((floor * v_model) ** 2)
 
-    # start: weights from the measured points (only to get a first model)
-    cov = np.diag(2.0 * np.maximum(v, 1e-6 * v.max()) ** 2 / edf_v)
-    # The covariance is computed from a *superset* model (all base effects plus the extras selected so
-    # far, NNLS-fitted): computing it from a model that lacks a term actually present would make the
-    # points dominated by that term look far too precise and trap the iteration.
-    base = [e for e in LINEAR_EFFECTS if e in effects and (e in BASE_EFFECTS or not auto)]
-    linear, nonlin, c2 = list(base), [], 0.0
-    prev = None
-    for it in range(max_iter):
-        prob = _Problem(tau, v, cov)
-        sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
-        A_sup = _columns(sup_lin, nonlin, tau)
-        th_sup, _ = prob.solve(A_sup)
-        cov = covariance(_terms_from(sup_lin, nonlin, th_sup, scale), A_sup @ th_sup)
-        prob = _Problem(tau, v, cov)
-        linear, nonlin, c2 = _select(prob, tau, effects, n_pts, auto)
-        theta, c2 = prob.solve(_columns(linear, nonlin, tau))
-        key = (tuple(linear), tuple(e for e, _ in nonlin))
-        if prev is not None and key == prev[0] and np.allclose(theta, prev[1], rtol=1e-3, atol=1e-12):
-            break
-        prev = (key, theta)
+    def iterate(floor):
+        # start: weights from the measured points (only to get a first model). The covariance is then
+        # computed from a *superset* model (all base effects plus the extras selected so far, NNLS-fitted):
+        # computing it from a model that lacks a term actually present would make the points dominated by
+        # that term look far too precise and trap the iteration.
+        cov = np.diag(2.0 * np.maximum(v, 1e-6 * v.max()) ** 2 / edf_v)
+        base = [e for e in LINEAR_EFFECTS if e in effects and (e in BASE_EFFECTS or not auto)]
+        linear, nonlin, c2 = list(base), [], 0.0
+        prev, v_sup = None, v
+        for it in range(max_iter):
+            prob = _Problem(tau, v, cov)
+            sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
+            A_sup = _columns(sup_lin, nonlin, tau)
+            th_sup, _ = prob.solve(A_sup)
+            v_sup = A_sup @ th_sup
+            cov = covariance(_terms_from(sup_lin, nonlin, th_sup, scale), v_sup, floor)
+            prob = _Problem(tau, v, cov)
+            linear, nonlin, c2 = _select(prob, tau, effects, n_pts, auto)
+            theta, c2 = prob.solve(_columns(linear, nonlin, tau))
+            key = (tuple(linear), tuple(e for e, _ in nonlin))
+            if prev is not None and key == prev[0] and np.allclose(theta, prev[1], rtol=1e-3, atol=1e-12):
+                break
+            prev = (key, theta)
+        return cov, linear, nonlin, c2, v_sup
+
+    cov, linear, nonlin, c2, v_sup = iterate(0.0)
+    floor = 0.0
+    dof0 = n_pts - len(linear) - 2 * len(nonlin)
+    if dof0 >= 2 and c2 > dof0 + 3.0 * math.sqrt(2.0 * dof0):
+        # Model misfit (real sensors: internal filters at short tau, temperature, ...): add a relative
+        # model error `floor` to every point, chosen so that chi^2 = dof (as a Birge ratio / random-effects
+        # term does), then select and fit again. Simulated data consistent with the model never get here.
+        A = _columns(linear, nonlin, tau)
+
+        def excess(lf):
+            return _Problem(tau, v, cov + np.diag((math.exp(lf) * v_sup) ** 2)).solve(A)[1] - dof0
+
+        lo_f, hi_f = math.log(1e-4), math.log(3.0)
+        if excess(hi_f) < 0:
+            for _ in range(40):
+                mid = 0.5 * (lo_f + hi_f)
+                lo_f, hi_f = (mid, hi_f) if excess(mid) > 0 else (lo_f, mid)
+            floor = math.exp(hi_f)
+        else:
+            floor = 3.0
+        chi_before = c2
+        cov, linear, nonlin, c2, v_sup = iterate(floor)
+        notes.append(f"model misfit (chi2 {chi_before:.0f} for {dof0} dof): a model error of {100 * floor:.1f} % "
+                     "of AVAR per point was added to the covariance")
     prob = _Problem(tau, v, cov)
     A = _columns(linear, nonlin, tau)
     theta, c2 = prob.solve(A)
@@ -314,15 +375,28 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         else:
             shape = dict(nonlin)[e]
             p, s = _NL_LINEAR[e], _NL_SHAPE[e]
+            others = [x for x in nonlin if x[0] != e]
+            s_lo, s_hi = _profile_ci(prob, e, shape, linear, others, tau, c2, level)
+            # sigma (amplitude) and the shape parameter are correlated: the interval of the linear parameter
+            # is the envelope of its conditional intervals over the shape interval (a projection interval)
+            for sh in np.exp(np.linspace(math.log(s_lo), math.log(s_hi), 7)):
+                A2 = _columns(linear, others + [(e, float(sh))], tau)
+                th2, _ = prob.solve(A2)
+                k2 = A2.shape[1] - 1
+                if th2[k2] > 0:
+                    act = th2 > 0
+                    ct = prob.cov_theta(A2[:, act])
+                    l2, h2 = _scaled_chi2_ci(th2[k2], ct[-1, -1], level)
+                    lo, hi = min(lo, l2), max(hi, h2)
             t = {"effect": e, p: math.sqrt(theta[j] * scale), s: shape,
-                 "ci95": {p: [math.sqrt(lo * scale), math.sqrt(hi * scale)],
-                          s: list(_profile_ci(prob, e, shape, linear, [x for x in nonlin if x[0] != e], tau, c2, level))}}
+                 "ci95": {p: [math.sqrt(lo * scale), math.sqrt(hi * scale)], s: [s_lo, s_hi]}}
         terms.append(t)
     kk = int(np.count_nonzero(active)) + len(nonlin)
     avar_fit = avar_model([{k: v_ for k, v_ in t.items() if k != "ci95"} for t in terms], tau)
     return FitResult(terms=terms, tau=tau, avar_fit=avar_fit, chi2=c2, dof=max(n_pts - kk, 0),
                      criterion="bic", score=c2 + kk * math.log(n_pts),
-                     covariance_mode="full" if full else "diagonal", avar_cov=cov * scale**2, notes=notes)
+                     covariance_mode="full" if full else "diagonal", avar_cov=cov * scale**2, notes=notes,
+                     model_error=floor)
 
 
 def _profile_ci(prob, effect, shape, linear, others, tau, c2min, level):
@@ -332,7 +406,15 @@ def _profile_ci(prob, effect, shape, linear, others, tau, c2min, level):
     grid = np.exp(np.linspace(math.log(lo) - 1.0, math.log(hi) + 1.0, 121))
     thr = c2min + chi2_dist.ppf(level, 1)
     chis = np.array([prob.solve(_columns(linear, others + [(effect, g)], tau))[1] for g in grid])
-    inside = grid[chis <= thr]
-    if inside.size == 0:
+    idx = np.flatnonzero(chis <= thr)
+    if idx.size == 0:
         return shape, shape
-    return float(min(inside.min(), shape)), float(max(inside.max(), shape))
+
+    def f(lg):
+        return prob.solve(_columns(linear, others + [(effect, math.exp(lg))], tau))[1] - thr
+
+    lg = np.log(grid)
+    i0, i1 = int(idx.min()), int(idx.max())
+    lo_v = math.exp(brentq(f, lg[i0 - 1], lg[i0], xtol=1e-4)) if i0 > 0 else float(grid[0])
+    hi_v = math.exp(brentq(f, lg[i1], lg[i1 + 1], xtol=1e-4)) if i1 < len(grid) - 1 else float(grid[-1])
+    return float(min(lo_v, shape)), float(max(hi_v, shape))

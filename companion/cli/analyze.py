@@ -118,6 +118,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     out.update(tau=tau.tolist(), adev=adev.tolist(), adev_lo=lo.tolist(), adev_hi=hi.tolist(),
                terms=fit.terms, edf=edf.tolist(),
                fit={"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
+                    "model_error": fit.model_error,
                     "points": int(len(tau_f)), "notes": fit.notes})
     N = next((t["N"] for t in fit.terms if t["effect"] == "white_noise"), None)
     out["quantization"] = lsb_report(y, rate_hz, lsb, N)
@@ -216,6 +217,8 @@ def format_table(report: dict) -> str:
                                     f"[{_fmt(units.to_datasheet(p, lo, a))}, {_fmt(units.to_datasheet(p, hi, a))}]")
                     else:
                         other.append(format_term(t, a))
+                if r.get("fit") and r["fit"].get("model_error"):
+                    other.append(f"misfit: +{100 * r['fit']['model_error']:.0f} % model error")
                 q = r.get("quantization")
                 if q and q.get("note"):
                     other.append(q["note"])
