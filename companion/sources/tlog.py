@@ -92,6 +92,9 @@ def _crc_ok(buf: np.ndarray, pos: np.ndarray, hl: int, ln: int, extra: np.ndarra
     return ok
 
 
+_EXTRA_PADDED = np.r_[M.CRC_EXTRA_TABLE, -1].astype(np.int32)  # index MAX_MSGID + 1: unknown
+
+
 def _crc_groups(buf, p, hl, ln, extra) -> np.ndarray:
     """CRC validity of candidates, grouped by (header length, payload length)."""
     ok = np.zeros(p.shape[0], dtype=bool)
@@ -109,31 +112,28 @@ def scan(data) -> FrameIndex:
     """Index every intact frame of tlog bytes ``data`` (bytes, bytearray, memoryview or uint8 array)."""
     buf = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data
     n = buf.shape[0]
-    magic_at = np.flatnonzero((buf[8:] >= M.MAGIC_V2)) + 8 if n > 8 else np.zeros(0, np.int64)
-    magic_at = magic_at[buf[magic_at] <= M.MAGIC_V1]  # 0xFD or 0xFE (0xFF excluded)
-    v2 = buf[magic_at] == M.MAGIC_V2
-    hl = np.where(v2, M.HEADER_V2, M.HEADER_V1).astype(np.int64)
-    fits_header = magic_at + hl <= n
-    p = magic_at[fits_header]
-    v2 = v2[fits_header]
-    hl = hl[fits_header]
-    ln = buf[p + 1].astype(np.int64)
-    msgid = np.where(v2, buf[np.minimum(p + 7, n - 1)].astype(np.int64)
-                     | (buf[np.minimum(p + 8, n - 1)].astype(np.int64) << 8)
-                     | (buf[np.minimum(p + 9, n - 1)].astype(np.int64) << 16),
-                     buf[np.minimum(p + 5, n - 1)].astype(np.int64))
-    incompat = np.where(v2, buf[np.minimum(p + 2, n - 1)], 0).astype(np.int64)
-    sig = np.where(incompat & M.IFLAG_SIGNED, M.SIGNATURE_LEN, 0)
-    flen = hl + ln + 2 + sig
-    known = msgid <= M.MAX_MSGID
-    msgid_c = np.where(known, msgid, 0)
-    extra = np.where(known, M.CRC_EXTRA_TABLE[msgid_c], -1)
-    plausible = (p + flen <= n) & (extra >= 0) & ((incompat & ~M.IFLAG_SIGNED) == 0)
+    # a zero-padded copy: header and "next record" lookups never need bounds checks
+    bufp = np.zeros(n + 300, dtype=np.uint8)
+    bufp[:n] = buf
+    p = np.flatnonzero(buf[8:] >= M.MAGIC_V2) + 8 if n > 8 else np.zeros(0, np.int64)
+    magic = buf[p]
+    keep = magic != 0xFF  # 0xFD (v2) or 0xFE (v1)
+    p, magic = p[keep], magic[keep]
+    v2 = (magic == M.MAGIC_V2).astype(np.int64)
+    hl = M.HEADER_V1 + 4 * v2
+    ln = bufp[p + 1].astype(np.int64)
+    # v1 id at p+5; v2 id (3 bytes, little-endian) at p+7
+    msgid = (bufp[p + 5 + 2 * v2].astype(np.int64)
+             | ((bufp[p + 8].astype(np.int64) << 8 | bufp[p + 9].astype(np.int64) << 16) * v2))
+    incompat = bufp[p + 2].astype(np.int64) * v2
+    flen = hl + ln + 2 + M.SIGNATURE_LEN * (incompat & M.IFLAG_SIGNED)
+    extra = _EXTRA_PADDED[np.minimum(msgid, M.MAX_MSGID + 1)]
+    plausible = (p + flen <= n) & (extra >= 0) & (incompat <= M.IFLAG_SIGNED)
     p, hl, ln, msgid, flen, extra = (a[plausible] for a in (p, hl, ln, msgid, flen, extra))
 
     # pass 1: candidates followed by the next record's magic byte (or the end of the file): the chain
     nxt = p + flen + 8
-    after = buf[np.minimum(nxt, n - 1)]
+    after = bufp[np.minimum(nxt, n + 299)]
     chain = (p + flen == n) | ((nxt < n) & (after >= M.MAGIC_V2) & (after <= M.MAGIC_V1))
     ok = np.zeros(p.shape[0], dtype=bool)
     first = np.flatnonzero(chain)
