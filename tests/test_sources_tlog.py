@@ -234,3 +234,24 @@ def test_config_scale_override(tmp_path):
     assert s.gyro_lsb == scale
     s_default = load(path).streams[0]
     np.testing.assert_array_equal(s_default.gyro[:, 1], 7e-3)  # read as mrad/s without the override
+
+
+@pytest.mark.parametrize("cfg,expect", [
+    ({"streams": {"message": "RAW_IMU"}}, "must be a list"),
+    ({"streams": [{"gyro_scale": 1.0}]}, "at least 'message'"),
+    ({"streams": [{"message": "RAW_IMU", "gyro_scal": 1.0}]}, "unknown key"),
+    ({"streams": [{"message": "ATTITUDE"}]}, "is not one of"),
+    ({"streams": [{"message": "RAW_IMU", "gyro_scale": -1}]}, "positive"),
+])
+def test_config_errors_are_one_line(tmp_path, cfg, expect):
+    from companion.errors import CompanionError
+
+    n = 20
+    path = tmp_path / "c.tlog"
+    write_imu_tlog(path, np.arange(n) / 10.0, np.zeros((n, 3)) + 0.01, np.zeros((n, 3)))
+    with pytest.raises(CompanionError, match=expect):
+        load(path, config=cfg)
+    bad_yaml = tmp_path / "bad.yaml"
+    bad_yaml.write_text("streams: [\n")
+    with pytest.raises(CompanionError, match="invalid YAML"):
+        load(path, config=bad_yaml)
