@@ -51,11 +51,15 @@ def describe_term(term, axis: str) -> str:
                                             if k != "effect" and isinstance(v, (int, float)))
 
 
-def explain_added(term, axis: str) -> str:
+def explain_added(term, axis: str, rate_hz: float | None = None) -> str:
     """One paragraph for an added effect: what it is, its parameters, what commonly causes it."""
     effect = term["effect"]
     head = f"{describe_term(term, axis)}: {WHAT[effect]}."
-    if effect == "gauss_markov":
+    if effect == "gauss_markov" and rate_hz and term["tau_c"] * rate_hz < 10:
+        cause = (f"Its correlation time is only {term['tau_c'] * rate_hz:.3g} samples: this is the signature of "
+                 "white noise seen through a low-pass filter (the sensor's digital filter or the autopilot's "
+                 "gyro filter) at the shortest cluster times, rather than a physical bias process.")
+    elif effect == "gauss_markov":
         cause = (f"A correlated bias that forgets itself in about {term['tau_c']:.3g} s: commonly "
                  f"{CAUSES[effect]}.")
     elif effect == "sinusoid":

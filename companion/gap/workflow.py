@@ -268,7 +268,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         if i in fixed:
             continue
         ci = base.ci95[i] if i < len(base.ci95) else {}
-        res.added.append({**t, "ci95": ci, "explanation": explain.explain_added(t, axis)})
+        res.added.append({**t, "ci95": ci, "explanation": explain.explain_added(t, axis, rate_hz)})
     s_final = model_avar(final, meas.tau, rate_hz)
     g_final = gap_metric(meas, s_final)
     changed = any(e["verdict"] != "consistent" for e in res.recalibrated) or len(final) > len(terms0)
