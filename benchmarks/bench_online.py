@@ -96,21 +96,21 @@ def table(title, rows):
     return d
 
 
-def section_sim(seeds, n=1_000_000, fs=100.0, phases=(16, 8)):
+def section_sim(seeds, n=1_000_000, fs=100.0, variants=((16, "fit_avar"), (8, "fit_avar"), (16, "diag"))):
     print(f"\n== simulated paper gyro Y (N {TRUTH['N']:.4g}, B {TRUTH['B']:.4g}, K {TRUTH['K']:.4g} SI), "
           f"{n} samples at {fs:g} Hz ({n / fs / 3600:.2f} h), {seeds} seeds")
-    res = {P: [] for P in phases}
+    res = {v: [] for v in variants}
     truth_err = []
     for seed in range(seeds):
         y = synthesize_axis(sim_terms(), fs, n, np.random.default_rng(seed))
         off = offline(y, fs)
-        for P in phases:
-            on, _ = online_octave(y, fs, phases=P)
-            res[P].append((f"seed {seed}", off, on))
-            if P == phases[0]:
+        for P, fit in variants:
+            on, _ = online_octave(y, fs, phases=P, fit=fit)
+            res[(P, fit)].append((f"seed {seed}", off, on))
+            if (P, fit) == variants[0]:
                 truth_err.append([rel(on[p], TRUTH[p]) for p in PAR] + [rel(off[p], TRUTH[p]) for p in PAR])
-    for P in phases:
-        table(f"octave bank, {P} phases: offline fit vs online", res[P])
+    for P, fit in variants:
+        table(f"octave bank, {P} phases, fit={fit}: offline fit vs online", res[(P, fit)])
     te = np.array(truth_err)
     print("\nagainst truth (%):      online N     B      K  | offline N     B      K")
     print(f"{'max':<22}" + "".join(f"{v:7.2f}" for v in te.max(0)))
@@ -130,13 +130,16 @@ def section_real(fs=100.0):
         print("\n== real data: ../shared/data/adis16405 absent, skipped")
         return
     print("\n== real ADIS16405 static recordings (1e6 samples, 100 Hz, each gyro axis); effects N, B, K")
-    rows = []
+    rows, rows_d = [], []
     for i in (1, 2, 3):
         g = load_adis(i)
         for a, name in enumerate(("gx", "gy", "gz")):
             y = g[:, a]
-            rows.append((f"imu{i} {name}", offline(y, fs), online_octave(y, fs)[0]))
-    table("octave bank (default) vs offline fit, real data", rows)
+            off = offline(y, fs)
+            rows.append((f"imu{i} {name}", off, online_octave(y, fs, fit="fit_avar")[0]))
+            rows_d.append((f"imu{i} {name}", off, online_octave(y, fs, fit="diag")[0]))
+    table("octave bank, fit=fit_avar (analyze --online) vs offline fit, real data", rows)
+    table("octave bank, fit=diag (default, companion run) vs offline fit, real data", rows_d)
 
 
 def section_miao(seeds, n=1_000_000, fs=100.0):
@@ -205,6 +208,10 @@ def section_speed(fs=400.0):
     t = time.perf_counter()
     est.terms()
     tt = time.perf_counter() - t
+    est.fit = "fit_avar"
+    t = time.perf_counter()
+    est.terms()
+    tf = time.perf_counter() - t
     m = make_estimator("miao", rate_hz=fs)
     n2 = 50_000
     t = time.perf_counter()
@@ -212,7 +219,8 @@ def section_speed(fs=400.0):
     tm = time.perf_counter() - t
     print(f"octave bank block mode      {y.size / tb:12,.0f} /s   (target >= 1,000,000)")
     print(f"octave bank sample by sample{n1 / ts:12,.0f} /s   (target >= 50,000)")
-    print(f"octave bank terms() (GLS)   {tt * 1e3:9.1f} ms per call")
+    print(f"octave bank terms() diag    {tt * 1e3:9.1f} ms per call")
+    print(f"octave bank terms() fit_avar{tf * 1e3:9.1f} ms per call")
     print(f"Miao SHAKF sample by sample {n2 / tm:12,.0f} /s")
 
 
@@ -233,8 +241,8 @@ def section_convergence(fs=100.0, n=1_800_000, plot=True):
     fig_data = []
     for name, y in cases:
         y = y[:n]
-        checkpoints = np.unique(np.round(np.geomspace(2000, y.size, 80)).astype(int))
-        oct_ = make_estimator("octave", rate_hz=fs, effects=EFF)
+        checkpoints = np.unique(np.round(np.geomspace(2000, y.size, 50)).astype(int))
+        oct_ = make_estimator("octave", rate_hz=fs, effects=EFF, fit="fit_avar")
         off = offline(y, fs)
         x0 = {p: off[p] * PAPER_X0_REL[p] for p in PAR if off[p] > 0}
         mia = make_estimator("miao", rate_hz=fs, effects=EFF, x0=x0)

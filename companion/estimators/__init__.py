@@ -46,11 +46,14 @@ def make_estimator(kind="octave", rate_hz=None, **cfg):
 
 def online_terms(y, rate_hz, offline_terms=None, kind="octave", **cfg) -> list[dict]:
     """Run an online estimator over the samples ``y`` and return its final terms. The effects are the linear
-    ones of ``offline_terms`` (so that online and offline fit the same model), else the default five."""
+    ones of ``offline_terms`` (so that online and offline fit the same model), else the default five; the
+    octave bank's coefficients are fitted with the offline procedure (``fit="fit_avar"``)."""
     from companion.allan.terms import LINEAR_EFFECTS
 
     effects = [t["effect"] for t in (offline_terms or []) if t["effect"] in LINEAR_EFFECTS]
     cfg.setdefault("effects", tuple(effects) or DEFAULT_EFFECTS)
+    if kind == "octave":
+        cfg.setdefault("fit", "fit_avar")  # the offline procedure: differences come from the accumulators only
     est = make_estimator(kind, rate_hz=rate_hz, **cfg)
     est.update(y)
     return est.terms()

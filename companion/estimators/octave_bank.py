@@ -26,13 +26,14 @@ Coefficients: the Allan variance is linear in theta = [Q^2, N^2, B^2, K^2, R^2] 
 with edf_j >= ``min_edf`` (edf_j = effective number of differences / P_j, about the number of
 non-overlapping clusters; Kish's n_eff = W^2 / sum(w^2) under forgetting). ``fit``:
 
-- ``"fit_avar"`` (default): the project's offline fit :func:`companion.allan.fit.fit_avar` on the bank's
+- ``"fit_avar"`` (used by ``companion analyze --online``): the project's offline fit :func:`companion.allan.fit.fit_avar` on the bank's
   Allan variances: generalised NNLS with the full model covariance of the Allan estimates (neighbouring
   cluster times are strongly correlated), iterated from measured weights. Same procedure as
-  ``companion analyze``, so online and offline differ only by the accumulators. 0.1-1 s per call.
+  ``companion analyze`` (including its model-error floor for misfit), so online and offline differ only by
+  the accumulators. 0.3-5 s per call: for reports, not for a loop.
 - ``"gls"``: the same kind of GLS (:func:`fit_theta_gls`), covariance from the model rounded to sqrt(2)
   steps and cached: a few ms per call when the model is stable; for a slow companion computer.
-- ``"diag"``: weighted NNLS with var(sigma_j^2) = 2 (A_j theta)^2 / edf_j (chi-square), iterated with
+- ``"diag"`` (default; 1-25 ms per call, for ``companion run``): weighted NNLS with var(sigma_j^2) = 2 (A_j theta)^2 / edf_j (chi-square), iterated with
   weights from the model (not from the noisy measurement, to avoid the low bias of self-weighting).
 
 Because S_j, W_j are sufficient statistics of the whole (forgotten) history, re-solving from them at each
@@ -60,7 +61,7 @@ from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, linear_basis
 
 DEFAULT_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
 _BUF = 2048
-#: coefficient fits: the offline fit_avar (default), a fast cached GLS, a diagonal weighted NNLS (fastest)
+#: coefficient fits: diagonal weighted NNLS (default, fast), a cached GLS, the offline fit_avar (slow, exact match)
 FITS = ("fit_avar", "gls", "diag")
 
 
@@ -86,7 +87,7 @@ class OctaveBankEstimator:
     kind = "octave"
 
     def __init__(self, rate_hz, effects=DEFAULT_EFFECTS, forgetting_s=None, phases=16, max_tau_s=20000.0,
-                 min_edf=1.0, fit="fit_avar", gls_max_ratio=256):
+                 min_edf=1.0, fit="diag", gls_max_ratio=256):
         rate_hz = float(rate_hz)
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
