@@ -60,3 +60,21 @@ def test_sawtooth_time_base_is_linear():
     keep, seg, rep = analyse(t, 1e-6)
     assert time.perf_counter() - t0 < 5.0
     assert rep.resets == 2999 and len(seg) == 3000 and rep.rate_hz == pytest.approx(10.0)
+
+
+def test_frame_hidden_inside_a_payload_is_not_counted(tmp_path):
+    """A valid RAW_IMU frame (with a stamp and a fake next magic) inside a FILE_TRANSFER_PROTOCOL payload:
+    both pass the CRC, they overlap, the outer (earlier) one wins."""
+    from companion.mavlink.tlog_writer import TlogWriter
+
+    path = tmp_path / "nested.tlog"
+    with TlogWriter(path) as w:
+        inner = w.mav.raw_imu_encode(123456, 1, 2, 3, 4, 5, 6, 7, 8, 9, 0, 0).pack(w.mav)
+        blob = bytes(8) + inner + bytes(8) + b"\xfd"
+        payload = blob + bytes(251 - len(blob) - 1) + b"\x01"
+        w.write(w.mav.heartbeat_encode(2, 3, 0, 0, 3), t_unix=1.7e9)
+        w.write(w.mav.file_transfer_protocol_encode(0, 0, 0, payload), t_unix=1.7e9 + 0.1)
+        w.write(w.mav.heartbeat_encode(2, 3, 0, 0, 3), t_unix=1.7e9 + 1)
+    idx = tlog.scan(path.read_bytes())
+    assert idx.counts == {"HEARTBEAT": 2, "FILE_TRANSFER_PROTOCOL": 1}
+    assert idx.bad_bytes == 0 and idx.bad_frames == 0

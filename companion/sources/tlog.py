@@ -158,7 +158,6 @@ def scan(data) -> FrameIndex:
         prev_max = np.maximum.accumulate(end)[:-1]
         clean = np.r_[True, start[1:] >= prev_max]  # starts a run that overlaps nothing before it
         if not clean.all():
-            run_id = np.cumsum(clean) - 1
             run_start = np.flatnonzero(clean)
             sizes = np.diff(np.r_[run_start, vp.shape[0]])
             for r in np.flatnonzero(sizes > 1):
@@ -168,7 +167,6 @@ def scan(data) -> FrameIndex:
                         last_end = end[i]
                     else:
                         keep[i] = False
-            del run_id
     acc = np.flatnonzero(ok)[keep]
     pos, hlen, length, mid = p[acc], hl[acc], ln[acc], msgid[acc]
     acc_start, acc_end = pos - 8, pos + flen[acc]
