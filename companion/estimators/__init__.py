@@ -24,8 +24,8 @@ def _miao():
 
 def make_estimator(kind="octave", rate_hz=None, **cfg):
     """Build an online estimator. ``kind``: ``"octave"`` (default) or ``"miao"``; ``cfg``: keyword arguments
-    of that class (unknown keys raise ValueError naming them). Keys of the other kind's sub-section
-    (``octave: {...}`` / ``miao: {...}``) are accepted and the matching one is merged in."""
+    of that class; settings of the other kind are ignored, unknown keys raise ValueError naming them.
+    Sub-sections ``octave: {...}`` / ``miao: {...}`` are accepted and the matching one is merged in."""
     if rate_hz is None:
         raise ValueError("make_estimator needs rate_hz")
     kind = kind or "octave"
@@ -34,14 +34,19 @@ def make_estimator(kind="octave", rate_hz=None, **cfg):
     cfg = dict(cfg)
     sub = {k: cfg.pop(k) for k in KINDS if k in cfg}
     cfg.update(sub.get(kind) or {})
-    cls = OctaveBankEstimator if kind == "octave" else _miao()
     import inspect
 
-    allowed = set(inspect.signature(cls.__init__).parameters) - {"self", "rate_hz"}
-    bad = sorted(set(cfg) - allowed)
+    def keys(c):
+        return set(inspect.signature(c.__init__).parameters) - {"self", "rate_hz"}
+
+    cls = OctaveBankEstimator if kind == "octave" else _miao()
+    other = _miao() if kind == "octave" else OctaveBankEstimator
+    allowed = keys(cls)
+    bad = sorted(set(cfg) - allowed - keys(other))
     if bad:
         raise ValueError(f"estimator kind {kind!r} has no setting {', '.join(bad)} (allowed: {', '.join(sorted(allowed))})")
-    return cls(rate_hz, **cfg)
+    # settings of the other kind (one config section serves both) are ignored
+    return cls(rate_hz, **{k: v for k, v in cfg.items() if k in allowed})
 
 
 def online_terms(y, rate_hz, offline_terms=None, kind="octave", **cfg) -> list[dict]:
