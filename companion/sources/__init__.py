@@ -23,7 +23,8 @@ import numpy as np
 from companion.errors import CompanionError
 from companion.samples import ImuStream
 from companion.sources import timing as _timing
-from companion.sources.decode import RawStream, ScaleTable, imu_sample_from_message
+from companion.sources.decode import (COMPASS_ONLY_CAN, TIME_RESOLUTION, RawStream, ScaleTable,
+                                      imu_sample_from_message)
 
 __all__ = ["load", "LoadResult", "ScaleTable", "build_stream", "imu_sample_from_message", "load_config"]
 
@@ -154,8 +155,6 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
     for key, rows in acc.items():
         a = np.array([r[:7] for r in rows], dtype=np.float64)
         temp = np.array([np.nan if r[7] is None else r[7] for r in rows])
-        from companion.sources.decode import TIME_RESOLUTION, COMPASS_ONLY_CAN
-
         gs, as_ = scales.lookup(key) if key.message != "HIGHRES_IMU" else (None, None)
         is_imu = not (key.message in COMPASS_ONLY_CAN and not np.any(a[:, 1:7]))
         raws.append(RawStream(key, a[:, 0], a[:, 1:4], a[:, 4:7],
