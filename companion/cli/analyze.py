@@ -222,7 +222,7 @@ def format_table(report: dict) -> str:
                 q = r.get("quantization")
                 if q and q.get("note"):
                     other.append(q["note"])
-                lines.append(f"  {a:<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26}"
+                lines.append(f"  {a:<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26} "
                              + "; ".join(other))
                 if r.get("online") is not None:
                     lines.append("  " + _online_row(r, a))
@@ -246,7 +246,7 @@ def _online_row(r: dict, a: str) -> str:
     nonlin = sorted({t["effect"] for t in r["terms"]} - {t["effect"] for t in r["online"]})
     if nonlin:
         other.append(f"online has no {', '.join(nonlin)}: differences expected")
-    return (f"{'online':<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26}"
+    return (f"{'online':<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26} "
             + "; ".join(other))
 
 
