@@ -84,3 +84,15 @@ def test_explicit_effects_and_diagonal_mode():
     assert r.term("bias_instability")["B"] == pytest.approx(5e-4, rel=0.3)
     with pytest.raises(ValueError):
         fit_avar(tau, av, None, ["pink"])
+
+
+def test_sinusoid_when_asked():
+    terms = [{"effect": "white_noise", "N": 1e-3}, {"effect": "sinusoid", "amplitude": 2e-3, "freq_hz": 0.05}]
+    y = synthesize_axis(terms, RATE, 90000, np.random.default_rng(0))
+    m = cluster_sizes(len(y), "log:8")
+    tau, av, _, _ = oavar(y, RATE, m=m)
+    r = fit_avar(tau, av, None, ["white_noise", "sinusoid"], n=len(y), rate_hz=RATE, m=m)
+    s = r.term("sinusoid")
+    assert s["ci95"]["freq_hz"][0] <= 0.05 <= s["ci95"]["freq_hz"][1]
+    assert s["ci95"]["amplitude"][0] <= 2e-3 <= s["ci95"]["amplitude"][1]
+    assert s["freq_hz"] == pytest.approx(0.05, rel=0.05)
