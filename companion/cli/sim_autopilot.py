@@ -113,17 +113,24 @@ class ImuSimulator:
         a = np.zeros((n, 3))
         for j, ax in enumerate(("gx", "gy", "gz", "ax", "ay", "az")):
             terms = self.model.axes.get(ax) or []
-            y = self.synth(terms, self.rate_hz, n, self.rng) if terms else np.zeros(n)
-            if any(tm["effect"] in ("random_walk", "ramp") for tm in terms) and ax in self.last:
-                y += self.last[ax] - y[0]  # continue a wandering bias across blocks
-            if self.degrade is not None and ax == self.degrade[1]:
+            y = np.zeros(n)
+            for i, term in enumerate(terms):  # term by term: random walk and ramp continue across blocks
+                c = self.synth([term], self.rate_hz, n, self.rng)
+                if term["effect"] in ("random_walk", "ramp"):
+                    c += self.last.get((ax, i), 0.0) + (term.get("R", 0.0) / self.rate_hz if (ax, i) in self.last else 0.0)
+                    self.last[(ax, i)] = float(c[-1])
+                y += c
+            if self.degrade is not None and ax == self.degrade[1] and t[-1] >= self.degrade[0]:
                 extra = self.synth([self.degrade[2]], self.rate_hz, n, self.rng)
+                if self.degrade[2]["effect"] == "random_walk":  # starts from 0 at the degradation, continues
+                    i0 = int(np.searchsorted(t, self.degrade[0]))
+                    extra += self.last.get("extra", 0.0) - (extra[i0] if t[0] < self.degrade[0] else extra[0])
+                    self.last["extra"] = float(extra[-1])
                 y = y + np.where(t >= self.degrade[0], extra, 0.0)
             if j < 3:
                 g[:, j] = y
             else:
                 a[:, j - 3] = y
-            self.last[ax] = float(y[-1])
         if not self.model.axes.get("ax") and not self.model.axes.get("ay") and not self.model.axes.get("az"):
             a += self.rng.normal(0.0, 0.02, (n, 3))  # a plausible accelerometer at rest
         a[:, 2] -= G0  # gravity, body z down (ArduPilot's FRD: -1 g on z at rest)
