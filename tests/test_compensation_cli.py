@@ -69,3 +69,11 @@ def test_compensate_user_errors_are_one_line(imu_csv, capsys, argv, msg):
 def test_compensate_missing_file(tmp_path, capsys):
     assert main(["compensate", str(tmp_path / "none.csv"), "--axis", "gx"]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_compensate_help_teaches(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["compensate", "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "examples:" in text and "srrsukf" in text and "--max-samples" in text
