@@ -46,7 +46,7 @@ chooses what the table/JSON/plot show.
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("analyze", help="Allan deviation, fitted noise terms with 95 % intervals, plot, JSON",
+    p = subparsers.add_parser("analyze", help="Allan deviation, fitted noise terms with 95 %% intervals, plot, JSON",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", help=".tlog, .csv/.csv.gz, or a connection string (with --duration)")
