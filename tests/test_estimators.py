@@ -100,3 +100,20 @@ def test_non_finite_samples_are_skipped_and_counted():
     est.update([1.0, float("nan"), 2.0])
     est.update(float("inf"))
     assert est.n_samples == 2 and est.n_rejected == 2
+
+
+def test_forgetting_tracks_a_change():
+    rng = np.random.default_rng(21)
+    fs = 100.0
+    before = white_rw(rng, 60_000, fs, 1e-3)
+    after = white_rw(rng, 60_000, fs, 2e-3)  # N doubles after 600 s
+    fast = OctaveBankEstimator(fs, effects=("white_noise", "random_walk"), forgetting_s=60.0)
+    keep = OctaveBankEstimator(fs, effects=("white_noise", "random_walk"))
+    for est in (fast, keep):
+        est.update(before)
+        est.update(after)
+    n_fast = fast.terms()[0]["N"]
+    n_keep = keep.terms()[0]["N"]
+    # 600 s after the change the 60 s memory has forgotten it (e^-10); infinite memory sits in between
+    assert n_fast == pytest.approx(2e-3, rel=0.03)
+    assert 1.4e-3 < n_keep < 1.7e-3
