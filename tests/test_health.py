@@ -61,7 +61,8 @@ def test_baseline_round_trip_and_analyze_report():
     b.set_axis(0, "gx", {"N": (1e-3, 1e-5), "B": (2e-5, math.inf)})
     b2 = Baseline.from_dict(b.to_dict())
     assert b2.get(0, "gx") == {"N": (1e-3, 1e-5), "B": (2e-5, math.inf)}
-    report = {"streams": [{"key": {"instance": 1}, "axes": {"gy": {"terms": [
+    # the layout of `companion analyze --json`: streams[].instance, streams[].axes.<axis>.terms[] with ci95
+    report = {"source": "x.tlog", "streams": [{"message": "SCALED_IMU2", "instance": 1, "axes": {"gy": {"terms": [
         {"effect": "white_noise", "N": 2e-3, "ci95": {"N": [1.9e-3, 2.1e-3]}},
         {"effect": "gauss_markov", "sigma": 1e-4, "tau_c": 10.0}]}}}]}
     b3 = Baseline.from_dict(report)
