@@ -166,3 +166,27 @@ def test_sim_autopilot_against_run_direct(tmp_path):
 def test_sim_autopilot_against_run_through_mavproxy(tmp_path):
     nvf, texts = run_loop(tmp_path, via_mavproxy=True, speedup=10.0, duration=480.0, degrade_at=280.0)
     check_loop(tmp_path, nvf, texts, 280.0, 480.0)
+
+
+def test_request_data_stream_fallback_when_interval_refused(tmp_path):
+    """An autopilot that refuses SET_MESSAGE_INTERVAL and streams nothing until asked gets REQUEST_DATA_STREAM."""
+    (tmp_path / "model.yaml").write_text(MODEL)
+    port = free_udp_port()
+    run, _ = start(["run", "--source", f"udpin:127.0.0.1:{port}", "--no-state", "--duration", "25"], tmp_path, "run.out")
+    sim = None
+    try:
+        time.sleep(1.0)
+        sim, _ = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{port}",
+                        "--speedup", "10", "--duration", "80", "--wait-request", "--refuse-interval",
+                        "--wall-limit", "30"], tmp_path, "sim.out")
+        sim.wait(40)
+        assert stop(run) == 0
+    finally:
+        for p in (sim, run):
+            if p is not None:
+                stop(p)
+    sim_out = (tmp_path / "sim.out").read_text()
+    assert "request: REQUEST_DATA_STREAM 1 at 50 Hz" in sim_out, sim_out
+    m = re.search(r"sent (\d+) RAW_IMU .*\((\S+) Hz at the end\)", sim_out)
+    assert m and int(m.group(1)) > 1000 and m.group(2) == "50", sim_out
+    assert "IMU0 (RAW_IMU, 50.0 Hz)" in (tmp_path / "run.out").read_text()
