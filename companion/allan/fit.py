@@ -21,16 +21,18 @@ random_walk} is fitted and the one with the least Bayesian information criterion
 is kept (k = non-zero coefficients; Schwarz 1978). Then quantization, ramp and one Gauss-Markov term
 (2 parameters; tau_c found by a grid over the tau range -- AVAR peak 1.89 tau_c within
 [4 tau_min, tau_max/4] -- refined by a bounded 1-D minimisation, and kept only at an interior optimum: a
-tau_c pinned to the edge of the range is not identified) are tried in turn (a sinusoid, same way, only when ``effects`` names it) and kept only if they lower the BIC by more than EXTRA_BIC_MARGIN = 10
+tau_c pinned to the edge of the range is not identified) are tried in turn (a sinusoid, same way, only
+when ``effects`` names it) and kept only if they lower the BIC by more than EXTRA_BIC_MARGIN = 10
 ("very strong" evidence, Kass & Raftery 1995): with ~18 strongly correlated points, plain BIC lets a ramp
 stand in for a random walk in about one seed out of five. A backward pass then drops any term whose
-removal costs less than its penalty (a term picked early may have stood in for one picked later). A slope region
-absent from the data simply leaves its coefficient at 0: never NaN.
+removal costs less than its penalty (a term picked early may have stood in for one picked later).
+A slope region absent from the data simply leaves its coefficient at 0: never NaN.
 
 Intervals: the covariance of the selected coefficients is (A^T C^-1 A)^-1; each theta_j is treated as a
 scaled chi-square with nu_j = 2 theta_j^2 / var(theta_j) degrees of freedom (Satterthwaite 1946), so its
 ``level`` interval is [theta nu / chi2_{(1+level)/2}(nu), theta nu / chi2_{(1-level)/2}(nu)] (for nu < 4,
-a barely identified term, the normal interval theta +- z sd truncated at 0); parameters are the square roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1); sigma and amplitude: the
+a barely identified term, the normal interval theta +- z sd truncated at 0); parameters are the square
+roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1); sigma and amplitude: the
 envelope of their conditional intervals over that range (they are correlated with the shape parameter).
 Coverage is measured in benchmarks/bench_fit.py.
 
