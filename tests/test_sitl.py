@@ -164,7 +164,7 @@ def test_sim_autopilot_against_run_direct(tmp_path):
 
 @pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")
 def test_sim_autopilot_against_run_through_mavproxy(tmp_path):
-    nvf, texts = run_loop(tmp_path, via_mavproxy=True, speedup=10.0, duration=480.0, degrade_at=280.0)
+    nvf, texts = run_loop(tmp_path, via_mavproxy=True, speedup=16.0, duration=480.0, degrade_at=280.0)
     check_loop(tmp_path, nvf, texts, 280.0, 480.0)
 
 
