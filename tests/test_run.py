@@ -207,7 +207,9 @@ def test_sigterm_saves_state_and_exits_cleanly(tmp_path):
 
 @pytest.mark.network
 def test_link_identity_and_replies_only_to_the_imu_sender():
-    from pymavlink import mavutil
+    """udpin: the vehicle (MAVLink 2, so pymavlink switches its encoder) gets our HEARTBEAT as onboard
+    controller 191 with its own sysid and our reports; another peer writing to the port gets nothing."""
+    from pymavlink.dialects.v20 import ardupilotmega as m2
 
     from companion.mavlink.link import Link, LinkConfig
     from companion.sources.connection import open_connection
@@ -216,13 +218,17 @@ def test_link_identity_and_replies_only_to_the_imu_sender():
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     conn = open_connection(f"udpin:127.0.0.1:{port}")
-    vehicle = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=7, source_component=1)
-    intruder = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=9, source_component=1)
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    intruder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.settimeout(0.3)
+    intruder.settimeout(0.5)
+    enc_v, enc_i = m2.MAVLink(None, 7, 1), m2.MAVLink(None, 9, 1)
     try:
         link = Link(conn, LinkConfig(), sysid=None)
-        intruder.mav.heartbeat_send(6, 8, 0, 0, 4)
-        vehicle.mav.heartbeat_send(2, 3, 0, 0, 3)
-        vehicle.mav.raw_imu_send(1_000_000, 0, 0, -1000, 1, 2, 3, 0, 0, 0)
+        intruder.sendto(enc_i.heartbeat_encode(6, 8, 0, 0, 4).pack(enc_i), ("127.0.0.1", port))
+        time.sleep(0.05)
+        vehicle.sendto(enc_v.heartbeat_encode(2, 3, 0, 0, 3).pack(enc_v), ("127.0.0.1", port))
+        vehicle.sendto(enc_v.raw_imu_encode(1_000_000, 0, 0, -1000, 1, 2, 3, 0, 0, 0).pack(enc_v), ("127.0.0.1", port))
         got = []
         deadline = time.monotonic() + 5
         while len(got) < 3 and time.monotonic() < deadline:
@@ -232,18 +238,23 @@ def test_link_identity_and_replies_only_to_the_imu_sender():
                 link.on_message(m, is_vehicle_imu=m.get_type() == "RAW_IMU")
         assert [m.get_type() for m in got] == ["HEARTBEAT", "HEARTBEAT", "RAW_IMU"]
         assert link.sysid == 7 and link.autopilot_compid == 1
-        link.service()  # our heartbeat
+        link.service()  # our heartbeat (and a request for IMU data)
         link.send_named_value_float(1000, "IMU0GX_N", 1.5)
+        dec = m2.MAVLink(None)
         rx = []
         deadline = time.monotonic() + 3
-        while len(rx) < 2 and time.monotonic() < deadline:
-            m = vehicle.recv_match(blocking=True, timeout=0.2)
-            if m is not None:
-                rx.append(m)
+        while time.monotonic() < deadline and not any(m.get_type() == "NAMED_VALUE_FLOAT" for m in rx):
+            try:
+                data = vehicle.recv(4096)
+            except socket.timeout:
+                continue
+            rx.extend(dec.parse_buffer(data) or [])
         hb = [m for m in rx if m.get_type() == "HEARTBEAT"][0]
         assert hb.type == 18 and hb.get_srcSystem() == 7 and hb.get_srcComponent() == 191
         assert any(m.get_type() == "NAMED_VALUE_FLOAT" and m.name == "IMU0GX_N" for m in rx)
-        assert intruder.recv_match(blocking=True, timeout=0.5) is None  # nothing for the other peer
+        with pytest.raises(socket.timeout):
+            intruder.recv(4096)  # nothing for the other peer
     finally:
-        for c in (conn, vehicle, intruder):
-            c.close()
+        conn.close()
+        vehicle.close()
+        intruder.close()

@@ -309,8 +309,7 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
         pipeline = Pipeline(pcfg, reporter, baseline, log, scales)
         _restore(pipeline, state_path, args, load_state, warn, log)
         if pipeline.sysid is not None and link.sysid is None:
-            link.sysid = pipeline.sysid
-            conn.mav.srcSystem = pipeline.sysid
+            link.set_sysid(pipeline.sysid)
         log(f"listening on {src}")
         t_start = time.monotonic()
         last_save = t_start

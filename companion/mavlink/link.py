@@ -63,12 +63,26 @@ class Link:
         self.requests = 0
         self.sent = 0
         self.recorder = None  # a TlogWriter: every frame we send is also recorded
-        mav = conn.mav
-        mav.srcSystem = sysid if sysid is not None else 1
-        mav.srcComponent = int(self.cfg.compid)
         self._udp_server = bool(getattr(conn, "udp_server", False))
         self._conn_write = conn.write
-        mav.file = self  # every frame we send goes through write() below
+        self._mav_seen = None
+        self._mav()
+
+    def _mav(self):
+        """The connection's encoder, set up as ours. pymavlink replaces ``conn.mav`` when it switches to
+        MAVLink 2 on the first v2 frame received, so this is checked before every send."""
+        mav = self.conn.mav
+        if mav is not self._mav_seen:
+            mav.srcSystem = self.sysid if self.sysid is not None else 1
+            mav.srcComponent = int(self.cfg.compid)
+            mav.file = self  # every frame we send goes through write() below
+            self._mav_seen = mav
+        return mav
+
+    def set_sysid(self, sysid: int) -> None:
+        """The vehicle's system id (known from a restored state): we send with it from now on."""
+        self.sysid = int(sysid)
+        self._mav_seen = None
 
     # --- writing ---
     def write(self, buf: bytes) -> None:
@@ -88,13 +102,13 @@ class Link:
             self.recorder.write_raw(bytes(buf), time.time())
 
     def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None:
-        self.conn.mav.named_value_float_send(int(time_boot_ms), name.encode("ascii"), float(value))
+        self._mav().named_value_float_send(int(time_boot_ms), name.encode("ascii"), float(value))
 
     def send_statustext(self, severity: int, text: str) -> None:
-        self.conn.mav.statustext_send(int(severity), text.encode("ascii", "replace")[:50])
+        self._mav().statustext_send(int(severity), text.encode("ascii", "replace")[:50])
 
     def send_heartbeat(self) -> None:
-        self.conn.mav.heartbeat_send(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE)
+        self._mav().heartbeat_send(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE)
 
     # --- receiving ---
     def on_message(self, msg, is_vehicle_imu: bool = False) -> None:
@@ -116,7 +130,7 @@ class Link:
         if is_vehicle_imu:
             if self.sysid is None:
                 self.sysid = src
-                self.conn.mav.srcSystem = src
+                self._mav().srcSystem = src
                 self.log(f"vehicle: system id {src}")
             self.last_imu_wall = self.clock()
             if self._udp_server:
@@ -154,10 +168,10 @@ class Link:
         comp = self.autopilot_compid if self.autopilot_compid is not None else 0
         interval_us = 1e6 / self.cfg.rate_hz
         for name in self.cfg.messages:
-            self.conn.mav.command_long_send(target, comp, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+            self._mav().command_long_send(target, comp, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
                                             IMU_MESSAGE_IDS[name], interval_us, 0, 0, 0, 0, 0)
         if self.use_data_stream:
             rate = int(max(1, min(50, round(self.cfg.rate_hz))))
-            self.conn.mav.request_data_stream_send(target, comp, MAV_DATA_STREAM_RAW_SENSORS, rate, 1)
+            self._mav().request_data_stream_send(target, comp, MAV_DATA_STREAM_RAW_SENSORS, rate, 1)
         self.requests += 1
         self.log(f"asked for IMU data at {self.cfg.rate_hz:g} Hz" + (" (and REQUEST_DATA_STREAM)" if self.use_data_stream else ""))
