@@ -258,3 +258,31 @@ def test_link_identity_and_replies_only_to_the_imu_sender():
         conn.close()
         vehicle.close()
         intruder.close()
+
+
+@pytest.mark.network
+def test_link_asks_again_when_data_stops_and_falls_back():
+    """Wall-clock logic of the link with a fake clock: heartbeat every second, requests every retry_s while
+    there is no data, REQUEST_DATA_STREAM added to the third request when two went unanswered, quiet while data flows."""
+    from companion.mavlink.link import Link, LinkConfig
+    from companion.sources.connection import open_connection
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    conn = open_connection(f"udpin:127.0.0.1:{port}")
+    now = [0.0]
+    try:
+        link = Link(conn, LinkConfig(stale_s=3.0, retry_s=5.0), sysid=1, clock=lambda: now[0])
+        seq = []
+        for t in (0.0, 2.0, 5.0, 6.0, 7.0, 8.5, 12.0, 13.0):
+            now[0] = t
+            if t in (6.0, 7.0, 8.5):
+                link.last_imu_wall = t  # data flowing
+            link.service()
+            seq.append((t, link.requests, link.use_data_stream))
+        assert seq == [(0.0, 1, False), (2.0, 1, False), (5.0, 2, False), (6.0, 2, False), (7.0, 2, False),
+                       (8.5, 2, False), (12.0, 3, True), (13.0, 3, True)]
+        assert link.sent >= 8 + 3 * 4  # heartbeats (one per second of fake time) + 3 requests of 3-4 messages
+    finally:
+        conn.close()
