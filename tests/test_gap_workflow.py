@@ -143,8 +143,7 @@ def test_rate_quantization_named_when_lsb_known(seed):
 def test_rate_quantization_without_lsb_is_a_missized_white_noise():
     # same data, LSB neither given nor detectable (values offset by a random bias): honest answer is N
     terms, y = _rounded(9e-5, 61)
-    y = y + 0.123456789e-3 * np.random.default_rng(0).standard_normal(1)[0] * 0  # keep on the grid
-    r = run_gap(y, AP_RATE, terms, lsb=None, seed=61)  # auto-detects the grid
+    r = run_gap(y, AP_RATE, terms, lsb=None, seed=61)  # values on a grid: the LSB is detected
     assert r.quantization is not None and r.quantization["lsb"] == pytest.approx(LSB, rel=1e-6)
     r2 = run_gap(y + 1e-7 * np.random.default_rng(1).standard_normal(y.shape), AP_RATE, terms, lsb=None, seed=61)
     assert r2.quantization is None
@@ -160,3 +159,18 @@ def test_undithered_rounding_is_flagged():
     assert not r.quantization["dithered"]
     assert any("not dithered" in n for n in r.notes)
     assert not any(a["effect"] == "quantization" for a in r.added)
+
+
+@pytest.mark.shared
+def test_adis16405_against_datasheet(shared_data):
+    """Real recording vs datasheet model: the gap shrinks to the noise floor, the datasheet ARW is found
+    ~10 % optimistic, and the rising long-tau end is named a rate random walk (see docs/gap.md)."""
+    import gzip
+
+    with gzip.open(shared_data / "adis16405" / "adis16405_imu1.csv.gz", "rt") as fh:
+        y = np.loadtxt(fh, delimiter=",", skiprows=1, usecols=2)  # gy
+    model = [{"effect": "white_noise", "N": 5.82e-4}, {"effect": "bias_instability", "B": 1.22e-4}]
+    r = run_gap(y, 100.0, model, axis="gy", simulate=False)
+    assert r.gap_before > 10 * NOISE_FLOOR_G and r.gap_after <= NOISE_FLOOR_G
+    assert "random_walk" in [a["effect"] for a in r.added]
+    assert r.recalibrated[0]["verdict"] == "too small" and 1.03 < r.recalibrated[0]["ratio"] < 1.2
