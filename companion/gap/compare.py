@@ -6,8 +6,8 @@ Statistics (NIST SP 1065 sec. 5.3; IEEE Std 952 Annex C):
   distributed as s chi^2_nu / nu around the true AVAR s. Its 95 % band is
   [nu a / chi^2_{0.975,nu}, nu a / chi^2_{0.025,nu}] (SP 1065 eq. (32)).
 * The EDF come from :mod:`companion.gap._edf` (SP 1065 Table 5), with the noise type taken from the local
-  log-log slope of the *measured* curve, so that every model compared against the same measurement is judged
-  by the same likelihood.
+  log-log slope of a smooth reference fitted to the *measurement* (:func:`reference_curve`), not of any model,
+  so that every model compared against the same measurement is judged by the same likelihood.
 * Deviance of a model s against the measurement (twice the negative log-likelihood ratio against the
   saturated fit, Gamma family):  d_i = nu_i (a_i/s_i - 1 - ln(a_i/s_i)).  Its expectation when the model is
   right is E0(nu) = nu (ln(nu/2) - psi(nu/2)) (psi: digamma), about 1 + 1/(3 nu).
