@@ -178,8 +178,10 @@ def _state_path(args, extra, live: bool) -> Path | None:
     return Path(base) / "companion" / "run_state.json"
 
 
-def print_summary(pipeline, out=sys.stdout) -> None:
+def print_summary(pipeline, out=None) -> None:
     from companion import units
+
+    out = out or sys.stdout
 
     rows = pipeline.summary()
     if not rows:
