@@ -37,6 +37,7 @@ import math
 
 import numpy as np
 
+from companion.compensation.scaled_filter import ScaledFilter
 from companion.compensation.arima import ArimaParams, f_nl
 from companion.compensation.sqrt_ops import cholupdate, tria
 
@@ -45,7 +46,7 @@ NQ = 2  # augmented noise items: a_k, a_{k-1}
 PHI_MAX = 0.9999
 
 
-class SRUKF:
+class SRUKF(ScaledFilter):
     """Square-root UKF on model NL with an augmented state for the non-additive noise (eq. (11)-(14), (16)-(21))."""
 
     name = "srukf"
@@ -138,23 +139,6 @@ class SRUKF:
         if not math.isfinite(x[0]) or not math.isfinite(dmin):
             self.finite = False
         return float(x[0])
-
-    def step(self, z: float) -> float:
-        """One cycle on a physical measurement (e.g. rad/s); returns the compensated value in the same unit."""
-        p = self.params
-        return p.offset + p.scale * self.step_internal((z - p.offset) / p.scale)
-
-    def run(self, z, progress=None) -> np.ndarray:
-        """Filter a whole series (physical units); ``progress(done, total)`` is called every 10^4 samples."""
-        z_int = self.params.to_internal(z)
-        out = np.empty(z_int.shape[0])
-        step = self.step_internal
-        total = z_int.shape[0]
-        for k, zk in enumerate(z_int.tolist()):
-            out[k] = step(zk)
-            if progress is not None and k % 10_000 == 0:
-                progress(k, total)
-        return self.params.to_physical(out)
 
     @property
     def P(self) -> np.ndarray:

@@ -24,11 +24,14 @@ import math
 
 import numpy as np
 
+from companion.compensation.scaled_filter import ScaledFilter
 from companion.compensation.arima import ArimaParams
 
 
-class STF:
+class STF(ScaledFilter):
     """Strong tracking Kalman filter with a fading factor, on the linear ARIMA model L."""
+
+    progress_every = 100_000
 
     name = "stf"
     label = "STF, model L"
@@ -100,21 +103,6 @@ class STF:
         if not (math.isfinite(x0) and math.isfinite(d)):
             self.finite = False
         return x0
-
-    def step(self, z: float) -> float:
-        p = self.params
-        return p.offset + p.scale * self.step_internal((z - p.offset) / p.scale)
-
-    def run(self, z, progress=None) -> np.ndarray:
-        z_int = self.params.to_internal(z)
-        out = np.empty(z_int.shape[0])
-        step = self.step_internal
-        total = z_int.shape[0]
-        for k, zk in enumerate(z_int.tolist()):
-            out[k] = step(zk)
-            if progress is not None and k % 100_000 == 0:
-                progress(k, total)
-        return self.params.to_physical(out)
 
     def covariance(self) -> np.ndarray:
         P00, P01, P11 = self.P

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 
-from companion.errors import CompanionError
 from companion.sources import messages as M
 from companion.sources import tlog
 from companion.sources.decode import ScaleTable, streams_from_records
@@ -22,14 +21,7 @@ from companion.sources.decode import ScaleTable, streams_from_records
 def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: False) -> dict:
     """Feed every HEARTBEAT and IMU sample of ``path`` to ``pipeline``; return counts."""
     path = Path(path)
-    try:
-        data = tlog.read_file(path)
-    except FileNotFoundError:
-        raise CompanionError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise CompanionError(f"{path}: is a directory, expected a .tlog file") from None
-    except OSError as exc:
-        raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    data = tlog.read_file(path)
     index = tlog.scan(data)
     scales = scales or ScaleTable()
     # events: frame number, source (-1: HEARTBEAT, else index into ``streams``), row in that source

@@ -94,14 +94,7 @@ def load_tlog(path, config=None, split_periods: float = _timing.SPLIT_PERIODS) -
     from companion.sources.decode import decode_index
 
     path = Path(path)
-    try:
-        data = tlog.read_file(path)
-    except FileNotFoundError:
-        raise CompanionError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise CompanionError(f"{path}: is a directory, expected a .tlog file") from None
-    except OSError as exc:
-        raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    data = tlog.read_file(path)
     index = tlog.scan(data)
     raws = decode_index(index, ScaleTable(load_config(config)))
     streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from companion.errors import CompanionError
 from companion.sources import messages as M
 
 
@@ -192,6 +193,13 @@ def scan(data) -> FrameIndex:
 
 
 def read_file(path) -> bytes:
-    """The bytes of a file (the caller turns OSError into a user error)."""
-    with open(path, "rb") as fh:
-        return fh.read()
+    """The bytes of a tlog file; a missing or unreadable file is a one-line :class:`CompanionError`."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read()
+    except FileNotFoundError:
+        raise CompanionError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise CompanionError(f"{path}: is a directory, expected a .tlog file") from None
+    except OSError as exc:
+        raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
