@@ -4,7 +4,6 @@ stream and axis, as a table in datasheet units, a JSON report (SI), a plot and a
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -17,6 +16,7 @@ from companion.allan.confidence import adev_ci, edf_model, edf_simple
 from companion.allan.fit import fit_avar
 from companion.allan.lsb import lsb_report
 from companion.allan.terms import PARAMS
+from companion.cli.output import to_json, write_text
 from companion.errors import CompanionError
 from companion.samples import ACCEL_AXES, AXES, GYRO_AXES
 
@@ -308,10 +308,10 @@ def run(args) -> int:
         progress.close()
     print(format_table(report))
     if args.json:
-        _write(args.json, json.dumps(report, indent=1, default=_json_default) + "\n")
+        write_text(args.json, to_json(report) + "\n", "JSON")
         print(f"wrote {args.json}")
     if args.kalibr:
-        _write(args.kalibr, kalibr_yaml(report))
+        write_text(args.kalibr, kalibr_yaml(report), "Kalibr YAML")
         print(f"wrote {args.kalibr}")
     if args.plot:
         from companion.plots.adev_plot import plot_report
@@ -319,19 +319,3 @@ def run(args) -> int:
         for path in plot_report(report, args.plot):
             print(f"wrote {path}")
     return 0
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o).__name__)
-
-
-def _write(path, text):
-    try:
-        with open(path, "w") as f:
-            f.write(text)
-    except OSError as exc:
-        raise CompanionError(f"cannot write {path}: {exc.strerror or exc}") from None

@@ -4,12 +4,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 import numpy as np
 
 from companion.compensation.pipeline import METHODS, compensate
+from companion.cli.output import to_json, write_text
 from companion.errors import CompanionError
 from companion.samples import AXES, GYRO_AXES
 
@@ -146,7 +146,7 @@ def run(args) -> int:
     if args.json:
         report = result.to_json(axis)
         report["stream"] = label
-        _write(args.json, json.dumps(report, indent=1), "JSON")
+        write_text(args.json, to_json(report) + "\n", "JSON")
     if args.out:
         cols = [t, z] + [m.x for m in result.methods.values()]
         header = ",".join(["time_s", f"{axis}_raw"] + [f"{axis}_{name}" for name in result.methods])
@@ -164,11 +164,3 @@ def run(args) -> int:
         print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)
         return 1
     return 0
-
-
-def _write(path, text, what):
-    try:
-        with open(path, "w") as fh:
-            fh.write(text + "\n")
-    except OSError as exc:
-        raise CompanionError(f"{path}: cannot write {what} ({exc.strerror or exc})") from None

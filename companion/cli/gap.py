@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
+from companion.cli.output import to_json, write_text
 from companion.errors import CompanionError
 from companion.samples import AXES, GYRO_AXES
 
@@ -71,14 +71,11 @@ def _load_axis(spec, axis, config):
 
 
 def format_report(r, source: str, label: str) -> str:
-    from companion import units
     from companion.gap.explain import describe_term
     from companion.gap.workflow import NOISE_FLOOR_G
 
     axis = r.axis
     m = r.measured
-    f = units.to_datasheet("B", 1.0, axis)
-    unit = units.datasheet_unit("B", axis)
     out = [f"gap: {source} {label} axis {axis}: {m.n} samples at {m.rate_hz:.4g} Hz, tau {m.tau[0]:.3g}-"
            f"{m.tau[-1]:.4g} s ({len(m.tau)} octave points)"]
     out.append("model before:")
@@ -89,7 +86,7 @@ def format_report(r, source: str, label: str) -> str:
                f"{r.sim_check_before:.3g})")
     out.append(f"gap before: G = {r.gap_before:.3g} (noise floor {NOISE_FLOOR_G:g}){sim}")
     if r.regions_before:
-        out.append(f"  where the measurement leaves the model's 95 % band:")
+        out.append("  where the measurement leaves the model's 95 % band:")
         out.append(f"  {'tau range (s)':>19}  {'measured':>8}  {'worst tau':>9}  {'ADEV ratio':>10}  {'z':>6}")
         for g in r.regions_before:
             out.append(f"  {g.tau_lo:9.3g}-{g.tau_hi:<9.3g}  {g.direction:>8}  {g.worst_tau:9.3g}  "
@@ -142,11 +139,11 @@ def run(args) -> int:
         doc = r.to_dict()
         doc["source"] = str(args.measured)
         doc["stream"] = label
-        s = json.dumps(doc, indent=2, default=_default)
+        s = to_json(doc, indent=2)
         if args.json == "-":
             print(s)
         else:
-            _write(args.json, s + "\n")
+            write_text(args.json, s + "\n", "JSON")
     if args.out_model:
         axes = {a: [dict(t) for t in ts] for a, ts in model.axes.items()}
         axes[args.axis] = [{k: v for k, v in t.items() if k != "ci95"} for t in r.terms_after]
@@ -164,23 +161,3 @@ def run(args) -> int:
         except OSError as exc:
             raise CompanionError(f"cannot write {args.plot}: {exc.strerror or exc}") from None
     return 0
-
-
-def _default(o):
-    import numpy as np
-
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.bool_):
-        return bool(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o))
-
-
-def _write(path, text):
-    try:
-        with open(path, "w") as fh:
-            fh.write(text)
-    except OSError as exc:
-        raise CompanionError(f"cannot write {path}: {exc.strerror or exc}") from None

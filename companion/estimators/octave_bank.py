@@ -212,7 +212,6 @@ class OctaveBankEstimator:
         self._flush()
         e = self._events()
         ok = e > 0
-        lam = self._lam
         with np.errstate(divide="ignore", invalid="ignore"):
             if self.forgetting_s is None:
                 W = e.astype(float)

@@ -13,3 +13,13 @@ def require_matplotlib():
     except ImportError:
         raise CompanionError("plotting needs matplotlib: pip install 'companion[plot]'") from None
     return plt
+
+
+def save_figure(fig, path, plt, dpi: int = 110) -> None:
+    """Save and close ``fig``; a path that cannot be written is a one-line CompanionError."""
+    try:
+        fig.savefig(path, dpi=dpi)
+    except OSError as exc:
+        raise CompanionError(f"{path}: cannot write plot ({exc.strerror or exc})") from None
+    finally:
+        plt.close(fig)

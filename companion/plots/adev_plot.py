@@ -12,7 +12,7 @@ import numpy as np
 
 from companion import units
 from companion.allan.terms import PARAMS, avar_term
-from companion.plots import require_matplotlib
+from companion.plots import require_matplotlib, save_figure
 from companion.samples import ACCEL_AXES, GYRO_AXES
 
 _LABEL = {"white_noise": "white noise", "bias_instability": "bias instability", "random_walk": "rate random walk",
@@ -92,14 +92,7 @@ def plot_stream(stream: dict, path, title: str | None = None) -> None:
                            f"{stream['samples']} samples at {stream['rate_hz']:.4g} Hz ({stream['duration_s']:.0f} s)"),
                  fontsize=11)
     fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=110)
-    except OSError as exc:
-        from companion.errors import CompanionError
-
-        raise CompanionError(f"cannot write {path}: {exc.strerror or exc}") from None
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, plt)
 
 
 def plot_report(report: dict, path) -> list[str]:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from companion.errors import CompanionError
+from companion.plots import require_matplotlib, save_figure
 
 COLORS = {"stf": "tab:orange", "srukf": "tab:green", "srrsukf": "tab:red"}
 
@@ -21,13 +21,7 @@ def plot_compensation(result, t: np.ndarray, z: np.ndarray, path, title: str = "
     ``t`` and ``z`` are the time (s) and raw series (SI); values are shown times ``unit_scale`` in ``unit``.
     Time series are decimated to at most ``max_points`` points for drawing (the ADEV uses every sample).
     """
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise CompanionError("--plot needs matplotlib: pip install 'companion[plot]'") from None
+    plt = require_matplotlib()
 
     methods = list(result.methods.values())
     rows = max(len(methods), 1)
@@ -57,9 +51,4 @@ def plot_compensation(result, t: np.ndarray, z: np.ndarray, path, title: str = "
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=110)
-    except OSError as exc:
-        raise CompanionError(f"{path}: cannot write plot ({exc.strerror or exc})") from None
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, plt)

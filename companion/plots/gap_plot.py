@@ -8,7 +8,7 @@ import numpy as np
 
 from companion import units
 from companion.gap.compare import model_avar
-from companion.plots import require_matplotlib
+from companion.plots import require_matplotlib, save_figure
 
 
 def plot_gap(result, path) -> None:
@@ -46,5 +46,4 @@ def plot_gap(result, path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, plt)

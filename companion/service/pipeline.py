@@ -33,7 +33,7 @@ import numpy as np
 
 from companion.estimators import from_state_dict as estimator_from_state, make_estimator
 from companion.health.baseline import Baseline, params_from_terms
-from companion.health.detector import DEGRADING, HEALTHY, LEARNING, DetectorConfig, HealthDetector, STATE_NAMES
+from companion.health.detector import DEGRADING, LEARNING, DetectorConfig, HealthDetector, STATE_NAMES
 from companion.mavlink.reporter import MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter
 from companion.samples import ACCEL_AXES, GYRO_AXES
 
