@@ -116,6 +116,28 @@ def test_missized_only_no_effect_missing():
     assert r.gap_after <= NOISE_FLOOR_G < r.gap_before
 
 
+
+def test_low_flicker_draw_keeps_b():
+    """Seed 1000 draws a flicker floor 0.48x the simulated B (raw LR 15.8 > 10.8): the long-tau estimates are
+    few and correlated, and the sandwich-corrected LR must keep B (bench_gap: this draw failed 5 cases)."""
+    r = run_gap(_measure(WB, 1000), RATE, WB, seed=0, simulate=False)
+    assert r.added == []
+    b = r.recalibrated[1]
+    assert b["lr_raw"] > 10.8 and b["inflation"] > 1.5
+    assert [e["verdict"] for e in r.recalibrated] == ["consistent", "consistent"]
+
+
+@pytest.mark.parametrize("seed", [53, 54, 55])
+def test_b_far_off_still_called_missized(seed):
+    """The correction must not blind the test: a model B 5x too small is still named (truth: simulator).
+    Not every draw: seed 52 (measured B plateau 0.69x the truth, raw LR 13.3) is kept; see docs/gap.md."""
+    model = [{"effect": "white_noise", "N": 1e-3}, {"effect": "bias_instability", "B": 1e-4 / 5}]
+    r = run_gap(_measure(WB, seed), RATE, model, seed=seed, simulate=False)
+    assert r.added == []
+    b = r.recalibrated[1]
+    assert b["verdict"] == "too small"
+    assert 0.7e-4 <= b["fitted"] <= 1.4e-4
+
 # --- ArduPilot-style rate rounding (RAW_IMU int16 mrad/s) -------------------------------------------
 LSB = 1e-3
 AP_RATE = 50.0

@@ -197,3 +197,47 @@ def fit_with_candidate(meas: Measured, base_terms, fixed, effect: str) -> Fit:
     free = [i for i in range(len(fit.terms)) if i not in fit.fixed]
     _intervals(meas, fit, free, shape_free=[new_index] if fit.terms[new_index][mag] > 0 else [])
     return fit
+
+
+def lr_inflation(meas: Measured, fit: Fit, i: int) -> float:
+    """Overdispersion phi_i >= 1 of the likelihood-ratio statistic of term ``i`` of ``fit`` (sandwich).
+
+    The deviance treats the octave estimates as independent with nu EDF each, i.e. Cov(a) = Sigma_0 =
+    diag(2 s^2 / nu). With flicker (bias instability) or random-walk noise, neighbouring long-tau estimates
+    are strongly correlated and few in EDF, so Sigma_0 understates the spread of the fitted magnitudes.
+    With c the free magnitudes (s = s_fixed + A c), D = diag(nu / (2 s^2)), I = A^T D A (Fisher information of
+    the Gamma likelihood) and the model covariance Sigma = Cov_model + diag(MODEL_FLOOR^2 s^2)
+    (:func:`companion.allan.confidence.oavar_covariance` for the fitted terms: Greenhall & Riley 2003,
+    across cluster sizes; the floor as in :func:`companion.gap.compare.measure`), the sandwich
+    V = I^-1 (A^T D Sigma D A) I^-1 is the actual covariance of c, I^-1 the one the deviance assumes, and
+    the LR statistic of c_i is rescaled by phi_i = max(1, V_ii / (I^-1)_ii) (quasi-likelihood; never
+    below 1: deterministic terms carry no sampling covariance, so the correction only makes the test
+    more cautious). Terms at zero or fixed are left out of A.
+    """
+    from companion.allan.confidence import oavar_covariance
+    from companion.gap.compare import MODEL_FLOOR
+
+    rate = meas.rate_hz
+    free = [j for j, t in enumerate(fit.terms)
+            if j not in fit.fixed and (j == i or fit.terms[j][MAGNITUDE[t["effect"]]] > 0)]
+    if i not in free:
+        return 1.0
+    A = np.column_stack([unit_column(fit.terms[j], meas.tau, rate) for j in free])
+    s = np.maximum(fit.s, 1e-300)
+    stoch = [dict(t, f0=t.get("f0") or rate / 2.0) if t["effect"] == "bias_instability" else dict(t)
+             for t in fit.terms if t["effect"] != "ramp" and t[MAGNITUDE[t["effect"]]] > 0]
+    cov = oavar_covariance(stoch, meas.m, meas.n, rate) if stoch else np.zeros((s.shape[0],) * 2)
+    sigma = cov + np.diag((MODEL_FLOOR * s) ** 2)
+    Dw = meas.nu / (2.0 * s**2)
+    DA = Dw[:, None] * A
+    info = A.T @ DA
+    try:
+        inv = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return 1.0
+    V = inv @ (DA.T @ sigma @ DA) @ inv
+    k = free.index(i)
+    v0 = inv[k, k]
+    if not (np.isfinite(V[k, k]) and v0 > 0):
+        return 1.0
+    return float(max(1.0, V[k, k] / v0))

@@ -14,7 +14,9 @@
    freq_hz and correlated octave estimates make the nominal level optimistic; the null benchmark in
    benchmarks/bench_gap.py measures the real false-alarm rate). Repeat until no candidate passes.
 5. Mis-sized terms: a model term is recalibrated only when holding it at its model value (all else
-   refitted) costs more deviance than chi^2_1(1 - ALPHA_RECAL), ALPHA_RECAL = 1e-3 (likelihood-ratio test);
+   refitted) costs more deviance than chi^2_1(1 - ALPHA_RECAL), ALPHA_RECAL = 1e-3 (likelihood-ratio test,
+   divided by the sandwich overdispersion phi_i of :func:`companion.gap.candidates.lr_inflation`, which
+   accounts for the correlated, low-EDF long-tau estimates of flicker and random-walk noise);
    otherwise the model value is kept. A term refitted to zero that fails the test is reported as not seen.
    Among candidates, a two-parameter effect gives way to its one-parameter limit (Gauss-Markov -> random
    walk or white noise) unless it is better by more than chi^2_1(1 - ALPHA).
@@ -36,7 +38,8 @@ from scipy import stats
 from companion.allan.adev import oavar
 from companion.allan.lsb import DITHER_RATIO
 from companion.gap import explain
-from companion.gap.candidates import MAGNITUDE, N_PARAMS, SHAPE, Fit, _intervals, fit_terms, fit_with_candidate
+from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, _intervals, fit_terms, fit_with_candidate,
+                                     lr_inflation)
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    model_avar)
 from companion.gap._edf import local_slope, oavar_edf
@@ -250,8 +253,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         # likelihood-ratio test: this term held at its model value, everything else refitted
         held = [dict(t) for t in base.terms]
         held[i][p] = t0[p]
-        lr = fit_terms(meas, held, fixed=sorted(set(fixed) | {i}), intervals=False).dev - base.dev
-        entry["lr"] = lr
+        lr_raw = fit_terms(meas, held, fixed=sorted(set(fixed) | {i}), intervals=False).dev - base.dev
+        phi = lr_inflation(meas, base, i)
+        lr = lr_raw / phi
+        entry.update(lr=lr, lr_raw=lr_raw, inflation=phi)
         if lr <= float(stats.chi2.isf(ALPHA_RECAL, 1)):
             final[i][p] = t0[p]
             entry["verdict"] = "consistent"
