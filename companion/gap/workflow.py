@@ -38,7 +38,7 @@ from scipy import stats
 from companion.allan.adev import oavar
 from companion.allan.lsb import DITHER_RATIO
 from companion.gap import explain
-from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, _intervals, fit_terms, fit_with_candidate,
+from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, _intervals, fit_terms, fit_with_candidate,
                                      lr_inflation)
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    model_avar)
