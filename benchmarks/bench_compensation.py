@@ -22,25 +22,16 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.linalg import solve_discrete_are
 from scipy.signal import lfilter
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from companion.compensation.arima import optimal_error_std  # noqa: E402
 from companion.compensation.pipeline import compensate  # noqa: E402
 
 RATE = 100.0
 TAUS = (0.01, 0.16, 1.28, 81.92)
-
-
-def optimal_error_std(phi, d1, d2, r):
-    A = np.array([[1 + phi, -phi, -d2], [1.0, 0, 0], [0, 0, 0]])
-    B = np.array([[d1], [0.0], [1.0]])
-    H = np.array([[1.0, 0, 0]])
-    Pp = solve_discrete_are(A.T, H.T, B @ B.T, np.array([[r]]))
-    P = Pp - Pp @ H.T @ H @ Pp / (H @ Pp @ H.T + r)
-    return float(np.sqrt(P[0, 0]))
 
 
 def progress(name, done, total):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from companion.compensation.arima import ArimaParams, fit_arima111
+from companion.compensation.arima import ArimaParams, fit_arima111, optimal_error_std
 from companion.compensation.srrsukf import SRRSUKF
 from companion.compensation.srukf import SRUKF
 from companion.compensation.stf import STF
@@ -106,20 +106,6 @@ def arima_plus_noise(n, phi, d1, d2, sqrt_r, seed):
     w = lfilter([d1, -d2], [1.0, -phi], rng.standard_normal(n))
     x = np.cumsum(w) - 0.02
     return x, x + sqrt_r * rng.standard_normal(n)
-
-
-def optimal_error_std(phi, d1, d2, r):
-    """Steady-state posterior std of the optimal (exact ARIMA(1,1,1), MA term as a state) Kalman filter, from the
-    discrete algebraic Riccati equation: state [x_k, x_{k-1}, a_k], x_k = (1+phi) x_{k-1} - phi x_{k-2}
-    - d2 a_{k-1} + d1 a_k."""
-    from scipy.linalg import solve_discrete_are
-
-    A = np.array([[1 + phi, -phi, -d2], [1.0, 0, 0], [0, 0, 0]])
-    B = np.array([[d1], [0.0], [1.0]])
-    H = np.array([[1.0, 0, 0]])
-    Pp = solve_discrete_are(A.T, H.T, B @ B.T, np.array([[r]]))
-    P = Pp - Pp @ H.T @ H @ Pp / (H @ Pp @ H.T + r)
-    return float(np.sqrt(P[0, 0]))
 
 
 def test_compensation_error_against_the_known_truth_and_the_optimal_filter():

@@ -34,6 +34,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy.linalg import solve_discrete_are
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
@@ -180,6 +181,21 @@ def simulate_arima111(n: int, phi: float, delta1: float, delta2: float, R: float
     w = lfilter([1.0], [1.0, -phi], e)  # w_k = phi w_{k-1} + e_k
     x = x0 + np.cumsum(w)
     return x, x + np.sqrt(R) * rng.standard_normal(n)
+
+
+def optimal_error_std(phi: float, delta1: float, delta2: float, R: float) -> float:
+    """Steady-state posterior std of the optimal Kalman filter on the exact ARIMA(1,1,1) model, eq. (1)-(4).
+
+    The reference any compensation filter is measured against: state [x_k, x_{k-1}, a_k] with
+    x_k = (1 + phi) x_{k-1} - phi x_{k-2} + delta1 a_k - delta2 a_{k-1}, a_k ~ N(0, 1), z_k = x_k + v_k,
+    var(v_k) = R; P from the discrete algebraic Riccati equation.
+    """
+    A = np.array([[1 + phi, -phi, -delta2], [1.0, 0, 0], [0, 0, 0]])
+    B = np.array([[delta1], [0.0], [1.0]])
+    H = np.array([[1.0, 0, 0]])
+    Pp = solve_discrete_are(A.T, H.T, B @ B.T, np.array([[R]]))
+    P = Pp - Pp @ H.T @ H @ Pp / (H @ Pp @ H.T + R)
+    return float(np.sqrt(P[0, 0]))
 
 
 def f_nl(chi: np.ndarray) -> np.ndarray:
