@@ -44,7 +44,10 @@ def test_raw_imu_tlog_names_rate_quantization(raw_imu_tlog, tmp_path, capsys):
     assert rc == 0
     text = capsys.readouterr().out
     assert "rate quantisation" in text and "gap before" in text and "gap after" in text
+    assert "  evidence for " in text and " needed: " in text  # the test behind each iteration's choice
     doc = json.loads(out_json.read_text())
+    test = doc["iterations"][0]["test"]
+    assert test["inflation"] >= 1.0 and test["lr"] == pytest.approx(test["lr_raw"] / test["inflation"])
     assert {"axis", "gap_before", "gap_after", "added", "iterations"} <= set(doc)
     assert doc["axis"] == "gx"
     assert [a["effect"] for a in doc["added"]] == ["quantization"]

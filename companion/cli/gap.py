@@ -96,6 +96,16 @@ def format_report(r, source: str, label: str) -> str:
     for it in r.iterations:
         top = ", ".join(f"{c['effect']} dD={c['delta_dev']:.1f}" for c in it["candidates"][:3])
         out.append(f"iteration {it['iteration']}: best candidates {top}; chosen: {it['chosen'] or 'none significant'}")
+        nt = it.get("nested")
+        if nt:
+            kept = "kept" if nt["lr"] < nt["threshold"] else "rejected"
+            out.append(f"  gauss_markov vs its {nt['limit']} limit: LR {nt['lr']:.1f} (dD {nt['lr_raw']:.1f} / "
+                       f"overdispersion {nt['inflation']:.2f}), {nt['threshold']:.1f} needed: {nt['limit']} {kept}")
+        t = it.get("test")
+        if t:
+            verdict = "significant" if t["lr"] > t["threshold"] else "not significant"
+            out.append(f"  evidence for {t['effect']}: LR {t['lr']:.1f} (dD {t['lr_raw']:.1f} / overdispersion "
+                       f"{t['inflation']:.2f}), {t['threshold']:.1f} needed: {verdict}")
     for a in r.added:
         out.append("added: " + a["explanation"])
     for e in r.recalibrated:

@@ -199,35 +199,55 @@ def fit_with_candidate(meas: Measured, base_terms, fixed, effect: str) -> Fit:
     return fit
 
 
-def lr_inflation(meas: Measured, fit: Fit, i: int) -> float:
-    """Overdispersion phi_i >= 1 of the likelihood-ratio statistic of term ``i`` of ``fit`` (sandwich).
+def estimate_covariance(meas: Measured, fit: Fit) -> np.ndarray:
+    """Model covariance of the octave AVAR estimates under ``fit``: Cov_model + diag(MODEL_FLOOR^2 s^2).
+
+    Cov_model is :func:`companion.allan.confidence.oavar_covariance` (Greenhall & Riley 2003, across
+    cluster sizes) for the fitted stochastic terms (a ramp carries no sampling covariance of its own); the
+    floor is the 5 % model floor of :func:`companion.gap.compare.measure`."""
+    from companion.allan.confidence import oavar_covariance
+    from companion.gap.compare import MODEL_FLOOR
+
+    rate = meas.rate_hz
+    s = np.maximum(fit.s, 1e-300)
+    stoch = [dict(t, f0=t.get("f0") or rate / 2.0) if t["effect"] == "bias_instability" else dict(t)
+             for t in fit.terms if t["effect"] != "ramp" and t[MAGNITUDE[t["effect"]]] > 0]
+    cov = oavar_covariance(stoch, meas.m, meas.n, rate) if stoch else np.zeros((s.shape[0],) * 2)
+    return cov + np.diag((MODEL_FLOOR * s) ** 2)
+
+
+def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction: np.ndarray | None = None,
+                 sigma: np.ndarray | None = None) -> float:
+    """Overdispersion phi >= 1 of a likelihood-ratio statistic at ``fit`` (sandwich, quasi-likelihood).
 
     The deviance treats the octave estimates as independent with nu EDF each, i.e. Cov(a) = Sigma_0 =
     diag(2 s^2 / nu). With flicker (bias instability) or random-walk noise, neighbouring long-tau estimates
     are strongly correlated and few in EDF, so Sigma_0 understates the spread of the fitted magnitudes.
     With c the free magnitudes (s = s_fixed + A c), D = diag(nu / (2 s^2)), I = A^T D A (Fisher information of
-    the Gamma likelihood) and the model covariance Sigma = Cov_model + diag(MODEL_FLOOR^2 s^2)
-    (:func:`companion.allan.confidence.oavar_covariance` for the fitted terms: Greenhall & Riley 2003,
-    across cluster sizes; the floor as in :func:`companion.gap.compare.measure`), the sandwich
-    V = I^-1 (A^T D Sigma D A) I^-1 is the actual covariance of c, I^-1 the one the deviance assumes, and
-    the LR statistic of c_i is rescaled by phi_i = max(1, V_ii / (I^-1)_ii) (quasi-likelihood; never
-    below 1: deterministic terms carry no sampling covariance, so the correction only makes the test
-    more cautious). Terms at zero or fixed are left out of A.
-    """
-    from companion.allan.confidence import oavar_covariance
-    from companion.gap.compare import MODEL_FLOOR
+    the Gamma likelihood) and Sigma the model covariance (:func:`estimate_covariance`, or ``sigma`` when
+    given), the sandwich V = I^-1 (A^T D Sigma D A) I^-1 is the actual covariance of c, I^-1 the one the
+    deviance assumes, and the LR statistic of c_k is rescaled by phi = max(1, V_kk / (I^-1)_kk) (never below
+    1: deterministic terms carry no sampling covariance, so the correction only makes a test more cautious).
+    Terms at zero or fixed are left out of A.
 
+    * ``direction`` None: the tested parameter is the magnitude of term ``i`` (mis-sized test).
+    * ``direction`` given (ds/dtheta over ``meas.tau``): a parameter theta that ``fit`` holds at 0 (score-test
+      form), appended as a last column with every free nonzero term (and term ``i``, if not None) free: the
+      magnitude of a candidate effect the model lacks (its unit column), or 1/tau_c of a Gauss-Markov term at
+      its random-walk limit (:func:`gm_rw_direction`).
+    """
     rate = meas.rate_hz
     free = [j for j, t in enumerate(fit.terms)
             if j not in fit.fixed and (j == i or fit.terms[j][MAGNITUDE[t["effect"]]] > 0)]
-    if i not in free:
+    if direction is None and i not in free:
         return 1.0
-    A = np.column_stack([unit_column(fit.terms[j], meas.tau, rate) for j in free])
+    cols = [unit_column(fit.terms[j], meas.tau, rate) for j in free]
+    if direction is not None:
+        cols.append(np.asarray(direction, dtype=float))
+    A = np.column_stack(cols)
     s = np.maximum(fit.s, 1e-300)
-    stoch = [dict(t, f0=t.get("f0") or rate / 2.0) if t["effect"] == "bias_instability" else dict(t)
-             for t in fit.terms if t["effect"] != "ramp" and t[MAGNITUDE[t["effect"]]] > 0]
-    cov = oavar_covariance(stoch, meas.m, meas.n, rate) if stoch else np.zeros((s.shape[0],) * 2)
-    sigma = cov + np.diag((MODEL_FLOOR * s) ** 2)
+    if sigma is None:
+        sigma = estimate_covariance(meas, fit)
     Dw = meas.nu / (2.0 * s**2)
     DA = Dw[:, None] * A
     info = A.T @ DA
@@ -236,8 +256,16 @@ def lr_inflation(meas: Measured, fit: Fit, i: int) -> float:
     except np.linalg.LinAlgError:
         return 1.0
     V = inv @ (DA.T @ sigma @ DA) @ inv
-    k = free.index(i)
+    k = free.index(i) if direction is None else len(free)
     v0 = inv[k, k]
     if not (np.isfinite(V[k, k]) and v0 > 0):
         return 1.0
     return float(max(1.0, V[k, k] / v0))
+
+
+def gm_rw_direction(meas: Measured, K: float) -> np.ndarray:
+    """ds/dlambda of a Gauss-Markov term at its random-walk limit, lambda = 1/tau_c -> 0 with
+    K^2 = 2 sigma^2 / tau_c held: expanding IEEE 952 C.6 in x = tau/tau_c,
+    sigma^2(tau) = K^2 tau/3 - K^2 lambda tau^2/4 + O(lambda^2), so the column is -K^2 tau^2 / 4 (checked
+    against :func:`companion.allan.terms.avar_gauss_markov` at lambda = 1e-5..1e-6)."""
+    return -(K**2) * meas.tau**2 / 4.0

@@ -84,3 +84,16 @@ def explain_rate_quantization(lsb: float, N_q: float, axis: str) -> str:
             f"{fmt_param('N', N_q, axis)[4:]}, slope -1/2 like the sensor's own white noise (not the -1 slope of "
             f"angle quantisation Q). It is named because the LSB is known; the Allan curve alone cannot tell it "
             f"from a larger N.")
+
+
+def explain_alternative(alt, record_s: float) -> str:
+    """Why a one-parameter limit was named instead of the Gauss-Markov term that fits nearly as well."""
+    if alt["effect"] != "gauss_markov":
+        return ""
+    tau_c = alt["tau_c"]
+    return (f"A Gauss-Markov term (sigma = {alt['sigma']:.3g} rad/s, tau_c = {tau_c:.3g} s) fits almost as well "
+            f"(likelihood ratio {alt['lr']:.1f}, corrected, not significant): the record ({record_s:.4g} s, "
+            f"{record_s / tau_c:.3g} times that tau_c) is too short to tell a slow correlated bias from a rate "
+            f"random walk. Telling them apart needs the fall of the ADEV after its peak at ~1.9 tau_c, i.e. a "
+            f"record of about 100 tau_c or more; with less, even an ideal estimator cannot pin tau_c within "
+            f"30 % (docs/gap.md, Limits).")
