@@ -57,6 +57,8 @@ def test_names_the_hidden_effect(base, hidden, seed):
     assert r.gap_sim_after is not None and r.gap_sim_after < r.gap_sim_before
     assert not [e for e in r.recalibrated if e["verdict"] != "consistent"]  # base model was exact
     assert "commonly" in got["explanation"].lower()
+    if hidden["effect"] == "sinusoid":  # a real line: the periodogram check confirms it
+        assert got["spectral"]["confirmed"] and "confirmed" in got["explanation"]
 
 
 @pytest.mark.parametrize("seed", [21, 22, 23])

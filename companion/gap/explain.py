@@ -51,8 +51,9 @@ def describe_term(term, axis: str) -> str:
                                             if k != "effect" and isinstance(v, (int, float)))
 
 
-def explain_added(term, axis: str, rate_hz: float | None = None) -> str:
-    """One paragraph for an added effect: what it is, its parameters, what commonly causes it."""
+def explain_added(term, axis: str, rate_hz: float | None = None, spectral: dict | None = None) -> str:
+    """One paragraph for an added effect: what it is, its parameters, what commonly causes it (for a
+    sinusoid with ``spectral``, the periodogram check of :mod:`companion.gap.spectral`)."""
     effect = term["effect"]
     head = f"{describe_term(term, axis)}: {WHAT[effect]}."
     if effect == "gauss_markov" and rate_hz and term["tau_c"] * rate_hz < 10:
@@ -62,10 +63,14 @@ def explain_added(term, axis: str, rate_hz: float | None = None) -> str:
     elif effect == "gauss_markov":
         cause = (f"A correlated bias that forgets itself in about {term['tau_c']:.3g} s: commonly "
                  f"{CAUSES[effect]}.")
+    elif effect == "sinusoid" and spectral is not None and not spectral["confirmed"]:
+        cause = explain_spectral(spectral, term, axis)
     elif effect == "sinusoid":
         period = 1.0 / term["freq_hz"]
         cause = (f"A periodic disturbance at {term['freq_hz']:.3g} Hz (period {period:.3g} s): commonly "
                  f"{CAUSES[effect]}.")
+        if spectral is not None:
+            cause += " " + explain_spectral(spectral, term, axis)
     else:
         cause = f"Commonly caused by {CAUSES[effect]}."
     return head + " " + cause
@@ -97,3 +102,18 @@ def explain_alternative(alt, record_s: float) -> str:
             f"random walk. Telling them apart needs the fall of the ADEV after its peak at ~1.9 tau_c, i.e. a "
             f"record of about 100 tau_c or more; with less, even an ideal estimator cannot pin tau_c within "
             f"30 % (docs/gap.md, Limits).")
+
+
+def explain_spectral(ev, term, axis: str) -> str:
+    """The periodogram check of a sinusoid named from the Allan curve (companion.gap.spectral)."""
+    amp = to_datasheet("amplitude", term["amplitude"], axis)
+    amp_psd = to_datasheet("amplitude", ev["amplitude_psd"], axis)
+    unit = datasheet_unit("amplitude", axis)
+    if ev["confirmed"]:
+        return (f"Periodogram check: a line at {ev['f_peak']:.4g} Hz, {ev['peak_ratio']:.3g}x the local noise "
+                f"level, carrying {amp_psd:.3g} {unit} of the {amp:.3g} {unit}: confirmed.")
+    return (f"Periodogram check: no line near {term['freq_hz']:.4g} Hz (largest bin {ev['peak_ratio']:.3g}x the "
+            f"local level, {ev['threshold']:.3g}x needed; it carries {amp_psd:.3g} of the {amp:.3g} {unit}): the "
+            "Allan bump is the picture of a broader spectral shape, e.g. the roll-off of the sensor's or the "
+            "autopilot's low-pass filter, not a periodic disturbance. The term is kept because it reproduces "
+            "the Allan curve; do not read it as a vibration line.")

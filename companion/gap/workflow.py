@@ -29,6 +29,8 @@
    reported as an alternative the record cannot rule out.
 6. Noise floor: the model fits within the noise when the gap metric G <= NOISE_FLOOR_G = 2 (G is 1 on
    average for a right model; the null benchmark gives its spread) and nothing is added or recalibrated.
+   An added sinusoid is checked against the periodogram (:func:`companion.gap.spectral.line_evidence`):
+   the explanation says whether a line carrying its power is there or the Allan bump is some broader shape.
 7. Known LSB (rate rounding, e.g. int16 mrad/s RAW_IMU): a white term N_q = LSB sqrt(tau0/12) with no free
    parameter is added first when it lowers the deviance of the unrecalibrated model by more than
    chi^2_1(1 - ALPHA); see :mod:`companion.allan.lsb`.
@@ -50,6 +52,7 @@ from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, _intervals, fi
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    model_avar)
 from companion.gap._edf import local_slope, oavar_edf
+from companion.gap.spectral import line_evidence
 from companion.sim.synth import synthesize_axis
 
 ALPHA = 1e-4
@@ -339,7 +342,12 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         if i in fixed:
             continue
         ci = base.ci95[i] if i < len(base.ci95) else {}
-        entry = {**t, "ci95": ci, "explanation": explain.explain_added(t, axis, rate_hz)}
+        ev = None
+        if t["effect"] == "sinusoid" and t["amplitude"] > 0:
+            ev = line_evidence(y, rate_hz, t["freq_hz"], t["amplitude"])
+        entry = {**t, "ci95": ci, "explanation": explain.explain_added(t, axis, rate_hz, spectral=ev)}
+        if ev is not None:
+            entry["spectral"] = ev
         if i in alternatives:
             alt = alternatives[i]
             entry["alternative"] = alt

@@ -1,0 +1,67 @@
+"""Spectral check of a sinusoid named from the Allan curve: is there a line in the periodogram?
+
+The Allan curve of a sinusoid (IEEE 952 C.7) is a bump near tau = 0.371 / f0; other shapes (the roll-off of
+a low-pass filter, a band of vibration) can produce a similar bump, so a sinusoid named from the Allan
+curve alone is checked against the data's power spectral density.
+
+* PSD: Welch's method (Hann window, 50 % overlap, scipy.signal.welch), one-sided, segments of at least
+  16 periods of f0 (so the line falls in one or two bins) and at most the record.
+* Local level: a parabola fitted in log-log to the PSD over [f0/2, 2 f0] without the band f0 (1 +- 10 %),
+  shifted by its median residual (robust to a neighbouring peak), so that a sloping or bending noise floor
+  (a filter's roll-off) is not mistaken for a peak.
+* Peak ratio: the largest PSD bin in the band over the local level there. Under noise alone each Welch
+  bin is level * chi^2_nu / nu with nu ~ 1.8 x (number of segments) (Hann, 50 % overlap; Percival & Walden
+  1993 sec. 6.17 give 2K/(1 + 2 c^2), c ~ 0.17), so the peak is significant when above
+  chi^2_nu(1 - 1e-3 / bins) / nu.
+* Line amplitude: A_spec = sqrt(2 x excess power in the band) (a sinusoid of amplitude A carries A^2/2).
+
+The line is *confirmed* when the peak is significant and A_spec >= 0.5 A, i.e. the periodogram holds at
+least a quarter of the power that the Allan fit gave the sinusoid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import stats
+from scipy.signal import welch
+
+#: half-width of the band searched around f0, relative
+REL_BAND = 0.10
+#: the share of the Allan-fitted amplitude the periodogram must hold (0.5 in amplitude = 25 % in power)
+MIN_AMPLITUDE_SHARE = 0.5
+ALPHA = 1e-3
+
+
+def line_evidence(y, rate_hz: float, freq_hz: float, amplitude: float) -> dict | None:
+    """Periodogram evidence for a sinusoid of ``amplitude`` at ``freq_hz`` in rate samples ``y``.
+
+    Returns {f_peak, peak_ratio, threshold, amplitude_psd, confirmed, segments} or None when the record
+    is too short to resolve the band (fewer than 4 background bins)."""
+    y = np.asarray(y, dtype=float)
+    n = y.shape[0]
+    if n < 256 or not (0 < freq_hz < rate_hz / 2):
+        return None
+    seg = 1 << int(math.ceil(math.log2(max(256.0, 16.0 * rate_hz / freq_hz))))
+    seg = min(seg, 1 << int(math.floor(math.log2(n))))
+    f, P = welch(y - y.mean(), fs=rate_hz, nperseg=seg)
+    df = f[1]
+    segments = max(1, 2 * n // seg - 1)
+    band = (f >= freq_hz * (1 - REL_BAND) - df) & (f <= freq_hz * (1 + REL_BAND) + df) & (f > 0)
+    outer = (f >= freq_hz / 2) & (f <= min(2 * freq_hz, rate_hz / 2)) & ~band & (f > 0) & (P > 0)
+    if band.sum() == 0 or outer.sum() < 4:
+        return None
+    lf, lp = np.log(f[outer]), np.log(P[outer])
+    coef = np.polyfit(lf, lp, 2)
+    coef[-1] += float(np.median(lp - np.polyval(coef, lf)))  # median residual: robust to a neighbouring peak
+    level = np.exp(np.polyval(coef, np.log(np.where(f > 0, f, df))))
+    k = int(np.argmax(np.where(band, P / level, -np.inf)))
+    peak_ratio = float(P[k] / level[k])
+    nu = 1.8 * segments
+    threshold = float(stats.chi2.isf(ALPHA / band.sum(), nu) / nu)
+    excess = float(np.sum(np.maximum(P[band] - level[band], 0.0)) * df)
+    amp_psd = math.sqrt(2.0 * excess)
+    return {"f_peak": float(f[k]), "peak_ratio": peak_ratio, "threshold": threshold, "amplitude_psd": amp_psd,
+            "confirmed": bool(peak_ratio > threshold and amp_psd >= MIN_AMPLITUDE_SHARE * amplitude),
+            "segments": segments}
