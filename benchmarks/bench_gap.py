@@ -290,6 +290,12 @@ def _short(a, axis):
         return f"rate quantisation N_q {a['N']:.2g}"
     ps = ", ".join(f"{k} {to_datasheet(k, v, axis):.3g}" for k, v in a.items()
                    if k not in ("effect", "ci95", "explanation") and isinstance(v, float))
+    if "spectral" in a:
+        sp = a["spectral"]
+        ps += (f"; periodogram: line {sp['peak_ratio']:.3g}x level, {to_datasheet('amplitude', sp['amplitude_psd'], axis):.3g}"
+               f" deg/h, {'confirmed' if sp['confirmed'] else 'NO LINE'}")
+    if "alternative" in a:
+        ps += f"; alternative gauss_markov tau_c {a['alternative']['tau_c']:.3g} s"
     return f"{a['effect']} ({ps})"
 
 
