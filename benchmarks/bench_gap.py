@@ -243,6 +243,32 @@ def missized_table(seeds):
     print(f"ok {ok_n}/{seeds}")
 
 
+def missized_power(seeds):
+    """How often a model B off by a factor is called mis-sized (truth N 1e-3, B 2e-4, nothing hidden), beside
+    the spread of the fitted B and its Cramer-Rao bound (Whittle, white + flicker)."""
+    from companion.gap.candidates import fit_terms
+    from companion.gap.compare import measure
+
+    truth = [{"effect": "white_noise", "N": 1e-3}, {"effect": "bias_instability", "B": 2e-4}]
+    factors = (0.6, 0.7, 1.4, 1.6)
+    called = {f: 0 for f in factors}
+    ln_fit = []
+    for seed in range(seeds):
+        y = synthesize_axis(truth, RATE, N, np.random.default_rng(3000 + seed))
+        ln_fit.append(math.log(fit_terms(measure(y, RATE), truth).terms[1]["B"] / 2e-4))
+        for f in factors:
+            model = [dict(truth[0]), {"effect": "bias_instability", "B": 2e-4 * f}]
+            e = run_gap(y, RATE, model, simulate=False).recalibrated[1]
+            called[f] += e["verdict"] == ("too small" if f < 1 else "too large")
+    fr = np.arange(1, N // 2 + 1) * RATE / N
+    s_white, s_flicker = np.full_like(fr, 2 * 1e-3**2), (2e-4) ** 2 / (math.pi * fr)  # one-sided PSDs
+    G = 2 * np.array([s_white, s_flicker]) / (s_white + s_flicker)  # d ln S / d ln (N, B)
+    crlb = math.sqrt(np.linalg.inv(G @ G.T)[1, 1])
+    print(f"\n== model B off by a factor (truth N 1e-3, B 2e-4), {seeds} seeds: called mis-sized ==")
+    print("  " + ", ".join(f"x{f}: {called[f]}/{seeds}" for f in factors)
+          + f"; spread of the fitted ln B {np.std(ln_fit):.3f} (Cramer-Rao {crlb:.3f})")
+
+
 def ardupilot(seeds):
     print("\n== ArduPilot-style RAW_IMU: rate rounded to 1 mrad/s, 50 Hz, 1 h, model without quantisation ==")
     lsb, rate = 1e-3, 50.0
@@ -312,6 +338,7 @@ def main():
     nested_null_table(max(4, 8 * a.seeds // 3))
     null_table(a.null_seeds)
     missized_table(a.seeds)
+    missized_power(2 * a.seeds)
     ardupilot(max(2, a.seeds // 3))
     if not a.skip_real:
         real(Path(a.shared))
