@@ -18,7 +18,10 @@ with measured data on one axis, and fix the model:
   3. the tau ranges where the measurement leaves the model's band (table);
   4. every effect the model lacks (quantization, white_noise, bias_instability, random_walk, ramp,
      gauss_markov, sinusoid) fitted to the data with the model's terms; the best one is added when its
-     likelihood-ratio gain is significant; model terms that are merely mis-sized are recalibrated;
+     likelihood-ratio gain is significant (corrected for the correlated long-tau Allan points; the report
+     prints each test); model terms that are merely mis-sized are recalibrated; a named sinusoid is
+     checked against the periodogram; a random walk that won over a long Gauss-Markov comes with that
+     Gauss-Markov as the alternative the record is too short to rule out;
   5. repeated until no significant gap remains; gap before/after (G = 1 on average for a right model,
      noise floor 2) against the analytic curves and against fresh simulations.
 
