@@ -234,6 +234,16 @@ def test_too_long_gauss_markov_is_named_random_walk_with_the_alternative():
     r = run_gap(_measure(WB + [hidden], 1000), RATE, WB, seed=0, simulate=False)
     assert [a["effect"] for a in r.added] == ["random_walk"]
     alt = r.added[0]["alternative"]
-    assert alt["effect"] == "gauss_markov" and 150.0 < alt["tau_c"] < 600.0
+    assert alt["effect"] == "gauss_markov" and alt["instead_of"] == "random_walk" and 150.0 < alt["tau_c"] < 600.0
     assert "too short to tell" in r.added[0]["explanation"]
     assert r.gap_after <= NOISE_FLOOR_G
+
+
+def test_alternative_explanations_name_the_right_limit():
+    from companion.gap.explain import explain_alternative
+
+    alt = {"effect": "gauss_markov", "sigma": 5e-4, "tau_c": 300.0, "lr": 4.2}
+    rw = explain_alternative({**alt, "instead_of": "random_walk"}, 7200.0, 20.0)
+    assert "rate random walk" in rw and "24 times that tau_c" in rw
+    wn = explain_alternative({**alt, "tau_c": 0.1, "instead_of": "white_noise"}, 7200.0, 20.0)
+    assert "white noise" in wn and "2 samples" in wn and "random walk" not in wn

@@ -216,16 +216,14 @@ def estimate_covariance(meas: Measured, fit: Fit) -> np.ndarray:
     return cov + np.diag((MODEL_FLOOR * s) ** 2)
 
 
-def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction: np.ndarray | None = None,
-                 sigma: np.ndarray | None = None) -> float:
+def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction: np.ndarray | None = None) -> float:
     """Overdispersion phi >= 1 of a likelihood-ratio statistic at ``fit`` (sandwich, quasi-likelihood).
 
     The deviance treats the octave estimates as independent with nu EDF each, i.e. Cov(a) = Sigma_0 =
     diag(2 s^2 / nu). With flicker (bias instability) or random-walk noise, neighbouring long-tau estimates
     are strongly correlated and few in EDF, so Sigma_0 understates the spread of the fitted magnitudes.
     With c the free magnitudes (s = s_fixed + A c), D = diag(nu / (2 s^2)), I = A^T D A (Fisher information of
-    the Gamma likelihood) and Sigma the model covariance (:func:`estimate_covariance`, or ``sigma`` when
-    given), the sandwich V = I^-1 (A^T D Sigma D A) I^-1 is the actual covariance of c, I^-1 the one the
+    the Gamma likelihood) and Sigma the model covariance (:func:`estimate_covariance`), the sandwich V = I^-1 (A^T D Sigma D A) I^-1 is the actual covariance of c, I^-1 the one the
     deviance assumes, and the LR statistic of c_k is rescaled by phi = max(1, V_kk / (I^-1)_kk) (never below
     1: deterministic terms carry no sampling covariance, so the correction only makes a test more cautious).
     Terms at zero or fixed are left out of A.
@@ -246,8 +244,7 @@ def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction: np.ndarray 
         cols.append(np.asarray(direction, dtype=float))
     A = np.column_stack(cols)
     s = np.maximum(fit.s, 1e-300)
-    if sigma is None:
-        sigma = estimate_covariance(meas, fit)
+    sigma = estimate_covariance(meas, fit)
     Dw = meas.nu / (2.0 * s**2)
     DA = Dw[:, None] * A
     info = A.T @ DA

@@ -91,11 +91,13 @@ def explain_rate_quantization(lsb: float, N_q: float, axis: str) -> str:
             f"from a larger N.")
 
 
-def explain_alternative(alt, record_s: float) -> str:
+def explain_alternative(alt, record_s: float, rate_hz: float) -> str:
     """Why a one-parameter limit was named instead of the Gauss-Markov term that fits nearly as well."""
-    if alt["effect"] != "gauss_markov":
-        return ""
     tau_c = alt["tau_c"]
+    if alt["instead_of"] == "white_noise":
+        return (f"A Gauss-Markov term (sigma = {alt['sigma']:.3g} rad/s, tau_c = {tau_c:.3g} s, "
+                f"{tau_c * rate_hz:.3g} samples) fits almost as well (likelihood ratio {alt['lr']:.1f}, not "
+                "significant): a correlation that short is white noise at every cluster time measured.")
     return (f"A Gauss-Markov term (sigma = {alt['sigma']:.3g} rad/s, tau_c = {tau_c:.3g} s) fits almost as well "
             f"(likelihood ratio {alt['lr']:.1f}, corrected, not significant): the record ({record_s:.4g} s, "
             f"{record_s / tau_c:.3g} times that tau_c) is too short to tell a slow correlated bias from a rate "

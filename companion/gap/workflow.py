@@ -177,7 +177,8 @@ def _nested_test(meas: Measured, best, limit) -> dict:
 
     Likelihood ratio LR = D_limit - D_best. Gauss-Markov against random walk (lambda = 1/tau_c -> 0): the
     long-tau octave estimates that carry the difference are correlated and few in EDF, so the raw LR is
-    overdispersed (measured: up to 20 in 48 random-walk draws, 2 h at 20 Hz); it is divided by the sandwich
+    overdispersed (64 random-walk draws, 2 h at 20 Hz, benchmarks/bench_gap.py: raw up to 20.3, corrected up
+    to 7.2); it is divided by the sandwich
     factor phi_lambda of :func:`companion.gap.candidates.lr_inflation` in the direction
     :func:`companion.gap.candidates.gm_rw_direction` and compared with chi^2_1(1 - ALPHA_RECAL) = 10.8, the
     level of the mis-sized test. Against white noise (tau_c << tau0) the raw LR is compared with
@@ -282,7 +283,8 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                     nested = _nested_test(meas, best, c)
                     record["nested"] = nested
                     if nested["lr"] < nested["threshold"]:
-                        alternative = {**_params(best[2].terms[-1]), "effect": best[1], "lr": nested["lr"]}
+                        alternative = {**_params(best[2].terms[-1]), "effect": best[1], "lr": nested["lr"],
+                                       "instead_of": c[1]}
                         best = c
                     break
         if best is not None:  # the same overdispersion correction as the mis-sized test (score form)
@@ -351,7 +353,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         if i in alternatives:
             alt = alternatives[i]
             entry["alternative"] = alt
-            entry["explanation"] += " " + explain.explain_alternative(alt, meas.n / rate_hz)
+            entry["explanation"] += " " + explain.explain_alternative(alt, meas.n / rate_hz, rate_hz)
         res.added.append(entry)
     s_final = model_avar(final, meas.tau, rate_hz)
     g_final = gap_metric(meas, s_final)
