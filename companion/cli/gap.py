@@ -74,6 +74,7 @@ def _load_axis(spec, axis, config):
 
 
 def format_report(r, source: str, label: str) -> str:
+    from companion.gap.candidates import MAGNITUDE
     from companion.gap.explain import describe_term
     from companion.gap.workflow import NOISE_FLOOR_G
 
@@ -97,7 +98,8 @@ def format_report(r, source: str, label: str) -> str:
     else:
         out.append("  the measurement stays inside the model's 95 % band everywhere")
     for it in r.iterations:
-        top = ", ".join(f"{c['effect']} dD={c['delta_dev']:.1f}" for c in it["candidates"][:3])
+        seen = [c for c in it["candidates"] if c["params"].get(MAGNITUDE[c["effect"]], 0) > 0]
+        top = ", ".join(f"{c['effect']} dD={c['delta_dev']:.1f}" for c in seen[:3]) or "none fits above zero"
         out.append(f"iteration {it['iteration']}: best candidates {top}; chosen: {it['chosen'] or 'none significant'}")
         nt = it.get("nested")
         if nt:
