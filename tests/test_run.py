@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 from companion.cli.main import main
-from companion.health.detector import LEARNING
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig

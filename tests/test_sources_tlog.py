@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as dialect
+
+from pymavlink_reference import pymavlink_messages
 
 from companion.mavlink.tlog_writer import write_imu_tlog
 from companion.samples import StreamKey
@@ -90,16 +91,6 @@ def make_mixed_tlog(path, mavlink2=True, garbage=False, seed=0):
     return records, bad
 
 
-def _pymavlink_messages(path):
-    log = mavutil.mavlogfile(str(path))
-    out = []
-    while True:
-        m = log.recv_msg()
-        if m is None:
-            return out
-        out.append(m)
-
-
 @pytest.mark.parametrize("garbage", [False, True])
 @pytest.mark.parametrize("mavlink2", [True, False])
 def test_mixed_streams_exact_counts_rates_and_pymavlink_values(tmp_path, mavlink2, garbage):
@@ -123,7 +114,7 @@ def test_mixed_streams_exact_counts_rates_and_pymavlink_values(tmp_path, mavlink
     clean = tmp_path / "clean.tlog"
     make_mixed_tlog(clean, mavlink2, False, seed=1 + mavlink2)
     ref = {}
-    for m in _pymavlink_messages(clean):
+    for m in pymavlink_messages(clean):
         assert m.get_type() != "BAD_DATA"
         smp = imu_sample_from_message(m)
         if smp is not None:
@@ -150,7 +141,7 @@ def test_pymavlink_field_equality_on_a_large_written_file(tmp_path):
     path = tmp_path / "r.tlog"
     write_imu_tlog(path, t, gyro, accel, temperature=np.linspace(30, 40, n))
     ref = np.array([[m.time_usec, m.xgyro, m.ygyro, m.zgyro, m.xacc, m.yacc, m.zacc, m.temperature]
-                    for m in _pymavlink_messages(path) if m.get_type() == "RAW_IMU"], dtype=np.float64)
+                    for m in pymavlink_messages(path) if m.get_type() == "RAW_IMU"], dtype=np.float64)
     s = load(path).streams[0]
     assert s.samples == n == ref.shape[0]
     np.testing.assert_array_equal(s.t, ref[:, 0] * 1e-6)
@@ -179,7 +170,7 @@ def test_garbage_that_breaks_pymavlink_is_recovered(tmp_path):
     res = load(bad)
     assert res.streams[0].samples == n
     assert res.totals["frames"] == n and res.totals["bad_bytes"] == junk
-    pm = sum(1 for m in _pymavlink_messages(bad) if m.get_type() == "RAW_IMU")
+    pm = sum(1 for m in pymavlink_messages(bad) if m.get_type() == "RAW_IMU")
     assert pm <= n  # pymavlink may lose sync (it does in the benchmark); we never do
 
 

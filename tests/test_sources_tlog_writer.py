@@ -4,20 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pymavlink import mavutil
+
+from pymavlink_reference import pymavlink_messages
 
 from companion.mavlink.tlog_writer import TlogWriter, write_imu_tlog
 from companion.sources import messages as M
-
-
-def _pymavlink_read(path):
-    log = mavutil.mavlogfile(str(path))
-    out = []
-    while True:
-        msg = log.recv_msg()
-        if msg is None:
-            return out
-        out.append(msg)
 
 
 def _signal(n, seed=3):
@@ -37,7 +28,7 @@ def test_int16_messages_round_trip_through_pymavlink(tmp_path, message, mavlink2
     path = tmp_path / "x.tlog"
     assert write_imu_tlog(path, t, gyro, accel, message=message, instance=0, temperature=41.27,
                           mavlink2=mavlink2, sysid=7, compid=3, heartbeat_hz=2.0) == n
-    msgs = _pymavlink_read(path)
+    msgs = pymavlink_messages(path)
     imu = [m for m in msgs if m.get_type() == message]
     hb = [m for m in msgs if m.get_type() == "HEARTBEAT"]
     assert len(msgs) == len(imu) + len(hb)  # no BAD_DATA
@@ -65,7 +56,7 @@ def test_highres_floats_and_custom_scale(tmp_path):
     t, gyro, accel = _signal(n, seed=5)
     path = tmp_path / "h.tlog"
     write_imu_tlog(path, t, gyro, accel, message="HIGHRES_IMU", instance=2, temperature=30.5)
-    imu = [m for m in _pymavlink_read(path) if m.get_type() == "HIGHRES_IMU"]
+    imu = [m for m in pymavlink_messages(path) if m.get_type() == "HIGHRES_IMU"]
     assert len(imu) == n
     got = np.array([[m.xgyro, m.ygyro, m.zgyro, m.xacc, m.yacc, m.zacc] for m in imu])
     np.testing.assert_array_equal(got, np.hstack([gyro, accel]).astype(np.float32))
@@ -74,7 +65,7 @@ def test_highres_floats_and_custom_scale(tmp_path):
     # a custom scale: ADIS16405 0.05 deg/s per LSB in RAW_IMU
     scale = np.deg2rad(0.05)
     write_imu_tlog(path, t, gyro, accel, message="RAW_IMU", gyro_scale=scale, accel_scale=3.33e-3 * 9.80665)
-    raw = [m for m in _pymavlink_read(path) if m.get_type() == "RAW_IMU"]
+    raw = [m for m in pymavlink_messages(path) if m.get_type() == "RAW_IMU"]
     np.testing.assert_array_equal([m.ygyro for m in raw], np.rint(gyro[:, 1] / scale))
 
 
@@ -86,7 +77,7 @@ def test_tlog_writer_any_message_and_crc(tmp_path):
     # our scalar CRC agrees with the frame pymavlink packed
     crc = M.crc_x25(frame[1:-2] + bytes([M.CRC_INFO[251][0]]))
     assert crc == int.from_bytes(frame[-2:], "little")
-    types = [m.get_type() for m in _pymavlink_read(path)]
+    types = [m.get_type() for m in pymavlink_messages(path)]
     assert types == ["NAMED_VALUE_FLOAT", "HEARTBEAT"]
 
 
