@@ -33,8 +33,10 @@ non-overlapping clusters; Kish's n_eff = W^2 / sum(w^2) under forgetting). ``fit
   the accumulators. 0.3-5 s per call: for reports, not for a loop.
 - ``"gls"``: the same kind of GLS (:func:`fit_theta_gls`), covariance from the model rounded to sqrt(2)
   steps and cached: a few ms per call when the model is stable; for a slow companion computer.
-- ``"diag"`` (default; 1-25 ms per call, for ``companion run``): weighted NNLS with var(sigma_j^2) = 2 (A_j theta)^2 / edf_j (chi-square), iterated with
-  weights from the model (not from the noisy measurement, to avoid the low bias of self-weighting).
+- ``"diag"`` (default; 2-13 ms per call, for ``companion run``): weighted NNLS with var(sigma_j^2) =
+  2 (A_j theta)^2 / edf_j (chi-square), iterated with weights from the model (not from the noisy
+  measurement, to avoid the low bias of self-weighting), plus the offline fit's model-error floor when the
+  five-term model does not fit (:func:`fit_theta`).
 
 Because S_j, W_j are sufficient statistics of the whole (forgotten) history, re-solving from them at each
 report is the information-form filter of the constant state theta with those measurement covariances,
@@ -239,12 +241,12 @@ class OctaveBankEstimator:
         ``[{"effect": "white_noise", "N": v, "std": {"N": one_sigma}}, ...]`` in SI units."""
         tau, avar, edf = self.avar()
         use = edf >= self.min_edf
-        theta, s_theta = fit_theta(tau[use], avar[use], edf[use], self.effects)
+        theta, s_theta, floor = fit_theta(tau[use], avar[use], edf[use], self.effects, return_floor=True)
         if self.fit == "fit_avar" and use.sum() > len(self.effects):
             theta, s_theta = self._fit_avar(tau[use], avar[use], edf[use], theta, s_theta)
         elif self.fit == "gls" and use.sum() > len(self.effects):
             theta, s_theta = fit_theta_gls(tau[use], avar[use], theta, self.effects, self.n_effective(),
-                                           self.rate_hz, self.gls_max_ratio, cache=self._cache)
+                                           self.rate_hz, self.gls_max_ratio, cache=self._cache, floor=floor)
         out = []
         for e, th, st in zip(self.effects, theta, s_theta):
             p = LINEAR_PARAM[e]
@@ -312,23 +314,19 @@ class OctaveBankEstimator:
         return est
 
 
-def fit_theta(tau, avar, edf, effects, iterations=6):
-    """Weighted NNLS of AVAR = A theta, theta = squared coefficients; var(avar_j) = 2 model_j^2 / edf_j.
+def _wnnls(A, avar, edf, floor, iterations, model=None):
+    """Weighted NNLS of avar = A theta with var_j = 2 model_j^2 / edf_j + (floor model_j)^2, the weights
+    iterated from the model. Returns (theta, model, sw) with sw the final 1/sd per point."""
+    tiny = 1e-300
+    model = avar.copy() if model is None else model
+    theta = np.zeros(A.shape[1])
 
-    Returns ``(theta, std_theta)`` (arrays over ``effects``); std is inf where nothing constrains it.
-    """
-    n_par = len(effects)
-    tau = np.asarray(tau, float)
-    avar = np.asarray(avar, float)
-    edf = np.asarray(edf, float)
-    if tau.size == 0:
-        return np.zeros(n_par), np.full(n_par, np.inf)
-    A = linear_basis(tau, effects)
-    model = avar.copy()
-    theta = np.zeros(n_par)
-    floor = 1e-300
+    def weights(mod):
+        mod = np.maximum(mod, avar * 1e-3 + tiny)
+        return 1.0 / (mod * np.sqrt(2.0 / edf + floor**2))
+
     for _ in range(iterations):
-        sw = np.sqrt(edf / 2.0) / np.maximum(model, avar * 1e-3 + floor)
+        sw = weights(model)
         Aw = A * sw[:, None]
         scale = np.linalg.norm(Aw, axis=0)
         scale[scale == 0] = 1.0
@@ -339,7 +337,47 @@ def fit_theta(tau, avar, edf, effects, iterations=6):
             model = new_model
             break
         model = new_model
-    sw = np.sqrt(edf / 2.0) / np.maximum(model, avar * 1e-3 + floor)
+    return theta, model, weights(model)
+
+
+def fit_theta(tau, avar, edf, effects, iterations=6, return_floor=False):
+    """Weighted NNLS of AVAR = A theta, theta = squared coefficients; var(avar_j) = 2 model_j^2 / edf_j.
+
+    Model misfit (real sensors: the internal low-pass filter bends the ADEV at a few tau0, a short-tau
+    Gauss-Markov shape, lines): when chi^2 exceeds dof + 3 sqrt(2 dof), a relative model error e, the same
+    for every level, is added, var_j = 2 model_j^2 / edf_j + (e model_j)^2, with e chosen so that
+    chi^2 = dof (Birge ratio; bisection on ln e, the fit redone at each step) -- as the offline fit
+    :func:`companion.allan.fit.fit_avar` does. Without it the thousands of degrees of freedom of the
+    shortest cluster times let a small misfit there set N and push B several times too high (ADIS16405:
+    B 2.3-3.5x the offline fit before this floor). Simulated data consistent with the model never get here.
+
+    Returns ``(theta, std_theta)`` (arrays over ``effects``; std is inf where nothing constrains it), and
+    the model error e as a third item with ``return_floor``.
+    """
+    n_par = len(effects)
+    tau = np.asarray(tau, float)
+    avar = np.asarray(avar, float)
+    edf = np.asarray(edf, float)
+    if tau.size == 0:
+        out = (np.zeros(n_par), np.full(n_par, np.inf))
+        return out + (0.0,) if return_floor else out
+    A = linear_basis(tau, effects)
+    floor = 0.0
+    theta, model, sw = _wnnls(A, avar, edf, 0.0, iterations)
+    dof = tau.size - int(np.count_nonzero(theta))
+    chi2 = float(np.sum(((avar - model) * sw) ** 2))
+    if dof >= 2 and chi2 > dof + 3.0 * math.sqrt(2.0 * dof):
+        def excess(lf):  # warm-started from the unfloored model: a few reweightings suffice
+            th, mod, w = _wnnls(A, avar, edf, math.exp(lf), 3, model)
+            return float(np.sum(((avar - mod) * w) ** 2)) - dof
+
+        lo, hi = math.log(1e-4), math.log(3.0)
+        if excess(hi) < 0:
+            for _ in range(14):  # ln e to 10.3 / 2^14 = 6e-4
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if excess(mid) > 0 else (lo, mid)
+        floor = math.exp(hi)
+        theta, model, sw = _wnnls(A, avar, edf, floor, iterations, model)
     Aw = A * sw[:, None]
     F = Aw.T @ Aw  # Fisher information of theta
     std = np.full(n_par, np.inf)
@@ -359,7 +397,7 @@ def fit_theta(tau, avar, edf, effects, iterations=6):
             std[i] = math.sqrt(v) if v > 0 else np.inf
         except np.linalg.LinAlgError:
             pass
-    return theta, std
+    return (theta, std, floor) if return_floor else (theta, std)
 
 
 def _quantise(x: float) -> float:
@@ -367,12 +405,13 @@ def _quantise(x: float) -> float:
     return float(2.0 ** (round(2.0 * math.log2(x)) / 2.0))
 
 
-def fit_theta_gls(tau, avar, theta0, effects, n, rate_hz, max_ratio=16, iterations=2, cache=None):
+def fit_theta_gls(tau, avar, theta0, effects, n, rate_hz, max_ratio=16, iterations=2, cache=None, floor=0.0):
     """Generalised NNLS with the model covariance of the Allan estimates at the levels (including the strong
     correlation of neighbouring cluster times), as the offline fit :func:`companion.allan.fit.fit_avar`:
     C = oavar_covariance(model, m, n) (overlapping estimator; the staggered phases are close to it; model
     and n rounded to sqrt(2) steps, which changes the weights only, and cached),
     theta = argmin_{theta >= 0} (v - A theta)^T C^-1 (v - A theta), C recomputed from the new model.
+    ``floor``: the model error of :func:`fit_theta` (misfit), added as (floor model)^2 to the diagonal of C.
     Starts from ``theta0`` (the diagonal fit). Returns ``(theta, std_theta)``."""
     tau = np.asarray(tau, float)
     avar = np.asarray(avar, float)
@@ -383,6 +422,7 @@ def fit_theta_gls(tau, avar, theta0, effects, n, rate_hz, max_ratio=16, iteratio
     theta = np.asarray(theta0, float) / scale
     n_par = len(effects)
     n = _quantise(max(float(n), float(2 * m.max() + 2)))
+    floor = _quantise(floor) if floor > 0 else 0.0
     F = None
     for _ in range(iterations):
         # C is computed from the model and n rounded to sqrt(2) steps: a deterministic function of the
@@ -391,11 +431,12 @@ def fit_theta_gls(tau, avar, theta0, effects, n, rate_hz, max_ratio=16, iteratio
         frac = (A * theta) / np.maximum((A @ theta)[:, None], 1e-300)
         th_q = tuple(_quantise(t * scale) if t > 0 and frac[:, i].max() >= 0.05 else 0.0
                      for i, t in enumerate(theta))
-        key = (tuple(m.tolist()), th_q, n, float(rate_hz), int(max_ratio), tuple(effects))
+        key = (tuple(m.tolist()), th_q, n, float(rate_hz), int(max_ratio), tuple(effects), floor)
         L = cache.get(key) if cache is not None else None
         if L is None:
             model = [{"effect": e, LINEAR_PARAM[e]: math.sqrt(t)} for e, t in zip(effects, th_q)]
             C = oavar_covariance(model, m, int(n), rate_hz, max_ratio=max_ratio)
+            C = C + np.diag((floor * (A @ np.asarray(th_q))) ** 2)
             C = C + np.diag(np.maximum(np.diag(C), 1e-300) * 1e-9)
             try:
                 L = np.linalg.cholesky(C)
