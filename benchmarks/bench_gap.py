@@ -236,7 +236,7 @@ def missized_table(seeds):
         ok, names = judge(r, hidden, exact_base=False)
         errs = [abs(t[p] / tr[p] - 1) for t, tr, p in zip(r.terms_after, truth, ("N", "B"))]
         recal_err.append(max(errs))
-        verdicts = [e["verdict"][:9] for e in r.recalibrated]
+        verdicts = [f"{e['verdict'][:9]} (LR {e['lr']:.1f})" for e in r.recalibrated]
         ok_n += ok
         print(f"  factors {f[0]:.2f} {f[1]:.2f}: named {names}, verdicts {verdicts}, terms after within "
               f"{100 * max(errs):.0f} % of truth, G {r.gap_before:.3g} -> {r.gap_after:.3g}")
