@@ -90,3 +90,21 @@ def test_user_errors_are_one_line(raw_imu_tlog, tmp_path, capsys, args, msg):
 def test_missing_model_file(tmp_path, capsys):
     assert main(["gap", str(tmp_path / "x.csv"), "--model", str(tmp_path / "none.yaml"), "--axis", "gx"]) == 2
     assert "none.yaml" in capsys.readouterr().err
+
+
+def test_report_gives_the_gauss_markov_alternative(tmp_path, capsys):
+    """A Gauss-Markov with tau_c = T/24 (seed 1000, as in test_gap_workflow) reaches the user as a random walk
+    plus the alternative, with the nested test that decided it printed."""
+    n = int(7200 * 20)
+    base = [{"effect": "white_noise", "N": 1e-3}, {"effect": "bias_instability", "B": 1e-4}]
+    y = synthesize_axis(base + [{"effect": "gauss_markov", "sigma": 5e-4, "tau_c": 300.0}], 20.0, n,
+                        np.random.default_rng(1000))
+    csv = tmp_path / "d.csv"
+    t = np.arange(n) / 20.0
+    np.savetxt(csv, np.column_stack([t, y, y, y, 0 * t, 0 * t, 0 * t - 9.8]), delimiter=",",
+               header="time_s,gx,gy,gz,ax,ay,az", comments="", fmt="%.9g")
+    model = _model_yaml(tmp_path / "m.yaml", base, rate=20.0)
+    assert main(["gap", str(csv), "--model", str(model), "--axis", "gx"]) == 0
+    text = capsys.readouterr().out
+    assert "gauss_markov vs its random_walk limit: LR" in text and "random_walk kept" in text
+    assert "added: random_walk" in text and "too short to tell a slow correlated bias" in text
