@@ -36,6 +36,7 @@ from companion.units import to_datasheet  # noqa: E402
 RATE = 20.0
 N = int(2 * 3600 * RATE)
 WB = [{"effect": "white_noise", "N": 1e-3}, {"effect": "bias_instability", "B": 1e-4}]
+WB_TXT = "white N 1e-3 + bias instability B 1e-4"
 CASES = [
     ("quantization Q=6e-4", WB, {"effect": "quantization", "Q": 6e-4}),
     ("quantization Q=3e-3", WB, {"effect": "quantization", "Q": 3e-3}),
@@ -103,20 +104,25 @@ def _psd_one_sided(f, N, B, sigma, tau_c):
     return 2.0 * N**2 + B**2 / (math.pi * f) + gm
 
 
-def crlb_log_tau_c(N_, B, sigma, tau_c, n=N):
-    """Cramer-Rao bound on the standard error of ln tau_c from n samples: Whittle Fisher information
-    I = sum_k (d ln S(f_k) / d theta)(d ln S(f_k) / d theta)^T over the Fourier frequencies f_k = k RATE / n,
-    theta = ln(N, B, sigma, tau_c) (the periodogram ordinates are S chi^2_2 / 2, independent)."""
+def whittle_crlb(psd, params, k, n=N):
+    """Cramer-Rao bound on the standard error of ln params[k] from n samples of noise with one-sided PSD
+    ``psd(f, *params)``: Whittle Fisher information I = sum_j (d ln S(f_j) / d theta)(d ln S(f_j) / d theta)^T
+    over the Fourier frequencies f_j = j RATE / n, theta = ln params (the periodogram ordinates are
+    S chi^2_2 / 2, independent)."""
     f = np.arange(1, n // 2 + 1) * RATE / n
-    p0 = np.log([N_, B, sigma, tau_c])
+    p0 = np.log(params)
     grads = []
-    for j in range(4):
-        h = np.zeros(4)
+    for j in range(len(params)):
+        h = np.zeros(len(params))
         h[j] = 1e-5
-        grads.append((np.log(_psd_one_sided(f, *np.exp(p0 + h))) - np.log(_psd_one_sided(f, *np.exp(p0 - h))))
-                     / 2e-5)
+        grads.append((np.log(psd(f, *np.exp(p0 + h))) - np.log(psd(f, *np.exp(p0 - h)))) / 2e-5)
     G = np.array(grads)
-    return float(math.sqrt(np.linalg.inv(G @ G.T)[3, 3]))
+    return float(math.sqrt(np.linalg.inv(G @ G.T)[k, k]))
+
+
+def crlb_log_tau_c(N_, B, sigma, tau_c, n=N):
+    """Cramer-Rao bound on the standard error of ln tau_c (white + flicker + Gauss-Markov, all free)."""
+    return whittle_crlb(_psd_one_sided, [N_, B, sigma, tau_c], 3, n)
 
 
 def whittle_tau_c(y, tau_c0, fmax=0.5):
@@ -176,9 +182,6 @@ def limit_table(seeds):
         named_s = ", ".join(f"{k} {v}" for k, v in sorted(named.items(), key=lambda kv: -kv[1]))
         print(f"{tau_c:6.0f} {T / tau_c:7.0f} {se:5.2f} {ideal:9.2f} {o30:>7}/{seeds:<2} {a30:>7}/{seeds:<2} "
               f"{ok_n:>2}/{seeds:<2} {named_s:36} {np.median(lrs) if lrs else float('nan'):6.1f}")
-
-
-WB_TXT = "white N 1e-3 + bias instability B 1e-4"
 
 
 def nested_null_table(seeds):
@@ -260,10 +263,7 @@ def missized_power(seeds):
             model = [dict(truth[0]), {"effect": "bias_instability", "B": 2e-4 * f}]
             e = run_gap(y, RATE, model, simulate=False).recalibrated[1]
             called[f] += e["verdict"] == ("too small" if f < 1 else "too large")
-    fr = np.arange(1, N // 2 + 1) * RATE / N
-    s_white, s_flicker = np.full_like(fr, 2 * 1e-3**2), (2e-4) ** 2 / (math.pi * fr)  # one-sided PSDs
-    G = 2 * np.array([s_white, s_flicker]) / (s_white + s_flicker)  # d ln S / d ln (N, B)
-    crlb = math.sqrt(np.linalg.inv(G @ G.T)[1, 1])
+    crlb = whittle_crlb(lambda f, N_, B: _psd_one_sided(f, N_, B, 0.0, 1.0), [1e-3, 2e-4], 1)
     print(f"\n== model B off by a factor (truth N 1e-3, B 2e-4), {seeds} seeds: called mis-sized ==")
     print("  " + ", ".join(f"x{f}: {called[f]}/{seeds}" for f in factors)
           + f"; spread of the fitted ln B {np.std(ln_fit):.3f} (Cramer-Rao {crlb:.3f})")

@@ -20,6 +20,14 @@ def _model_yaml(path, terms, rate=RATE):
     return path
 
 
+def _write_csv(path, y, rate):
+    """The same rate samples on all three gyro axes of a companion CSV, accelerometer at rest."""
+    t = np.arange(y.shape[0]) / rate
+    np.savetxt(path, np.column_stack([t, y, y, y, 0 * t, 0 * t, 0 * t - 9.8]), delimiter=",",
+               header="time_s,gx,gy,gz,ax,ay,az", comments="", fmt="%.9g")
+    return path
+
+
 @pytest.fixture(scope="module")
 def raw_imu_tlog(tmp_path_factory):
     d = tmp_path_factory.mktemp("gap")
@@ -64,10 +72,7 @@ def test_model_that_fits_adds_nothing(tmp_path, capsys):
     n = int(1800 * 20)
     terms = [{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 1e-5}]
     y = synthesize_axis(terms, 20.0, n, np.random.default_rng(3))
-    csv = tmp_path / "d.csv"
-    t = np.arange(n) / 20.0
-    np.savetxt(csv, np.column_stack([t, y, y, y, 0 * t, 0 * t, 0 * t - 9.8]), delimiter=",",
-               header="time_s,gx,gy,gz,ax,ay,az", comments="", fmt="%.9g")
+    csv = _write_csv(tmp_path / "d.csv", y, 20.0)
     model = _model_yaml(tmp_path / "m.yaml", terms, rate=20.0)
     assert main(["gap", str(csv), "--model", str(model), "--axis", "gx", "--json", "-"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -99,10 +104,7 @@ def test_report_gives_the_gauss_markov_alternative(tmp_path, capsys):
     base = [{"effect": "white_noise", "N": 1e-3}, {"effect": "bias_instability", "B": 1e-4}]
     y = synthesize_axis(base + [{"effect": "gauss_markov", "sigma": 5e-4, "tau_c": 300.0}], 20.0, n,
                         np.random.default_rng(1000))
-    csv = tmp_path / "d.csv"
-    t = np.arange(n) / 20.0
-    np.savetxt(csv, np.column_stack([t, y, y, y, 0 * t, 0 * t, 0 * t - 9.8]), delimiter=",",
-               header="time_s,gx,gy,gz,ax,ay,az", comments="", fmt="%.9g")
+    csv = _write_csv(tmp_path / "d.csv", y, 20.0)
     model = _model_yaml(tmp_path / "m.yaml", base, rate=20.0)
     assert main(["gap", str(csv), "--model", str(model), "--axis", "gx"]) == 0
     text = capsys.readouterr().out
