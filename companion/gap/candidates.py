@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar, nnls
 
-from companion.gap.compare import Measured, deviance, gap_metric, term_avar
+from companion.gap.likelihood import MODEL_FLOOR, Measured, deviance, gap_metric, term_avar
 
 #: The magnitude parameter of each effect (AVAR proportional to its square).
 MAGNITUDE = {"quantization": "Q", "white_noise": "N", "bias_instability": "B", "random_walk": "K",
@@ -206,7 +206,6 @@ def estimate_covariance(meas: Measured, fit: Fit) -> np.ndarray:
     cluster sizes) for the fitted stochastic terms (a ramp carries no sampling covariance of its own); the
     floor is the 5 % model floor of :func:`companion.gap.compare.measure`."""
     from companion.allan.confidence import oavar_covariance
-    from companion.gap.compare import MODEL_FLOOR
 
     rate = meas.rate_hz
     s = np.maximum(fit.s, 1e-300)

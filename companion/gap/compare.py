@@ -21,40 +21,16 @@ Statistics (NIST SP 1065 sec. 5.3; IEEE Std 952 Annex C):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import special, stats
 
 from companion.allan.adev import oavar
-from companion.allan.terms import avar_term
 from companion.gap._edf import local_slope, oavar_edf
-
-
-@dataclass
-class Measured:
-    """Overlapping AVAR of one axis with EDF and 95 % band (all arrays aligned on ``tau``)."""
-
-    tau: np.ndarray
-    avar: np.ndarray
-    m: np.ndarray
-    nu: np.ndarray
-    rate_hz: float
-    n: int
-    lo: np.ndarray = field(default=None)
-    hi: np.ndarray = field(default=None)
-    nu_raw: np.ndarray = field(default=None)
-
-    def __post_init__(self):
-        if self.nu_raw is None:
-            self.nu_raw = self.nu
-        if self.lo is None:
-            self.lo = self.nu * self.avar / stats.chi2.ppf(0.975, self.nu)
-            self.hi = self.nu * self.avar / stats.chi2.ppf(0.025, self.nu)
-
-
-#: Relative accuracy (in AVAR) to which any model, or simulation, can be expected to hold: 5 %.
-MODEL_FLOOR = 0.05
+from companion.gap.candidates import fit_terms
+from companion.gap.likelihood import (MODEL_FLOOR, Measured, deviance, deviance_points,  # noqa: F401 (re-exported)
+                                      expected_deviance, gap_metric, model_avar, term_avar)
 
 
 def measure(y, rate_hz: float, spec="octave", min_terms: int = 1, model_floor: float = MODEL_FLOOR) -> Measured:
@@ -92,51 +68,10 @@ def reference_curve(meas: Measured) -> np.ndarray:
     fall after a Gauss-Markov or sinusoid bump; there it takes the flatter slope, whose EDF is smaller, the
     cautious side.
     """
-    from companion.gap.candidates import fit_terms  # late import: candidates imports this module
-
     terms = [{"effect": e, p: 1.0} for e, p in (("quantization", "Q"), ("white_noise", "N"),
                                                  ("bias_instability", "B"), ("random_walk", "K"),
                                                  ("ramp", "R"))]
     return fit_terms(meas, terms).s
-
-
-def term_avar(term, tau, rate_hz: float) -> np.ndarray:
-    """AVAR of one term as the simulator produces it: a bias_instability term without ``f0`` gets the
-    cut-off at the Nyquist frequency rate_hz/2 (thesis eq. (3.16)), which is how
-    :func:`companion.sim.synth.flicker` synthesises it; every other term as in :mod:`companion.allan.terms`."""
-    if term["effect"] == "bias_instability" and term.get("f0") is None:
-        term = dict(term, f0=rate_hz / 2.0)
-    return avar_term(term, tau)
-
-
-def model_avar(terms, tau, rate_hz: float) -> np.ndarray:
-    tau = np.asarray(tau, dtype=float)
-    total = np.zeros_like(tau)
-    for t in terms:
-        total = total + term_avar(t, tau, rate_hz)
-    return total
-
-
-def expected_deviance(nu) -> np.ndarray:
-    """E0(nu) = nu (ln(nu/2) - psi(nu/2)): the mean per-point deviance of a correct model."""
-    nu = np.asarray(nu, dtype=float)
-    return nu * (np.log(nu / 2.0) - special.digamma(nu / 2.0))
-
-
-def deviance_points(meas: Measured, s) -> np.ndarray:
-    """d_i = nu_i (a_i/s_i - 1 - ln(a_i/s_i)) (Gamma deviance)."""
-    s = np.maximum(np.asarray(s, dtype=float), 1e-300)
-    r = meas.avar / s
-    return meas.nu * (r - 1.0 - np.log(r))
-
-
-def deviance(meas: Measured, s) -> float:
-    return float(np.sum(deviance_points(meas, s)))
-
-
-def gap_metric(meas: Measured, s) -> float:
-    """G = mean d_i / E0(nu_i); about 1 when the model ``s`` (AVAR at meas.tau) is right."""
-    return float(np.mean(deviance_points(meas, s) / expected_deviance(meas.nu)))
 
 
 def z_scores(meas: Measured, s) -> np.ndarray:
