@@ -17,11 +17,13 @@ with measured data on one axis, and fix the model:
   2. the model's Allan deviation, analytic and confirmed by simulating the model;
   3. the tau ranges where the measurement leaves the model's band (table);
   4. every effect the model lacks (quantization, white_noise, bias_instability, random_walk, ramp,
-     gauss_markov, sinusoid) fitted to the data with the model's terms; the best one is added when its
-     likelihood-ratio gain is significant (corrected for the correlated long-tau Allan points; the report
-     prints each test); model terms that are merely mis-sized are recalibrated; a named sinusoid is
-     checked against the periodogram; a random walk that won over a long Gauss-Markov comes with that
-     Gauss-Markov as the alternative the record is too short to rule out;
+     gauss_markov, sinusoid) added, each model term recalibrated, and each effect with a recalibrated
+     term: all fitted to the same data and ranked by one score (deviance removed minus the penalty of the
+     documented test level, scaled for the correlated long-tau Allan points); the best is taken when its
+     corrected likelihood ratio passes that level, and the runner-up is printed beside it (so a ramp and
+     a 5x larger random walk are weighed against each other, not tested one after the other); a named
+     sinusoid is checked against the periodogram; a random walk that won over a long Gauss-Markov comes
+     with that Gauss-Markov as the alternative the record is too short to rule out;
   5. repeated until no significant gap remains; gap before/after (G = 1 on average for a right model,
      noise floor 2) against the analytic curves and against fresh simulations.
 
@@ -74,7 +76,6 @@ def _load_axis(spec, axis, config):
 
 
 def format_report(r, source: str, label: str) -> str:
-    from companion.gap.candidates import MAGNITUDE
     from companion.gap.explain import describe_term
     from companion.gap.workflow import NOISE_FLOOR_G
 
@@ -98,9 +99,10 @@ def format_report(r, source: str, label: str) -> str:
     else:
         out.append("  the measurement stays inside the model's 95 % band everywhere")
     for it in r.iterations:
-        seen = [c for c in it["candidates"] if c["params"].get(MAGNITUDE[c["effect"]], 0) > 0]
-        top = ", ".join(f"{c['effect']} dD={c['delta_dev']:.1f}" for c in seen[:3]) or "none fits above zero"
-        out.append(f"iteration {it['iteration']}: best candidates {top}; chosen: {it['chosen'] or 'none significant'}")
+        ex = it.get("explanations") or []
+        top = "; ".join(f"{x['explanation']} {x['score']:.1f}" for x in ex[:3]) or "none fits above zero"
+        out.append(f"iteration {it['iteration']}: explanations by score (dD - overdispersion x penalty): {top}; "
+                   f"chosen: {it['chosen'] or 'none significant'}")
         nt = it.get("nested")
         if nt:
             kept = "kept" if nt["lr"] < nt["threshold"] else "rejected"
@@ -111,6 +113,11 @@ def format_report(r, source: str, label: str) -> str:
             verdict = "significant" if t["lr"] > t["threshold"] else "not significant"
             out.append(f"  evidence for {t['effect']}: LR {t['lr']:.1f} (dD {t['lr_raw']:.1f} / overdispersion "
                        f"{t['inflation']:.2f}), {t['threshold']:.1f} needed: {verdict}")
+        ru = it.get("runner_up")
+        if t and ru:
+            out.append(f"  runner-up {ru['explanation']}: LR {ru['lr']:.1f} (dD {ru['delta_dev']:.1f} / overdispersion "
+                       f"{ru['inflation']:.2f}), {ru['penalty']:.1f} needed, score {ru['score']:.1f} against "
+                       f"{t.get('score', float('nan')):.1f}")
     for a in r.added:
         out.append("added: " + a["explanation"])
     for e in r.recalibrated:

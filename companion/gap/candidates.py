@@ -215,7 +215,7 @@ def estimate_covariance(meas: Measured, fit: Fit) -> np.ndarray:
     return cov + np.diag((MODEL_FLOOR * s) ** 2)
 
 
-def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction: np.ndarray | None = None) -> float:
+def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction=None, sigma=None) -> float:
     """Overdispersion phi >= 1 of a likelihood-ratio statistic at ``fit`` (sandwich, quasi-likelihood).
 
     The deviance treats the octave estimates as independent with nu EDF each, i.e. Cov(a) = Sigma_0 =
@@ -232,6 +232,14 @@ def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction: np.ndarray 
       form), appended as a last column with every free nonzero term (and term ``i``, if not None) free: the
       magnitude of a candidate effect the model lacks (its unit column), or 1/tau_c of a Gauss-Markov term at
       its random-walk limit (:func:`gm_rw_direction`).
+    * ``direction`` a list of such columns: a joint test of several parameters (an effect added together
+      with a recalibrated term). The statistic is then divided by the largest eigenvalue of P^-1 V_TT,
+      P = (I^-1)_TT and V_TT the naive and sandwich covariances of the k tested parameters T (the
+      conservative bound of Rao & Scott 1981: LR / delta_max is stochastically below chi^2_k). Not the
+      first-order (mean) factor: a useless extra direction with little overdispersion would lower the mean
+      and let "effect + needless recalibration" outscore the effect alone. The largest eigenvalue over a
+      larger set of directions is never smaller, so a combination never gains from its correction; for
+      k = 1 it is the ratio above.
     """
     rate = meas.rate_hz
     free = [j for j, t in enumerate(fit.terms)
@@ -239,11 +247,15 @@ def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction: np.ndarray 
     if direction is None and i not in free:
         return 1.0
     cols = [unit_column(fit.terms[j], meas.tau, rate) for j in free]
+    extra = []
     if direction is not None:
-        cols.append(np.asarray(direction, dtype=float))
+        extra = [np.asarray(d, dtype=float) for d in direction] if isinstance(direction, (list, tuple)) \
+            else [np.asarray(direction, dtype=float)]
+        cols += extra
     A = np.column_stack(cols)
     s = np.maximum(fit.s, 1e-300)
-    sigma = estimate_covariance(meas, fit)
+    if sigma is None:  # the callers weighing many directions at one fit pass it once
+        sigma = estimate_covariance(meas, fit)
     Dw = meas.nu / (2.0 * s**2)
     DA = Dw[:, None] * A
     info = A.T @ DA
@@ -252,11 +264,15 @@ def lr_inflation(meas: Measured, fit: Fit, i: int | None, direction: np.ndarray 
     except np.linalg.LinAlgError:
         return 1.0
     V = inv @ (DA.T @ sigma @ DA) @ inv
-    k = free.index(i) if direction is None else len(free)
-    v0 = inv[k, k]
-    if not (np.isfinite(V[k, k]) and v0 > 0):
+    T = [free.index(i)] if direction is None else list(range(len(free), len(free) + len(extra)))
+    P, VT = inv[np.ix_(T, T)], V[np.ix_(T, T)]
+    if not (np.all(np.isfinite(VT)) and np.all(np.diag(P) > 0)):
         return 1.0
-    return float(max(1.0, V[k, k] / v0))
+    try:
+        ratio = float(np.max(np.real(np.linalg.eigvals(np.linalg.solve(P, VT)))))
+    except np.linalg.LinAlgError:
+        return 1.0
+    return float(max(1.0, ratio)) if np.isfinite(ratio) else 1.0
 
 
 def gm_rw_direction(meas: Measured, K: float) -> np.ndarray:

@@ -119,3 +119,16 @@ def explain_spectral(ev, term, axis: str) -> str:
             "Allan bump is the picture of a broader spectral shape, e.g. the roll-off of the sensor's or the "
             "autopilot's low-pass filter, not a periodic disturbance. The term is kept because it reproduces "
             "the Allan curve; do not read it as a vibration line.")
+
+
+def explain_runner_up(chosen: str, chosen_score: float, runner: str | None, runner_score: float | None) -> str:
+    """Why ``chosen`` and not the runner-up: both scored by the one criterion of companion.gap.selection
+    (deviance removed minus the overdispersion-scaled penalty), on the same data and from the same state."""
+    if runner is None:
+        return f"{chosen} (score {chosen_score:.1f}) was the only explanation fitted with a positive gain."
+    if runner_score is not None and runner_score > 0:
+        how = "also significant on its own, but explains less net of its penalty"
+    else:
+        how = "not significant on its own"
+    return (f"{chosen} (score {chosen_score:.1f}) was weighed against {runner} (score {runner_score:.1f}, "
+            f"{how}); score = deviance removed - overdispersion x penalty, on the same data.")

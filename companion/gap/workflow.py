@@ -5,28 +5,20 @@
    :func:`companion.sim.synth.synthesize_axis` (same rate and length, fixed seed): G_sim compares the
    measurement with the simulated curve, and the simulated curve with the analytic one.
 3. Disagreement regions: consecutive cluster times where the measurement leaves the model's 95 % band.
-4. Evidence rule. Every candidate effect the model lacks (quantization, white_noise, bias_instability,
-   random_walk, ramp; gauss_markov and sinusoid even when one is present: a second time scale) is fitted
-   jointly with the model's own terms (magnitudes free) by maximum likelihood (candidates.py). The
-   candidate with the smallest D + 2 k (AIC; k its number of parameters) is added when its deviance gain
-   over the recalibrated model, Delta D = D_base - D_cand (a likelihood ratio, chi^2_k under the null by
-   Wilks' theorem), divided by the sandwich overdispersion phi of its magnitude at the base fit
-   (:func:`companion.gap.candidates.lr_inflation` in the direction of its unit column: correlated, low-EDF
-   long-tau estimates under flicker and random-walk noise), exceeds chi^2_k(1 - ALPHA), ALPHA = 1e-4 (a
-   stringent level: grids over tau_c and freq_hz make the nominal level optimistic; the null benchmark in
-   benchmarks/bench_gap.py measures the real false-alarm rate). Repeat until no candidate passes.
-5. Mis-sized terms: a model term is recalibrated only when holding it at its model value (all else
-   refitted) costs more deviance than chi^2_1(1 - ALPHA_RECAL), ALPHA_RECAL = 1e-3 (likelihood-ratio test,
-   divided by the sandwich overdispersion phi_i of :func:`companion.gap.candidates.lr_inflation`, which
-   accounts for the correlated, low-EDF long-tau estimates of flicker and random-walk noise; evaluated
-   under the null, i.e. at the fit with the term held);
-   otherwise the model value is kept. A term refitted to zero that fails the test is reported as not seen.
-   Among candidates, a two-parameter effect gives way to the one-parameter limit it is near (Gauss-Markov
-   with tau_c in the upper half of the log tau range -> random walk, lower half -> white noise) unless it is
-   significantly better (:func:`_nested_test`: against random walk the
-   likelihood ratio corrected for correlated long-tau estimates exceeds chi^2_1(1 - ALPHA_RECAL); against
-   white noise the raw one exceeds chi^2_1(1 - ALPHA)). When the limit wins, the Gauss-Markov fit is
-   reported as an alternative the record cannot rule out.
+4-5. Explanations weighed head to head (:mod:`companion.gap.selection`). From the current state (model
+   terms held at their values unless recalibrated, effects added earlier free) every explanation is fitted
+   by maximum likelihood on the same data: each effect the model lacks added (quantization, white_noise,
+   bias_instability, random_walk, ramp; gauss_markov and sinusoid also a second time), each held model
+   term recalibrated, each effect with one term recalibrated. One criterion ranks them:
+   score = Delta D / phi - penalty (deviance removed, divided by its sandwich overdispersion at the state,
+   :func:`companion.gap.candidates.lr_inflation`; penalty chi^2_k(1 - ALPHA) per added effect with k
+   parameters, chi^2_1(1 - ALPHA_RECAL) per recalibrated term). The best is taken when its score is
+   positive; its runner-up and the margin are reported (``alternatives``). A Gauss-Markov winner gives way
+   to the one-parameter limit it is near (random walk, added or the model's own recalibrated; white noise)
+   unless significantly better (:func:`companion.gap.selection.nested_test`), and is then reported as the
+   alternative the record cannot rule out. Repeat until no explanation scores above zero; then a
+   recalibration that later additions made unnecessary (holding the term at its model value costs
+   LR <= chi^2_1(1 - ALPHA_RECAL)) is undone. A freed term refitted to zero is reported as not seen.
 6. Noise floor: the model fits within the noise when the gap metric G <= NOISE_FLOOR_G = 2 (G is 1 on
    average for a right model; the null benchmark gives its spread) and nothing is added or recalibrated.
    An added sinusoid is checked against the periodogram (:func:`companion.gap.spectral.line_evidence`):
@@ -46,23 +38,20 @@ from scipy import stats
 
 from companion.allan.adev import oavar
 from companion.allan.lsb import DITHER_RATIO
-from companion.gap import explain
-from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, _intervals, fit_terms, fit_with_candidate,
-                                     gm_rw_direction, lr_inflation, unit_column)
+from companion.gap import explain, selection
+from companion.gap.candidates import MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation, unit_column
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    model_avar)
 from companion.gap._edf import local_slope, oavar_edf
 from companion.gap.spectral import line_evidence
 from companion.sim.synth import synthesize_axis
 
-ALPHA = 1e-4
-#: level of the per-term likelihood-ratio test that declares a model term mis-sized
-ALPHA_RECAL = 1e-3
-#: one-parameter limits of two-parameter effects (Gauss-Markov: tau_c >> T is a rate random walk,
-#: tau_c << tau0 white noise; IEEE 952 C.6)
-NESTED = {"gauss_markov": ("random_walk", "white_noise")}
+ALPHA = selection.ALPHA
+ALPHA_RECAL = selection.ALPHA_RECAL
+NESTED = selection.NESTED
 NOISE_FLOOR_G = 2.0
-MAX_ITER = 4
+#: steps (an effect added, a term recalibrated, or both) before stopping
+MAX_ITER = 6
 SIM_MAX_SAMPLES = 2_000_000
 
 
@@ -92,6 +81,7 @@ class GapResult:
     fits_within_noise: bool = False
     notes: list = field(default_factory=list)
     quantization: dict | None = None
+    alternatives: list = field(default_factory=list)  # per chosen step: its runner-up and the margin
 
     def to_dict(self) -> dict:
         m = self.measured
@@ -109,6 +99,7 @@ class GapResult:
             "added": self.added,
             "recalibrated": self.recalibrated,
             "iterations": self.iterations,
+            "alternatives": self.alternatives,
             "disagreements_before": [r.as_dict() for r in self.regions_before],
             "disagreements_after": [r.as_dict() for r in self.regions_after],
             "terms_before": self.terms_before,
@@ -162,53 +153,39 @@ def _sim_checks(terms, meas: Measured, seed: int):
     return avar, g_meas_sim, g_sim_analytic
 
 
-def _nearer_limit(meas: Measured, cand) -> str | None:
-    """The one-parameter limit a two-parameter candidate is near: for Gauss-Markov, random walk when its
-    tau_c lies in the upper half of the measured tau range (log scale), white noise in the lower half."""
-    limits = NESTED.get(cand[1])
-    if not limits:
-        return None
-    tau_c = cand[2].terms[-1]["tau_c"]
-    return limits[0] if tau_c >= math.sqrt(meas.tau[0] * meas.tau[-1]) else limits[1]
-
-
-def _nested_test(meas: Measured, best, limit) -> dict:
-    """Is the two-parameter candidate ``best`` significantly better than its one-parameter limit ``limit``?
-
-    Likelihood ratio LR = D_limit - D_best. Gauss-Markov against random walk (lambda = 1/tau_c -> 0): the
-    long-tau octave estimates that carry the difference are correlated and few in EDF, so the raw LR is
-    overdispersed (64 random-walk draws, 2 h at 20 Hz, benchmarks/bench_gap.py: raw up to 20.3, corrected up
-    to 7.2); it is divided by the sandwich
-    factor phi_lambda of :func:`companion.gap.candidates.lr_inflation` in the direction
-    :func:`companion.gap.candidates.gm_rw_direction` and compared with chi^2_1(1 - ALPHA_RECAL) = 10.8, the
-    level of the mis-sized test. Against white noise (tau_c << tau0) the raw LR is compared with
-    chi^2_1(1 - ALPHA) = 15.1."""
-    lr_raw = best[3] - limit[3]
-    if limit[1] == "random_walk":
-        fit_limit = limit[2]
-        i = len(fit_limit.terms) - 1
-        phi = lr_inflation(meas, fit_limit, i, direction=gm_rw_direction(meas, fit_limit.terms[i]["K"]))
-        threshold = float(stats.chi2.isf(ALPHA_RECAL, 1))
-    else:
-        phi, threshold = 1.0, delta_crit(1)
-    return {"limit": limit[1], "lr": lr_raw / phi, "lr_raw": lr_raw, "inflation": phi, "threshold": threshold}
-
-
 def _strongest_left(res: GapResult) -> str:
-    """'; the strongest candidate left, ...' from the last iteration's rejected test, or ''."""
+    """'; the strongest explanation left, ...' from the last iteration's ranking when nothing was chosen."""
     last = res.iterations[-1] if res.iterations else {}
     t = last.get("test")
     if not t or last.get("chosen") or t["lr"] <= 0:
         return ""
-    cand = next((c for c in last["candidates"] if c["effect"] == t["effect"]), None)
-    params = ", ".join(f"{k} = {v:.3g}" for k, v in (cand or {}).get("params", {}).items())
-    return (f"; the strongest candidate left, {t['effect']} ({params}), has LR {t['lr']:.1f} < {t['threshold']:.1f}: "
+    top = (last.get("explanations") or [{}])[0]
+    params = ", ".join(f"{k} = {v:.3g}" for k, v in top.get("params", {}).items())
+    params = f" ({params})" if params else ""
+    return (f"; the strongest explanation left, {t['effect']}{params}, has LR {t['lr']:.1f} < {t['threshold']:.1f}: "
             "suggestive, not significant at the documented level")
 
 
-def _candidate_effects(terms) -> list[str]:
-    present = {t["effect"] for t in terms}
-    return [e for e in MAGNITUDE if e not in present or e in SHAPE]
+def _refit(meas: Measured, terms, held, n_model: int) -> Fit:
+    """Refit the free magnitudes; intervals for them and for the shapes of added Gauss-Markov/sinusoid terms."""
+    fit = fit_terms(meas, terms, fixed=sorted(held))
+    free = [i for i in range(len(terms)) if i not in held]
+    _intervals(meas, fit, free, shape_free=[i for i in range(n_model, len(terms))
+                                            if terms[i]["effect"] in SHAPE and i not in held])
+    return fit
+
+
+def _hold_test(meas: Measured, base: Fit, held, i: int, t0) -> tuple:
+    """Likelihood ratio of holding the freed model term ``i`` back at its model value (all else refitted),
+    divided by the sandwich overdispersion evaluated under that null (score form: a model B larger than
+    the data's gets the wider spread of its own flicker). Returns (lr, lr_raw, phi, held fit)."""
+    p = MAGNITUDE[t0["effect"]]
+    terms = [dict(t) for t in base.terms]
+    terms[i][p] = t0[p]
+    hf = fit_terms(meas, terms, fixed=sorted(set(held) | {i}), intervals=False)
+    lr_raw = hf.dev - base.dev
+    phi = lr_inflation(meas, hf, None, direction=[unit_column(terms[i], meas.tau, meas.rate_hz)])
+    return lr_raw / phi, lr_raw, phi, hf
 
 
 def _params(term) -> dict:
@@ -259,77 +236,84 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                  "change the fit measurably (indistinguishable from the model's N)")
         res.quantization = q
 
-    # 4-5. iterate: recalibrate, try every candidate, add the best significant one
-    base = fit_terms(meas, current, fixed=fixed)
-    alternatives: dict[int, dict] = {}  # index of an added term -> the two-parameter effect it won over
+    # 4-5. every explanation weighed from the same state by one criterion (companion.gap.selection): an
+    # effect added, a model term recalibrated, both; model terms stay at their values unless freed
+    held = set(range(len(terms0))) | set(fixed)
+    base = _refit(meas, current, held, len(terms0))
+    alternatives: dict[int, dict] = {}  # index of a term -> the Gauss-Markov fit it won over
     for it in range(max_iter):
-        cands = []
-        for effect in _candidate_effects(current):
-            f = fit_with_candidate(meas, current, fixed, effect)
-            k = N_PARAMS[effect]
-            mag = f.terms[-1][MAGNITUDE[effect]]
-            cands.append((f.dev + 2 * k, effect, f, base.dev - f.dev, k, mag))
-        cands.sort(key=lambda c: c[0])
+        recalibratable = [j for j in range(len(terms0)) if j in held]
+        step = selection.choose(meas, base, sorted(held), recalibratable)
+        ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
         record = {"iteration": it + 1, "gap_base": base.gap,
-                  "candidates": [{"effect": c[1], "delta_dev": c[3], "k": c[4], "gap": c[2].gap,
-                                  "params": _params(c[2].terms[-1])} for c in cands],
-                  "threshold": {k: delta_crit(k) for k in (1, 2)}}
-        best = next((c for c in cands if c[5] > 0), None)
-        alternative = None
-        if best is not None:  # Occam: a nested one-parameter limit that is not significantly worse wins
-            near = _nearer_limit(meas, best)
-            for c in cands:
-                if c[1] == near and c[5] > 0:
-                    nested = _nested_test(meas, best, c)
-                    record["nested"] = nested
-                    if nested["lr"] < nested["threshold"]:
-                        alternative = {**_params(best[2].terms[-1]), "effect": best[1], "lr": nested["lr"],
-                                       "instead_of": c[1]}
-                        best = c
-                    break
-        if best is not None:  # the same overdispersion correction as the mis-sized test (score form)
-            phi = lr_inflation(meas, base, None, direction=unit_column(best[2].terms[-1], meas.tau, rate_hz))
-            record["test"] = {"effect": best[1], "lr": best[3] / phi, "lr_raw": best[3], "inflation": phi,
-                              "threshold": delta_crit(best[4])}
-        if best is None or best[3] / phi <= delta_crit(best[4]):
+                  "candidates": [{"effect": x.effect, "delta_dev": x.delta_dev, "k": x.k, "gap": x.fit.gap,
+                                  "params": _params(x.fit.terms[-1])} for x in ranked if x.effect and not x.recal],
+                  "explanations": [x.as_dict(terms0) for x in ranked[:8]],
+                  "threshold": {k: selection.add_penalty(k) for k in (1, 2)},
+                  "recal_threshold": selection.RECAL_PENALTY}
+        if step["nested"]:
+            record["nested"] = step["nested"]
+        if top is not None:
+            record["test"] = {"effect": top.label(terms0), "lr": top.lr, "lr_raw": top.delta_dev,
+                              "inflation": top.inflation, "threshold": top.penalty, "score": top.score}
+            record["runner_up"] = ru.as_dict(terms0) if ru is not None else None
+        if chosen is None:
             record["chosen"] = None
             res.iterations.append(record)
             break
-        _, effect, f, dd, k, _ = best
-        record["chosen"] = effect
-        record["gap_after"] = f.gap
+        record["chosen"] = chosen.label(terms0)
+        record["gap_after"] = chosen.fit.gap
         res.iterations.append(record)
-        if alternative is not None:
-            alternatives[len(current)] = alternative
-        current = f.terms
-        fixed = list(fixed)
-        base = fit_terms(meas, current, fixed=fixed)
-        # shapes of the added GM/sinusoid: intervals with the shape free
-        free = [i for i in range(len(current)) if i not in fixed]
-        _intervals(meas, base, free, shape_free=[i for i in range(len(terms0), len(current))
-                                                 if current[i]["effect"] in SHAPE and i not in fixed])
+        res.alternatives.append({"iteration": it + 1, "chosen": chosen.as_dict(terms0),
+                                 "runner_up": ru.as_dict(terms0) if ru is not None else None,
+                                 "margin": selection.margin(chosen, ru) if ru is not None else None,
+                                 "text": explain.explain_runner_up(chosen.label(terms0), chosen.score,
+                                                                   ru.label(terms0) if ru is not None else None,
+                                                                   ru.score if ru is not None else None)})
+        if step["alternative"] is not None:
+            if chosen.effect:
+                alternatives[len(current)] = step["alternative"]
+            else:
+                alternatives[[j for j in chosen.recal if current[j]["effect"] == step["nested"]["limit"]][0]] = \
+                    step["alternative"]
+        current = [dict(t) for t in chosen.fit.terms]
+        held -= set(chosen.recal)
+        base = _refit(meas, current, held, len(terms0))
 
-    # 5. keep model values that the data do not contradict
+    # 5. a recalibration that later additions made unnecessary is undone (backward step, same test)
+    while True:
+        weakest = None
+        for j in range(len(terms0)):
+            if j in held:
+                continue
+            lr, _, _, hf = _hold_test(meas, base, held, j, terms0[j])
+            if lr <= selection.RECAL_PENALTY and (weakest is None or lr < weakest[0]):
+                weakest = (lr, j, hf)
+        if weakest is None:
+            break
+        held.add(weakest[1])
+        current = [dict(t) for t in weakest[2].terms]
+        base = _refit(meas, current, held, len(terms0))
+        alternatives.pop(weakest[1], None)
+
     final = [dict(t) for t in base.terms]
     for i, t0 in enumerate(terms0):
         p = MAGNITUDE[t0["effect"]]
-        fitted = base.terms[i][p]
-        lo, hi = base.ci95[i].get(p, [fitted, fitted])
+        entry = {"effect": t0["effect"], "param": p, "model": t0[p]}
+        if i in held:  # evidence for freeing it at the final state
+            free_fit = fit_terms(meas, base.terms, fixed=sorted(held - {i}))
+            fitted = free_fit.terms[i][p]
+            lo, hi = free_fit.ci95[i].get(p, [fitted, fitted])
+            phi = lr_inflation(meas, base, None, direction=[unit_column(base.terms[i], meas.tau, rate_hz)])
+            lr_raw = base.dev - free_fit.dev
+            lr = lr_raw / phi
+        else:  # evidence for holding it back at its model value
+            fitted = base.terms[i][p]
+            lo, hi = base.ci95[i].get(p, [fitted, fitted])
+            lr, lr_raw, phi, _ = _hold_test(meas, base, held, i, t0)
         ratio = fitted / t0[p] if t0[p] > 0 else math.inf
-        entry = {"effect": t0["effect"], "param": p, "model": t0[p], "fitted": fitted, "ratio": ratio,
-                 "ci95": [lo, hi]}
-        # likelihood-ratio test: this term held at its model value, everything else refitted
-        held = [dict(t) for t in base.terms]
-        held[i][p] = t0[p]
-        held_fit = fit_terms(meas, held, fixed=sorted(set(fixed) | {i}), intervals=False)
-        lr_raw = held_fit.dev - base.dev
-        # overdispersion evaluated under the null hypothesis (the term at its model value), as in a score
-        # test: a model B larger than the data's gets the wider spread of its own flicker
-        phi = lr_inflation(meas, replace(held_fit, fixed=list(fixed)), i)
-        lr = lr_raw / phi
-        entry.update(lr=lr, lr_raw=lr_raw, inflation=phi)
-        if lr <= float(stats.chi2.isf(ALPHA_RECAL, 1)):
-            final[i][p] = t0[p]
+        entry.update(fitted=fitted, ratio=ratio, ci95=[lo, hi], lr=lr, lr_raw=lr_raw, inflation=phi)
+        if i in held:
             entry["verdict"] = "consistent"
         elif fitted == 0:
             entry["verdict"] = "not seen"
@@ -338,10 +322,13 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         else:
             entry["verdict"] = "too small" if ratio > 1 else "too large"
             entry["text"] = explain.explain_missized(t0["effect"], p, ratio)
+            if i in alternatives:
+                entry["alternative"] = alternatives[i]
+                entry["text"] += ". " + explain.explain_alternative(alternatives[i], meas.n / rate_hz, rate_hz)
         res.recalibrated.append(entry)
     for i in range(len(terms0), len(final)):
         t = final[i]
-        if i in fixed:
+        if i in held:
             continue
         ci = base.ci95[i] if i < len(base.ci95) else {}
         ev = None

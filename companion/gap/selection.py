@@ -1,0 +1,265 @@
+"""Weigh every explanation of a gap head to head, on the same data, by one criterion.
+
+A gap between a model and a measurement can have several explanations that compete for the same points:
+an effect the model lacks, a model term that is mis-sized, an effect plus a recalibrated term; and within
+these, look-alikes (a ramp or a larger random walk for a rising long-tau end; a Gauss-Markov term or a
+random walk; a sinusoid or a Gauss-Markov bump). Testing them one after another lets whichever is tested
+first take the points; here each is fitted from the same state and scored by one criterion:
+
+    score(E) = Delta D_E - phi_E penalty(E)      (= D_state - [D_E + phi_E penalty(E)])
+
+i.e. each explanation's deviance plus its overdispersion-scaled penalty (a quasi-likelihood AIC, QAIC, with
+the penalty of the documented test levels); the smallest wins.
+
+* Delta D_E = D_state - D_E: the Gamma deviance (-2 ln L + const, :mod:`companion.gap.likelihood`) the
+  explanation removes; the state is the model as it stands (model terms held at their values unless a
+  previous step recalibrated them; effects added earlier free).
+* phi_E >= 1: the overdispersion of that likelihood ratio (the long-tau octave estimates are correlated and
+  few in EDF), :func:`companion.gap.candidates.lr_inflation` at the state fit (score-test form) in the
+  directions E opens (the unit column of an added effect, of a freed model term); for two directions the
+  largest Rao-Scott eigenvalue (conservative: a combination never gains from its correction).
+* penalty(E) = the sum of the levels its parts must pass on their own: chi^2_k(1 - ALPHA) for an added
+  effect with k parameters (15.1, 18.4), chi^2_1(1 - ALPHA_RECAL) = 10.8 per recalibrated term.
+
+A positive score is the same statement as "the corrected likelihood ratio LR = Delta D_E / phi_E exceeds
+the documented level", so taking the best explanation only when its score is positive keeps every test's
+level. Between two explanations the difference of scores is the difference of their deviances net of
+their scaled penalties: the gain is not divided by phi for the ranking, because with a gap of thousands of
+deviance units a 10 % difference of phi between two directions would outweigh any difference of fit
+(measured: a hidden white noise lost to a sinusoid that fits 4 % worse).
+
+The best-scoring explanation is taken when its score is positive; the runner-up that is not merely the
+winner plus a further change is reported with its evidence (``alternatives``). One refinement keeps the
+nested rule of a two-parameter effect against its one-parameter limit (Gauss-Markov with tau_c -> infinity
+is a random walk, tau_c -> 0 white noise): the limit is named unless the Gauss-Markov term is
+significantly better than it (:func:`nested_test`), because the score's small cost of a shape parameter
+(18.4 - 15.1) is not a test of lambda = 1/tau_c = 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from scipy import stats
+
+from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
+                                      fit_with_candidate, gm_rw_direction, lr_inflation, unit_column)
+from companion.gap.likelihood import Measured
+
+#: level an added effect must pass (its score's penalty is chi^2_k(1 - ALPHA))
+ALPHA = 1e-4
+#: level a recalibrated model term must pass (penalty chi^2_1(1 - ALPHA_RECAL) = 10.8)
+ALPHA_RECAL = 1e-3
+#: one-parameter limits of two-parameter effects (Gauss-Markov: tau_c >> T is a rate random walk,
+#: tau_c << tau0 white noise; IEEE 952 C.6)
+NESTED = {"gauss_markov": ("random_walk", "white_noise")}
+
+
+def add_penalty(k: int) -> float:
+    return float(stats.chi2.isf(ALPHA, max(k, 1)))
+
+
+RECAL_PENALTY = float(stats.chi2.isf(ALPHA_RECAL, 1))
+
+
+@dataclass
+class Explanation:
+    """One explanation of the gap, fitted from the state: ``effect`` added (or None) and the model terms
+    ``recal`` freed (recalibrated)."""
+
+    effect: str | None
+    recal: tuple
+    fit: Fit
+    delta_dev: float
+    inflation: float
+    penalty: float
+
+    @property
+    def lr(self) -> float:
+        return self.delta_dev / self.inflation
+
+    @property
+    def score(self) -> float:
+        return self.delta_dev - self.inflation * self.penalty
+
+    @property
+    def k(self) -> int:
+        return (N_PARAMS[self.effect] if self.effect else 0) + len(self.recal)
+
+    def changes(self) -> set:
+        return ({("add", self.effect)} if self.effect else set()) | {("recal", j) for j in self.recal}
+
+    def label(self, model_terms) -> str:
+        parts = [self.effect] if self.effect else []
+        for j in self.recal:
+            t = model_terms[j]
+            parts.append(f"recalibrated {t['effect']} {MAGNITUDE[t['effect']]}")
+        return " + ".join(parts)
+
+    def as_dict(self, model_terms) -> dict:
+        d = {"explanation": self.label(model_terms), "effect": self.effect,
+             "recalibrate": [f"{model_terms[j]['effect']}.{MAGNITUDE[model_terms[j]['effect']]}" for j in self.recal],
+             "k": self.k, "delta_dev": self.delta_dev, "inflation": self.inflation, "lr": self.lr,
+             "penalty": self.penalty, "score": self.score, "gap": self.fit.gap}
+        if self.effect:
+            d["params"] = {p: v for p, v in self.fit.terms[-1].items() if p != "effect"}
+        if self.recal:
+            d["recalibrated"] = {f"{model_terms[j]['effect']}.{MAGNITUDE[model_terms[j]['effect']]}":
+                                 {"model": model_terms[j][MAGNITUDE[model_terms[j]['effect']]],
+                                  "fitted": self.fit.terms[j][MAGNITUDE[model_terms[j]['effect']]]}
+                                 for j in self.recal}
+        return d
+
+
+def candidate_effects(terms) -> list[str]:
+    """Effects that can be added: those the model lacks, and Gauss-Markov / sinusoid also a second time."""
+    present = {t["effect"] for t in terms}
+    return [e for e in MAGNITUDE if e not in present or e in SHAPE]
+
+
+def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Explanation:
+    dirs = []
+    if effect:
+        dirs.append(unit_column(fit.terms[-1], meas.tau, meas.rate_hz))
+    for j in recal:
+        dirs.append(unit_column(state.terms[j], meas.tau, meas.rate_hz))
+    phi = lr_inflation(meas, state, None, direction=dirs, sigma=sigma)
+    pen = (add_penalty(N_PARAMS[effect]) if effect else 0.0) + RECAL_PENALTY * len(recal)
+    return Explanation(effect, tuple(recal), fit, state.dev - fit.dev, phi, pen)
+
+
+def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None) -> list:
+    """Fit every explanation from ``state`` (terms with the indices ``held`` fixed): each candidate effect
+    added; each term of ``recalibratable`` (held model terms) freed; each effect added with one term freed.
+    ``combine_top`` limits the combinations to the best-scoring effects alone (None: all). Sorted by score,
+    best first."""
+    terms = state.terms
+    held = sorted(set(held))
+    sigma = estimate_covariance(meas, state)  # every explanation is corrected at the same state fit
+    out = []
+    fits = {}
+    for e in candidate_effects(terms):
+        f = fit_with_candidate(meas, terms, held, e)
+        fits[e] = f
+        if f.terms[-1][MAGNITUDE[e]] > 0:
+            out.append(_explanation(meas, state, held, e, (), f, sigma))
+    for j in recalibratable:
+        f = fit_terms(meas, terms, [i for i in held if i != j], intervals=False)
+        out.append(_explanation(meas, state, held, None, (j,), f, sigma))
+    effects = [x.effect for x in sorted((x for x in out if x.effect), key=lambda x: -x.score)]
+    if combine_top is not None:
+        effects = effects[:combine_top]
+    for e in effects:
+        for j in recalibratable:
+            f = fit_with_candidate(meas, terms, [i for i in held if i != j], e)
+            if f.terms[-1][MAGNITUDE[e]] > 0:
+                out.append(_explanation(meas, state, held, e, (j,), f, sigma))
+    out.sort(key=lambda x: -x.score)
+    return out
+
+
+def nearer_limit(meas: Measured, x: Explanation) -> str | None:
+    """The one-parameter limit a two-parameter effect is near: for Gauss-Markov, random walk when its
+    tau_c lies in the upper half of the measured tau range (log scale), white noise in the lower half."""
+    limits = NESTED.get(x.effect)
+    if not limits:
+        return None
+    tau_c = x.fit.terms[-1]["tau_c"]
+    return limits[0] if tau_c >= math.sqrt(meas.tau[0] * meas.tau[-1]) else limits[1]
+
+
+def limit_explanation(meas: Measured, state: Fit, held, x: Explanation, ranked) -> tuple:
+    """The explanation that replaces Gauss-Markov ``x`` by its nearer limit, with the index of the limit's
+    term in its fit: the limit added (when the model lacks it) or the model's own term of that effect
+    recalibrated (when it is held), other parts of ``x`` unchanged. (None, None) when there is none."""
+    limit = nearer_limit(meas, x)
+    if limit is None:
+        return None, None
+    own = [j for j, t in enumerate(state.terms) if t["effect"] == limit]
+    if not own:
+        for y in ranked:
+            if y.effect == limit and y.recal == x.recal:
+                return y, len(y.fit.terms) - 1
+        return None, None
+    j = own[0]
+    if j not in held:
+        return None, None
+    recal = tuple(sorted(set(x.recal) | {j}))
+    for y in ranked:
+        if y.effect is None and y.recal == recal:
+            return y, j
+    f = fit_terms(meas, state.terms, [i for i in held if i not in recal], intervals=False)
+    return _explanation(meas, state, held, None, recal, f), j
+
+
+def nested_test(meas: Measured, best: Explanation, limit: Explanation, i: int) -> dict:
+    """Is the Gauss-Markov explanation ``best`` significantly better than ``limit`` (its term ``i`` the
+    one-parameter limit)?
+
+    Likelihood ratio LR = D_limit - D_best. Against a random walk (lambda = 1/tau_c -> 0) the long-tau
+    estimates that carry the difference are correlated and few in EDF, so the LR is divided by the sandwich
+    factor in the direction :func:`companion.gap.candidates.gm_rw_direction` and compared with
+    chi^2_1(1 - ALPHA_RECAL) = 10.8 (64 random-walk draws, 2 h at 20 Hz: raw up to 20.3, corrected up to
+    7.2). Against white noise the raw LR is compared with chi^2_1(1 - ALPHA) = 15.1."""
+    lr_raw = limit.fit.dev - best.fit.dev
+    effect = limit.fit.terms[i]["effect"]
+    if effect == "random_walk" and limit.fit.terms[i]["K"] > 0:
+        phi = lr_inflation(meas, limit.fit, i, direction=gm_rw_direction(meas, limit.fit.terms[i]["K"]))
+        threshold = RECAL_PENALTY
+    else:
+        phi, threshold = 1.0, add_penalty(1)
+    return {"limit": effect, "lr": lr_raw / phi, "lr_raw": lr_raw, "inflation": phi, "threshold": threshold}
+
+
+def runner_up(ranked, chosen: Explanation):
+    """The best explanation other than ``chosen`` that is not ``chosen`` plus further changes."""
+    c = chosen.changes()
+    for y in ranked:
+        if y is chosen or c <= y.changes():
+            continue
+        return y
+    return None
+
+
+def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None) -> dict:
+    """One step: rank all explanations, apply the nested rule, return
+    {ranked, chosen (Explanation or None), best (top of the ranking, chosen or not), nested, alternative
+    (Gauss-Markov fit the limit won over), runner_up}."""
+    ranked = explanations(meas, state, held, recalibratable, combine_top)
+    out = {"ranked": ranked, "chosen": None, "best": ranked[0] if ranked else None, "nested": None,
+           "alternative": None, "runner_up": None}
+    if not ranked:
+        return out
+    best = ranked[0]
+    if best.effect in NESTED:
+        lim, i = limit_explanation(meas, state, held, best, ranked)
+        if lim is not None and lim.fit.terms[i][MAGNITUDE[lim.fit.terms[i]["effect"]]] > 0:
+            nt = nested_test(meas, best, lim, i)
+            out["nested"] = nt
+            if nt["lr"] < nt["threshold"]:
+                out["alternative"] = {**{p: v for p, v in best.fit.terms[-1].items() if p != "effect"},
+                                      "effect": best.effect, "lr": nt["lr"], "instead_of": nt["limit"]}
+                if lim not in ranked:
+                    ranked.append(lim)
+                    ranked.sort(key=lambda x: -x.score)
+                best = lim
+    out["best"] = best
+    if best.score > 0:
+        out["chosen"] = best
+    out["runner_up"] = runner_up(ranked, best)
+    return out
+
+
+def evidence(x: Explanation | None, model_terms) -> dict | None:
+    return None if x is None else x.as_dict(model_terms)
+
+
+def margin(a: Explanation, b: Explanation | None) -> float:
+    return math.inf if b is None else a.score - b.score
+
+
+def summary_line(x: Explanation, model_terms) -> str:
+    return (f"{x.label(model_terms)}: dD {x.delta_dev:.1f} - overdispersion {x.inflation:.2f} x penalty "
+            f"{x.penalty:.1f} = score {x.score:.1f} (LR {x.lr:.1f})")
+
