@@ -169,8 +169,12 @@ def shape_grid(effect: str, meas: Measured) -> np.ndarray:
     return np.logspace(math.log10(lo), math.log10(hi), n)
 
 
-def fit_with_candidate(meas: Measured, base_terms, fixed, effect: str) -> Fit:
-    """Fit ``base_terms`` (magnitudes free except ``fixed``) plus one new term of ``effect``."""
+def fit_with_candidate(meas: Measured, base_terms, fixed, effect: str, near: float | None = None) -> Fit:
+    """Fit ``base_terms`` (magnitudes free except ``fixed``) plus one new term of ``effect``.
+
+    ``near``: a shape value found for the same effect in a closely related fit (the same state with one
+    more term free); the profile then runs over every third grid point plus +-3 grid steps around it, a
+    third of the work, for the many "effect + recalibrated term" fits."""
     mag = MAGNITUDE[effect]
     new_index = len(base_terms)
     if effect not in SHAPE:
@@ -178,21 +182,30 @@ def fit_with_candidate(meas: Measured, base_terms, fixed, effect: str) -> Fit:
         return fit
     q = SHAPE[effect]
     grid = shape_grid(effect, meas)
+    if near is not None and near > 0:
+        per = 8 if effect == "gauss_markov" else 30
+        local = near * 10.0 ** (np.arange(-3, 4) / per)
+        grid = np.unique(np.concatenate([grid[::3], local[(local >= grid[0]) & (local <= grid[-1])]]))
 
     def profile(log_v):
         return fit_terms(meas, list(base_terms) + [{"effect": effect, mag: 1.0, q: float(math.exp(log_v))}],
                          fixed, intervals=False)
 
-    devs = [profile(math.log(v)).dev for v in grid]
-    k = int(np.argmin(devs))
-    lo = math.log(grid[max(k - 1, 0)])
-    hi = math.log(grid[min(k + 1, len(grid) - 1)])
-    if hi > lo:
-        res = minimize_scalar(lambda u: profile(u).dev, bounds=(lo, hi), method="bounded",
-                              options={"xatol": 1e-4})
-        u = res.x if res.fun < devs[k] else math.log(grid[k])
-    else:
-        u = math.log(grid[k])
+    devs = np.array([profile(math.log(v)).dev for v in grid])
+    # the profile is rugged (a sinusoid's Allan curve has notches, the taus are octaves apart): refine
+    # around the three lowest local minima of the grid, not only the lowest grid point
+    n = len(grid)
+    minima = [k for k in range(n) if (k == 0 or devs[k] <= devs[k - 1]) and (k == n - 1 or devs[k] <= devs[k + 1])]
+    best_u, best_d = math.log(grid[int(np.argmin(devs))]), float(np.min(devs))
+    for k in sorted(minima, key=lambda k: devs[k])[:3]:
+        lo = math.log(grid[max(k - 1, 0)])
+        hi = math.log(grid[min(k + 1, n - 1)])
+        if hi > lo:
+            res = minimize_scalar(lambda u: profile(u).dev, bounds=(lo, hi), method="bounded",
+                                  options={"xatol": 1e-4})
+            if res.fun < best_d:
+                best_u, best_d = float(res.x), float(res.fun)
+    u = best_u
     fit = profile(u)
     free = [i for i in range(len(fit.terms)) if i not in fit.fixed]
     _intervals(meas, fit, free, shape_free=[new_index] if fit.terms[new_index][mag] > 0 else [])
@@ -281,3 +294,33 @@ def gm_rw_direction(meas: Measured, K: float) -> np.ndarray:
     sigma^2(tau) = K^2 tau/3 - K^2 lambda tau^2/4 + O(lambda^2), so the column is -K^2 tau^2 / 4 (checked
     against :func:`companion.allan.terms.avar_gauss_markov` at lambda = 1e-5..1e-6)."""
     return -(K**2) * meas.tau**2 / 4.0
+
+
+def refine_shapes(meas: Measured, terms, fixed, indices, steps: int = 3) -> Fit:
+    """Refit with the shape parameters (tau_c, freq_hz) of the terms ``indices`` re-optimised one after the
+    other by profile likelihood near their current values (``steps`` grid steps of :func:`shape_grid` either
+    side, then a bounded refinement), magnitudes free except ``fixed``. Used when a state changes (a term
+    recalibrated, an effect added or held back): a shape fitted before is then no longer the maximum of the
+    likelihood, and a test that kept it would let it absorb part of what is tested."""
+    terms = [dict(t) for t in terms]
+    for i in indices:
+        t = terms[i]
+        q = SHAPE.get(t["effect"])
+        if q is None or t[MAGNITUDE[t["effect"]]] <= 0:
+            continue
+        per = 8 if t["effect"] == "gauss_markov" else 30
+        step = math.log(10.0) / per
+        u0 = math.log(t[q])
+
+        def dev(u, i=i, q=q):
+            trial = [dict(x) for x in terms]
+            trial[i][q] = float(math.exp(u))
+            return fit_terms(meas, trial, fixed, intervals=False).dev
+
+        us = [u0 + k * step for k in range(-steps, steps + 1)]
+        ds = [dev(u) for u in us]
+        k = int(np.argmin(ds))
+        res = minimize_scalar(dev, bounds=(us[max(k - 1, 0)], us[min(k + 1, len(us) - 1)]), method="bounded",
+                              options={"xatol": 1e-4})
+        terms[i][q] = float(math.exp(res.x if res.fun < ds[k] else us[k]))
+    return fit_terms(meas, terms, fixed, intervals=False)

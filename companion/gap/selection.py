@@ -44,7 +44,8 @@ from dataclasses import dataclass
 from scipy import stats
 
 from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
-                                      fit_with_candidate, gm_rw_direction, lr_inflation, unit_column)
+                                      fit_with_candidate, gm_rw_direction, lr_inflation, refine_shapes,
+                                      unit_column)
 from companion.gap.likelihood import Measured
 
 #: level an added effect must pass (its score's penalty is chi^2_k(1 - ALPHA))
@@ -129,11 +130,13 @@ def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Expl
     return Explanation(effect, tuple(recal), fit, state.dev - fit.dev, phi, pen)
 
 
-def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None) -> list:
+def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None,
+                 shaped=()) -> list:
     """Fit every explanation from ``state`` (terms with the indices ``held`` fixed): each candidate effect
     added; each term of ``recalibratable`` (held model terms) freed; each effect added with one term freed.
-    ``combine_top`` limits the combinations to the best-scoring effects alone (None: all). Sorted by score,
-    best first."""
+    ``combine_top`` limits the combinations to the best-scoring effects alone (None: all). A recalibration
+    re-optimises the shapes of the added terms ``shaped`` (:func:`companion.gap.candidates.refine_shapes`).
+    Sorted by score, best first."""
     terms = state.terms
     held = sorted(set(held))
     sigma = estimate_covariance(meas, state)  # every explanation is corrected at the same state fit
@@ -145,14 +148,16 @@ def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: 
         if f.terms[-1][MAGNITUDE[e]] > 0:
             out.append(_explanation(meas, state, held, e, (), f, sigma))
     for j in recalibratable:
-        f = fit_terms(meas, terms, [i for i in held if i != j], intervals=False)
+        f = refine_shapes(meas, terms, [i for i in held if i != j], shaped)
         out.append(_explanation(meas, state, held, None, (j,), f, sigma))
     effects = [x.effect for x in sorted((x for x in out if x.effect), key=lambda x: -x.score)]
     if combine_top is not None:
         effects = effects[:combine_top]
     for e in effects:
+        q = SHAPE.get(e)
         for j in recalibratable:
-            f = fit_with_candidate(meas, terms, [i for i in held if i != j], e)
+            f = fit_with_candidate(meas, terms, [i for i in held if i != j], e,
+                                   near=fits[e].terms[-1][q] if q else None)
             if f.terms[-1][MAGNITUDE[e]] > 0:
                 out.append(_explanation(meas, state, held, e, (j,), f, sigma))
     out.sort(key=lambda x: -x.score)
@@ -190,7 +195,7 @@ def limit_explanation(meas: Measured, state: Fit, held, x: Explanation, ranked) 
         if y.effect is None and y.recal == recal:
             return y, j
     f = fit_terms(meas, state.terms, [i for i in held if i not in recal], intervals=False)
-    return _explanation(meas, state, held, None, recal, f), j
+    return _explanation(meas, state, held, None, recal, f, estimate_covariance(meas, state)), j
 
 
 def nested_test(meas: Measured, best: Explanation, limit: Explanation, i: int) -> dict:
@@ -222,28 +227,39 @@ def runner_up(ranked, chosen: Explanation):
     return None
 
 
-def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None) -> dict:
+def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None, shaped=()) -> dict:
     """One step: rank all explanations, apply the nested rule, return
     {ranked, chosen (Explanation or None), best (top of the ranking, chosen or not), nested, alternative
     (Gauss-Markov fit the limit won over), runner_up}."""
-    ranked = explanations(meas, state, held, recalibratable, combine_top)
+    ranked = explanations(meas, state, held, recalibratable, combine_top, shaped)
     out = {"ranked": ranked, "chosen": None, "best": ranked[0] if ranked else None, "nested": None,
            "alternative": None, "runner_up": None}
     if not ranked:
         return out
     best = ranked[0]
+    gm, lim, i = None, None, None
     if best.effect in NESTED:
+        gm = best
         lim, i = limit_explanation(meas, state, held, best, ranked)
-        if lim is not None and lim.fit.terms[i][MAGNITUDE[lim.fit.terms[i]["effect"]]] > 0:
-            nt = nested_test(meas, best, lim, i)
-            out["nested"] = nt
-            if nt["lr"] < nt["threshold"]:
-                out["alternative"] = {**{p: v for p, v in best.fit.terms[-1].items() if p != "effect"},
-                                      "effect": best.effect, "lr": nt["lr"], "instead_of": nt["limit"]}
-                if lim not in ranked:
-                    ranked.append(lim)
-                    ranked.sort(key=lambda x: -x.score)
-                best = lim
+    else:  # the winner may itself be the limit of a Gauss-Markov explanation close behind
+        for y in ranked:
+            if y.effect in NESTED and y.score > 0:
+                cand, ci = limit_explanation(meas, state, held, y, ranked)
+                if cand is best:
+                    gm, lim, i = y, cand, ci
+                    break
+    if lim is not None and lim.fit.terms[i][MAGNITUDE[lim.fit.terms[i]["effect"]]] > 0:
+        nt = nested_test(meas, gm, lim, i)
+        out["nested"] = nt
+        if nt["lr"] < nt["threshold"]:
+            out["alternative"] = {**{p: v for p, v in gm.fit.terms[-1].items() if p != "effect"},
+                                  "effect": gm.effect, "lr": nt["lr"], "instead_of": nt["limit"]}
+            if lim not in ranked:
+                ranked.append(lim)
+                ranked.sort(key=lambda x: -x.score)
+            best = lim
+        else:
+            best = gm
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best

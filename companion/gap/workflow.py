@@ -39,7 +39,8 @@ from scipy import stats
 from companion.allan.adev import oavar
 from companion.allan.lsb import DITHER_RATIO
 from companion.gap import explain, selection
-from companion.gap.candidates import MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation, unit_column
+from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation, refine_shapes,
+                                     unit_column)
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    model_avar)
 from companion.gap._edf import local_slope, oavar_edf
@@ -182,7 +183,8 @@ def _hold_test(meas: Measured, base: Fit, held, i: int, t0) -> tuple:
     p = MAGNITUDE[t0["effect"]]
     terms = [dict(t) for t in base.terms]
     terms[i][p] = t0[p]
-    hf = fit_terms(meas, terms, fixed=sorted(set(held) | {i}), intervals=False)
+    shaped = [j for j in range(len(terms)) if terms[j]["effect"] in SHAPE and j not in held and j != i]
+    hf = refine_shapes(meas, terms, sorted(set(held) | {i}), shaped)
     lr_raw = hf.dev - base.dev
     phi = lr_inflation(meas, hf, None, direction=[unit_column(terms[i], meas.tau, meas.rate_hz)])
     return lr_raw / phi, lr_raw, phi, hf
@@ -243,7 +245,8 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     alternatives: dict[int, dict] = {}  # index of a term -> the Gauss-Markov fit it won over
     for it in range(max_iter):
         recalibratable = [j for j in range(len(terms0)) if j in held]
-        step = selection.choose(meas, base, sorted(held), recalibratable)
+        shaped = [i for i in range(len(terms0), len(current)) if current[i]["effect"] in SHAPE and i not in held]
+        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped)
         ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
         record = {"iteration": it + 1, "gap_base": base.gap,
                   "candidates": [{"effect": x.effect, "delta_dev": x.delta_dev, "k": x.k, "gap": x.fit.gap,
@@ -278,6 +281,8 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                     step["alternative"]
         current = [dict(t) for t in chosen.fit.terms]
         held -= set(chosen.recal)
+        if shaped and (chosen.effect is not None):  # earlier shapes re-optimised in the new state
+            current = refine_shapes(meas, current, sorted(held), shaped).terms
         base = _refit(meas, current, held, len(terms0))
 
     # 5. a recalibration that later additions made unnecessary is undone (backward step, same test)
@@ -301,7 +306,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         p = MAGNITUDE[t0["effect"]]
         entry = {"effect": t0["effect"], "param": p, "model": t0[p]}
         if i in held:  # evidence for freeing it at the final state
-            free_fit = fit_terms(meas, base.terms, fixed=sorted(held - {i}))
+            shaped = [j for j in range(len(terms0), len(base.terms)) if base.terms[j]["effect"] in SHAPE
+                      and j not in held]
+            free_fit = fit_terms(meas, refine_shapes(meas, base.terms, sorted(held - {i}), shaped).terms,
+                                 fixed=sorted(held - {i}))
             fitted = free_fit.terms[i][p]
             lo, hi = free_fit.ci95[i].get(p, [fitted, fitted])
             phi = lr_inflation(meas, base, None, direction=[unit_column(base.terms[i], meas.tau, rate_hz)])
@@ -330,6 +338,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         t = final[i]
         if i in held:
             continue
+        if t[MAGNITUDE[t["effect"]]] <= 0:  # an earlier addition that a later one replaced
+            res.notes.append(f"{t['effect']} added at one step was refitted to zero after a later step and is "
+                             "dropped")
+            continue
         ci = base.ci95[i] if i < len(base.ci95) else {}
         ev = None
         if t["effect"] == "sinusoid" and t["amplitude"] > 0:
@@ -342,6 +354,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             entry["alternative"] = alt
             entry["explanation"] += " " + explain.explain_alternative(alt, meas.n / rate_hz, rate_hz)
         res.added.append(entry)
+    final = [t for i, t in enumerate(final) if i < len(terms0) or i in held or t[MAGNITUDE[t["effect"]]] > 0]
     s_final = model_avar(final, meas.tau, rate_hz)
     g_final = gap_metric(meas, s_final)
     changed = any(e["verdict"] != "consistent" for e in res.recalibrated) or len(final) > len(terms0)
