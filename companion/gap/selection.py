@@ -28,8 +28,12 @@ their scaled penalties: the gain is not divided by phi for the ranking, because 
 deviance units a 10 % difference of phi between two directions would outweigh any difference of fit
 (measured: a hidden white noise lost to a sinusoid that fits 4 % worse).
 
-The best-scoring explanation is taken when its score is positive; the runner-up that is not merely the
-winner plus a further change is reported with its evidence (``alternatives``). One refinement keeps the
+The best-scoring explanation is taken when its score is positive, with one ordering rule: a single change
+(one effect, or one recalibration) with a positive score is taken before a combination, which is taken
+only when no single change passes. A combination's recalibration can otherwise ride on a large effect and
+pre-empt the head-to-head of that recalibration with a second effect (measured: a ramp hidden beside a
+Gauss-Markov term was absorbed by "gauss_markov + random_walk K recalibrated"). The runner-up that is not
+merely the winner plus a further change is reported with its evidence (``alternatives``). One refinement keeps the
 nested rule of a two-parameter effect against its one-parameter limit (Gauss-Markov with tau_c -> infinity
 is a random walk, tau_c -> 0 white noise): the limit is named unless the Gauss-Markov term is
 significantly better than it (:func:`nested_test`), because the score's small cost of a shape parameter
@@ -144,6 +148,8 @@ def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: 
     fits = {}
     for e in candidate_effects(terms):
         f = fit_with_candidate(meas, terms, held, e)
+        if shaped and f.terms[-1][MAGNITUDE[e]] > 0:  # earlier shapes re-optimised beside the new term
+            f = refine_shapes(meas, f.terms, held, shaped)
         fits[e] = f
         if f.terms[-1][MAGNITUDE[e]] > 0:
             out.append(_explanation(meas, state, held, e, (), f, sigma))
@@ -260,6 +266,14 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
             best = lim
         else:
             best = gm
+    if best.score > 0 and best.effect and best.recal:
+        # one change at a time when one suffices: a single change with a positive score is taken before a
+        # combination, so that the combination's rider (a recalibration riding on a large effect) does not
+        # pre-empt the head-to-head of that recalibration with a second effect at the next step
+        single = next((y for y in ranked if y.score > 0 and not (y.effect and y.recal)), None)
+        if single is not None and not (single.effect in NESTED and out["nested"] is None
+                                        and limit_explanation(meas, state, held, single, ranked)[0] is not None):
+            best = single
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best

@@ -301,6 +301,41 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         base = _refit(meas, current, held, len(terms0))
         alternatives.pop(weakest[1], None)
 
+    # 5b. a recalibration taken as the rider of another change (e.g. "gauss_markov + random_walk K" when a
+    # ramp also hides in the data) is weighed once more against every effect from the state with that term
+    # held: the same score, the recalibration's own (dD - phi x 10.8) against the effect's
+    for j in range(len(terms0)):
+        if j in held or len(current) - len(terms0) >= max_iter:
+            continue
+        _, lr_raw, phi, hf = _hold_test(meas, base, held, j, terms0[j])
+        value = lr_raw - phi * selection.RECAL_PENALTY
+        shaped = [i for i in range(len(terms0), len(hf.terms)) if hf.terms[i]["effect"] in SHAPE and i not in held]
+        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped)
+        x = step["chosen"]
+        if x is None or x.score <= value:
+            continue
+        ru = step["runner_up"]
+        mod = terms0[j]["effect"] + " " + MAGNITUDE[terms0[j]["effect"]]
+        res.iterations.append({"iteration": len(res.iterations) + 1, "swap": mod, "gap_base": hf.gap,
+                               "candidates": [], "explanations": [y.as_dict(terms0) for y in step["ranked"][:8]],
+                               "test": {"effect": x.label(terms0), "lr": x.lr, "lr_raw": x.delta_dev,
+                                        "inflation": x.inflation, "threshold": x.penalty, "score": x.score},
+                               "recalibration_score": value, "chosen": x.label(terms0), "gap_after": x.fit.gap,
+                               "runner_up": ru.as_dict(terms0) if ru is not None else None})
+        res.alternatives.append({"iteration": len(res.iterations), "chosen": x.as_dict(terms0),
+                                 "runner_up": {"explanation": f"recalibrated {mod}", "delta_dev": lr_raw,
+                                               "inflation": phi, "lr": lr_raw / phi,
+                                               "penalty": selection.RECAL_PENALTY, "score": value},
+                                 "margin": x.score - value,
+                                 "text": explain.explain_runner_up(x.label(terms0), x.score, f"recalibrated {mod}",
+                                                                   value)})
+        if step["alternative"] is not None and x.effect:
+            alternatives[len(hf.terms)] = step["alternative"]
+        alternatives.pop(j, None)
+        held.add(j)
+        current = [dict(t) for t in x.fit.terms]
+        base = _refit(meas, current, held, len(terms0))
+
     final = [dict(t) for t in base.terms]
     for i, t0 in enumerate(terms0):
         p = MAGNITUDE[t0["effect"]]
