@@ -188,7 +188,10 @@ def test_undithered_rounding_is_flagged():
 @pytest.mark.shared
 def test_adis16405_against_datasheet(shared_data):
     """Real recording vs datasheet model: the gap shrinks to the noise floor, the datasheet ARW is found
-    ~10 % optimistic, and the rising long-tau end is named a rate random walk (see docs/gap.md)."""
+    optimistic, and the rising long-tau end is named a rate random walk (see docs/gap.md). The white level
+    is judged as the data see it at tau >> 0.03 s: N^2 plus the white-equivalent 2 sigma^2 tau_c of a
+    filter-like Gauss-Markov term (tau_c < 1 s) when one is named; how the Allan curve splits the two at
+    the shortest cluster times is not identifiable (both fits are within the noise)."""
     import gzip
 
     with gzip.open(shared_data / "adis16405" / "adis16405_imu1.csv.gz", "rt") as fh:
@@ -197,7 +200,10 @@ def test_adis16405_against_datasheet(shared_data):
     r = run_gap(y, 100.0, model, axis="gy", simulate=False)
     assert r.gap_before > 10 * NOISE_FLOOR_G and r.gap_after <= NOISE_FLOOR_G
     assert "random_walk" in [a["effect"] for a in r.added]
-    assert r.recalibrated[0]["verdict"] == "too small" and 1.03 < r.recalibrated[0]["ratio"] < 1.2
+    n_eff2 = sum(t["N"] ** 2 for t in r.terms_after if t["effect"] == "white_noise")
+    n_eff2 += sum(2 * t["sigma"] ** 2 * t["tau_c"] for t in r.terms_after
+                  if t["effect"] == "gauss_markov" and t["tau_c"] < 1.0)
+    assert 1.03 < math.sqrt(n_eff2) / 5.82e-4 < 1.35
 
 
 @pytest.mark.parametrize("seed", [7000, 7009])

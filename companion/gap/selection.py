@@ -28,12 +28,12 @@ their scaled penalties: the gain is not divided by phi for the ranking, because 
 deviance units a 10 % difference of phi between two directions would outweigh any difference of fit
 (measured: a hidden white noise lost to a sinusoid that fits 4 % worse).
 
-The best-scoring explanation is taken when its score is positive, with one ordering rule: a single change
-(one effect, or one recalibration) with a positive score is taken before a combination, which is taken
-only when no single change passes. A combination's recalibration can otherwise ride on a large effect and
-pre-empt the head-to-head of that recalibration with a second effect (measured: a ramp hidden beside a
-Gauss-Markov term was absorbed by "gauss_markov + random_walk K recalibrated"). The runner-up that is not
-merely the winner plus a further change is reported with its evidence (``alternatives``). One refinement keeps the
+The best-scoring explanation is taken when its score is positive; the runner-up that is not merely the
+winner plus a further change is reported with its evidence (``alternatives``). A recalibration taken as
+the rider of a combination is weighed once more at the end against every effect, from the state with that
+term held (the workflow's swap step): a ramp hidden beside a Gauss-Markov term was otherwise absorbed by
+"gauss_markov + random_walk K recalibrated".
+One refinement keeps the
 nested rule of a two-parameter effect against its one-parameter limit (Gauss-Markov with tau_c -> infinity
 is a random walk, tau_c -> 0 white noise): the limit is named unless the Gauss-Markov term is
 significantly better than it (:func:`nested_test`), because the score's small cost of a shape parameter
@@ -242,38 +242,32 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
            "alternative": None, "runner_up": None}
     if not ranked:
         return out
-    best = ranked[0]
-    gm, lim, i = None, None, None
-    if best.effect in NESTED:
-        gm = best
-        lim, i = limit_explanation(meas, state, held, best, ranked)
-    else:  # the winner may itself be the limit of a Gauss-Markov explanation close behind
-        for y in ranked:
-            if y.effect in NESTED and y.score > 0:
-                cand, ci = limit_explanation(meas, state, held, y, ranked)
-                if cand is best:
-                    gm, lim, i = y, cand, ci
-                    break
-    if lim is not None and lim.fit.terms[i][MAGNITUDE[lim.fit.terms[i]["effect"]]] > 0:
+    def resolve(best):
+        """The nested rule for ``best``: (explanation to take, nested record, Gauss-Markov alternative)."""
+        gm, lim, i = None, None, None
+        if best.effect in NESTED:
+            gm = best
+            lim, i = limit_explanation(meas, state, held, best, ranked)
+        else:  # the winner may itself be the limit of a Gauss-Markov explanation close behind
+            for y in ranked:
+                if y.effect in NESTED and y.score > 0:
+                    cand, ci = limit_explanation(meas, state, held, y, ranked)
+                    if cand is best:
+                        gm, lim, i = y, cand, ci
+                        break
+        if lim is None or lim.fit.terms[i][MAGNITUDE[lim.fit.terms[i]["effect"]]] <= 0:
+            return best, None, None
         nt = nested_test(meas, gm, lim, i)
-        out["nested"] = nt
-        if nt["lr"] < nt["threshold"]:
-            out["alternative"] = {**{p: v for p, v in gm.fit.terms[-1].items() if p != "effect"},
-                                  "effect": gm.effect, "lr": nt["lr"], "instead_of": nt["limit"]}
-            if lim not in ranked:
-                ranked.append(lim)
-                ranked.sort(key=lambda x: -x.score)
-            best = lim
-        else:
-            best = gm
-    if best.score > 0 and best.effect and best.recal:
-        # one change at a time when one suffices: a single change with a positive score is taken before a
-        # combination, so that the combination's rider (a recalibration riding on a large effect) does not
-        # pre-empt the head-to-head of that recalibration with a second effect at the next step
-        single = next((y for y in ranked if y.score > 0 and not (y.effect and y.recal)), None)
-        if single is not None and not (single.effect in NESTED and out["nested"] is None
-                                        and limit_explanation(meas, state, held, single, ranked)[0] is not None):
-            best = single
+        if nt["lr"] >= nt["threshold"]:
+            return gm, nt, None
+        if lim not in ranked:
+            ranked.append(lim)
+            ranked.sort(key=lambda x: -x.score)
+        alt = {**{p: v for p, v in gm.fit.terms[-1].items() if p != "effect"}, "effect": gm.effect, "lr": nt["lr"],
+               "instead_of": nt["limit"]}
+        return lim, nt, alt
+
+    best, out["nested"], out["alternative"] = resolve(ranked[0])
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best
