@@ -110,3 +110,4 @@ def test_report_gives_the_gauss_markov_alternative(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "gauss_markov vs its random_walk limit: LR" in text and "random_walk kept" in text
     assert "added: random_walk" in text and "too short to tell a slow correlated bias" in text
+    assert "explanations by score" in text and "  runner-up " in text  # weighed head to head, runner-up shown
