@@ -97,6 +97,10 @@ def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: 
     temperature = temp0 + 3.0 * (1.0 - np.exp(-(t - boot) / 300.0))
     factor = rise ** (f / (flights - 1)) if flights > 1 else 1.0
     rows, msgids, times, used = [], [], [], []
+    for payload, mid in _meta_payloads(vehicle["board_id"], [i["gyro_id"] for i in vehicle["imus"]]):
+        rows.append(np.frombuffer(payload, dtype=np.uint8).reshape(1, -1))  # first in the log (stable sort)
+        msgids.append(np.array([mid]))
+        times.append(np.array([boot]))
     for imu in vehicle["imus"]:
         gyro = np.zeros((n, 3))
         par = {}
@@ -119,10 +123,6 @@ def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: 
     rows.append(np.repeat(heartbeat_payload().view(np.uint8).reshape(1, -1), hb_t.size, axis=0))
     msgids.append(np.full(hb_t.size, M.HEARTBEAT.msgid))
     times.append(hb_t)
-    for payload, mid in _meta_payloads(vehicle["board_id"], [i["gyro_id"] for i in vehicle["imus"]]):
-        rows.append(np.frombuffer(payload, dtype=np.uint8).reshape(1, -1))
-        msgids.append(np.array([mid]))
-        times.append(np.array([boot - 1.0]))
     width = max(r.shape[1] for r in rows)
     payloads = np.zeros((sum(r.shape[0] for r in rows), width), dtype=np.uint8)
     i = 0
