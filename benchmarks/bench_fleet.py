@@ -158,6 +158,7 @@ def scale(args):
         size = sum(os.path.getsize(os.path.join(r, f)) for r, _, fs in os.walk(os.path.join(tmp, "logs")) for f in fs)
         print(f"command: python benchmarks/bench_fleet.py scale --logs {args.logs} --duration {args.duration:g} "
               f"--rate {args.rate:g} --imus {args.imus} --serial-logs {args.serial_logs}")
+        print(f"load average at start {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (a shared machine)")
         print(f"{n} logs ({vehicles} vehicles x {flights} flights), {args.imus} IMU(s) each, {args.duration:g} s at "
               f"{args.rate:g} Hz, {size / 1e6:.0f} MB; simulated in {t_sim:.0f} s")
         # one process, on the first K logs (or all)
@@ -178,6 +179,7 @@ def scale(args):
         r2 = s2.rate
         print(f"Dask LocalCluster, 2 worker processes: {n} logs in {s2.elapsed_s:.1f} s = {r2:.3f} logs/s "
               f"({s2.failed} failed)")
+        print(f"load average now {os.getloadavg()[0]:.1f}")
         print(f"parallel efficiency (rate on 2 workers) / (2 x rate in one process) = {r2 / (2 * r1):.2f}")
         if rss:
             m = np.array([x[1] for x in rss if len(x[1]) == 2]) / 1e6
@@ -234,6 +236,28 @@ def big_query(n_logs: int):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def _noop(i):
+    return i
+
+
+def sched(args):
+    """Tasks per second the Dask scheduler of a LocalCluster sustains for no-op tasks."""
+    from companion.fleet.runner import close_client, open_client
+
+    client, cluster = open_client(args.workers)
+    try:
+        client.gather(client.map(_noop, range(100)))  # warm up
+        t = time.perf_counter()
+        client.gather(client.map(_noop, range(args.tasks), pure=False))
+        dt = time.perf_counter() - t
+    finally:
+        close_client(client, cluster)
+    print(f"command: python benchmarks/bench_fleet.py sched --tasks {args.tasks} --workers {args.workers}")
+    print(f"{args.tasks} no-op tasks on a LocalCluster of {args.workers} processes: {dt:.1f} s = "
+          f"{args.tasks / dt:.0f} tasks/s ({1e3 * dt / args.tasks:.2f} ms per task); load average "
+          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -257,8 +281,11 @@ def main():
     s.add_argument("--bigdb", type=int, default=0, help="also time the history query on a database of N logs")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--tmp", default=None, help="folder for the temporary logs")
+    d = sub.add_parser("sched")
+    d.add_argument("--tasks", type=int, default=5000)
+    d.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
-    calibrate(args) if args.cmd == "calibrate" else scale(args)
+    {"calibrate": calibrate, "scale": scale, "sched": sched}[args.cmd](args)
 
 
 if __name__ == "__main__":

@@ -96,6 +96,8 @@ def register(subparsers) -> None:
     a.add_argument("--vehicle", choices=("auto", "dir"), default="auto",
                    help="vehicle id: auto (board id, else sys<sysid>) or dir (the log's folder name)")
     a.add_argument("--axes", default="gx,gy,gz", help="axes to analyse (default gx,gy,gz)")
+    a.add_argument("--batch", type=int, default=1, metavar="K",
+                   help="logs per Dask task (default 1; tens on a large cluster, see docs/fleet.md)")
     a.add_argument("--retry-failed", action="store_true", help="analyse logs recorded as failed again")
     a.add_argument("--time-limit", type=float, default=None, metavar="S",
                    help="stop submitting after S seconds (what is recorded stays; run again to resume)")
@@ -146,15 +148,15 @@ def run_analyze(args) -> int:
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
     if not axes or any(a not in AXES for a in axes):
         raise CompanionError(f"bad --axes {args.axes!r}: expected a comma list of {', '.join(AXES)}")
+    if args.batch < 1:
+        raise CompanionError("--batch must be >= 1")
     if args.workers is not None and args.workers < 0:
         raise CompanionError("--workers must be >= 0")
     if args.time_limit is not None and not (args.time_limit > 0 and math.isfinite(args.time_limit)):
         raise CompanionError("--time-limit must be a positive number of seconds")
     logs = discover(args.logs)
     with FleetStore(args.db) as store:
-        work, skipped = plan(store, logs)
-        if args.retry_failed:
-            work, skipped = plan(store, logs, retry_failed=True)
+        work, skipped = plan(store, logs, retry_failed=args.retry_failed)
         print(f"{len(logs)} log(s): {len(work)} to analyse, {skipped} already in {args.db}", file=sys.stderr)
         progress = Progress(len(work), skipped, enabled=not args.quiet)
         if not work:
@@ -165,7 +167,8 @@ def run_analyze(args) -> int:
             workers = args.workers or os.cpu_count() or 1
             client, cluster = open_client(workers, args.scheduler)
             try:
-                stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit)
+                stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit,
+                                 batch=args.batch)
             finally:
                 close_client(client, cluster)
         if stats is not None:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 from companion.errors import CompanionError
 from companion.fleet.discover import LogFile, hash_files
-from companion.fleet.task import analyze_log, one_line
+from companion.fleet.task import analyze_log, analyze_logs, one_line
 from companion.samples import GYRO_AXES
 
 DASK_MISSING = ("fleet analyze runs on dask.distributed, which is not installed: "
@@ -182,7 +182,7 @@ def open_client(workers: int | None = None, scheduler: str | None = None, timeou
     if n < 1:
         raise CompanionError("--workers must be >= 1 for a Dask cluster (0 analyses in this process)")
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=None, silence_logs=logging.ERROR)
+                           dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
     try:
         client = Client(cluster, timeout=timeout_s)
     except BaseException:
@@ -192,13 +192,18 @@ def open_client(workers: int | None = None, scheduler: str | None = None, timeou
 
 
 def run_dask(store, work: list[Work], progress: Progress, client, axes=GYRO_AXES, vehicle_from="auto",
-             deadline_s: float | None = None, window: int | None = None) -> RunStats:
-    """Analyse ``work`` on the Dask ``client``'s workers; this process is the only database writer."""
+             deadline_s: float | None = None, window: int | None = None, batch: int = 1) -> RunStats:
+    """Analyse ``work`` on the Dask ``client``'s workers; this process is the only database writer.
+
+    ``batch``: logs per task (1 by default; a large cluster wants tasks of tens of seconds, docs/fleet.md).
+    ``window``: tasks in flight (default 4 per worker thread).
+    """
     from dask.distributed import wait
 
     nthreads = max(sum(client.nthreads().values()), 1)
     stats = RunStats(total=len(work), workers=len(client.nthreads()))
     window = window or max(4 * nthreads, 8)
+    batch = max(int(batch), 1)
     t0 = time.monotonic()
     pending: dict = {}
     todo = iter(work)
@@ -207,12 +212,16 @@ def run_dask(store, work: list[Work], progress: Progress, client, axes=GYRO_AXES
     def fill():
         nonlocal exhausted
         while not exhausted and len(pending) < window:
-            w = next(todo, None)
-            if w is None:
+            ws = [w for w in (next(todo, None) for _ in range(batch)) if w is not None]
+            if not ws:
                 exhausted = True
                 return
-            fut = client.submit(analyze_log, w.log.path, tuple(axes), vehicle_from, pure=False, retries=0)
-            pending[fut] = w
+            if batch == 1:
+                fut = client.submit(analyze_log, ws[0].log.path, tuple(axes), vehicle_from, pure=False, retries=0)
+            else:
+                fut = client.submit(analyze_logs, [w.log.path for w in ws], tuple(axes), vehicle_from, pure=False,
+                                    retries=0)
+            pending[fut] = ws
 
     try:
         fill()
@@ -225,12 +234,14 @@ def run_dask(store, work: list[Work], progress: Progress, client, axes=GYRO_AXES
             except TimeoutError:
                 finished = ()
             for fut in finished:
-                w = pending.pop(fut)
+                ws = pending.pop(fut)
                 try:
-                    result = fut.result()
+                    results = fut.result()
+                    results = [results] if isinstance(results, dict) else results
                 except Exception as exc:  # noqa: BLE001 - KilledWorker, lost connection: recorded, run goes on
-                    result = _failed(w, f"worker: {one_line(exc)}"[:500])
-                _record(store, stats, w, result)
+                    results = [_failed(w, f"worker: {one_line(exc)}"[:500]) for w in ws]
+                for w, result in zip(ws, results):
+                    _record(store, stats, w, result)
             progress.update(stats.done, stats.failed)
             fill()
     except KeyboardInterrupt:

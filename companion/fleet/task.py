@@ -131,3 +131,8 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         out["rows"] = []
     out["elapsed_s"] = time.perf_counter() - t0
     return out
+
+
+def analyze_logs(paths, axes=GYRO_AXES, vehicle_from: str = "auto", config=None) -> list[dict]:
+    """:func:`analyze_log` over several logs in one task (``--batch``: fewer, longer tasks for the scheduler)."""
+    return [analyze_log(p, axes, vehicle_from, config) for p in paths]
