@@ -12,6 +12,8 @@ import base64
 import html
 import time
 from collections import defaultdict
+from itertools import groupby
+from operator import itemgetter
 
 import numpy as np
 
@@ -20,11 +22,10 @@ from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE, TREND_PARAMS, im
 
 def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float = MIN_RISE) -> list[dict]:
     """Ranked IMU entries; each carries its ``_series`` and ``_tests`` (for plots; not JSON)."""
-    groups: dict = defaultdict(list)
-    for r in store.all_results():
-        groups[(r["vehicle"], r["sysid"], r["compid"], r["message"], r["imu"])].append(r)
     entries = []
-    for (vehicle, sysid, compid, message, imu), rows in groups.items():
+    key = itemgetter("vehicle", "sysid", "compid", "message", "imu")
+    for (vehicle, sysid, compid, message, imu), group in groupby(store.all_results(), key=key):
+        rows = list(group)  # one IMU at a time: the rows arrive sorted by IMU, then flight time
         order: dict = {}
         for r in rows:  # rows are in flight-time order
             order.setdefault(r["hash"], len(order))

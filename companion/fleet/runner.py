@@ -112,11 +112,10 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
         if isinstance(h, Exception):
             raise CompanionError(f"{p}: cannot read ({getattr(h, 'strerror', None) or h})")
         hashes[p] = h
-    known = store.statuses()
     work, seen, skipped = [], set(), 0
     for lf in logs:
         h = hashes[lf.path]
-        st = known.get(h)
+        st = store.status(h)
         if h in seen or st == "ok" or (st == "failed" and not retry_failed):
             skipped += 1
             if st is not None and store.cached_hash(lf.path, lf.size, lf.mtime) != h:

@@ -191,8 +191,10 @@ class FleetStore:
         names = [d[0] for d in cur.description]
         return [dict(zip(names, row)) for row in cur]
 
-    def all_results(self) -> list[dict]:
-        """Every analysed axis joined with its log, ordered by IMU then flight time (for the report)."""
+    def all_results(self):
+        """Every analysed axis joined with its log, ordered by IMU then flight time (for the report).
+
+        A generator: rows stream from SQLite, the report holds one IMU at a time."""
         cur = self.con.execute(
             "SELECT r.vehicle, r.sysid, r.compid, r.message, r.imu, r.axis, r.status, r.hash, r.still_s, "
             "r.rate_hz, r.temp_min, r.temp_max, "
@@ -200,7 +202,8 @@ class FleetStore:
             + ", l.start_time, l.path FROM results r JOIN logs l ON l.hash = r.hash WHERE l.status = 'ok' "
             "ORDER BY r.vehicle, r.sysid, r.compid, r.message, r.imu, l.start_time, l.path, r.axis")
         names = [d[0] for d in cur.description]
-        return [dict(zip(names, row)) for row in cur]
+        for row in cur:
+            yield dict(zip(names, row))
 
     def failures(self) -> list[tuple[str, str]]:
         return self.con.execute("SELECT path, error FROM logs WHERE status = 'failed' ORDER BY path").fetchall()
