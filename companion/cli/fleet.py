@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import sys
 
 from companion.errors import CompanionError
@@ -138,6 +139,17 @@ def _help(p) -> int:
     return 2
 
 
+def _term_as_interrupt():
+    """SIGTERM (a batch system's time limit, ``kill``) stops the run like Ctrl-C: what is recorded stays."""
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        return signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        return None
+
+
 def run_analyze(args) -> int:
     from companion.fleet.discover import discover
     from companion.fleet.runner import (Progress, close_client, describe, open_client, plan, run_dask,
@@ -161,16 +173,22 @@ def run_analyze(args) -> int:
         progress = Progress(len(work), skipped, enabled=not args.quiet)
         if not work:
             stats = None
-        elif args.workers == 0 and not args.scheduler:
-            stats = run_serial(store, work, progress, axes, args.vehicle, args.time_limit)
         else:
-            workers = args.workers or os.cpu_count() or 1
-            client, cluster = open_client(workers, args.scheduler)
+            old_term = _term_as_interrupt()
             try:
-                stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit,
-                                 batch=args.batch)
+                if args.workers == 0 and not args.scheduler:
+                    stats = run_serial(store, work, progress, axes, args.vehicle, args.time_limit)
+                else:
+                    workers = args.workers or os.cpu_count() or 1
+                    client, cluster = open_client(workers, args.scheduler)
+                    try:
+                        stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit,
+                                         batch=args.batch)
+                    finally:
+                        close_client(client, cluster)
             finally:
-                close_client(client, cluster)
+                if old_term is not None:
+                    signal.signal(signal.SIGTERM, old_term)
         if stats is not None:
             progress.close()
             stats.skipped = skipped

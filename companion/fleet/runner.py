@@ -14,6 +14,7 @@ cancels what is in flight (it is analysed again on the next run) and keeps every
 from __future__ import annotations
 
 import logging
+import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -180,8 +181,18 @@ def open_client(workers: int | None = None, scheduler: str | None = None, timeou
     n = int(workers or 0)
     if n < 1:
         raise CompanionError("--workers must be >= 1 for a Dask cluster (0 analyses in this process)")
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+    # the worker processes inherit an ignored SIGINT: a Ctrl-C (sent to the whole process group) is handled
+    # by this process alone, which stops submitting and closes the cluster (no traceback from each worker)
+    try:
+        old_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread
+        old_int = None
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+    finally:
+        if old_int is not None:
+            signal.signal(signal.SIGINT, old_int)
     try:
         client = Client(cluster, timeout=timeout_s)
     except BaseException:
