@@ -29,7 +29,7 @@ def test_null_p_values_are_calibrated_even_with_overdispersion(scatter):
     their intervals say (the dispersion correction)."""
     rng = np.random.default_rng(7)
     ps = []
-    for _ in range(3000):
+    for _ in range(2000):
         i, v, lo, hi = _series(rng, int(rng.integers(5, 31)), float(rng.uniform(0.005, 0.05)), scatter=scatter)
         ps.append(10 ** slope_test(i / i[-1], np.log(v), log_sd(v, lo, hi)).log10_p)
     ps = np.array(ps)
