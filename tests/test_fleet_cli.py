@@ -179,3 +179,19 @@ def test_html_opens_in_headless_chromium(tmp_path, capsys):
     r = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", f"--screenshot={shot}",
                         "--window-size=1200,1600", html.as_uri()], capture_output=True, timeout=120)
     assert r.returncode == 0 and shot.stat().st_size > 10_000
+
+
+@pytest.mark.network
+def test_existing_scheduler_on_loopback(tmp_path, capsys):
+    """--scheduler: the same command on an already running cluster (here a loopback LocalCluster)."""
+    distributed = pytest.importorskip("dask.distributed")
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "2", "--flights", "2", "--imus", "1",
+                 "--duration", "10", "--rate", "50", "--degrading", "0"]) == 0
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address="127.0.0.1:0") as cluster:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        db = str(tmp_path / "f.sqlite")
+        assert main(["fleet", "analyze", str(logs), "--db", db, "--scheduler", cluster.scheduler_address,
+                     "--quiet"]) == 0
+    assert "4 analysed, 0 failed" in capsys.readouterr().out
