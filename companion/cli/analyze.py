@@ -146,9 +146,18 @@ class Progress:
             sys.stderr.flush()
 
 
+def analysis_segment(stream) -> tuple[int, int]:
+    """Index range ``(a, b)`` of the samples of ``stream`` that are analysed: the longest gap-free segment.
+
+    The one place where the choice of samples is made, for ``companion analyze`` and ``companion fleet``
+    alike (a still-segment selection plugs in here).
+    """
+    return stream.longest_segment()
+
+
 def analyze_stream(stream, axes, taus, progress=None, online=False) -> dict:
-    """The JSON ``streams`` entry of one :class:`companion.samples.ImuStream` (longest segment)."""
-    a, b = stream.longest_segment()
+    """The JSON ``streams`` entry of one :class:`companion.samples.ImuStream` (its :func:`analysis_segment`)."""
+    a, b = analysis_segment(stream)
     rate = float(stream.rate_hz)
     entry = {"message": stream.key.message, "instance": stream.key.instance, "sysid": stream.key.sysid,
              "compid": stream.key.compid, "rate_hz": rate, "samples": int(b - a),

@@ -23,6 +23,7 @@ COMMANDS = (
     "compensate",
     "run",
     "sim_autopilot",
+    "fleet",
 )
 
 EPILOG = """\

@@ -1,0 +1,275 @@
+"""``companion fleet``: analyse a fleet's logs on Dask into SQLite, report gyro trends, simulate a fleet."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import sys
+
+from companion.errors import CompanionError
+
+DESCRIPTION = """\
+A fleet's thousands of logs: every IMU's noise coefficients per flight, kept in a SQLite database, and
+the IMUs whose N, B or K rise across flights named. Three steps:
+
+  companion fleet simulate demo/ --vehicles 20 --flights 30       a synthetic fleet (3 IMUs degrade)
+  companion fleet analyze demo/ --db fleet.sqlite --workers 2     analyse every log (Dask), resumable
+  companion fleet report --db fleet.sqlite --html report.html     ranking, trends, plots
+
+Method and database schema: docs/fleet.md.
+"""
+
+ANALYZE_DESCRIPTION = """\
+Analyse every log named by LOGS (files, folders searched recursively, glob patterns) with the code of
+`companion analyze` (the same segment choice, fit and 95 % intervals; gyro axes by default) in parallel
+on Dask: a local cluster of --workers processes on this machine (default: one per CPU core), or the
+workers of an existing scheduler (--scheduler tcp://HOST:8786; they need companion installed and the
+log paths readable). Results go to the SQLite database --db, one transaction per log, written by this
+process only. A log whose content (BLAKE2b hash) is already in the database is skipped, so an
+interrupted run resumes where it stopped; a log that fails is recorded with a one-line reason
+(--retry-failed analyses those again). Progress on stderr: logs done, failed, rate, ETA.
+"""
+
+ANALYZE_EPILOG = """\
+examples:
+  companion fleet analyze logs/ --db fleet.sqlite
+  companion fleet analyze 'logs/**/*.tlog' more/flight7.tlog --db fleet.sqlite --workers 8
+  companion fleet analyze /shared/logs --db fleet.sqlite --scheduler tcp://10.0.0.5:8786
+  companion fleet analyze logs/ --db fleet.sqlite --vehicle dir     one folder per vehicle
+  companion fleet analyze logs/ --db fleet.sqlite --workers 0       in this process, no Dask
+
+Vehicle id: the autopilot's board id when the log has one (AUTOPILOT_VERSION uid in a tlog), else
+sys<MAVLink sysid>; --vehicle dir names vehicles by the log's folder instead (CSV logs carry no id).
+"""
+
+REPORT_DESCRIPTION = """\
+Per IMU (vehicle, MAVLink system, message, instance) its coefficients across flights (oldest first) and a
+trend test: a weighted regression of ln N, ln B and ln K on the flight index with the per-flight 95 %
+intervals, widened when the flights scatter more than the intervals explain. Evidence is -log10 of the
+Bonferroni-corrected one-sided p-value of the steepest rise; an IMU is flagged at evidence >= 4 (about
+one false alarm in 10,000 healthy IMUs, chosen from simulations) with a fitted rise >= 1.2x. IMUs are
+printed most evidence first.
+"""
+
+REPORT_EPILOG = """\
+examples:
+  companion fleet report --db fleet.sqlite
+  companion fleet report --db fleet.sqlite --html report.html --json report.json
+
+--json OUT writes {"imus": [...]}, one entry per IMU, most evidence first, with vehicle, sysid, imu,
+message, flights, flagged, evidence, axis and param (the worst test), trend (its fitted last/first
+ratio), t, dispersion, first_flight/last_flight (unix s).
+"""
+
+SIM_DESCRIPTION = """\
+Write a synthetic fleet: OUT_DIR/vehicle_NNN/flight_FFF.tlog for every vehicle and flight (a day apart),
+each a still recording of --duration s at --rate Hz of --imus IMUs (ArduPilot's RAW_IMU, SCALED_IMU2,
+SCALED_IMU3, int16 mrad/s; or HIGHRES_IMU), with the board id (AUTOPILOT_VERSION) and the INS_GYR_ID
+parameters. Every IMU axis has its own N, B and K; --degrading IMUs chosen at random have --param
+multiplied by --rise from the first to the last flight. The truth goes to OUT_DIR/fleet_truth.json.
+"""
+
+SIM_EPILOG = """\
+examples:
+  companion fleet simulate demo/ --vehicles 20 --flights 30
+  companion fleet simulate small/ --vehicles 4 --flights 8 --duration 60 --rate 50 --seed 3
+  companion fleet simulate b/ --vehicles 10 --flights 20 --param B --rise 2 --message HIGHRES_IMU
+"""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("fleet", help="many logs on Dask into SQLite, gyro trends across flights, HTML report",
+                              description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="fleet_command", metavar="STEP")
+    p.set_defaults(func=lambda args: _help(p))
+
+    a = sub.add_parser("analyze", help="analyse logs in parallel into the database (resumable)",
+                       description=ANALYZE_DESCRIPTION, epilog=ANALYZE_EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    a.add_argument("logs", nargs="+", metavar="LOGS", help="log files, folders or glob patterns")
+    a.add_argument("--db", required=True, metavar="FILE", help="SQLite database (created when missing)")
+    g = a.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="local Dask worker processes (default: CPU cores); 0: analyse in this process")
+    g.add_argument("--scheduler", metavar="ADDR", help="an existing Dask scheduler, e.g. tcp://HOST:8786")
+    a.add_argument("--vehicle", choices=("auto", "dir"), default="auto",
+                   help="vehicle id: auto (board id, else sys<sysid>) or dir (the log's folder name)")
+    a.add_argument("--axes", default="gx,gy,gz", help="axes to analyse (default gx,gy,gz)")
+    a.add_argument("--batch", type=int, default=1, metavar="K",
+                   help="logs per Dask task (default 1; tens on a large cluster, see docs/fleet.md)")
+    a.add_argument("--retry-failed", action="store_true", help="analyse logs recorded as failed again")
+    a.add_argument("--time-limit", type=float, default=None, metavar="S",
+                   help="stop submitting after S seconds (what is recorded stays; run again to resume)")
+    a.add_argument("--quiet", action="store_true", help="no progress line")
+    a.set_defaults(func=run_analyze)
+
+    r = sub.add_parser("report", help="trend test per IMU, ranking, HTML and JSON",
+                       description=REPORT_DESCRIPTION, epilog=REPORT_EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("--db", required=True, metavar="FILE", help="SQLite database written by fleet analyze")
+    r.add_argument("--html", metavar="OUT", help="write the self-contained HTML report")
+    r.add_argument("--json", metavar="OUT", help="write the ranking as JSON ({\"imus\": [...]})")
+    r.add_argument("--top", type=int, default=20, metavar="K", help="IMUs printed (default 20; 0: all)")
+    r.add_argument("--max-plots", type=int, default=100, metavar="K",
+                   help="plots of unflagged IMUs in the HTML (flagged ones always; default 100)")
+    r.set_defaults(func=run_report)
+
+    s = sub.add_parser("simulate", help="a synthetic fleet in which chosen IMUs degrade",
+                       description=SIM_DESCRIPTION, epilog=SIM_EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    s.add_argument("out_dir", metavar="OUT_DIR")
+    s.add_argument("--vehicles", type=int, required=True, metavar="V")
+    s.add_argument("--flights", type=int, required=True, metavar="F")
+    s.add_argument("--imus", type=int, default=3, help="IMUs per vehicle (default 3)")
+    s.add_argument("--degrading", type=int, default=3, help="IMUs that degrade (default 3)")
+    s.add_argument("--rise", type=float, default=1.5, help="last/first flight ratio of the degrading parameter (1.5)")
+    s.add_argument("--param", choices=("N", "B", "K"), default="N", help="parameter that rises (default N)")
+    s.add_argument("--duration", type=float, default=600.0, metavar="S", help="seconds per flight (default 600)")
+    s.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="sample rate (default 100)")
+    s.add_argument("--message", choices=("ardupilot", "HIGHRES_IMU"), default="ardupilot",
+                   help="ardupilot: RAW_IMU/SCALED_IMU2/SCALED_IMU3 int16 (default); HIGHRES_IMU: float")
+    s.add_argument("--seed", type=int, default=0)
+    s.set_defaults(func=run_simulate)
+
+
+def _help(p) -> int:
+    p.print_help()
+    return 2
+
+
+def _term_as_interrupt():
+    """SIGTERM (a batch system's time limit, ``kill``) stops the run like Ctrl-C: what is recorded stays."""
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        return signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        return None
+
+
+def run_analyze(args) -> int:
+    from companion.fleet.discover import discover
+    from companion.fleet.runner import (Progress, close_client, describe, open_client, plan, run_dask,
+                                        run_serial)
+    from companion.fleet.store import FleetStore
+    from companion.samples import AXES
+
+    axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
+    if not axes or any(a not in AXES for a in axes):
+        raise CompanionError(f"bad --axes {args.axes!r}: expected a comma list of {', '.join(AXES)}")
+    if args.batch < 1:
+        raise CompanionError("--batch must be >= 1")
+    if args.workers is not None and args.workers < 0:
+        raise CompanionError("--workers must be >= 0")
+    if args.time_limit is not None and not (args.time_limit > 0 and math.isfinite(args.time_limit)):
+        raise CompanionError("--time-limit must be a positive number of seconds")
+    logs = discover(args.logs)
+    with FleetStore(args.db) as store:
+        work, skipped = plan(store, logs, retry_failed=args.retry_failed)
+        print(f"{len(logs)} log(s): {len(work)} to analyse, {skipped} already in {args.db}", file=sys.stderr)
+        progress = Progress(len(work), skipped, enabled=not args.quiet)
+        if not work:
+            stats = None
+        else:
+            old_term = _term_as_interrupt()
+            try:
+                if args.workers == 0 and not args.scheduler:
+                    stats = run_serial(store, work, progress, axes, args.vehicle, args.time_limit)
+                else:
+                    workers = args.workers or os.cpu_count() or 1
+                    client, cluster = open_client(workers, args.scheduler)
+                    try:
+                        stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit,
+                                         batch=args.batch)
+                    finally:
+                        close_client(client, cluster)
+            finally:
+                if old_term is not None:
+                    signal.signal(signal.SIGTERM, old_term)
+        if stats is not None:
+            progress.close()
+            stats.skipped = skipped
+            for path, reason in stats.failures[:10]:
+                print(f"failed: {path}: {reason}", file=sys.stderr)
+            if len(stats.failures) > 10:
+                print(f"... and {len(stats.failures) - 10} more failed (fleet report --html lists them)",
+                      file=sys.stderr)
+            print(describe(stats))
+            if stats.stopped == "interrupted":
+                return 130
+            if stats.stopped == "deadline":
+                return 3
+        c = store.counts()
+        print(f"{args.db}: {c['ok']} log(s) analysed, {c['failed']} failed")
+    return 0
+
+
+def run_report(args) -> int:
+    from companion.cli.output import to_json, write_text
+    from companion.fleet.report import fleet_trends, report_html, report_json
+    from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE
+
+    from companion.fleet.store import FleetStore
+
+    with FleetStore(args.db, create=False) as store:
+        entries = fleet_trends(store)
+        if not entries:
+            c = store.counts()
+            raise CompanionError(f"{args.db}: no analysed IMU data ({c['ok']} logs ok, {c['failed']} failed)")
+        flagged = sum(e["flagged"] for e in entries)
+        print(f"{len(entries)} IMUs, {flagged} flagged (evidence >= {EVIDENCE_THRESHOLD:g}, rise >= {MIN_RISE:g}x)")
+        print(f"{'#':>4} {'vehicle':<18} {'sys':>3} {'IMU':<16} {'flights':>7} {'flag':>4} {'evidence':>8} "
+              f"{'worst':<6} {'trend':>6}")
+        top = entries if args.top == 0 else entries[:args.top]
+        for i, e in enumerate(top, 1):
+            worst = f"{e['axis']} {e['param']}" if e["axis"] else "-"
+            trend = f"{e['trend']:.2f}x" if e["trend"] is not None else "-"
+            print(f"{i:>4} {e['vehicle'][:18]:<18} {e['sysid']:>3} {str(e['imu']) + ' ' + e['message']:<16} "
+                  f"{e['flights']:>7} {'YES' if e['flagged'] else 'no':>4} {e['evidence']:>8.1f} {worst:<6} {trend:>6}"
+                  + (f"  ({e['note']})" if e["note"] and not e["axis"] else ""))
+        if len(top) < len(entries):
+            print(f"... {len(entries) - len(top)} more (--top 0 for all)")
+        if args.json:
+            write_text(args.json, to_json(report_json(store, entries, EVIDENCE_THRESHOLD, MIN_RISE)) + "\n", "JSON")
+            print(f"wrote {args.json}")
+        if args.html:
+            write_text(args.html, report_html(store, entries, EVIDENCE_THRESHOLD, MIN_RISE, args.max_plots), "HTML")
+            print(f"wrote {args.html}")
+    return 0
+
+
+def run_simulate(args) -> int:
+    from companion.fleet.simulate import simulate_fleet
+
+    for name in ("vehicles", "flights", "imus"):
+        if getattr(args, name) < 1:
+            raise CompanionError(f"--{name} must be >= 1")
+    if not (args.duration > 0 and math.isfinite(args.duration)) or not (args.rate > 0 and math.isfinite(args.rate)):
+        raise CompanionError("--duration and --rate must be positive")
+    if args.duration * args.rate < 64:
+        raise CompanionError(f"--duration {args.duration:g} s at {args.rate:g} Hz is fewer than 64 samples per flight")
+    if not (args.rise > 0 and math.isfinite(args.rise)):
+        raise CompanionError("--rise must be a positive ratio")
+    tty = sys.stderr.isatty()
+
+    def progress(done, total):
+        if tty:
+            sys.stderr.write(f"\rsimulate {done}/{total} logs")
+            sys.stderr.flush()
+
+    try:
+        truth = simulate_fleet(args.out_dir, args.vehicles, args.flights, args.imus, args.degrading, args.rise,
+                               args.param, args.duration, args.rate, args.seed, args.message, progress)
+    except ValueError as exc:
+        raise CompanionError(str(exc)) from None
+    except OSError as exc:
+        raise CompanionError(f"{args.out_dir}: cannot write ({exc.strerror or exc})") from None
+    if tty:
+        sys.stderr.write("\n")
+    deg = [f"{v['name']} IMU{i['imu']}" for v in truth["vehicles"] for i in v["imus"] if i["degrading"]]
+    print(f"wrote {len(truth['logs'])} logs to {args.out_dir} ({args.vehicles} vehicles x {args.flights} flights, "
+          f"{args.imus} IMUs each); degrading ({args.param} x{args.rise:g}): {', '.join(deg) or 'none'}")
+    return 0

@@ -1,0 +1,293 @@
+"""Run the per-log task over many logs: on Dask (a local cluster of processes, or a given scheduler) or
+in this process, with one writer to the database and a progress line on stderr.
+
+Flow: :func:`plan` turns the discovered files into work (content hashes: reused from the database when
+the path's size and mtime are unchanged, else computed in threads; a hash already stored as ``ok`` --
+or ``failed``, unless retried -- is skipped; a second copy of the same content in the batch is
+skipped), then :func:`run_logs` submits :func:`companion.fleet.task.analyze_log` for each log, at most
+``window`` in flight (the scheduler never holds a million futures), and records each result in its own
+transaction as it arrives. A worker that dies (``KilledWorker``) or a task error is recorded as a
+failed log with its one-line reason; the run goes on. Ctrl-C or ``deadline_s`` stops submitting,
+cancels what is in flight (it is analysed again on the next run) and keeps every recorded log.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+
+from companion.errors import CompanionError
+from companion.fleet.discover import LogFile, hash_files
+from companion.fleet.task import analyze_log, analyze_logs, one_line
+from companion.samples import GYRO_AXES
+
+DASK_MISSING = ("fleet analyze runs on dask.distributed, which is not installed: "
+                "pip install 'companion[fleet]' (or use --workers 0 to analyse in this process)")
+
+
+@dataclass
+class Work:
+    log: LogFile
+    hash: str
+
+
+@dataclass
+class RunStats:
+    total: int = 0  # logs given
+    skipped: int = 0  # already in the database (or a duplicate content)
+    done: int = 0  # analysed and recorded ok in this run
+    failed: int = 0  # analysed and recorded failed in this run
+    elapsed_s: float = 0.0
+    stopped: str = ""  # "", "interrupted" or "deadline"
+    workers: int = 0
+    failures: list = field(default_factory=list)  # (path, reason) of this run
+
+    @property
+    def rate(self) -> float:
+        return (self.done + self.failed) / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+
+class Progress:
+    """``fleet [#####.....] 120/1000 failed 3 | 4.2 logs/s | ETA 3:29`` on stderr.
+
+    On a terminal the line is redrawn in place (at most 10 times a second); otherwise a line is written
+    every ``every_s`` seconds and at the end, so a batch job's log shows progress too.
+    """
+
+    def __init__(self, total: int, skipped: int = 0, enabled: bool = True, stream=None, every_s: float = 10.0):
+        self.stream = stream or sys.stderr
+        self.total, self.skipped = total, skipped
+        self.enabled = enabled
+        self.tty = enabled and getattr(self.stream, "isatty", lambda: False)()
+        self.t0 = time.monotonic()
+        self.last = 0.0
+        self.every_s = every_s
+        self.done = self.failed = 0
+
+    def line(self) -> str:
+        n = self.done + self.failed
+        el = time.monotonic() - self.t0
+        rate = n / el if el > 0 else 0.0
+        left = self.total - n
+        eta = f"{int(left / rate) // 60}:{int(left / rate) % 60:02d}" if rate > 0 and left > 0 else "-"
+        k = int(30 * n / self.total) if self.total else 30
+        return (f"fleet [{'#' * k}{'.' * (30 - k)}] {n}/{self.total} done, {self.failed} failed"
+                + (f", {self.skipped} skipped" if self.skipped else "") + f" | {rate:.2f} logs/s | ETA {eta}")
+
+    def update(self, done: int, failed: int, force: bool = False) -> None:
+        self.done, self.failed = done, failed
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if self.tty and (force or now - self.last >= 0.1):
+            self.stream.write("\r" + self.line() + "  ")
+            self.stream.flush()
+            self.last = now
+        elif not self.tty and (force or now - self.last >= self.every_s):
+            self.stream.write(self.line() + "\n")
+            self.stream.flush()
+            self.last = now
+
+    def close(self) -> None:
+        if self.enabled:
+            self.update(self.done, self.failed, force=True)
+            if self.tty:
+                self.stream.write("\n")
+                self.stream.flush()
+
+
+def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 4) -> tuple[list[Work], int]:
+    """(work to do, number skipped) for ``logs`` against what ``store`` holds."""
+    hashes: dict[str, str] = {}
+    unknown = []
+    for lf in logs:
+        h = store.cached_hash(lf.path, lf.size, lf.mtime)
+        if h:
+            hashes[lf.path] = h
+        else:
+            unknown.append(lf.path)
+    for p, h in hash_files(unknown, threads).items():
+        if isinstance(h, Exception):
+            raise CompanionError(f"{p}: cannot read ({getattr(h, 'strerror', None) or h})")
+        hashes[p] = h
+    work, seen, skipped = [], set(), 0
+    for lf in logs:
+        h = hashes[lf.path]
+        st = store.status(h)
+        if h in seen or st == "ok" or (st == "failed" and not retry_failed):
+            skipped += 1
+            if st is not None and store.cached_hash(lf.path, lf.size, lf.mtime) != h:
+                store.remember_path(lf.path, h, lf.size, lf.mtime)
+            continue
+        seen.add(h)
+        work.append(Work(lf, h))
+    return work, skipped
+
+
+def _record(store, stats: RunStats, w: Work, result: dict) -> None:
+    store.record(w.hash, result, w.log.size, w.log.mtime)
+    if result["status"] == "ok":
+        stats.done += 1
+    else:
+        stats.failed += 1
+        stats.failures.append((w.log.path, result.get("error") or "failed"))
+
+
+def _failed(w: Work, reason: str) -> dict:
+    from companion.fleet.discover import log_format
+
+    return {"path": w.log.path, "format": log_format(w.log.path), "status": "failed", "error": reason,
+            "log": {}, "rows": [], "elapsed_s": None}
+
+
+def run_serial(store, work: list[Work], progress: Progress, axes=GYRO_AXES, vehicle_from="auto",
+               deadline_s: float | None = None) -> RunStats:
+    """Analyse ``work`` one log after the other in this process (``--workers 0``; the benchmark's baseline)."""
+    stats = RunStats(total=len(work), workers=0)
+    t0 = time.monotonic()
+    try:
+        for w in work:
+            if deadline_s is not None and time.monotonic() - t0 > deadline_s:
+                stats.stopped = "deadline"
+                break
+            _record(store, stats, w, analyze_log(w.log.path, axes, vehicle_from))
+            progress.update(stats.done, stats.failed)
+    except KeyboardInterrupt:
+        stats.stopped = "interrupted"
+    stats.elapsed_s = time.monotonic() - t0
+    return stats
+
+
+def open_client(workers: int | None = None, scheduler: str | None = None, timeout_s: float = 60.0):
+    """(client, cluster or None): a LocalCluster of ``workers`` single-threaded processes on 127.0.0.1,
+    or a client of the scheduler at ``scheduler`` (``tcp://HOST:8786``)."""
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise CompanionError(DASK_MISSING) from None
+    for name in ("distributed", "distributed.nanny", "distributed.scheduler", "distributed.worker",
+                 "distributed.core", "distributed.comm"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+    if scheduler:
+        if "://" not in scheduler:
+            scheduler = "tcp://" + scheduler
+        try:
+            return Client(scheduler, timeout=timeout_s), None
+        except (OSError, TimeoutError) as exc:
+            raise CompanionError(f"cannot reach the Dask scheduler at {scheduler} ({one_line(exc)})") from None
+    n = int(workers or 0)
+    if n < 1:
+        raise CompanionError("--workers must be >= 1 for a Dask cluster (0 analyses in this process)")
+    # the worker processes inherit an ignored SIGINT: a Ctrl-C (sent to the whole process group) is handled
+    # by this process alone, which stops submitting and closes the cluster (no traceback from each worker)
+    try:
+        old_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread
+        old_int = None
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+    finally:
+        if old_int is not None:
+            signal.signal(signal.SIGINT, old_int)
+    try:
+        client = Client(cluster, timeout=timeout_s)
+    except BaseException:
+        cluster.close()
+        raise
+    return client, cluster
+
+
+def run_dask(store, work: list[Work], progress: Progress, client, axes=GYRO_AXES, vehicle_from="auto",
+             deadline_s: float | None = None, window: int | None = None, batch: int = 1) -> RunStats:
+    """Analyse ``work`` on the Dask ``client``'s workers; this process is the only database writer.
+
+    ``batch``: logs per task (1 by default; a large cluster wants tasks of tens of seconds, docs/fleet.md).
+    ``window``: tasks in flight (default 4 per worker thread).
+    """
+    from dask.distributed import wait
+
+    nthreads = max(sum(client.nthreads().values()), 1)
+    stats = RunStats(total=len(work), workers=len(client.nthreads()))
+    window = window or max(4 * nthreads, 8)
+    batch = max(int(batch), 1)
+    t0 = time.monotonic()
+    pending: dict = {}
+    todo = iter(work)
+    exhausted = False
+
+    def fill():
+        nonlocal exhausted
+        while not exhausted and len(pending) < window:
+            ws = [w for w in (next(todo, None) for _ in range(batch)) if w is not None]
+            if not ws:
+                exhausted = True
+                return
+            if batch == 1:
+                fut = client.submit(analyze_log, ws[0].log.path, tuple(axes), vehicle_from, pure=False, retries=0)
+            else:
+                fut = client.submit(analyze_logs, [w.log.path for w in ws], tuple(axes), vehicle_from, pure=False,
+                                    retries=0)
+            pending[fut] = ws
+
+    try:
+        fill()
+        while pending:
+            if deadline_s is not None and time.monotonic() - t0 > deadline_s:
+                stats.stopped = "deadline"
+                break
+            try:
+                finished = wait(list(pending), timeout=0.5, return_when="FIRST_COMPLETED").done
+            except TimeoutError:
+                finished = ()
+            for fut in finished:
+                ws = pending.pop(fut)
+                try:
+                    results = fut.result()
+                    results = [results] if isinstance(results, dict) else results
+                except Exception as exc:  # noqa: BLE001 - KilledWorker, lost connection: recorded, run goes on
+                    results = [_failed(w, f"worker: {one_line(exc)}"[:500]) for w in ws]
+                for w, result in zip(ws, results):
+                    _record(store, stats, w, result)
+            progress.update(stats.done, stats.failed)
+            fill()
+    except KeyboardInterrupt:
+        stats.stopped = "interrupted"
+    finally:
+        if pending:
+            try:
+                client.cancel(list(pending))
+            except Exception:  # noqa: BLE001 - shutting down anyway
+                pass
+    stats.elapsed_s = time.monotonic() - t0
+    return stats
+
+
+def close_client(client, cluster) -> None:
+    try:
+        client.close(timeout=10)
+    except Exception:  # noqa: BLE001
+        pass
+    if cluster is not None:
+        try:
+            cluster.close(timeout=20)
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def describe(stats: RunStats) -> str:
+    s = (f"{stats.done} analysed, {stats.failed} failed, {stats.skipped} already in the database, "
+         f"{stats.elapsed_s:.1f} s")
+    if stats.done + stats.failed and stats.elapsed_s > 0:
+        s += f" ({stats.rate:.2f} logs/s" + (f" on {stats.workers} workers)" if stats.workers else " in-process)")
+    if stats.stopped:
+        left = stats.total - stats.done - stats.failed
+        s += f"; {stats.stopped}: {left} log(s) not analysed, run again to resume"
+    return s
+
+
+__all__ = ["plan", "run_serial", "run_dask", "open_client", "close_client", "Progress", "RunStats", "describe",
+           "hash_file", "DASK_MISSING", "math"]

@@ -1,0 +1,171 @@
+"""A synthetic fleet: vehicles x flights telemetry logs in which chosen IMUs degrade slowly.
+
+Every vehicle has ``imus`` gyros (ArduPilot's streams: IMU 0 as RAW_IMU, IMU 1 as SCALED_IMU2, IMU 2 as
+SCALED_IMU3, int16 mrad/s; or all as float HIGHRES_IMU with ``message="HIGHRES_IMU"``), a MAVLink system
+id (1, 2, ...), a 64-bit board id sent in AUTOPILOT_VERSION.uid and gyro ids sent as the INS_GYR_ID
+parameters. Each IMU axis has its own white noise N (log-uniform in ``N_RANGE``), flicker bias
+instability B and rate random walk K (log-uniform in ``B_RANGE``, ``K_RANGE``), synthesised by
+:mod:`companion.sim.synth`. Flights are a day apart (start times in the tlog record stamps); each
+flight is a still, disarmed recording of ``duration_s`` seconds at ``rate_hz`` with a warming
+temperature.
+
+``degrading`` IMUs, chosen at random, have their ``param`` (N, B or K) multiplied by
+``rise ** (f / (F - 1))`` on all three gyro axes at flight f: a geometric rise to ``rise`` times the
+first flight's value at the last flight. The truth (every IMU's parameters and which ones degrade) is
+written to ``OUT_DIR/fleet_truth.json``; logs go to ``OUT_DIR/<vehicle>/flight_<f>.tlog``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+
+import numpy as np
+
+from companion.sources import messages as M
+
+N_RANGE = (1.5e-4, 4.0e-4)  # rad/s/sqrt(Hz)  (0.5 - 1.4 deg/sqrt(h))
+B_RANGE = (1.0e-5, 4.0e-5)  # rad/s           (2 - 8 deg/h)
+K_RANGE = (2.0e-7, 1.0e-6)  # rad/s^1.5
+ARDUPILOT_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
+DAY = 86400.0
+T0_UNIX = 1.75e9
+
+
+def _loguniform(rng, lo_hi, size=None):
+    lo, hi = lo_hi
+    return np.exp(rng.uniform(math.log(lo), math.log(hi), size))
+
+
+def imu_message(k: int, message: str) -> str:
+    if message == "HIGHRES_IMU":
+        return "HIGHRES_IMU"
+    return ARDUPILOT_MESSAGES[k] if k < len(ARDUPILOT_MESSAGES) else "RAW_IMU"
+
+
+def fleet_truth(vehicles: int, flights: int, imus: int = 3, degrading: int = 3, rise: float = 1.5,
+                param: str = "N", seed: int = 0) -> dict:
+    """The fleet's parameters (no samples): vehicles, IMUs, their per-axis terms, the degrading IMUs."""
+    if vehicles < 1 or flights < 1 or imus < 1:
+        raise ValueError("vehicles, flights and imus must be >= 1")
+    if not 0 <= degrading <= vehicles * imus:
+        raise ValueError(f"degrading must be between 0 and vehicles x imus = {vehicles * imus}")
+    if param not in ("N", "B", "K"):
+        raise ValueError("param must be N, B or K")
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 15]))
+    pairs = [(v, k) for v in range(vehicles) for k in range(imus)]
+    chosen = {pairs[i] for i in rng.choice(len(pairs), size=degrading, replace=False)} if degrading else set()
+    out = {"vehicles": [], "flights": flights, "rise": rise, "param": param, "seed": seed}
+    for v in range(vehicles):
+        uid = int(rng.integers(1, 2**63))
+        veh = {"name": f"vehicle_{v:03d}", "sysid": v % 250 + 1, "board_id": f"{uid:016x}", "imus": []}
+        for k in range(imus):
+            axes = {a: {"N": float(_loguniform(rng, N_RANGE)), "B": float(_loguniform(rng, B_RANGE)),
+                        "K": float(_loguniform(rng, K_RANGE))} for a in ("gx", "gy", "gz")}
+            veh["imus"].append({"imu": k, "gyro_id": int(rng.integers(1, 2**22)), "axes": axes,
+                                "degrading": (v, k) in chosen})
+        out["vehicles"].append(veh)
+    return out
+
+
+def _meta_payloads(board_id: str, gyro_ids: list[int]):
+    """(payload bytes, msgid) of AUTOPILOT_VERSION and the INS_GYR*_ID PARAM_VALUEs."""
+    av = struct.pack("<QQIIIIHH8s8s8s18s", 0, int(board_id, 16), 0x04050000, 0, 0, 0, 0, 0, b"", b"", b"", b"")
+    out = [(av, 148)]
+    for k, gid in enumerate(gyro_ids[:3]):
+        name = "INS_GYR_ID" if k == 0 else f"INS_GYR{k + 1}_ID"
+        out.append((struct.pack("<fHH16sB", float(gid), 3, k, name.encode(), 6), 22))  # MAV_PARAM_TYPE_INT32
+    return out
+
+
+def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: str, duration_s: float,
+                 rate_hz: float, message: str, seed) -> dict:
+    """Write one flight's tlog; returns what it holds (start time, per-IMU parameters used)."""
+    from companion.mavlink.tlog_writer import encode_frames, heartbeat_payload, imu_payloads, pack_records
+    from companion.sim.synth import flicker, random_walk, white_noise
+
+    rng = np.random.default_rng(seed)
+    n = int(round(duration_s * rate_hz))
+    if n < 2:
+        raise ValueError("a flight needs at least 2 samples")
+    boot = float(rng.uniform(20.0, 120.0))
+    t = boot + np.arange(n) / rate_hz
+    start = T0_UNIX + f * DAY + (vehicle["sysid"] % 24) * 3600.0 + float(rng.uniform(0, 3000))
+    temp0 = float(rng.uniform(15.0, 35.0))
+    temperature = temp0 + 3.0 * (1.0 - np.exp(-(t - boot) / 300.0))
+    factor = rise ** (f / (flights - 1)) if flights > 1 else 1.0
+    rows, msgids, times, used = [], [], [], []
+    for payload, mid in _meta_payloads(vehicle["board_id"], [i["gyro_id"] for i in vehicle["imus"]]):
+        rows.append(np.frombuffer(payload, dtype=np.uint8).reshape(1, -1))  # first in the log (stable sort)
+        msgids.append(np.array([mid]))
+        times.append(np.array([boot]))
+    for imu in vehicle["imus"]:
+        gyro = np.zeros((n, 3))
+        par = {}
+        for j, a in enumerate(("gx", "gy", "gz")):
+            p = dict(imu["axes"][a])
+            if imu["degrading"]:
+                p[param] *= factor
+            par[a] = p
+            gyro[:, j] = (white_noise(p["N"], rate_hz, n, rng) + flicker(p["B"], rate_hz, n, rng)
+                          + random_walk(p["K"], rate_hz, n, rng) + rng.normal(0.0, 0.01))  # + a constant bias
+        accel = rng.normal(0.0, 0.02, (n, 3))
+        accel[:, 2] -= 9.80665
+        msg = imu_message(imu["imu"], message)
+        rec = imu_payloads(msg, t, gyro, accel, instance=imu["imu"], temperature=temperature + imu["imu"])
+        rows.append(rec.view(np.uint8).reshape(n, -1))
+        msgids.append(np.full(n, M.IMU_LAYOUTS[msg].msgid))
+        times.append(t)
+        used.append({"imu": imu["imu"], "message": msg, "axes": par})
+    hb_t = boot + np.arange(0.0, duration_s, 1.0)
+    rows.append(np.repeat(heartbeat_payload().view(np.uint8).reshape(1, -1), hb_t.size, axis=0))
+    msgids.append(np.full(hb_t.size, M.HEARTBEAT.msgid))
+    times.append(hb_t)
+    width = max(r.shape[1] for r in rows)
+    payloads = np.zeros((sum(r.shape[0] for r in rows), width), dtype=np.uint8)
+    i = 0
+    for r in rows:
+        payloads[i:i + r.shape[0], :r.shape[1]] = r
+        i += r.shape[0]
+    msgid = np.concatenate(msgids).astype(np.int64)
+    t_all = np.concatenate(times)
+    order = np.argsort(t_all, kind="stable")
+    payloads, msgid, t_all = payloads[order], msgid[order], t_all[order]
+    extra = M.CRC_EXTRA_TABLE[msgid].astype(np.uint16)
+    seq = (np.arange(msgid.size) & 0xFF).astype(np.uint8)
+    frames, flen = encode_frames(payloads, msgid, extra, seq, vehicle["sysid"], 1, True)
+    stamps = np.rint((start + (t_all - boot)) * 1e6).astype(np.uint64)
+    with open(path, "wb") as fh:
+        fh.write(pack_records(stamps, frames, flen))
+    return {"path": str(path), "start_time": start, "imus": used}
+
+
+def simulate_fleet(out_dir, vehicles: int, flights: int, imus: int = 3, degrading: int = 3, rise: float = 1.5,
+                   param: str = "N", duration_s: float = 600.0, rate_hz: float = 100.0, seed: int = 0,
+                   message: str = "ardupilot", progress=None) -> dict:
+    """Write the fleet's logs and ``fleet_truth.json`` into ``out_dir``; returns the truth dict.
+
+    ``progress``: optional callable(done, total) after each log.
+    """
+    truth = fleet_truth(vehicles, flights, imus, degrading, rise, param, seed)
+    truth.update(duration_s=duration_s, rate_hz=rate_hz, message=message, logs=[])
+    os.makedirs(out_dir, exist_ok=True)
+    total = vehicles * flights
+    done = 0
+    for v, veh in enumerate(truth["vehicles"]):
+        vdir = os.path.join(out_dir, veh["name"])
+        os.makedirs(vdir, exist_ok=True)
+        for f in range(flights):
+            path = os.path.join(vdir, f"flight_{f:03d}.tlog")
+            info = write_flight(path, veh, f, flights, rise, param, duration_s, rate_hz, message,
+                                np.random.SeedSequence([seed, 16, v, f]))
+            truth["logs"].append({"path": os.path.relpath(path, out_dir), "vehicle": veh["name"],
+                                  "flight": f, "start_time": info["start_time"]})
+            done += 1
+            if progress:
+                progress(done, total)
+    with open(os.path.join(out_dir, "fleet_truth.json"), "w") as fh:
+        json.dump(truth, fh, indent=1)
+    return truth

@@ -1,0 +1,138 @@
+"""The per-log analysis task: one log file in, a plain dict of database rows out. Never raises.
+
+This is what a Dask worker runs (it must stay importable and picklable: plain arguments, plain dict
+result). The numbers are those of ``companion analyze``: the log is read by
+:func:`companion.sources.load` (so every format it reads flows in), each IMU stream is analysed by
+:func:`companion.cli.analyze.analyze_stream` over its :func:`companion.cli.analyze.analysis_segment`
+(the single place where a still-segment selection plugs in, for both commands), with the same fit and
+intervals. Only the gyro axes by default.
+
+Result (see :func:`analyze_log`)::
+
+    {"path", "format", "status": "ok" | "failed", "error": one line or None, "elapsed_s",
+     "log": {"sysid", "vehicle", "board_id", "imu_ids", "start_time", "duration_s", "streams"},
+     "rows": [{"vehicle", "sysid", "compid", "imu", "message", "axis", "status", "note", "rate_hz",
+               "samples", "still_s", "temp_min", "temp_max", "Q", "Q_lo", "Q_hi", "N", ..., "R_hi",
+               "model_error", "chi2", "dof", "extra"}, ...]}
+
+A failure (unreadable file, no IMU data, a bug) gives ``status="failed"`` and a one-line ``error``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+
+from companion.samples import GYRO_AXES
+
+#: linear IEEE 952 terms stored as columns (value, 95 % interval); other terms go to ``extra`` (JSON)
+COLUMN_PARAMS = {"quantization": "Q", "white_noise": "N", "bias_instability": "B", "random_walk": "K", "ramp": "R"}
+
+
+def one_line(exc: BaseException) -> str:
+    """A one-line reason: the user-error text as is, anything else prefixed with its type."""
+    from companion.errors import CompanionError
+
+    text = str(exc).strip().replace("\n", " ")
+    if isinstance(exc, CompanionError):
+        return text or "error"
+    if isinstance(exc, MemoryError):
+        return "out of memory"
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def vehicle_name(sysid: int, board_id: str | None, path: str, vehicle_from: str = "auto") -> str:
+    """Vehicle id text: the folder name (``vehicle_from="dir"``), else the board id, else ``sys<sysid>``."""
+    if vehicle_from == "dir":
+        return os.path.basename(os.path.dirname(os.path.abspath(path))) or f"sys{sysid}"
+    if board_id:
+        return board_id
+    return f"sys{sysid}"
+
+
+def _row(entry: dict, stream, axis: str, vehicle: str) -> dict:
+    from companion.cli.analyze import analysis_segment
+
+    r = entry["axes"][axis]
+    a, b = analysis_segment(stream)
+    temp = stream.temperature[a:b] if stream.temperature is not None else None
+    temp = temp[np.isfinite(temp)] if temp is not None else None
+    row = {"vehicle": vehicle, "sysid": int(entry["sysid"]), "compid": int(entry["compid"]),
+           "imu": int(entry["instance"]), "message": entry["message"], "axis": axis,
+           "status": r["status"], "note": r.get("note"),
+           "rate_hz": float(entry["rate_hz"]) if math.isfinite(entry["rate_hz"]) else None,
+           "samples": int(entry["samples"]), "still_s": float(entry["duration_s"]),
+           "temp_min": float(temp.min()) if temp is not None and temp.size else None,
+           "temp_max": float(temp.max()) if temp is not None and temp.size else None,
+           "model_error": None, "chi2": None, "dof": None, "extra": None}
+    for p in COLUMN_PARAMS.values():
+        row[p] = row[p + "_lo"] = row[p + "_hi"] = None
+    extra = []
+    for t in r.get("terms", []):
+        p = COLUMN_PARAMS.get(t["effect"])
+        if p:
+            lo, hi = t.get("ci95", {}).get(p, (None, None))
+            row[p], row[p + "_lo"], row[p + "_hi"] = float(t[p]), lo, hi
+        else:
+            extra.append(t)
+    fit = r.get("fit") or {}
+    row["model_error"] = fit.get("model_error")
+    row["chi2"] = fit.get("chi2")
+    row["dof"] = fit.get("dof")
+    if extra:
+        row["extra"] = {"terms": extra}
+    return row
+
+
+def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=None) -> dict:
+    """Analyse one log file (see the module docstring). Never raises (but KeyboardInterrupt)."""
+    from companion.fleet.discover import log_format
+
+    t0 = time.perf_counter()
+    fmt = log_format(path)
+    out = {"path": str(path), "format": fmt, "status": "failed", "error": None, "log": {}, "rows": [],
+           "elapsed_s": 0.0}
+    try:
+        from companion.cli.analyze import analyze_stream
+        from companion.fleet.identity import log_identity
+        from companion.sources import load
+
+        res = load(path, config=config)
+        ident = log_identity(path, fmt)
+        streams = res.imu_streams()
+        sysids = sorted({s.key.sysid for s in streams})
+        sysid = sysids[0] if sysids else 0
+        boards = ident.get("board_by_sysid", {})
+        board = boards.get(sysid) or ident.get("board_id")
+        vehicle = vehicle_name(sysid, board, path, vehicle_from)
+        rows, duration = [], 0.0
+        for s in streams:
+            v = vehicle if s.key.sysid == sysid else vehicle_name(s.key.sysid, boards.get(s.key.sysid), path,
+                                                                   vehicle_from)
+            entry = analyze_stream(s, list(axes), "octave")
+            duration = max(duration, float(s.timing.duration_s))
+            rows += [_row(entry, s, a, v) for a in axes]
+        out["log"] = {"sysid": sysid, "vehicle": vehicle, "board_id": board,
+                      "imu_ids": {int(k): int(v) for k, v in ident.get("imu_ids", {}).items()},
+                      "start_time": ident.get("start_time"), "duration_s": duration, "streams": len(streams)}
+        out["rows"] = rows
+        if not any(r["status"] == "ok" for r in rows):
+            notes = sorted({f"{r['status']}" + (f" ({r['note']})" if r.get("note") else "") for r in rows})
+            out["error"] = "no axis could be analysed: " + "; ".join(notes)[:300]
+        else:
+            out["status"] = "ok"
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a failing log is recorded, never aborts the run
+        out["error"] = one_line(exc)[:500]
+        out["rows"] = []
+    out["elapsed_s"] = time.perf_counter() - t0
+    return out
+
+
+def analyze_logs(paths, axes=GYRO_AXES, vehicle_from: str = "auto", config=None) -> list[dict]:
+    """:func:`analyze_log` over several logs in one task (``--batch``: fewer, longer tasks for the scheduler)."""
+    return [analyze_log(p, axes, vehicle_from, config) for p in paths]

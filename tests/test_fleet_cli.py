@@ -1,0 +1,197 @@
+"""companion fleet simulate / analyze / report end to end: a local Dask cluster of 2 workers on loopback
+(bounded in time), interruption and resume, failures recorded, idempotence, correctness over seeds."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pytest
+
+from companion.cli.main import main
+
+TIMEOUT = 600  # generous bound for a busy machine; the runs take seconds
+
+
+def _cli(*args, timeout=TIMEOUT):
+    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def _sick(truth):
+    return {(v["board_id"], i["imu"]) for v in truth["vehicles"] for i in v["imus"] if i["degrading"]}
+
+
+def _count(db):
+    try:
+        con = sqlite3.connect(db, timeout=5)
+        try:
+            return con.execute("SELECT COUNT(*) FROM logs").fetchone()[0]
+        finally:
+            con.close()
+    except sqlite3.OperationalError:
+        return 0
+
+
+@pytest.mark.network
+def test_dask_two_workers_interrupt_resume_report(tmp_path):
+    pytest.importorskip("dask.distributed")
+    logs = tmp_path / "logs"
+    r = _cli("fleet", "simulate", str(logs), "--vehicles", "3", "--flights", "10", "--imus", "2",
+             "--duration", "20", "--rate", "50", "--seed", "11")
+    assert r.returncode == 0, r.stderr
+    truth = json.loads((logs / "fleet_truth.json").read_text())
+    (logs / "vehicle_000" / "broken.tlog").write_bytes(b"\xfe\x00not a log" * 50)
+    db = str(tmp_path / "fleet.sqlite")
+    # first run: interrupted (SIGINT, as Ctrl-C) once a few logs are recorded
+    proc = subprocess.Popen([sys.executable, "-m", "companion", "fleet", "analyze", str(logs), "--db", db,
+                             "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    deadline = time.monotonic() + TIMEOUT
+    while _count(db) < 3 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.2)
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group, workers included
+    out, err = proc.communicate(timeout=TIMEOUT)
+    first = _count(db)
+    if proc.returncode == 130:
+        assert "interrupted" in out and 3 <= first < 31 and "Traceback" not in err
+    else:  # it finished before the signal arrived
+        assert proc.returncode == 0, err
+    # resume: only what is missing is analysed; nothing lost, nothing twice
+    r = _cli("fleet", "analyze", str(logs), "--db", db, "--workers", "2", "--batch", "3")
+    assert r.returncode == 0, r.stderr
+    assert f"{31 - first} to analyse, {first} already" in r.stderr
+    assert "1 failed" in r.stdout.splitlines()[-1] and "broken.tlog" in (r.stderr + out + err)
+    con = sqlite3.connect(db)
+    assert con.execute("SELECT COUNT(*) FROM logs WHERE status='ok'").fetchone()[0] == 30
+    err_text = con.execute("SELECT error FROM logs WHERE status='failed'").fetchone()[0]
+    assert "no IMU messages" in err_text and "\n" not in err_text
+    assert con.execute("SELECT COUNT(*) FROM results").fetchone()[0] == 30 * 2 * 3
+    con.close()
+    # idempotent: a third run analyses nothing
+    r = _cli("fleet", "analyze", str(logs), "--db", db, "--workers", "2")
+    assert r.returncode == 0 and "0 to analyse, 31 already" in r.stderr
+    # report: the degrading IMUs first and flagged, no healthy one flagged
+    out_json, out_html = tmp_path / "r.json", tmp_path / "r.html"
+    r = _cli("fleet", "report", "--db", db, "--json", str(out_json), "--html", str(out_html))
+    assert r.returncode == 0, r.stderr
+    imus = json.loads(out_json.read_text())["imus"]
+    assert len(imus) == 6
+    sick = _sick(truth)
+    assert {(e["vehicle"], e["imu"]) for e in imus[:len(sick)]} == sick
+    assert all(e["flagged"] for e in imus[:len(sick)]) and not any(e["flagged"] for e in imus[len(sick):])
+    for e in imus[:len(sick)]:
+        assert e["param"] == "N" and 1.25 < e["trend"] < 1.8 and e["flights"] == 10
+        assert isinstance(e["sysid"], int) and isinstance(e["evidence"], float) and e["axis"] in ("gx", "gy", "gz")
+    page = out_html.read_text()
+    assert page.count("data:image/png;base64,") == 6 and "FLAGGED" in page
+    assert "src='http" not in page and "<script" not in page and "<link" not in page  # self-contained
+
+
+@pytest.mark.parametrize("seed", [21, 22, 23])
+def test_degrading_imus_ranked_first_over_seeds(tmp_path, seed, capsys):
+    """In-process (--workers 0) small fleets, one gyro axis: 3 of 6 IMUs' N rises 1.5x over 10 flights."""
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "3", "--flights", "10", "--imus", "2",
+                 "--duration", "30", "--rate", "50", "--seed", str(seed)]) == 0
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--axes", "gx", "--quiet"]) == 0
+    out = tmp_path / "r.json"
+    assert main(["fleet", "report", "--db", db, "--json", str(out)]) == 0
+    imus = json.loads(out.read_text())["imus"]
+    sick = _sick(json.loads((logs / "fleet_truth.json").read_text()))
+    assert {(e["vehicle"], e["imu"]) for e in imus[:3]} == sick
+    assert [e["flagged"] for e in imus] == [True] * 3 + [False] * 3
+
+
+def test_time_limit_then_resume_and_vehicle_from_dir(tmp_path, capsys):
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "2", "--flights", "3", "--imus", "1",
+                 "--duration", "10", "--rate", "50", "--degrading", "0"]) == 0
+    db = str(tmp_path / "f.sqlite")
+    rc = main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--time-limit", "1e-9", "--quiet"])
+    assert rc == 3 and "deadline" in capsys.readouterr().out
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet", "--vehicle", "dir"]) == 0
+    con = sqlite3.connect(db)
+    assert con.execute("SELECT COUNT(*) FROM logs WHERE status='ok'").fetchone()[0] == 6
+    vehicles = {v for (v,) in con.execute("SELECT DISTINCT vehicle FROM results")}
+    con.close()
+    assert vehicles <= {"vehicle_000", "vehicle_001"} and len(vehicles) >= 1
+    # a copy of a log under another name is the same content: skipped
+    shutil.copy(logs / "vehicle_000" / "flight_000.tlog", logs / "vehicle_000" / "copy.tlog")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 0
+    assert "0 to analyse, 7 already" in capsys.readouterr().err
+
+
+def test_user_errors_are_one_line(tmp_path, capsys):
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(tmp_path / "nothing"), "--db", db]) == 2
+    assert main(["fleet", "report", "--db", str(tmp_path / "none.sqlite")]) == 2
+    assert main(["fleet", "simulate", str(tmp_path / "s"), "--vehicles", "0", "--flights", "3"]) == 2
+    assert main(["fleet", "analyze", str(tmp_path), "--db", db, "--axes", "qq"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("companion: error:") == 4 and "Traceback" not in err
+
+
+def test_missing_dask_is_one_clear_line(tmp_path, monkeypatch, capsys):
+    import builtins
+
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "1", "--flights", "1", "--imus", "1",
+                 "--duration", "5", "--rate", "50", "--degrading", "0"]) == 0
+    real = builtins.__import__
+
+    def no_dask(name, *a, **k):
+        if name.startswith("dask") or name.startswith("distributed"):
+            raise ImportError(name)
+        return real(name, *a, **k)
+
+    monkeypatch.setattr(builtins, "__import__", no_dask)
+    assert main(["fleet", "analyze", str(logs), "--db", str(tmp_path / "f.sqlite"), "--workers", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "pip install 'companion[fleet]'" in err and err.count("\n") == 2  # plan line + the error
+
+
+def test_html_opens_in_headless_chromium(tmp_path, capsys):
+    chromium = "/usr/bin/chromium"
+    if not os.path.exists(chromium):
+        pytest.skip("/usr/bin/chromium not present")
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "2", "--flights", "5", "--imus", "1",
+                 "--duration", "20", "--rate", "50", "--degrading", "1", "--rise", "2"]) == 0
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 0
+    html = tmp_path / "r.html"
+    assert main(["fleet", "report", "--db", db, "--html", str(html)]) == 0
+    r = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom", html.as_uri()],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-500:]
+    assert "Gyro trends across flights" in r.stdout and 'id="ranking"' in r.stdout
+    assert r.stdout.count("data:image/png;base64,") == 2
+    shot = tmp_path / "shot.png"
+    r = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", f"--screenshot={shot}",
+                        "--window-size=1200,1600", html.as_uri()], capture_output=True, timeout=120)
+    assert r.returncode == 0 and shot.stat().st_size > 10_000
+
+
+@pytest.mark.network
+def test_existing_scheduler_on_loopback(tmp_path, capsys):
+    """--scheduler: the same command on an already running cluster (here a loopback LocalCluster)."""
+    distributed = pytest.importorskip("dask.distributed")
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "2", "--flights", "2", "--imus", "1",
+                 "--duration", "10", "--rate", "50", "--degrading", "0"]) == 0
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address="127.0.0.1:0") as cluster:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        db = str(tmp_path / "f.sqlite")
+        assert main(["fleet", "analyze", str(logs), "--db", db, "--scheduler", cluster.scheduler_address,
+                     "--quiet"]) == 0
+    assert "4 analysed, 0 failed" in capsys.readouterr().out
