@@ -390,7 +390,7 @@ def log_metadata(log: DataFlashLog) -> dict:
         t = log.time_s("EV", rec)
         for ti, i in zip(t, rec["Id"].astype(int)):
             if i in (EV_ARMED, EV_DISARMED):
-                trans.append((float(ti), i == EV_ARMED))
+                trans.append((float(ti), bool(i == EV_ARMED)))
     if log.has("ARM") and "ArmState" in log.columns("ARM"):
         rec = log.records("ARM")
         t = log.time_s("ARM", rec)
