@@ -9,7 +9,8 @@ so that a window holds 16 samples):
    widened by ``guard_s`` on each side (motors spin up before take-off and down after landing), is out;
 2. **motion** from *every* IMU stream of the log, accelerometer and gyro: per window and axis the standard
    deviation and the mean. The noise floor of each stream is the 10th percentile of its window standard
-   deviations (the quietest tenth of the log); a window moves when, in any IMU,
+   deviations (the quietest tenth of the log; at least half an LSB for quantised formats and a tenth of the
+   median spread); a window moves when, in any IMU,
 
    - an axis' standard deviation exceeds ``threshold`` x its floor (3x: the spread of a 50-sample
      standard deviation is about 10 %), or exceeds an absolute limit (gyro 0.05 rad/s, accel 0.5 m/s^2:
@@ -134,7 +135,8 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
     b = b[inside]
     moving = np.zeros(nb, dtype=bool)
     has = np.bincount(b, minlength=nb) >= 2
-    for kind, v, abs_std in (("gyro", stream.gyro[inside], ABS_GYRO_STD), ("accel", stream.accel[inside], ABS_ACCEL_STD)):
+    for kind, v, abs_std, lsb in (("gyro", stream.gyro[inside], ABS_GYRO_STD, stream.gyro_lsb),
+                                  ("accel", stream.accel[inside], ABS_ACCEL_STD, stream.accel_lsb)):
         if v.shape[0] == 0 or not np.all(np.isfinite(v[:, 0])):
             continue
         cnt, mean, std = _bin_stats(b, v, nb)
@@ -142,6 +144,10 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
         if good.sum() < 3:
             continue
         floor = np.nanpercentile(std[good], 10, axis=0)
+        # a quantised sensor at rest can show windows of identical values (std 0): the floor is at least
+        # half an LSB, and never below a tenth of the median window spread
+        floor = np.maximum(floor, 0.5 * (lsb or 0.0))
+        floor = np.maximum(floor, 0.1 * np.nanmedian(std[good], axis=0))
         floor = np.maximum(floor, 1e-12)
         with np.errstate(invalid="ignore"):
             mv = np.any((std > threshold * floor) | (std > abs_std), axis=1)
