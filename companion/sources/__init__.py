@@ -113,7 +113,8 @@ def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
     raw = read_csv(path)
     n = raw.t.shape[0]
     return LoadResult(str(path), [build_stream(raw, split_periods)],
-                      {"frames": n, "bad_bytes": 0, "bad_frames": 0, "imu_messages": n}, {"CSV": n})
+                      {"frames": n, "bad_bytes": 0, "bad_frames": 0, "imu_messages": n}, {"CSV": n},
+                      {"format": "csv", "notes": list(raw.notes)})
 
 
 def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:

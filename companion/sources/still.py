@@ -230,6 +230,8 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
     keep, short = [], 0.0
     for a, b in runs:
         t0, t1 = lo + a * window_s, min(lo + b * window_s, hi)
+        if b == nb:  # the last window includes the last sample
+            t1 = float(np.nextafter(hi, np.inf))
         if use_all or t1 - t0 >= min_segment_s:
             keep.append((t0, t1))
         else:
