@@ -139,9 +139,11 @@ def test_written_layouts_equal_dfreader_with_garbage(tmp_path, layout):
     assert res.meta["params"]["INS_GYRO_FILTER"] == 20.0
 
 
-def _flight_log(rng, N, rate=100.0, still=(900.0, 700.0), flight=120.0, gap=15.0, fc=20.0, internal=400):
+def _flight_log(rng, N, rate=100.0, still=(900.0, 700.0), flight=120.0, gap=15.0, fc=20.0, internal=400,
+                average=False):
     """Still - (armed) flight - gap - still at ``rate``; gyro white noise of density N through a 2-pole
-    Butterworth at ``fc`` at ``internal`` Hz, then decimated (as ArduPilot logs its IMU)."""
+    Butterworth at ``fc`` at ``internal`` Hz, then decimated (as ArduPilot logs its IMU) or, with
+    ``average``, averaged over each output interval (PX4's sensor_combined)."""
     from scipy.signal import butter, lfilter
 
     dec = int(internal // rate)
@@ -149,8 +151,13 @@ def _flight_log(rng, N, rate=100.0, still=(900.0, 700.0), flight=120.0, gap=15.0
     n_int = int(total * internal)
     sd = N * np.sqrt(internal)
     b, a = butter(2, fc / (internal / 2))
-    g = lfilter(b, a, rng.normal(0, sd, (n_int, 3)), axis=0)[::dec]
-    acc = lfilter(b, a, rng.normal(0, 0.02, (n_int, 3)), axis=0)[::dec] + [0.0, 0.0, -9.80665]
+    def out(x):
+        if average:
+            return x[: x.shape[0] // dec * dec].reshape(-1, dec, 3).mean(axis=1)
+        return x[::dec]
+
+    g = out(lfilter(b, a, rng.normal(0, sd, (n_int, 3)), axis=0))
+    acc = out(lfilter(b, a, rng.normal(0, 0.02, (n_int, 3)), axis=0)) + [0.0, 0.0, -9.80665]
     t = 1.0 + np.arange(g.shape[0]) / rate
     t0f = 1.0 + still[0]
     fl = (t >= t0f) & (t < t0f + flight)
@@ -187,6 +194,37 @@ def test_still_flight_still_gives_N_within_3_percent(tmp_path, layout):
             terms = {t_["effect"]: t_ for t_ in st["axes"][ax]["terms"]}
             errs.append(terms["white_noise"]["N"] / N - 1)
             assert "bias_instability" not in terms or terms["bias_instability"]["B"] < 0.3 * N  # the filter is not B
+    errs = np.array(errs)
+    assert np.max(np.abs(errs)) < 0.03, errs
+    assert abs(np.mean(errs)) < 0.01
+
+
+def test_px4_still_flight_still_gives_N_within_3_percent(tmp_path):
+    from companion.cli.analyze import analyze_source
+    from companion.sim.ulog_writer import write_ulog
+
+    class Args:
+        taus, online, start, end, use_all, min_still, config, duration = "octave", False, None, None, False, 10.0, None, None
+
+    errs = []
+    for seed in range(4):
+        rng = np.random.default_rng(200 + seed)
+        N = 10 ** rng.uniform(-4, -3)
+        t, g, acc, armed = _flight_log(rng, N)
+        tc, gc, ac, _ = _flight_log(rng, N, average=True)
+        n = min(t.shape[0], tc.shape[0])
+        p = tmp_path / f"s{seed}.ulg"
+        write_ulog(p, t[:n], g[None, :n], acc[None, :n], combined=(gc[:n], ac[:n]),
+                   params={"IMU_GYRO_CUTOFF": 20.0}, armed=armed)
+        entries, summary = analyze_source(str(p), Args, ["gx", "gy", "gz"], progress_enabled=False)
+        assert len(summary["selection"]["intervals"]) == 2, summary["selection"]["description"]
+        assert summary["selection"]["method"] == "armed state + motion"
+        assert sorted(e["message"] for e in entries) == ["sensor_combined", "sensor_gyro"]
+        for st in entries:
+            assert st["filters_hz"] == {"gyro": 20.0}
+            for ax in ("gx", "gy", "gz"):
+                terms = {t_["effect"]: t_ for t_ in st["axes"][ax]["terms"]}
+                errs.append(terms["white_noise"]["N"] / N - 1)
     errs = np.array(errs)
     assert np.max(np.abs(errs)) < 0.03, errs
     assert abs(np.mean(errs)) < 0.01
