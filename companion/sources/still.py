@@ -20,7 +20,8 @@ so that a window holds 16 samples):
      5 x its standard error + 0.005 rad/s (a slow turn);
 
    moving windows are widened by ``guard_s``;
-3. windows without samples are **gaps**; still runs shorter than ``min_segment_s`` are left out.
+3. windows without samples are **gaps**; still runs shorter than ``min_segment_s`` are left out (unless the
+   run is the whole record: a short bench recording is still, only short; analyze warns about its length).
 
 ``start``/``end`` (seconds, the log's own time) restrict everything; ``use_all`` skips the selection
 (the whole record between ``start`` and ``end``, for a user who knows better). The result lists the
@@ -128,7 +129,8 @@ def _bin_stats(b: np.ndarray, v: np.ndarray, nb: int):
     return cnt, mean, std
 
 
-def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: float,
+                    use_gyro: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(moving, has_data) per window for one IMU stream."""
     b = np.floor((stream.t - t0) / window_s).astype(np.int64)
     inside = (b >= 0) & (b < nb)
@@ -137,7 +139,7 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
     has = np.bincount(b, minlength=nb) >= 2
     for kind, v, abs_std, lsb in (("gyro", stream.gyro[inside], ABS_GYRO_STD, stream.gyro_lsb),
                                   ("accel", stream.accel[inside], ABS_ACCEL_STD, stream.accel_lsb)):
-        if v.shape[0] == 0 or not np.all(np.isfinite(v[:, 0])):
+        if v.shape[0] == 0 or not np.all(np.isfinite(v[:, 0])) or (kind == "gyro" and not use_gyro):
             continue
         cnt, mean, std = _bin_stats(b, v, nb)
         good = has & np.all(np.isfinite(std), axis=1)
@@ -179,11 +181,14 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 def select_still(streams, meta: dict | None = None, *, start: float | None = None, end: float | None = None,
                  use_all: bool = False, window_s: float | None = None, guard_s: float = 3.0,
-                 min_segment_s: float = 10.0, threshold: float = 3.0) -> StillSelection:
+                 min_segment_s: float = 10.0, threshold: float = 3.0, use_gyro: bool = True) -> StillSelection:
     """Still intervals of a log from its IMU ``streams`` (all of them) and its ``meta`` (armed state).
 
     ``streams``: :class:`companion.samples.ImuStream` list (non-IMU streams are ignored); ``meta``:
-    ``LoadResult.meta`` (``armed`` transitions, ``has_armed_state``). See the module docstring.
+    ``LoadResult.meta`` (``armed`` transitions, ``has_armed_state``). ``use_gyro``: False detects motion
+    from the accelerometers only (for analyses of drifting gyros, where a wandering gyro is the object of
+    study; a stream without accelerometer then counts as still).
+    See the module docstring.
     """
     meta = meta or {}
     imus = [s for s in streams if s.is_imu and s.samples >= 2]
@@ -206,7 +211,7 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
     has = np.zeros(nb, dtype=bool)
     moving = np.zeros(nb, dtype=bool)
     for s in imus:
-        mv, h = _moving_windows(s, lo, window_s, nb, threshold)
+        mv, h = _moving_windows(s, lo, window_s, nb, threshold, use_gyro)
         has |= h
         if not use_all:
             moving |= mv
@@ -232,7 +237,7 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         t0, t1 = lo + a * window_s, min(lo + b * window_s, hi)
         if b == nb:  # the last window includes the last sample
             t1 = float(np.nextafter(hi, np.inf))
-        if use_all or t1 - t0 >= min_segment_s:
+        if use_all or t1 - t0 >= min_segment_s or (a == 0 and b == nb):  # a short record still throughout
             keep.append((t0, t1))
         else:
             short += t1 - t0
@@ -258,3 +263,16 @@ def _covered(stream, intervals) -> float:
     for a, b in StillSelection(intervals, "").ranges(stream, min_samples=2):
         tot += float(stream.t[b - 1] - stream.t[a]) + 1.0 / stream.rate_hz if stream.rate_hz > 0 else 0.0
     return tot
+
+
+def longest_still_range(res, stream, warn=None) -> tuple[int, int]:
+    """Index range of the longest still, gap-free piece of ``stream`` (for analyses that need one contiguous
+    series: ``gap``, ``compensate``). ``res`` is the stream's LoadResult (its metadata gives the armed
+    state). Motion is judged from the accelerometers only: these commands study drifting gyros. Without any still piece the longest segment is returned and ``warn`` (a callable) is told."""
+    sel = select_still(res.imu_streams(), getattr(res, "meta", {}) or {}, use_gyro=False)
+    ranges = sel.ranges(stream)
+    if ranges:
+        return max(ranges, key=lambda r: r[1] - r[0])
+    if warn:
+        warn(f"{res.source}: no still stretch found ({sel.describe()}); using the longest segment as it is")
+    return stream.longest_segment()
