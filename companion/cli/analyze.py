@@ -160,7 +160,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     notes = list(fit.notes)
     terms = fit.terms
     if fit.model_error:
-        terms, note = local_white_noise(terms, tau_f[keep], avar_f[keep], edf0)
+        terms, note = local_white_noise(terms, tau_f[keep], avar_f[keep], edf0, 1.0 / rate_hz)
         if note:
             notes.append(note)
     out.update(tau=tau.tolist(), adev=adev.tolist(), adev_lo=lo.tolist(), adev_hi=hi.tolist(),
@@ -209,12 +209,17 @@ def filter_tau(cutoff_hz: float | None, rate_hz: float) -> float:
     return 7.0 / cutoff_hz
 
 
-def local_white_noise(terms: list, tau, avar, edf, share: float = 0.7):
+def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0.5):
     """N from a local weighted fit of the white-noise region, for a fit with model misfit.
 
     Under misfit the global fit trades the short-tau points, where the data are most precise, for a bump
-    elsewhere; N is then taken from the points where white noise makes >= ``share`` of the fitted model:
-    N^2 = sum w a / tau / sum w / tau^2, w = EDF / (2 a^2) (weighted least squares of a = N^2 / tau).
+    elsewhere. The white-noise region is the run of cluster times from 10 tau0 (clear of a sensor's internal
+    filter, output lines and quantisation at the first few samples) on which white noise makes at least
+    ``share`` of the fitted model. On it N^2 is refitted with the other fitted terms held fixed (weighted
+    least squares of a - other = N^2 / tau, weights w = EDF / (2 a^2)):
+
+        N^2 = sum w (a - other) / tau / sum w / tau^2.
+
     Its interval is the global one scaled by the ratio. Returns (terms, note or None).
     """
     from companion.allan.terms import avar_term
@@ -224,16 +229,28 @@ def local_white_noise(terms: list, tau, avar, edf, share: float = 0.7):
         return terms, None
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in terms]
     tau = np.asarray(tau, dtype=float)
+    white = avar_term({"effect": "white_noise", "N": wn["N"]}, tau)
     total = sum(avar_term(t, tau) for t in plain)
-    frac = avar_term({"effect": "white_noise", "N": wn["N"]}, tau) / np.where(total > 0, total, 1.0)
-    sel = frac >= share
-    if sel.sum() < 2:
+    frac = white / np.where(total > 0, total, 1.0)
+    ok = (frac >= share) & (tau >= 10.0 * tau0 * (1 - 1e-9))
+    idx = np.flatnonzero(ok)
+    if idx.shape[0] < 2:
+        return terms, None
+    stop = idx[0]
+    while stop + 1 < tau.shape[0] and ok[stop + 1]:
+        stop += 1
+    sel = np.arange(idx[0], stop + 1)
+    if sel.shape[0] < 2:
         return terms, None
     a, tt, e = np.asarray(avar)[sel], tau[sel], np.asarray(edf)[sel]
+    other = (total - white)[sel]
     w = e / (2.0 * a**2)
-    N = math.sqrt(float(np.sum(w * a / tt) / np.sum(w / tt**2)))
+    n2 = float(np.sum(w * (a - other) / tt) / np.sum(w / tt**2))
+    if not n2 > 0:
+        return terms, None
+    N = math.sqrt(n2)
     ratio = N / wn["N"]
-    if abs(ratio - 1) < 1e-3:
+    if abs(ratio - 1) < 1e-4:
         return terms, None
     new = []
     for t in terms:
