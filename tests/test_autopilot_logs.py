@@ -341,3 +341,41 @@ def test_N_survives_model_misfit():
         assert any(s.startswith("N from a local weighted fit") for s in r["fit"]["notes"])
         got = next(x["N"] for x in r["terms"] if x["effect"] == "white_noise")
         assert abs(got / N - 1) < 0.01
+
+
+def test_plot_overlays_every_imu_and_several_logs(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    rng = np.random.default_rng(21)
+    paths = []
+    for k, N in enumerate((2e-4, 4e-4)):
+        n = 8000
+        t = 1.0 + np.arange(n) / 100.0
+        g = rng.normal(0, N * 10, (2, n, 3))
+        a = rng.normal(0, 0.01, (2, n, 3)) + [0, 0, -9.8]
+        p = tmp_path / f"log{k}.bin"
+        write_imu_log(p, t, g, a, layout="3.4")
+        paths.append(str(p))
+    png = tmp_path / "cmp.png"
+    rc = main(["analyze", *paths, "--axes", "gx,gy", "--plot", str(png), "--json", str(tmp_path / "r.json")])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert png.exists() and png.stat().st_size > 10_000
+    written = [line.split(" ", 1)[1] for line in out.splitlines() if line.startswith("wrote ") and "cmp" in line]
+    assert len(written) == 1 + 4  # the overlay and one detailed figure per stream (2 logs x 2 IMUs)
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert {st["source"] for st in rep["streams"]} == set(paths)
+    assert len(rep["sources"]) == 2
+
+
+def test_several_sources_one_without_still_data(tmp_path, capsys):
+    rng = np.random.default_rng(4)
+    n = 8000
+    t = 1.0 + np.arange(n) / 100.0
+    g, a = rng.normal(0, 1e-3, (1, n, 3)), rng.normal(0, 0.01, (1, n, 3)) + [0, 0, -9.8]
+    good, armed = tmp_path / "good.bin", tmp_path / "armed.bin"
+    write_imu_log(good, t, g, a)
+    write_imu_log(armed, t, g, a, armed=[(0.5, True)])
+    assert main(["analyze", str(good), str(armed), "--axes", "gx"]) == 2
+    cap = capsys.readouterr()
+    assert "good.bin: 1 still segment" in cap.out and "1 of 2 sources not analysed" in cap.err
+    assert main(["analyze", str(armed), "--axes", "gx", "--all"]) == 0

@@ -534,10 +534,20 @@ def run(args) -> int:
     sources = args.source if isinstance(args.source, (list, tuple)) else [args.source]
     report = {"source": str(sources[0]) if len(sources) == 1 else ", ".join(map(str, sources)),
               "sources": [], "streams": []}
+    failed = []
     for spec in sources:
-        entries, summary = analyze_source(spec, args, axes, progress_enabled=not args.quiet)
+        try:
+            entries, summary = analyze_source(spec, args, axes, progress_enabled=not args.quiet)
+        except CompanionError as exc:
+            if len(sources) == 1:
+                raise
+            failed.append(str(exc))  # the other logs are still analysed; the exit status says it
+            continue
         report["sources"].append(summary)
         report["streams"].extend(entries)
+    if not report["streams"]:
+        raise CompanionError("; ".join(failed) if failed else "no IMU stream analysed")
+    report["failed_sources"] = failed
     for summary in report["sources"]:
         print(f"{summary['source']}: {summary['selection']['description']}")
         for n in summary["notes"]:
@@ -558,4 +568,6 @@ def run(args) -> int:
             raise CompanionError(f"{args.kalibr} not written: {'; '.join(blockers)} (--force writes it anyway)")
         write_text(args.kalibr, kalibr_yaml(report), "Kalibr YAML")
         print(f"wrote {args.kalibr}")
+    if failed:
+        raise CompanionError(f"{len(failed)} of {len(sources)} sources not analysed: {'; '.join(failed)}")
     return 0
