@@ -138,7 +138,9 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     pooled = len(pieces) > 1
     m_fit = pooled_cluster_sizes(lengths, "octave")
     tau_f, avar_f, m_fit, counts = pooled_oavar(pieces, rate_hz, m=m_fit)
-    cut = max(float(tau_min or 0.0), rolloff_tau(tau_f, avar_f))
+    detected = rolloff_tau(tau_f, avar_f) if rate_hz >= MIN_RATE_HZ else 0.0
+    cut = max(float(tau_min or 0.0), detected)
+    why = "from the log's filter parameter" if (tau_min or 0.0) >= detected else "detected in the data"
     keep = tau_f >= cut * (1 - 1e-9)
     if keep.sum() < 3:  # keep at least the three longest-but-shortest points
         keep = np.zeros_like(keep)
@@ -170,7 +172,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
                     "points": int(keep.sum()), "notes": notes, "segments": len(pieces)})
     if cut > 0 and (~keep).any():
         out["fit"]["notes"].append(f"cluster times below {tau_f[keep][0]:.3g} s left out of the fit (low-pass "
-                                   "filter roll-off)")
+                                   f"roll-off, {why})")
     N = next((t["N"] for t in terms if t["effect"] == "white_noise"), None)
     out["quantization"] = lsb_report(pieces[int(np.argmax(lengths))], rate_hz, lsb, N)
     return out
