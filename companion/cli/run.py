@@ -23,8 +23,9 @@ The baseline (what healthy looks like) is learned from the first --baseline-s se
 loaded from a report of `companion analyze` (--baseline FILE). It is kept, with the estimator state,
 in the --state file (saved atomically every minute and on Ctrl-C / SIGTERM), so it survives restarts.
 
-A .tlog source is replayed through the very same pipeline as fast as possible (message time only: the
-estimates do not depend on the replay speed) and a summary is printed. See docs/run.md.
+A log file (.tlog, ArduPilot DataFlash .bin, PX4 .ulg, .csv; each optionally .gz) is replayed through the
+very same pipeline as fast as possible (message time only: the estimates do not depend on the replay
+speed; a log's armed state becomes heartbeats) and a summary is printed. See docs/run.md.
 """
 
 EPILOG = """\
