@@ -6,6 +6,7 @@ from __future__ import annotations
 import gzip
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -379,3 +380,37 @@ def test_several_sources_one_without_still_data(tmp_path, capsys):
     cap = capsys.readouterr()
     assert "good.bin: 1 still segment" in cap.out and "1 of 2 sources not analysed" in cap.err
     assert main(["analyze", str(armed), "--axes", "gx", "--all"]) == 0
+
+
+def test_bad_log_files_are_one_line_errors(tmp_path, capsys):
+    bad_bin = tmp_path / "x.bin"
+    bad_bin.write_bytes(b"this is not a log" * 20)
+    bad_ulg = tmp_path / "x.ulg"
+    bad_ulg.write_bytes(b"\x00" * 100)
+    bad_gz = tmp_path / "x.bin.gz"
+    bad_gz.write_bytes(b"not gzip")
+    for p, msg in ((bad_bin, "not a DataFlash log"), (bad_ulg, "not a readable ULog"), (bad_gz, "gzip"),
+                   (tmp_path / "missing.ulg", "no such file")):
+        assert main(["inspect", str(p)]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and err.count("\n") == 1, err
+
+
+def test_start_end_and_tlog_gz(tmp_path, capsys):
+    rng = np.random.default_rng(12)
+    n = 12000
+    t = 1.0 + np.arange(n) / 100.0
+    p = tmp_path / "a.bin"
+    write_imu_log(p, t, rng.normal(0, 1e-3, (1, n, 3)), rng.normal(0, 0.01, (1, n, 3)) + [0, 0, -9.8])
+    out = tmp_path / "r.json"
+    assert main(["analyze", str(p), "--axes", "gx", "--start", "20", "--end", "90", "--json", str(out)]) == 0
+    st = json.loads(out.read_text())["streams"][0]
+    assert st["ranges_s"][0][0] >= 20 and st["ranges_s"][-1][1] <= 90
+    assert 69 <= st["duration_s"] <= 70.5
+    capsys.readouterr()
+    tl = Path(__file__).resolve().parent.parent / "tlogs" / "sample.tlog"
+    if tl.exists():
+        gz = tmp_path / "s.tlog.gz"
+        gz.write_bytes(gzip.compress(tl.read_bytes()))
+        assert main(["inspect", str(gz)]) == 0
+        assert "RAW_IMU" in capsys.readouterr().out
