@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from companion import units
-from companion.allan.adev import cluster_sizes, oavar
+from companion.allan.adev import cluster_sizes
 from companion.allan.confidence import adev_ci, edf_model, edf_simple
 from companion.allan.fit import fit_avar
 from companion.allan.lsb import lsb_report

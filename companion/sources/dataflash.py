@@ -229,7 +229,6 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     known = ln > 0
     nxt = h + np.where(known, ln, 1)
     succ = np.searchsorted(h, nxt, side="left")
-    K = h.shape[0]
     chain, stopped = _orbit(succ, known)
     if stopped is not None:
         stopped = int(h[stopped])
