@@ -266,13 +266,15 @@ def _scaled_chi2_ci(theta, var, level):
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
-             max_iter=4, max_ratio=256) -> FitResult:
+             max_iter=4, max_ratio=256, segments=None) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring.
 
     ``edf``: EDF of each point (used for the first weights, and for the diagonal covariance when ``n`` or
     ``rate_hz`` is not given). ``effects``: None = automatic selection among all effects, or a list of effect
     names to fit (all kept unless their NNLS coefficient is 0). ``n``, ``rate_hz`` (and ``m``, default
     round(tau rate_hz)): number of rate samples and their rate, for the full model covariance.
+    ``segments``: lengths (samples) of the segments of a pooled AVAR (:mod:`companion.allan.pooled`); the
+    covariance is then the pooled one and ``n`` may be their sum.
     """
     tau = np.asarray(tau, dtype=float)
     avar = np.asarray(avar, dtype=float)
@@ -303,7 +305,11 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         inflate = 2.0 * max(1.0, dens)
 
     def covariance(terms_si, v_model, floor):
-        if full and terms_si:
+        if full and terms_si and segments is not None and len(segments) > 1:
+            from companion.allan.pooled import pooled_oavar_covariance
+
+            c = pooled_oavar_covariance(terms_si, m, segments, rate_hz, max_ratio=max_ratio) / scale**2
+        elif full and terms_si:
             c = oavar_covariance(terms_si, m, n, rate_hz, max_ratio=max_ratio) / scale**2
         else:
             base = v_model if np.all(v_model > 0) else np.maximum(v_model, 1e-6 * np.max(v))

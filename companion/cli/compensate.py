@@ -72,7 +72,7 @@ def parse_methods(spec: str) -> tuple:
 
 
 def select_series(res, axis: str, stream_index: int, max_samples):
-    """(t, z, rate_hz, label) of the longest segment of the chosen IMU stream."""
+    """(t, z, rate_hz, label) of the longest still, gap-free piece of the chosen IMU stream."""
     streams = res.imu_streams()
     if not streams:
         raise CompanionError(f"{res.source}: no IMU stream")
@@ -80,7 +80,9 @@ def select_series(res, axis: str, stream_index: int, max_samples):
         labels = "; ".join(f"{i}: {s.key.label()}" for i, s in enumerate(streams))
         raise CompanionError(f"--stream {stream_index} out of range; IMU streams: {labels}")
     s = streams[stream_index]
-    a, b = s.longest_segment()
+    from companion.sources.still import longest_still_range
+
+    a, b = longest_still_range(res, s, warn=lambda m: print(f"warning: {m}", file=sys.stderr))
     if max_samples is not None:
         if max_samples < 1:
             raise CompanionError("--max-samples must be at least 1")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 from companion.cli.output import to_json, write_text
 from companion.errors import CompanionError
@@ -66,7 +67,9 @@ def _load_axis(spec, axis, config):
     if not streams:
         raise CompanionError(f"{spec}: no IMU stream")
     st = max(streams, key=lambda s: s.samples)
-    a, b = st.longest_segment()
+    from companion.sources.still import longest_still_range
+
+    a, b = longest_still_range(res, st, warn=lambda m: print(f"warning: {m}", file=sys.stderr))
     y = st.axis(axis)[a:b]
     lsb = st.gyro_lsb if axis in GYRO_AXES else st.accel_lsb
     rate = st.rate_hz

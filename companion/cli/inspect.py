@@ -69,7 +69,8 @@ def summary(res) -> dict:
 
 def notes(res) -> list[str]:
     """Why little can be estimated, stream by stream (plain sentences)."""
-    out = []
+    out = list((getattr(res, "meta", None) or {}).get("notes", []))
+    fmt = (getattr(res, "meta", None) or {}).get("format")
     for s in res.streams:
         lab = s.key.label()
         if not s.is_imu:
@@ -86,8 +87,7 @@ def notes(res) -> list[str]:
         longest = float(s.t[b - 1] - s.t[a]) if b > a else 0.0
         if t.rate_hz < MIN_RATE_HZ:
             out.append(f"{lab}: only {t.rate_hz:.3g} Hz: the Allan curve starts at tau = {1 / t.rate_hz:.3g} s, "
-                       "so quantisation and white noise (Q, N) are aliased together; stream RAW_IMU faster "
-                       "(SRn_RAW_SENS or MAV_CMD_SET_MESSAGE_INTERVAL) for a usable estimate.")
+                       "so quantisation and white noise (Q, N) are aliased together; " + _faster_hint(fmt, s.key.message))
         if longest < MIN_DURATION_S:
             out.append(f"{lab}: longest contiguous segment {longest:.0f} s: Allan deviation reaches tau of about "
                        f"{longest / 10:.3g} s with useful confidence; bias instability and rate random walk "
@@ -100,6 +100,17 @@ def notes(res) -> list[str]:
                 out.append(f"{lab}: gyro noise (std {sd:.2g} rad/s) is within 2 LSB ({s.gyro_lsb:.2g} rad/s): "
                            "int16 quantisation dominates the short-tau Allan deviation.")
     return out
+
+
+def _faster_hint(fmt, message: str) -> str:
+    if fmt == "dataflash":
+        return ("log the IMU faster (INS_LOG_BAT_MASK / INS_LOG_BAT_OPT batch sampler, or LOG_BITMASK IMU_FAST, "
+                "or INS_RAW_LOG_OPT) for a usable estimate.")
+    if fmt == "ulog":
+        return ("log this topic at full rate (SDLOG_PROFILE high rate / sensor_gyro_fifo) for a usable estimate.")
+    if fmt == "csv":
+        return "record faster for a usable estimate."
+    return "stream RAW_IMU faster (SRn_RAW_SENS or MAV_CMD_SET_MESSAGE_INTERVAL) for a usable estimate."
 
 
 def render(res) -> str:

@@ -23,8 +23,9 @@ The baseline (what healthy looks like) is learned from the first --baseline-s se
 loaded from a report of `companion analyze` (--baseline FILE). It is kept, with the estimator state,
 in the --state file (saved atomically every minute and on Ctrl-C / SIGTERM), so it survives restarts.
 
-A .tlog source is replayed through the very same pipeline as fast as possible (message time only: the
-estimates do not depend on the replay speed) and a summary is printed. See docs/run.md.
+A log file (.tlog, ArduPilot DataFlash .bin, PX4 .ulg, .csv; each optionally .gz) is replayed through the
+very same pipeline as fast as possible (message time only: the estimates do not depend on the replay
+speed; a log's armed state becomes heartbeats) and a summary is printed. See docs/run.md.
 """
 
 EPILOG = """\
@@ -48,7 +49,8 @@ def register(subparsers) -> None:
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--source", required=True, metavar="CONN",
-                   help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, tcpin:, a serial device, or a .tlog to replay")
+                   help="udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, tcpin:, a serial device, or a log to replay "
+                        "(.tlog, DataFlash .bin, PX4 .ulg, .csv; each optionally .gz)")
     p.add_argument("--baud", type=int, default=None, help="serial baud rate (default 115200)")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (sections run:, estimator:, streams:)")
     g = p.add_mutually_exclusive_group()
@@ -227,7 +229,9 @@ def run(args) -> int:
         raise CompanionError("--duration must be > 0")
     pcfg, link_cfg, period, extra, baseline, scales = build(args, log)
     src = str(args.source)
-    is_replay = src.lower().endswith(".tlog")
+    from companion.service.replay import is_replay_source
+
+    is_replay = is_replay_source(src)
     if not is_replay:
         from companion.sources.connection import parse_connection
 
@@ -251,13 +255,16 @@ def run(args) -> int:
             except OSError as exc:
                 raise CompanionError(f"{args.out_tlog}: cannot write ({exc.strerror or exc})") from None
         if is_replay:
-            from companion.service.replay import replay_tlog
+            from companion.service.replay import replay_log, replay_tlog
 
             sink = ReplaySink(writer, echo=None if quiet else print)
             reporter = Reporter(sink, period)
             pipeline = Pipeline(pcfg, reporter, baseline, log, scales)
             _restore(pipeline, state_path, args, load_state, warn, log)
-            totals = replay_tlog(src, pipeline, scales, stop=lambda: stop["flag"])
+            if src.lower().endswith((".tlog", ".tlog.gz")):
+                totals = replay_tlog(src, pipeline, scales, stop=lambda: stop["flag"])
+            else:
+                totals = replay_log(src, pipeline, stop=lambda: stop["flag"])
             log(f"replayed {totals['frames']} frames ({totals['imu_samples']} IMU samples, {totals['bad_frames']} bad frames), "
                 f"{sink.sent} NAMED_VALUE_FLOAT, {len(sink.texts)} STATUSTEXT")
             if not pipeline.channels:

@@ -23,7 +23,7 @@ from pathlib import Path
 from companion.errors import CompanionError
 
 #: log suffixes taken from folders and globs (lower case)
-LOG_SUFFIXES = (".tlog", ".tlog.bin", ".mavlink", ".csv", ".csv.gz", ".bin", ".ulg")
+LOG_SUFFIXES = (".tlog", ".tlog.gz", ".tlog.bin", ".mavlink", ".csv", ".csv.gz", ".bin", ".bin.gz", ".ulg", ".ulg.gz")
 _GLOB_CHARS = set("*?[")
 
 
@@ -44,6 +44,8 @@ def is_log_name(name: str) -> bool:
 def log_format(path: str) -> str:
     """Short format name from the file name: tlog, csv, bin, ulg (or the suffix)."""
     low = path.lower()
+    if low.endswith(".gz") and not low.endswith(".csv.gz"):
+        low = low[:-3]
     if low.endswith((".tlog", ".tlog.bin", ".mavlink")):
         return "tlog"
     if low.endswith((".csv", ".csv.gz")):

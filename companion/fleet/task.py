@@ -3,9 +3,9 @@
 This is what a Dask worker runs (it must stay importable and picklable: plain arguments, plain dict
 result). The numbers are those of ``companion analyze``: the log is read by
 :func:`companion.sources.load` (so every format it reads flows in), each IMU stream is analysed by
-:func:`companion.cli.analyze.analyze_stream` over its :func:`companion.cli.analyze.analysis_segment`
-(the single place where a still-segment selection plugs in, for both commands), with the same fit and
-intervals. Only the gyro axes by default.
+:func:`companion.cli.analyze.analyze_stream` over the still segments that
+:func:`companion.sources.still.select_still` picks (armed state and motion, as ``companion analyze``
+does), pooled, with the same filter handling, fit and intervals. Only the gyro axes by default.
 
 Result (see :func:`analyze_log`)::
 
@@ -53,13 +53,12 @@ def vehicle_name(sysid: int, board_id: str | None, path: str, vehicle_from: str 
     return f"sys{sysid}"
 
 
-def _row(entry: dict, stream, axis: str, vehicle: str) -> dict:
-    from companion.cli.analyze import analysis_segment
-
+def _row(entry: dict, stream, axis: str, vehicle: str, ranges) -> dict:
     r = entry["axes"][axis]
-    a, b = analysis_segment(stream)
-    temp = stream.temperature[a:b] if stream.temperature is not None else None
-    temp = temp[np.isfinite(temp)] if temp is not None else None
+    temp = None
+    if stream.temperature is not None and ranges:
+        temp = np.concatenate([stream.temperature[a:b] for a, b in ranges])
+        temp = temp[np.isfinite(temp)]
     row = {"vehicle": vehicle, "sysid": int(entry["sysid"]), "compid": int(entry["compid"]),
            "imu": int(entry["instance"]), "message": entry["message"], "axis": axis,
            "status": r["status"], "note": r.get("note"),
@@ -96,11 +95,13 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
     out = {"path": str(path), "format": fmt, "status": "failed", "error": None, "log": {}, "rows": [],
            "elapsed_s": 0.0}
     try:
-        from companion.cli.analyze import analyze_stream
+        from companion.cli.analyze import analyze_stream, stream_filters
         from companion.fleet.identity import log_identity
         from companion.sources import load
+        from companion.sources.still import select_still
 
         res = load(path, config=config)
+        sel = select_still(res.imu_streams(), getattr(res, "meta", {}) or {})
         ident = log_identity(path, fmt)
         streams = res.imu_streams()
         sysids = sorted({s.key.sysid for s in streams})
@@ -112,14 +113,20 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         for s in streams:
             v = vehicle if s.key.sysid == sysid else vehicle_name(s.key.sysid, boards.get(s.key.sysid), path,
                                                                    vehicle_from)
-            entry = analyze_stream(s, list(axes), "octave")
             duration = max(duration, float(s.timing.duration_s))
-            rows += [_row(entry, s, a, v) for a in axes]
+            ranges = sel.ranges(s)
+            if not ranges:  # no still data in this stream: nothing to analyse (said in the log's error)
+                continue
+            entry = analyze_stream(s, list(axes), "octave", ranges=ranges,
+                                   filters=stream_filters(s, getattr(res, "meta", {}) or {}))
+            rows += [_row(entry, s, a, v, ranges) for a in axes]
         out["log"] = {"sysid": sysid, "vehicle": vehicle, "board_id": board,
                       "imu_ids": {int(k): int(v) for k, v in ident.get("imu_ids", {}).items()},
                       "start_time": ident.get("start_time"), "duration_s": duration, "streams": len(streams)}
         out["rows"] = rows
-        if not any(r["status"] == "ok" for r in rows):
+        if not rows:
+            out["error"] = f"no still data ({sel.describe()})"
+        elif not any(r["status"] == "ok" for r in rows):
             notes = sorted({f"{r['status']}" + (f" ({r['note']})" if r.get("note") else "") for r in rows})
             out["error"] = "no axis could be analysed: " + "; ".join(notes)[:300]
         else:

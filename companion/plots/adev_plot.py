@@ -95,14 +95,80 @@ def plot_stream(stream: dict, path, title: str | None = None) -> None:
     save_figure(fig, path, plt)
 
 
+def _stream_label(st: dict, several_sources: bool) -> str:
+    lab = f"{st['message']}[{st['instance']}]"
+    if several_sources and st.get("source"):
+        lab = f"{Path(st['source']).name} {lab}"
+    return lab
+
+
+def plot_overlay(report: dict, path) -> None:
+    """Every stream of the report (every IMU of a log, and of several logs) in one figure: a panel per axis,
+    each stream's measured ADEV (points and 95 % band) and its fitted model (line), legend with N."""
+    plt = require_matplotlib()
+    streams = [st for st in report["streams"] if any(r.get("status") == "ok" for r in st["axes"].values())]
+    several = len({st.get("source") for st in streams}) > 1
+    rows = [[a for a in names if any(a in st["axes"] and st["axes"][a].get("status") == "ok" for st in streams)]
+            for names in (GYRO_AXES, ACCEL_AXES)]
+    rows = [r for r in rows if r]
+    if not rows:
+        return
+    ncol = max(len(r) for r in rows)
+    fig, axs = plt.subplots(len(rows), ncol, figsize=(5.4 * ncol, 4.6 * len(rows)), squeeze=False)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, row in enumerate(rows):
+        for j in range(ncol):
+            ax = axs[i][j]
+            if j >= len(row):
+                ax.set_visible(False)
+                continue
+            axis = row[j]
+            gyro = axis in GYRO_AXES
+            f = units.to_datasheet("B", 1.0, axis)
+            for k, st in enumerate(streams):
+                r = st["axes"].get(axis)
+                if not r or r.get("status") != "ok" or not r.get("tau"):
+                    continue
+                c = colors[k % len(colors)]
+                tau = np.asarray(r["tau"])
+                ax.fill_between(tau, np.asarray(r["adev_lo"]) * f, np.asarray(r["adev_hi"]) * f, color=c,
+                                alpha=0.15, linewidth=0)
+                nterm = next((t for t in r["terms"] if t["effect"] == "white_noise"), None)
+                ntext = (f", N={units.to_datasheet('N', nterm['N'], axis):.3g} {units.datasheet_unit('N', axis)}"
+                         if nterm else "")
+                ax.loglog(tau, np.asarray(r["adev"]) * f, "o", ms=3, color=c,
+                          label=_stream_label(st, several) + ntext)
+                if r["terms"]:
+                    tt = np.logspace(np.log10(tau[0]), np.log10(tau[-1]), 120)
+                    tot = sum(avar_term({kk: v for kk, v in t.items() if kk != "ci95"}, tt) for t in r["terms"])
+                    ax.loglog(tt, np.sqrt(tot) * f, "-", lw=1.1, color=c)
+            ax.set_title(axis + (" (gyro)" if gyro else " (accel)"), fontsize=10)
+            ax.set_xlabel("cluster time tau [s]")
+            ax.set_ylabel(f"Allan deviation [{'deg/h' if gyro else 'mg'}]")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=6.5, loc="best", framealpha=0.85)
+    srcs = sorted({Path(st.get("source") or report.get("source", "")).name for st in streams})
+    fig.suptitle(f"Allan deviation, {len(streams)} streams of {', '.join(srcs)} (points: measured with 95 % band; "
+                 "lines: fitted model)", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path, plt)
+
+
 def plot_report(report: dict, path) -> list[str]:
-    """One PNG per stream: ``path`` itself for a single stream, else ``<stem>_<message><instance>_sys<id><suffix>``."""
+    """A single stream: one PNG at ``path``. Several streams (the IMUs of a log, or several logs): ``path``
+    overlays them all (:func:`plot_overlay`) and each stream also gets its own detailed figure
+    ``<stem>_<message><instance>_sys<id><suffix>`` (with the source's name when there are several)."""
     streams = report["streams"]
     p = Path(path)
     out = []
+    several = len({st.get("source") for st in streams}) > 1
+    if len(streams) > 1:
+        plot_overlay(report, p)
+        out.append(str(p))
     for st in streams:
+        src = f"{Path(st['source']).name.split('.')[0]}_" if several and st.get("source") else ""
         target = p if len(streams) == 1 else p.with_name(
-            f"{p.stem}_{st['message']}{st['instance']}_sys{st['sysid']}{p.suffix or '.png'}")
+            f"{p.stem}_{src}{st['message']}{st['instance']}_sys{st['sysid']}{p.suffix or '.png'}")
         plot_stream(st, target)
         out.append(str(target))
     return out

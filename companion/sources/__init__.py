@@ -1,4 +1,5 @@
-"""Ingestion: IMU samples from a .tlog, a CSV file or a live MAVLink link, in SI, with their timing.
+"""Ingestion: IMU samples from a .tlog, an ArduPilot DataFlash .bin, a PX4 .ulg, a CSV file or a live
+MAVLink link, in SI, with their timing.
 
 >>> from companion.sources import load
 >>> res = load("flight.tlog")                 # or "imu.csv.gz", or "udpin:0.0.0.0:14550" (duration=...)
@@ -37,6 +38,9 @@ class LoadResult:
     streams: list[ImuStream]
     totals: dict = field(default_factory=dict)  # frames, bad_bytes, bad_frames, imu_messages
     messages: dict = field(default_factory=dict)  # message name -> valid frames (tlog / live)
+    # log metadata where the format has it (DataFlash, ULog): params {name: value}, armed [(t_s, bool)],
+    # has_armed_state, modes [(t_s, number)], messages [(t_s, text)], format, extra per-format keys
+    meta: dict = field(default_factory=dict)
 
     def imu_streams(self) -> list[ImuStream]:
         return [s for s in self.streams if s.is_imu]
@@ -109,7 +113,44 @@ def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
     raw = read_csv(path)
     n = raw.t.shape[0]
     return LoadResult(str(path), [build_stream(raw, split_periods)],
-                      {"frames": n, "bad_bytes": 0, "bad_frames": 0, "imu_messages": n}, {"CSV": n})
+                      {"frames": n, "bad_bytes": 0, "bad_frames": 0, "imu_messages": n}, {"CSV": n},
+                      {"format": "csv", "notes": list(raw.notes)})
+
+
+def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+    """An ArduPilot DataFlash .bin (or .bin.gz): every IMU instance, batch-sampler bursts, metadata."""
+    from companion.sources import dataflash as df
+
+    log = df.open_log(path)
+    raws, extras = df.imu_raw_streams(log)
+    isb, bursts = df.isb_raw_streams(log)
+    streams = sorted((build_stream(r, split_periods) for r in raws + isb), key=lambda s: s.key)
+    counts = log.counts()
+    imu_n = int(sum(r.t.shape[0] for r in raws))
+    totals = {"frames": int(sum(counts.values())), "bad_bytes": int(log.bad_bytes), "bad_frames": 0,
+              "imu_messages": imu_n}
+    meta = df.log_metadata(log)
+    meta["format"] = "dataflash"
+    meta["isb_bursts"] = bursts
+    meta["imu_extras"] = {k.instance: {n: int(np.nansum(v)) if n.endswith("errors") else None
+                                       for n, v in e.items()} for k, e in extras.items()}
+    if log.stopped_at is not None:
+        meta["stopped_at"] = int(log.stopped_at)
+    return LoadResult(str(path), streams, totals, counts, meta)
+
+
+def load_ulog(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+    """A PX4 ULog .ulg (or .ulg.gz) through pyulog: IMU topics per multi_id, armed state, parameters."""
+    from companion.sources import ulog as ul
+
+    u = ul.open_ulog(path)
+    raws, counts = ul.raw_streams(u)
+    streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
+    totals = {"frames": int(sum(counts.values())), "bad_bytes": 0, "bad_frames": 0,
+              "imu_messages": int(sum(r.t.shape[0] for r in raws))}
+    meta = ul.metadata(u)
+    meta["format"] = "ulog"
+    return LoadResult(str(path), streams, totals, counts, meta)
 
 
 def load_live(spec: str, duration: float, config=None, baud=None, split_periods: float = _timing.SPLIT_PERIODS,
@@ -161,8 +202,9 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
 
 def load(spec, config=None, *, duration: float | None = None, baud: int | None = None,
          require_imu: bool = True, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
-    """Load IMU streams from ``spec``: a ``.tlog`` file, a ``.csv``/``.csv.gz`` file, or a connection
-    string (listened to for ``duration`` seconds).
+    """Load IMU streams from ``spec``: a ``.tlog``, an ArduPilot DataFlash ``.bin``, a PX4 ``.ulg``, a
+    ``.csv`` file (each may be gzip-compressed, ``.gz``), or a connection string (listened to for
+    ``duration`` seconds). Log metadata (parameters, armed state, modes) is in ``LoadResult.meta``.
 
     ``config``: None, a dict (the whole configuration; its ``streams:`` list overrides scales) or a
     YAML path. ``require_imu``: raise :class:`CompanionError` when no stream is an IMU.
@@ -174,13 +216,18 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
     low = s.lower()
     if low.endswith(".csv") or low.endswith(".csv.gz"):
         res = load_csv(s, split_periods)
-    elif low.endswith(".tlog") or low.endswith(".tlog.bin") or low.endswith(".mavlink"):
+    elif low.endswith((".tlog", ".tlog.bin", ".mavlink", ".tlog.gz")):
         res = load_tlog(s, config, split_periods)
+    elif low.endswith((".bin", ".bin.gz")):
+        res = load_dataflash(s, split_periods)
+    elif low.endswith((".ulg", ".ulg.gz")):
+        res = load_ulog(s, split_periods)
     elif is_connection_string(s):
         parse_connection(s, baud)  # validate before anything else
         res = load_live(s, duration or 0.0, config, baud, split_periods)
     elif Path(s).is_file():
-        raise CompanionError(f"{s}: unknown file type; expected .tlog, .csv or .csv.gz")
+        raise CompanionError(f"{s}: unknown file type; expected .tlog, .bin (DataFlash), .ulg (ULog) or "
+                             ".csv (each optionally .gz)")
     else:
         parse_connection(s, baud)  # raises the 'unknown source' error
         raise CompanionError(f"{s}: unknown source")  # pragma: no cover - parse_connection raised

@@ -71,8 +71,38 @@ def read_csv(path) -> RawStream:
     if not np.all(np.isfinite(arr)):
         row = int(np.flatnonzero(~np.all(np.isfinite(arr), axis=1))[0])
         raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {row + 1}")
-    return RawStream(CSV_KEY, arr[:, 0].copy(), arr[:, 1:4].copy(), arr[:, 4:7].copy(), None, True,
-                     None, None, 0.0)
+    t = arr[:, 0].copy()
+    check_time_unit(path, t)
+    notes = []
+    back = int(np.count_nonzero(np.diff(t) < 0))
+    if back:
+        order = np.argsort(t, kind="stable")
+        arr = arr[order]
+        t = arr[:, 0].copy()
+        notes.append(f"{path.name}: rows were not in time order ({back} backward steps): sorted by time_s")
+    return RawStream(CSV_KEY, t, arr[:, 1:4].copy(), arr[:, 4:7].copy(), None, True,
+                     None, None, 0.0, notes)
+
+
+def check_time_unit(path, t: np.ndarray) -> None:
+    """Refuse a ``time_s`` column that is evidently in milliseconds or microseconds.
+
+    IMU data come at >= 1 Hz; a median step of >= 1 with whole-number times (or times beyond 1e5, i.e. more
+    than a day "since boot") is a clock in ms (step 1-100) or us (step >= 100). Read as seconds it would make
+    a 100 Hz log look like 0.1 Hz data and N 30x too large, so it is refused with the fix."""
+    if t.shape[0] < 3:
+        return
+    d = np.diff(np.sort(t))
+    d = d[d > 0]
+    if d.shape[0] == 0:
+        return
+    step = float(np.median(d))
+    integral = bool(np.all(t == np.round(t)))
+    if step >= 1.0 and (integral or float(np.max(np.abs(t))) > 1e5):
+        unit, div = ("microseconds", 1e6) if step >= 100.0 else ("milliseconds", 1e3)
+        raise CompanionError(f"{path}: time_s looks like {unit} (median step {step:g}, "
+                             f"{'whole numbers' if integral else 'values up to %g' % float(np.max(t))}): "
+                             f"divide the column by {div:g} to get seconds")
 
 
 def _to_file_lines(msg: str) -> str:

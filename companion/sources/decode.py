@@ -18,7 +18,7 @@ every sample only carries a compass: ``is_imu`` False.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -87,6 +87,7 @@ class RawStream:
     gyro_lsb: float | None
     accel_lsb: float | None
     time_resolution: float
+    notes: list = field(default_factory=list)  # what the reader repaired (e.g. rows sorted), for the report
 
 
 def _instance(layout: M.MessageLayout, rec: np.ndarray) -> np.ndarray:

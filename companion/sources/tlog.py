@@ -194,9 +194,17 @@ def scan(data) -> FrameIndex:
 
 def read_file(path) -> bytes:
     """The bytes of a tlog file; a missing or unreadable file is a one-line :class:`CompanionError`."""
+    import gzip
+    import zlib
+
     try:
+        if str(path).lower().endswith(".gz"):
+            with gzip.open(path, "rb") as fh:
+                return fh.read()
         with open(path, "rb") as fh:
             return fh.read()
+    except (gzip.BadGzipFile, zlib.error, EOFError) as exc:
+        raise CompanionError(f"{path}: not a readable gzip file ({exc})") from None
     except FileNotFoundError:
         raise CompanionError(f"{path}: no such file") from None
     except IsADirectoryError:

@@ -1,0 +1,132 @@
+"""A small ArduPilot DataFlash ``.bin`` writer for tests and simulations (numpy, vectorised).
+
+It writes self-describing logs (FMT messages first) in the three IMU layouts the reader handles:
+
+- ``"2015"``: ``IMU``/``IMU2``/``IMU3`` with ``TimeMS`` (uint32 ms), ``ErrG``, ``ErrA``, ``Temp`` (Copter 3.3);
+- ``"3.4"``: the same three messages with ``TimeUS`` (uint64 us);
+- ``"4.x"``: one ``IMU`` message with instance field ``I`` (``TimeUS``, ``T``, ``EG``, ``EA``, ``GH``, ``AH``).
+
+plus ``PARM``, ``EV`` (armed 10 / disarmed 11), ``MODE`` and ``MSG``. Messages are written in time
+order, as a logger would. Only for tests and examples: real logs carry many more message types.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+HEAD = b"\xa3\x95"
+FMT_TYPE = 128
+
+_NP = {"b": "i1", "B": "u1", "h": "<i2", "H": "<u2", "i": "<i4", "I": "<u4", "f": "<f4", "d": "<f8",
+       "n": "S4", "N": "S16", "Z": "S64", "q": "<i8", "Q": "<u8", "M": "i1", "c": "<i2", "C": "<u2",
+       "e": "<i4", "E": "<u4"}
+
+IMU_LAYOUTS = ("2015", "3.4", "4.x")
+
+
+class _Type:
+    def __init__(self, type_id, name, fmt, columns):
+        self.id, self.name, self.fmt, self.columns = type_id, name, fmt, columns.split(",")
+        self.dtype = np.dtype([("h", "S2"), ("t", "u1")] + [(c, _NP[ch]) for c, ch in zip(self.columns, fmt)])
+        self.length = self.dtype.itemsize
+
+    def fmt_bytes(self) -> bytes:
+        return HEAD + bytes([FMT_TYPE]) + struct.pack("<BB4s16s64s", self.id, self.length, self.name.encode(),
+                                                      self.fmt.encode(), ",".join(self.columns).encode())
+
+
+def _fmt_fmt() -> bytes:
+    return HEAD + bytes([FMT_TYPE]) + struct.pack("<BB4s16s64s", FMT_TYPE, 89, b"FMT", b"BBnNZ",
+                                                  b"Type,Length,Name,Format,Columns")
+
+
+def write_imu_log(path, t_s, gyro, accel, layout: str = "4.x", params: dict | None = None,
+                  armed: list[tuple[float, bool]] | None = None, modes: list[tuple[float, int]] | None = None,
+                  temperature: float = 40.0, messages: list[str] | None = None) -> int:
+    """Write a DataFlash log: ``t_s`` (n,) seconds since boot; ``gyro``, ``accel`` (k, n, 3) per IMU.
+
+    Returns the number of bytes written. Parameters, armed transitions and mode changes are placed at
+    their times (parameters and messages at the start).
+    """
+    if layout not in IMU_LAYOUTS:
+        raise ValueError(f"layout must be one of {IMU_LAYOUTS}")
+    t_s = np.asarray(t_s, dtype=np.float64)
+    gyro = np.asarray(gyro, dtype=np.float64)
+    accel = np.asarray(accel, dtype=np.float64)
+    if gyro.ndim == 2:
+        gyro, accel = gyro[None], accel[None]
+    k, n = gyro.shape[0], gyro.shape[1]
+    ms = layout == "2015"
+    tcol, tch = ("TimeMS", "I") if ms else ("TimeUS", "Q")
+    types = {"PARM": _Type(64, "PARM", tch + "Nf", f"{tcol},Name,Value"),
+             "EV": _Type(65, "EV", tch + "B", f"{tcol},Id"),
+             "MODE": _Type(66, "MODE", tch + "MB", f"{tcol},Mode,ModeNum"),
+             "MSG": _Type(67, "MSG", tch + "Z", f"{tcol},Message")}
+    if layout == "4.x":
+        types["IMU"] = _Type(70, "IMU", "QBffffffIIfBB", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH")
+        imu_names = ["IMU"] * k
+    else:
+        cols = f"{tcol},GyrX,GyrY,GyrZ,AccX,AccY,AccZ,ErrG,ErrA,Temp"
+        imu_names = ["IMU", "IMU2", "IMU3"][:k]
+        for i, nm in enumerate(imu_names):
+            types[nm] = _Type(70 + i, nm, tch + "ffffffIIf", cols)
+    tick = np.round(t_s * (1e3 if ms else 1e6)).astype(np.int64)
+    recs = []
+    for i in range(k):
+        ty = types[imu_names[i]]
+        rec = np.zeros(n, dtype=ty.dtype)
+        rec["h"], rec["t"] = HEAD, ty.id
+        rec[tcol] = tick
+        for j, c in enumerate(("GyrX", "GyrY", "GyrZ")):
+            rec[c] = gyro[i, :, j]
+        for j, c in enumerate(("AccX", "AccY", "AccZ")):
+            rec[c] = accel[i, :, j]
+        if layout == "4.x":
+            rec["I"], rec["T"], rec["GH"], rec["AH"] = i, temperature, 1, 1
+        else:
+            rec["Temp"] = temperature
+        recs.append(rec.view(np.uint8).reshape(n, -1))
+    # the IMUs interleave sample by sample (IMU, IMU2, IMU3, IMU, ...), as the logger writes them
+    chunks = [(np.repeat(tick, k), np.full(n * k, 10), np.stack(recs, axis=1).reshape(n * k, -1))]
+
+    def one(name, tt, *vals):
+        ty = types[name]
+        rec = np.zeros(1, dtype=ty.dtype)
+        rec["h"], rec["t"] = HEAD, ty.id
+        rec[tcol] = int(round(tt * (1e3 if ms else 1e6)))
+        for c, v in zip(ty.columns[1:], vals):
+            rec[c] = v
+        return rec.view(np.uint8).reshape(1, -1)
+
+    t0 = float(t_s[0]) if n else 0.0
+    small = []
+    for nm, v in (params or {}).items():
+        small.append((t0, 0, one("PARM", t0, nm.encode()[:16], float(v))))
+    for m in messages or []:
+        small.append((t0, 1, one("MSG", t0, m.encode()[:64])))
+    for tt, a in armed or []:
+        small.append((tt, 2, one("EV", tt, 10 if a else 11)))
+    for tt, mnum in modes or []:
+        small.append((tt, 3, one("MODE", tt, mnum, mnum)))
+    # merge everything by time (stable: small messages before IMU samples of the same tick)
+    head = _fmt_fmt() + b"".join(ty.fmt_bytes() for ty in types.values())
+    scale = 1e3 if ms else 1e6
+    all_t = np.concatenate([c[0] for c in chunks] + [np.array([int(round(s[0] * scale))]) for s in small])
+    all_o = np.concatenate([c[1] for c in chunks] + [np.array([s[1]]) for s in small])
+    blobs = [c[2] for c in chunks] + [s[2] for s in small]
+    src = np.concatenate([np.full(b.shape[0], i) for i, b in enumerate(blobs)])
+    row = np.concatenate([np.arange(b.shape[0]) for b in blobs])
+    order = np.lexsort((all_o, all_t))
+    out = bytearray(head)
+    # group consecutive rows from the same blob to keep the join fast
+    s_ord, r_ord = src[order], row[order]
+    brk = np.flatnonzero((np.diff(s_ord) != 0) | (np.diff(r_ord) != 1)) + 1
+    starts = np.r_[0, brk]
+    ends = np.r_[brk, order.shape[0]]
+    pieces = [blobs[s_ord[a]][r_ord[a]:r_ord[b - 1] + 1].tobytes() for a, b in zip(starts, ends)]
+    out += b"".join(pieces)
+    with open(path, "wb") as fh:
+        fh.write(bytes(out))
+    return len(out)

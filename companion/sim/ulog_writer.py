@@ -1,0 +1,112 @@
+"""A small PX4 ULog ``.ulg`` writer for tests and simulations (numpy, vectorised).
+
+File layout (PX4 ULog spec, as pyulog reads it): 16-byte header ``ULog\\x01\\x12\\x35``, version 1, start
+time (uint64 us); a flag-bits message ``B``; format definitions ``F`` (``name:type field;...``, packed, no
+padding); initial parameters ``P`` (``float NAME`` / ``int32_t NAME``); then subscriptions ``A``
+(multi_id, msg_id, name) and data messages ``D`` (msg_id + packed fields) in time order. Every message is
+``uint16 size, uint8 type, payload``.
+
+Topics written (fields as the readers need them): ``sensor_combined`` (primary IMU; gyro averaged over
+``gyro_integral_dt``), ``sensor_gyro``/``sensor_accel`` per ``multi_id``, ``vehicle_status`` (``arming_state``
+2 = armed, 1 = standby). Only for tests and examples.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+MAGIC = b"ULog\x01\x12\x35"
+_C = {"uint64_t": "<u8", "uint32_t": "<u4", "int32_t": "<i4", "float": "<f4", "uint8_t": "u1"}
+
+FORMATS = {
+    "sensor_combined": [("uint64_t", "timestamp", 0), ("float", "gyro_rad", 3), ("uint32_t", "gyro_integral_dt", 0),
+                        ("int32_t", "accelerometer_timestamp_relative", 0), ("float", "accelerometer_m_s2", 3),
+                        ("uint32_t", "accelerometer_integral_dt", 0)],
+    "sensor_gyro": [("uint64_t", "timestamp", 0), ("uint64_t", "timestamp_sample", 0), ("uint32_t", "device_id", 0),
+                    ("float", "x", 0), ("float", "y", 0), ("float", "z", 0), ("float", "temperature", 0),
+                    ("uint32_t", "error_count", 0)],
+    "sensor_accel": [("uint64_t", "timestamp", 0), ("uint64_t", "timestamp_sample", 0), ("uint32_t", "device_id", 0),
+                     ("float", "x", 0), ("float", "y", 0), ("float", "z", 0), ("float", "temperature", 0),
+                     ("uint32_t", "error_count", 0)],
+    "vehicle_status": [("uint64_t", "timestamp", 0), ("uint8_t", "arming_state", 0), ("uint8_t", "nav_state", 0)],
+}
+
+
+def _dtype(name):
+    fields = [("_hdr", "<u2"), ("_type", "u1"), ("_id", "<u2")]
+    for typ, fname, arr in FORMATS[name]:
+        fields.append((fname, _C[typ], (arr,)) if arr else (fname, _C[typ]))
+    return np.dtype(fields)
+
+
+def _msg(kind: bytes, payload: bytes) -> bytes:
+    return struct.pack("<HB", len(payload), kind[0]) + payload
+
+
+def write_ulog(path, t_s, gyro, accel, combined=None, params: dict | None = None,
+               armed: list[tuple[float, bool]] | None = None, temperature: float = 45.0) -> int:
+    """Write a ULog: ``t_s`` (n,) s since boot, ``gyro``/``accel`` (k, n, 3) as sensor_gyro/sensor_accel of
+    ``k`` IMUs; ``combined`` = (gyro, accel) (n, 3) each for sensor_combined (default: IMU 0's data).
+    Returns the bytes written."""
+    t_s = np.asarray(t_s, dtype=float)
+    gyro, accel = np.asarray(gyro, dtype=float), np.asarray(accel, dtype=float)
+    if gyro.ndim == 2:
+        gyro, accel = gyro[None], accel[None]
+    k, n = gyro.shape[:2]
+    us = np.round(t_s * 1e6).astype(np.uint64)
+    dt_us = int(round(float(np.median(np.diff(t_s))) * 1e6)) if n > 1 else 0
+    out = bytearray(MAGIC + bytes([1]) + struct.pack("<Q", int(us[0]) if n else 0))
+    out += _msg(b"B", bytes(16) + struct.pack("<QQQ", 0, 0, 0))
+    for name, fields in FORMATS.items():
+        spec = name + ":" + "".join(f"{t}[{a}] {f};" if a else f"{t} {f};" for t, f, a in fields)
+        out += _msg(b"F", spec.encode())
+    for pname, v in (params or {}).items():
+        if isinstance(v, int):
+            out += _msg(b"P", bytes([len(f"int32_t {pname}")]) + f"int32_t {pname}".encode() + struct.pack("<i", v))
+        else:
+            out += _msg(b"P", bytes([len(f"float {pname}")]) + f"float {pname}".encode() + struct.pack("<f", float(v)))
+    subs = [("sensor_combined", 0)] + [(s, i) for i in range(k) for s in ("sensor_gyro", "sensor_accel")]
+    subs.append(("vehicle_status", 0))
+    for msg_id, (name, mid) in enumerate(subs):
+        out += _msg(b"A", struct.pack("<BH", mid, msg_id) + name.encode())
+    blocks = []  # (timestamps, bytes rows)
+    for msg_id, (name, mid) in enumerate(subs):
+        dt = _dtype(name)
+        if name == "vehicle_status":
+            trans = sorted(armed or [])
+            times = np.unique(np.r_[np.arange(float(t_s[0]), float(t_s[-1]), 1.0), [a for a, _ in trans]])
+            rec = np.zeros(times.shape[0], dtype=dt)
+            rec["timestamp"] = np.round(times * 1e6).astype(np.uint64)
+            state = np.ones(times.shape[0], dtype=np.uint8)
+            for ta, a in trans:
+                state[times >= ta] = 2 if a else 1
+            rec["arming_state"] = state
+        else:
+            rec = np.zeros(n, dtype=dt)
+            rec["timestamp"] = us
+            if name == "sensor_combined":
+                g, a = combined if combined is not None else (gyro[0], accel[0])
+                rec["gyro_rad"], rec["accelerometer_m_s2"] = g, a
+                rec["gyro_integral_dt"] = rec["accelerometer_integral_dt"] = dt_us
+            else:
+                v = gyro[mid] if name == "sensor_gyro" else accel[mid]
+                rec["timestamp_sample"] = us
+                rec["device_id"] = 1000 + mid
+                rec["x"], rec["y"], rec["z"] = v[:, 0], v[:, 1], v[:, 2]
+                rec["temperature"] = temperature
+        rec["_hdr"], rec["_type"], rec["_id"] = dt.itemsize - 3, ord("D"), msg_id
+        blocks.append((rec["timestamp"].astype(np.int64), rec.view(np.uint8).reshape(rec.shape[0], -1)))
+    # data in time order: rows of different sizes, merged by a stable sort on the timestamp
+    ts = np.concatenate([b[0] for b in blocks])
+    src = np.concatenate([np.full(b[0].shape[0], i) for i, b in enumerate(blocks)])
+    row = np.concatenate([np.arange(b[0].shape[0]) for b in blocks])
+    order = np.lexsort((src, ts))
+    s_o, r_o = src[order], row[order]
+    brk = np.flatnonzero((np.diff(s_o) != 0) | (np.diff(r_o) != 1)) + 1
+    starts, ends = np.r_[0, brk], np.r_[brk, order.shape[0]]
+    out += b"".join(blocks[s_o[a]][1][r_o[a]:r_o[b - 1] + 1].tobytes() for a, b in zip(starts, ends))
+    with open(path, "wb") as fh:
+        fh.write(bytes(out))
+    return len(out)

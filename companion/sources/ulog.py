@@ -1,0 +1,157 @@
+"""PX4 ULog ``.ulg`` files (pyulog, the ecosystem's parser): IMU topics as :class:`ImuStream`.
+
+Topics read (each ``multi_id`` is its own stream; time = ``timestamp_sample`` where the topic has it,
+else ``timestamp``, in microseconds since boot):
+
+- ``sensor_combined`` (instance 0): the primary IMU as the estimator sees it; ``gyro_rad[3]`` is the
+  *average* over ``gyro_integral_dt`` (a boxcar of the raw samples: a low-pass filter), accel
+  ``accelerometer_m_s2[3]`` (its own time offset ``accelerometer_timestamp_relative`` is ignored);
+- ``sensor_gyro`` / ``sensor_accel`` per ``multi_id``: one IMU's calibrated, filtered output; the accel of
+  the same ``multi_id`` is interpolated (linearly) onto the gyro times, NaN if it is absent;
+- ``sensor_gyro_fifo``: raw FIFO samples, ``samples`` values per message of int16 ``x/y/z[32]`` x
+  ``scale`` (rad/s), spaced ``dt`` us, the last one at ``timestamp_sample``; accel columns NaN;
+- ``vehicle_imu``: integrated ``delta_angle`` / ``delta_angle_dt`` and ``delta_velocity`` /
+  ``delta_velocity_dt`` (rad/s, m/s^2): averages over the integration interval.
+
+Metadata: ``params`` (initial parameters, e.g. ``IMU_GYRO_CUTOFF``, ``IMU_INTEG_RATE``), armed state
+from ``vehicle_status.arming_state`` (2 = armed) as transitions, ``messages`` (logged text).
+``.ulg.gz`` is read through gzip transparently.
+"""
+
+from __future__ import annotations
+
+import gzip
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from companion.errors import CompanionError
+from companion.samples import StreamKey
+from companion.sources.decode import RawStream
+
+TOPICS = ("sensor_combined", "sensor_gyro", "sensor_accel", "sensor_gyro_fifo", "vehicle_imu", "vehicle_status")
+ARMING_STATE_ARMED = 2
+
+
+def open_ulog(path):
+    """A ``pyulog.ULog`` of ``path`` (.ulg or .ulg.gz) holding only the IMU and status topics."""
+    try:
+        from pyulog import ULog
+    except ImportError:  # pragma: no cover - pyulog is a dependency
+        raise CompanionError("reading .ulg needs pyulog: pip install pyulog") from None
+    path = Path(path)
+    try:
+        if path.name.lower().endswith(".gz"):
+            with gzip.open(path, "rb") as fh:
+                import io
+
+                return ULog(io.BytesIO(fh.read()), list(TOPICS))
+        if not path.exists():
+            raise FileNotFoundError
+        if path.is_dir():
+            raise IsADirectoryError
+        return ULog(str(path), list(TOPICS))
+    except FileNotFoundError:
+        raise CompanionError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise CompanionError(f"{path}: is a directory, expected a .ulg file") from None
+    except (gzip.BadGzipFile, zlib.error, EOFError) as exc:
+        raise CompanionError(f"{path}: not a readable gzip file ({exc})") from None
+    except OSError as exc:
+        raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except Exception as exc:  # pyulog raises plain exceptions on a bad header or a corrupt file
+        raise CompanionError(f"{path}: not a readable ULog file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+
+
+def _time(d) -> np.ndarray:
+    ts = d.data.get("timestamp_sample")
+    if ts is None or not np.any(ts):
+        ts = d.data["timestamp"]
+    return ts.astype(np.float64) * 1e-6
+
+
+def _vec(d, names) -> np.ndarray:
+    return np.column_stack([d.data[n].astype(np.float64) for n in names])
+
+
+def _nan3(n: int) -> np.ndarray:
+    return np.full((n, 3), np.nan)
+
+
+def raw_streams(ulog) -> tuple[list[RawStream], dict]:
+    """Every IMU topic instance as a RawStream, and the per-topic message counts (pyulog's rows)."""
+    out: list[RawStream] = []
+    counts: dict = {}
+    by = {}
+    for d in ulog.data_list:
+        by[(d.name, d.multi_id)] = d
+        counts[f"{d.name}[{d.multi_id}]"] = int(d.data["timestamp"].shape[0])
+    for (name, mid), d in sorted(by.items()):
+        n = int(d.data["timestamp"].shape[0])
+        key = StreamKey(0, 0, name, int(mid))
+        if name == "sensor_combined":
+            gyro = _vec(d, [f"gyro_rad[{i}]" for i in range(3)])
+            acc = (_vec(d, [f"accelerometer_m_s2[{i}]" for i in range(3)])
+                   if "accelerometer_m_s2[0]" in d.data else _nan3(n))
+            out.append(RawStream(key, _time(d), gyro, acc, None, True, None, None, 1e-6))
+        elif name == "sensor_gyro":
+            t = _time(d)
+            gyro = _vec(d, ["x", "y", "z"])
+            acc = _nan3(n)
+            a = by.get(("sensor_accel", mid))
+            if a is not None and a.data["timestamp"].shape[0] >= 2:
+                ta = _time(a)
+                o = np.argsort(ta, kind="stable")
+                av = _vec(a, ["x", "y", "z"])[o]
+                inside = (t >= ta[o][0]) & (t <= ta[o][-1])
+                for j in range(3):
+                    acc[inside, j] = np.interp(t[inside], ta[o], av[:, j])
+            temp = d.data["temperature"].astype(np.float64) if "temperature" in d.data else None
+            if temp is not None and not np.all(np.isfinite(temp)):
+                temp = None
+            out.append(RawStream(key, t, gyro, acc, temp, True, None, None, 1e-6))
+        elif name == "sensor_gyro_fifo":
+            t_last = _time(d)
+            cnt = d.data["samples"].astype(np.int64)
+            dt = d.data["dt"].astype(np.float64) * 1e-6
+            scale = d.data["scale"].astype(np.float64)
+            k = np.arange(32)
+            valid = k[None, :] < cnt[:, None]
+            tt = t_last[:, None] - (cnt[:, None] - 1 - k[None, :]) * dt[:, None]
+            vals = np.stack([_vec(d, [f"{ax}[{i}]" for i in range(32)]) * scale[:, None] for ax in "xyz"], axis=2)
+            lsb = float(np.median(scale)) if n else None
+            out.append(RawStream(key, tt[valid], vals[valid], _nan3(int(valid.sum())), None, True, lsb, None, 1e-6))
+        elif name == "vehicle_imu":
+            dta = d.data["delta_angle_dt"].astype(np.float64) * 1e-6
+            dtv = d.data["delta_velocity_dt"].astype(np.float64) * 1e-6
+            with np.errstate(divide="ignore", invalid="ignore"):
+                gyro = _vec(d, [f"delta_angle[{i}]" for i in range(3)]) / dta[:, None]
+                acc = _vec(d, [f"delta_velocity[{i}]" for i in range(3)]) / dtv[:, None]
+            out.append(RawStream(key, _time(d), gyro, acc, None, True, None, None, 1e-6))
+    return out, counts
+
+
+def metadata(ulog) -> dict:
+    meta: dict = {"params": dict(ulog.initial_parameters), "armed": [], "modes": [], "messages": [],
+                  "has_armed_state": False}
+    for d in ulog.data_list:
+        if d.name == "vehicle_status" and "arming_state" in d.data:
+            meta["has_armed_state"] = True
+            t = d.data["timestamp"].astype(np.float64) * 1e-6
+            armed = d.data["arming_state"].astype(int) == ARMING_STATE_ARMED
+            prev = None
+            for ti, a in zip(t, armed):
+                if prev is None or a != prev:
+                    meta["armed"].append((float(ti), bool(a)))
+                    prev = a
+            if "nav_state" in d.data:
+                ns = d.data["nav_state"].astype(int)
+                change = np.r_[True, ns[1:] != ns[:-1]]
+                meta["modes"] = [(float(a), int(b)) for a, b in zip(t[change], ns[change])]
+    meta["messages"] = [(float(m.timestamp) * 1e-6, m.message) for m in getattr(ulog, "logged_messages", [])]
+    sc = next((d for d in ulog.data_list if d.name == "sensor_combined"), None)
+    if sc is not None and "gyro_integral_dt" in sc.data and sc.data["gyro_integral_dt"].shape[0]:
+        v = float(np.median(sc.data["gyro_integral_dt"]))
+        meta["gyro_integral_dt_s"] = v * 1e-6 if v > 1.0 else v  # uint32 us (new) or float s (old)
+    return meta
