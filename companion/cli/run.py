@@ -39,6 +39,10 @@ watch it in MAVProxy:   graph NAMED_VALUE_FLOAT[IMU0GX_N].value
             in Mission Planner: Ctrl-F > Tuning > MAV_IMU0GX_N
 """
 
+#: Printed on stderr (also with --quiet) once a live link is open and SIGINT/SIGTERM are handled:
+#: supervisors and tests wait for it instead of a fixed time.
+READY_LINE = "companion run: listening on"
+
 LINK_KEYS = ("rate_hz", "messages", "compid", "heartbeat_s", "stale_s", "retry_s")
 RUN_KEYS = ("report_period_s", "state_file", "save_period_s")
 
@@ -210,6 +214,21 @@ def print_summary(pipeline, out=None) -> None:
 
 
 def run(args) -> int:
+    # i14: signal handling first (a SIGTERM during start-up still saves and exits 0), then the imports
+    stop = {"flag": False}
+
+    def on_signal(signum, frame):
+        stop["flag"] = True
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _run(args, stop)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def _run(args, stop) -> int:
     from companion.mavlink.reporter import Reporter
     from companion.service.pipeline import Pipeline
     from companion.service.state import load_state, save_state
@@ -235,12 +254,6 @@ def run(args) -> int:
     state_path = _state_path(args, extra, live=not is_replay)
     save_period = float(extra.get("save_period_s", 60.0))
 
-    stop = {"flag": False}
-
-    def on_signal(signum, frame):
-        stop["flag"] = True
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     writer = None
     try:
         if args.out_tlog:
@@ -270,8 +283,6 @@ def run(args) -> int:
         print_summary(pipeline)
         return 0
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
         if writer is not None:
             writer.close()
 
@@ -312,7 +323,8 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
         _restore(pipeline, state_path, args, load_state, warn, log)
         if pipeline.sysid is not None and link.sysid is None:
             link.set_sysid(pipeline.sysid)
-        log(f"listening on {src}")
+        # i14: the readiness line, printed even with --quiet: the socket/port is open and signals are handled
+        print(f"{READY_LINE} {src}", file=sys.stderr, flush=True)
         t_start = time.monotonic()
         last_save = t_start
         stale = False
