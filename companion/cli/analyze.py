@@ -13,7 +13,6 @@ import numpy as np
 from companion import units
 from companion.allan.adev import cluster_sizes, oavar
 from companion.allan.confidence import adev_ci, edf_model, edf_simple
-from companion.allan.fit import fit_avar
 from companion.allan.lsb import lsb_report
 from companion.allan.terms import PARAMS
 from companion.cli.output import to_json, write_text
@@ -104,6 +103,8 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
         out["status"] = "constant"
         out["note"] = "all samples equal (" + ("all zero" if y[0] == 0 else f"{y[0]:g}") + "): no noise to analyse"
         return out
+    from companion.allan.fit import fit_avar  # scipy.optimize/stats: only where a fit runs (issue 14)
+
     m_fit = cluster_sizes(n, "octave")
     tau_f, avar_f, _, _ = oavar(y, rate_hz, m=m_fit)
     fit = fit_avar(tau_f, avar_f, edf_simple(n + 1, m_fit, 0), effects=effects, n=n, rate_hz=rate_hz, m=m_fit,
