@@ -80,6 +80,19 @@ def parse_taus(spec: str, n: int, rate_hz: float):
     return cluster_sizes(n, np.maximum(np.round(np.array(secs) * rate_hz), 1).astype(np.int64))
 
 
+def taus_beyond(spec: str, n: int, rate_hz: float) -> list[float]:
+    """The cluster times (s) of a --taus seconds list that a record of ``n`` samples cannot reach
+    (overlapping ADEV needs m <= n/2); [] for octave/decade/all/log:N."""
+    spec = spec.strip()
+    if spec in ("octave", "decade", "all") or spec.startswith("log:"):
+        return []
+    try:
+        secs = [float(x) for x in spec.split(",") if x.strip()]
+    except ValueError:
+        return []  # parse_taus gives the error
+    return [x for x in secs if math.isfinite(x) and x > 0 and max(round(x * rate_hz), 1) > n // 2]
+
+
 def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, effects=None, level: float = 0.95) -> dict:
     """Allan analysis of one axis (SI rate samples): the JSON ``axes`` entry.
 
@@ -291,14 +304,21 @@ def kalibr_yaml(report: dict) -> str:
 
 
 def run(args) -> int:
+    from companion.cli.output import check_output_path, check_plot_path
     from companion.sources import load
 
+    for opt, path in (("--json", args.json), ("--kalibr", args.kalibr)):  # i14: outputs checked before the work
+        if path:
+            check_output_path(path, opt)
+    if args.plot:
+        check_plot_path(args.plot)
     axes = [a.strip() for a in args.axes.split(",") if a.strip()]
     bad = [a for a in axes if a not in AXES]
     if bad or not axes:
         raise CompanionError(f"bad --axes {args.axes!r}: expected a comma list of {', '.join(AXES)}")
     res = load(args.source, config=args.config, duration=args.duration)
     streams = res.imu_streams()
+    _report_taus_beyond(args.taus, streams)
     total = sum(s.samples for s in streams) * len(axes)
     progress = Progress(len(streams) * len(axes), enabled=not args.quiet and total > 2_000_000)
     report = {"source": str(args.source), "streams": []}
@@ -320,3 +340,25 @@ def run(args) -> int:
         for path in plot_report(report, args.plot):
             print(f"wrote {path}")
     return 0
+
+
+def _report_taus_beyond(spec: str, streams) -> None:
+    """i14: --taus cluster times beyond a record are reported (warning), or refused when none is reachable."""
+    reachable = False
+    for st in streams:
+        a, b = st.longest_segment()
+        rate = float(st.rate_hz)
+        if not (rate > 0 and math.isfinite(rate)):
+            continue
+        beyond = taus_beyond(spec, b - a, rate)
+        asked = taus_beyond(spec, 0, rate)  # every valid seconds value (none for octave etc.)
+        if len(beyond) < len(asked) or not asked:
+            reachable = True
+        if beyond:
+            longest = (b - a) // 2 / rate
+            print(f"companion analyze: warning: --taus {', '.join(f'{x:g}' for x in beyond)} s beyond "
+                  f"{st.key.label()}: its longest segment ({(b - a) / rate:.0f} s) reaches tau {longest:.4g} s; "
+                  "not shown", file=sys.stderr)
+    if streams and not reachable:
+        raise CompanionError(f"--taus {spec}: every cluster time is beyond the record (overlapping Allan deviation "
+                             "reaches half the longest gap-free segment)")

@@ -129,8 +129,14 @@ def format_table(result, axis: str, label: str) -> str:
 
 
 def run(args) -> int:
+    from companion.cli.output import check_output_path, check_plot_path
     from companion.sources import load
 
+    for opt, path in (("--json", args.json), ("--out", args.out)):
+        if path:
+            check_output_path(path, opt)
+    if args.plot:
+        check_plot_path(args.plot)
     axis = args.axis.strip().lower()
     if axis not in AXES:
         raise CompanionError(f"unknown --axis {args.axis!r}; expected one of {', '.join(AXES)}")

@@ -253,6 +253,7 @@ def _run(args, stop) -> int:
         parse_connection(src, args.baud)  # a clear error before anything else
     state_path = _state_path(args, extra, live=not is_replay)
     save_period = float(extra.get("save_period_s", 60.0))
+    _check_outputs(args, extra, state_path)  # i14: every output path checked before the work starts
 
     writer = None
     try:
@@ -285,6 +286,27 @@ def _run(args, stop) -> int:
     finally:
         if writer is not None:
             writer.close()
+
+
+def _check_outputs(args, extra, state_path) -> None:
+    """--out-tlog and a state file named by the user (--state, run.state_file) follow the CLI's one rule
+    (companion.cli.output.check_output_path: existing directory, writable, refused otherwise); only the
+    default state location ($XDG_STATE_HOME/companion) is created when missing."""
+    from companion.cli.output import check_output_path
+
+    if args.out_tlog:
+        check_output_path(args.out_tlog, "--out-tlog")
+    if state_path is None:
+        return
+    if args.state or extra.get("state_file"):
+        check_output_path(state_path, "--state" if args.state else "run.state_file")
+    else:
+        try:
+            state_path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CompanionError(f"default state file {state_path}: cannot create its directory "
+                                 f"({exc.strerror or exc}); give --state FILE or --no-state") from None
+        check_output_path(state_path, "state file")
 
 
 def _restore(pipeline, state_path, args, load_state, warn, log) -> None:
