@@ -43,7 +43,7 @@ watch it in MAVProxy:   graph NAMED_VALUE_FLOAT[IMU0GX_N].value
 #: supervisors and tests wait for it instead of a fixed time.
 READY_LINE = "companion run: listening on"
 
-LINK_KEYS = ("rate_hz", "messages", "compid", "heartbeat_s", "stale_s", "retry_s")
+LINK_KEYS = ("rate_hz", "messages", "compid", "heartbeat_s", "stale_s", "retry_s", "loss_warn", "loss_window_s")
 RUN_KEYS = ("report_period_s", "state_file", "save_period_s")
 
 
@@ -277,11 +277,14 @@ def _run(args, stop) -> int:
             if not pipeline.channels:
                 raise CompanionError(f"{src}: no IMU data to replay")
         else:
-            pipeline = _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_period,
-                             writer, stop, log, warn)
+            pipeline, link = _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_period,
+                                   writer, stop, log, warn)
         if state_path is not None:
             _save(pipeline, state_path, save_state, warn)
         print_summary(pipeline)
+        if not is_replay:  # i14: link health (loss, reordering, late, rejected frames) per source
+            for line in link.stats.summary_lines():
+                print(line)
         return 0
     finally:
         if writer is not None:
@@ -355,6 +358,7 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
             msg = conn.recv_match(blocking=True, timeout=0.1)
             now = time.monotonic()
             if msg is not None:
+                link.count(msg)  # i14: sequence numbers, loss, reordering per source
                 if writer is not None:
                     writer.write_raw(msg.get_msgbuf(), time.time())
                 if msg.get_type() != "BAD_DATA":
@@ -378,7 +382,7 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
             if args.duration is not None and now - t_start >= args.duration:
                 break
         log(f"stopping: {link.sent} messages sent, {reporter.sent} NAMED_VALUE_FLOAT, {reporter.texts} STATUSTEXT")
-        return pipeline
+        return pipeline, link
     finally:
         try:
             conn.close()

@@ -68,6 +68,20 @@ def _resolve(kind_prefix: str, host: str, port: int, spec: str) -> None:
         raise CompanionError(f"{spec}: cannot resolve host {host!r} ({getattr(exc, 'strerror', None) or exc})") from None
 
 
+UDP_RCVBUF = 4 << 20
+
+
+def _grow_receive_buffer(conn) -> None:
+    """Ask for a 4 MiB UDP receive buffer (the kernel caps it at net.core.rmem_max): a few seconds of IMU
+    data survive a pause of this process instead of being dropped by the kernel."""
+    import socket
+
+    try:
+        conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)
+    except (OSError, AttributeError):
+        pass
+
+
 def open_connection(spec: str, baud: int | None = None, source_system: int = 1, source_component: int = 191,
                     dialect: str = "ardupilotmega", retries: int = 3, **kwargs):
     """Open a pymavlink link after :func:`parse_connection` accepted ``spec``.
@@ -95,10 +109,13 @@ def open_connection(spec: str, baud: int | None = None, source_system: int = 1, 
     noise = io.StringIO()
     try:
         with contextlib.redirect_stdout(noise):
-            return mavutil.mavlink_connection(s, baud=int(baud or DEFAULT_BAUD), source_system=source_system,
+            conn = mavutil.mavlink_connection(s, baud=int(baud or DEFAULT_BAUD), source_system=source_system,
                                               source_component=source_component, dialect=dialect,
                                               robust_parsing=True, autoreconnect=kind == "serial",
                                               retries=retries, **kwargs)
+        if s.startswith("udp"):
+            _grow_receive_buffer(conn)
+        return conn
     except Exception as exc:  # socket errors, serial errors: the user's link is not usable
         reason = (getattr(exc, "strerror", None) or str(exc).splitlines()[0]) if str(exc) else type(exc).__name__
         tries = f" after {max(retries, 1)} attempts" if s.startswith("tcp:") else ""
