@@ -68,6 +68,12 @@ def register(subparsers) -> None:
     p.add_argument("--out-tlog", metavar="FILE", help="record what was received and sent (or, for a replay, the reports) to a tlog")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (default: run until Ctrl-C/SIGTERM)")
     p.add_argument("--quiet", action="store_true", help="only warnings and the final summary")
+    # i14: MAVLink 2 signing (companion/mavlink/signing.py, docs/run.md#signed-links)
+    p.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing with this 32-byte key (raw or 64 hex "
+                   "digits; the autopilot's key, set with SETUP_SIGNING): sign what we send, accept only "
+                   "correctly signed frames, count the rejected ones")
+    p.add_argument("--accept-unsigned", action="store_true",
+                   help="with --signing-key: also accept unsigned frames (wrongly signed ones are still refused)")
     p.set_defaults(func=run)
 
 
@@ -254,6 +260,7 @@ def _run(args, stop) -> int:
     state_path = _state_path(args, extra, live=not is_replay)
     save_period = float(extra.get("save_period_s", 60.0))
     _check_outputs(args, extra, state_path)  # i14: every output path checked before the work starts
+    args.signing = _signing_key(args, is_replay, warn)
 
     writer = None
     try:
@@ -289,6 +296,19 @@ def _run(args, stop) -> int:
     finally:
         if writer is not None:
             writer.close()
+
+
+def _signing_key(args, is_replay, warn):
+    """i14: the signing key (bytes) of --signing-key, or None."""
+    if args.accept_unsigned and not args.signing_key:
+        raise CompanionError("--accept-unsigned needs --signing-key")
+    if not args.signing_key:
+        return None
+    if is_replay:
+        raise CompanionError("--signing-key applies to live links, not to a replayed log")
+    from companion.mavlink.signing import load_signing_key
+
+    return load_signing_key(args.signing_key, warn)
 
 
 def _check_outputs(args, extra, state_path) -> None:
@@ -338,8 +358,15 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
     from companion.service.state import load_state, save_state
     from companion.sources.connection import open_connection
 
-    conn = open_connection(src, args.baud, source_system=pcfg.sysid or 1, source_component=link_cfg.compid)
+    conn = open_connection(src, args.baud, source_system=pcfg.sysid or 1, source_component=link_cfg.compid,
+                           mavlink2=args.signing is not None)
     try:
+        if args.signing is not None:  # i14
+            from companion.mavlink.signing import setup_signing
+
+            setup_signing(conn, args.signing, accept_unsigned=args.accept_unsigned)
+            log("MAVLink 2 signing on: sending signed frames, accepting "
+                + ("signed and unsigned" if args.accept_unsigned else "only correctly signed") + " frames")
         link = Link(conn, link_cfg, pcfg.sysid, log=log)
         if writer is not None:
             link.recorder = writer

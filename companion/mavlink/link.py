@@ -103,7 +103,10 @@ class LinkStats:
     def on_message(self, msg) -> None:
         mtype = msg.get_type()
         if mtype == "BAD_DATA":
-            self.bad_frames += 1
+            if "signature" in str(getattr(msg, "reason", "")):
+                self.rejected_signature += 1  # unsigned, wrongly signed or replayed (signing is on)
+            else:
+                self.bad_frames += 1
             return
         key = (msg.get_srcSystem(), msg.get_srcComponent())
         st = self.sources.get(key)

@@ -83,7 +83,7 @@ def _grow_receive_buffer(conn) -> None:
 
 
 def open_connection(spec: str, baud: int | None = None, source_system: int = 1, source_component: int = 191,
-                    dialect: str = "ardupilotmega", retries: int = 3, **kwargs):
+                    dialect: str = "ardupilotmega", retries: int = 3, mavlink2: bool = False, **kwargs):
     """Open a pymavlink link after :func:`parse_connection` accepted ``spec``.
 
     ``source_system``/``source_component`` identify us when we send (default compid 191 =
@@ -91,6 +91,7 @@ def open_connection(spec: str, baud: int | None = None, source_system: int = 1, 
     come back as BAD_DATA messages instead of exceptions. Extra ``kwargs`` go to
     ``mavutil.mavlink_connection`` (e.g. ``input=False`` for udpout). Returns the pymavlink connection.
 
+    ``mavlink2``: use MAVLink 2 from the start (needed for signing, :mod:`companion.mavlink.signing`).
     Host names are resolved first; a ``tcp:`` server is tried ``retries`` more times a second apart (an
     autopilot still booting). Whatever pymavlink prints while connecting ("[Errno 111] Connection refused
     sleeping") is kept off stdout; a failure is one :class:`CompanionError` line.
@@ -99,6 +100,8 @@ def open_connection(spec: str, baud: int | None = None, source_system: int = 1, 
     import io
 
     kind, s = parse_connection(spec, baud)
+    if mavlink2:  # speak MAVLink 2 from the first frame (signing needs it; pymavlink reads this variable)
+        os.environ["MAVLINK20"] = "1"
     if kind == "net":
         prefix, rest = s.split(":", 1)
         host, port = rest.rsplit(":", 1)
