@@ -115,3 +115,46 @@ def test_bad_key_files_are_one_line(tmp_path, capsys, content, msg):
     assert msg in err and len(err.strip().splitlines()) == 1
     assert main(["run", "--source", "udpin:127.0.0.1:14999", "--no-state", "--signing-key", str(tmp_path / "none")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+@pytest.mark.network
+def test_accept_unsigned_lets_unsigned_in_but_never_a_wrong_signature(monkeypatch):
+    import time
+
+    from pymavlink.dialects.v20 import ardupilotmega as m2
+
+    from companion.mavlink.link import LinkStats
+    from companion.mavlink.signing import setup_signing
+    from companion.sources.connection import open_connection
+
+    monkeypatch.setenv("MAVLINK20", "1")
+    key, wrong = bytes(range(32)), bytes(range(1, 33))
+    port = free_udp_port()
+    conn = open_connection(f"udpin:127.0.0.1:{port}", mavlink2=True)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    def encoder(k, sysid):
+        mav = m2.MAVLink(None, sysid, 1)
+        if k is not None:
+            mav.signing.secret_key, mav.signing.sign_outgoing = k, True
+            mav.signing.timestamp = int((time.time() - 1420070400) * 1e5)
+        return mav
+
+    try:
+        setup_signing(conn, key, accept_unsigned=True)
+        stats = LinkStats()
+        for sysid, k in ((1, None), (2, wrong), (3, key), (4, None)):
+            mav = encoder(k, sysid)
+            tx.sendto(mav.heartbeat_encode(2, 3, 0, 0, 3).pack(mav), ("127.0.0.1", port))
+        got = []
+        deadline = time.monotonic() + DEADLINE_S
+        while len(got) < 4 and time.monotonic() < deadline:
+            msg = conn.recv_match(blocking=True, timeout=0.2)
+            if msg is not None:
+                stats.on_message(msg)
+                got.append(msg)
+        assert sorted(m.get_srcSystem() for m in got if m.get_type() == "HEARTBEAT") == [1, 3, 4]
+        assert stats.rejected_signature == 1
+    finally:
+        tx.close()
+        conn.close()
