@@ -20,6 +20,7 @@ from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.state import load_state, save_state
+from readiness import DEADLINE_S, READY, wait_for_text
 
 ROOT = Path(__file__).resolve().parent.parent
 KEY = StreamKey(1, 1, "RAW_IMU", 0)
@@ -188,17 +189,20 @@ def test_sigterm_saves_state_and_exits_cleanly(tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-m", "companion", "run", "--source", f"udpin:127.0.0.1:{port}",
-                             "--state", str(tmp_path / "st.json"), "--duration", "30"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    errf = tmp_path / "err.txt"
+    with open(errf, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "companion", "run", "--source", f"udpin:127.0.0.1:{port}",
+                                 "--state", str(tmp_path / "st.json"), "--duration", "600", "--quiet"], env=env,
+                                stdout=subprocess.DEVNULL, stderr=fh, text=True)
     try:
-        time.sleep(2.0)
+        wait_for_text(errf, READY, proc)  # readiness line, not a fixed sleep
         proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=15)
+        proc.wait(DEADLINE_S)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait(5)
+    err = errf.read_text()
     assert proc.returncode == 0, err
     assert "Traceback" not in err
     assert json.loads((tmp_path / "st.json").read_text())["format"] == "companion-run-state"

@@ -19,13 +19,15 @@ CASES = [
     ({"effect": "quantization", "Q": 1e-4}, {"effect": "quantization", "Q": 1e-4}),
     # flicker with its high cut-off at Nyquist: the cosine-integral form with f0 = fs/2 (thesis eq. 3.16)
     ({"effect": "bias_instability", "B": 1e-3}, {"effect": "bias_instability", "B": 1e-3, "f0": RATE / 2}),
+    # the README's optional cut-off f0 below Nyquist: the same cosine-integral form with that f0
+    ({"effect": "bias_instability", "B": 1e-3, "f0": RATE / 8}, {"effect": "bias_instability", "B": 1e-3, "f0": RATE / 8}),
     ({"effect": "random_walk", "K": 1e-4}, {"effect": "random_walk", "K": 1e-4}),
     ({"effect": "gauss_markov", "sigma": 1e-3, "tau_c": 3.0}, {"effect": "gauss_markov", "sigma": 1e-3, "tau_c": 3.0}),
     ({"effect": "sinusoid", "amplitude": 1e-3, "freq_hz": 0.07}, {"effect": "sinusoid", "amplitude": 1e-3, "freq_hz": 0.07}),
 ]
 
 
-@pytest.mark.parametrize("term,analytic", CASES, ids=[c[0]["effect"] for c in CASES])
+@pytest.mark.parametrize("term,analytic", CASES, ids=[c[0]["effect"] + ("_f0" if "f0" in c[0] else "") for c in CASES])
 def test_synth_matches_analytic_avar(term, analytic):
     rng = np.random.default_rng(12345)
     # continuous-time formulas; the sampled process departs from them at a few tau0 (e.g. the discrete
@@ -73,3 +75,13 @@ def test_simulate_model_axes_independent_of_order():
     b = simulate_model({"rate_hz": 10.0, "axes": {"gy": [{"effect": "white_noise", "N": 1.0}]}}, 100, seed=3)
     assert np.array_equal(a["gy"], b["gy"]) and not np.array_equal(a["gx"], a["gy"])
     assert a["gx"].shape == (1000,)
+
+
+@pytest.mark.parametrize("term, msg", [
+    ({"effect": "sinusoid", "amplitude": 1e-3, "freq_hz": 6.0}, "Nyquist"),
+    ({"effect": "sinusoid", "amplitude": 1e-3, "freq_hz": 5.0}, "Nyquist"),
+    ({"effect": "bias_instability", "B": 1e-3, "f0": 7.0}, "f0"),
+])
+def test_terms_the_rate_cannot_carry_are_refused(term, msg):
+    with pytest.raises(ValueError, match=msg):
+        synthesize_axis([term], RATE, 100, np.random.default_rng(0))

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import pytest
+from readiness import READY, wait_for_text
 
 pytestmark = pytest.mark.network
 
@@ -128,16 +129,16 @@ def run_loop(tmp_path, via_mavproxy=False, speedup=30.0, duration=900.0, degrade
             sim_target = p_run
         wall = duration / speedup
         run, _ = start(["run", "--source", f"udpin:127.0.0.1:{p_run}", "--state", str(tmp_path / "state.json"),
-                        "--baseline-s", str(baseline_s), "--duration", str(wall + 15), "--out-tlog",
+                        "--baseline-s", str(baseline_s), "--duration", str(4 * wall + 120), "--out-tlog",
                         str(tmp_path / "rx.tlog")], tmp_path, "run.out")
         procs.append(run)
-        time.sleep(1.0)
+        wait_for_text(tmp_path / "run.out", READY, run)
         sim, _ = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{sim_target}",
                         "--speedup", str(speedup), "--duration", str(duration), "--degrade-at", str(degrade_at),
                         "--degrade-factor", "2", "--degrade-axis", "gx", "--wait-request", "--wall-limit",
                         str(wall + 20), "--record", "rx.jsonl", "--quiet"], tmp_path, "sim.out")
         procs.append(sim)
-        sim.wait(wall + 40)
+        sim.wait(wall + 120)  # bounded by its --wall-limit; generous for a busy machine
         assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
         rc = stop(run)  # SIGTERM: saves its state and prints the summary
         assert rc == 0, (tmp_path / "run.out").read_text()
@@ -172,14 +173,14 @@ def test_request_data_stream_fallback_when_interval_refused(tmp_path):
     """An autopilot that refuses SET_MESSAGE_INTERVAL and streams nothing until asked gets REQUEST_DATA_STREAM."""
     (tmp_path / "model.yaml").write_text(MODEL)
     port = free_udp_port()
-    run, _ = start(["run", "--source", f"udpin:127.0.0.1:{port}", "--no-state", "--duration", "25"], tmp_path, "run.out")
+    run, _ = start(["run", "--source", f"udpin:127.0.0.1:{port}", "--no-state", "--duration", "300"], tmp_path, "run.out")
     sim = None
     try:
-        time.sleep(1.0)
+        wait_for_text(tmp_path / "run.out", READY, run)
         sim, _ = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{port}",
                         "--speedup", "10", "--duration", "80", "--wait-request", "--refuse-interval",
                         "--wall-limit", "30"], tmp_path, "sim.out")
-        sim.wait(40)
+        sim.wait(120)  # bounded by its --wall-limit
         assert stop(run) == 0
     finally:
         for p in (sim, run):

@@ -30,7 +30,6 @@ import math
 from typing import Iterable, Mapping
 
 import numpy as np
-from scipy.special import sici
 
 EFFECTS = (
     "quantization",
@@ -84,6 +83,8 @@ def avar_bias_instability(tau, B, f0=None):
     tau = np.asarray(tau, dtype=float)
     if f0 is None:
         return np.full_like(tau, BIAS_PLATEAU * B**2)
+    from scipy.special import sici  # only for the cut-off form (keeps scipy out of start-up)
+
     x = math.pi * f0 * tau
     _, ci2 = sici(2.0 * x)
     _, ci4 = sici(4.0 * x)

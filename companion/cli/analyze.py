@@ -13,7 +13,6 @@ import numpy as np
 from companion import units
 from companion.allan.adev import cluster_sizes
 from companion.allan.confidence import adev_ci, edf_model, edf_simple
-from companion.allan.fit import fit_avar
 from companion.allan.lsb import lsb_report
 from companion.allan.pooled import pooled_cluster_sizes, pooled_edf, pooled_oavar
 from companion.allan.terms import PARAMS
@@ -103,6 +102,19 @@ def parse_taus(spec: str, n: int, rate_hz: float):
     return cluster_sizes(n, np.maximum(np.round(np.array(secs) * rate_hz), 1).astype(np.int64))
 
 
+def taus_beyond(spec: str, n: int, rate_hz: float) -> list[float]:
+    """The cluster times (s) of a --taus seconds list that a record of ``n`` samples cannot reach
+    (overlapping ADEV needs m <= n/2); [] for octave/decade/all/log:N."""
+    spec = spec.strip()
+    if spec in ("octave", "decade", "all") or spec.startswith("log:"):
+        return []
+    try:
+        secs = [float(x) for x in spec.split(",") if x.strip()]
+    except ValueError:
+        return []  # parse_taus gives the error
+    return [x for x in secs if math.isfinite(x) and x > 0 and max(round(x * rate_hz), 1) > n // 2]
+
+
 def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, effects=None, level: float = 0.95,
                  segments=None, tau_min: float = 0.0) -> dict:
     """Allan analysis of one axis (SI rate samples): the JSON ``axes`` entry.
@@ -134,6 +146,8 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
         out["status"] = "constant"
         out["note"] = "all samples equal (" + ("all zero" if allv[0] == 0 else f"{allv[0]:g}") + "): no noise to analyse"
         return out
+    from companion.allan.fit import fit_avar  # scipy.optimize/stats: only where a fit runs (issue 14)
+
     lengths = [int(p.shape[0]) for p in pieces]
     pooled = len(pieces) > 1
     m_fit = pooled_cluster_sizes(lengths, "octave")
@@ -494,6 +508,8 @@ def analyze_source(spec, args, axes, progress_enabled=True) -> tuple[list[dict],
 
     res = load(spec, config=getattr(args, "config", None), duration=getattr(args, "duration", None))
     streams = res.imu_streams()
+    if isinstance(getattr(args, "taus", None), str):
+        _report_taus_beyond(args.taus, streams)
     sel = select_still(streams, res.meta, start=getattr(args, "start", None), end=getattr(args, "end", None),
                        use_all=getattr(args, "use_all", False), min_segment_s=getattr(args, "min_still", 10.0))
     summary = {"source": str(spec), "notes": inspect_notes(res), "selection": sel.to_dict(),
@@ -529,6 +545,13 @@ def kalibr_blockers(report: dict) -> list[str]:
 
 
 def run(args) -> int:
+    from companion.cli.output import check_output_path, check_plot_path
+
+    for opt, path in (("--json", args.json), ("--kalibr", args.kalibr)):  # outputs checked before the work
+        if path:
+            check_output_path(path, opt)
+    if args.plot:
+        check_plot_path(args.plot)
     axes = [a.strip() for a in args.axes.split(",") if a.strip()]
     bad = [a for a in axes if a not in AXES]
     if bad or not axes:
@@ -573,3 +596,25 @@ def run(args) -> int:
     if failed:
         raise CompanionError(f"{len(failed)} of {len(sources)} sources not analysed: {'; '.join(failed)}")
     return 0
+
+
+def _report_taus_beyond(spec: str, streams) -> None:
+    """--taus cluster times beyond a record are reported (warning), or refused when none is reachable."""
+    reachable = False
+    for st in streams:
+        a, b = st.longest_segment()
+        rate = float(st.rate_hz)
+        if not (rate > 0 and math.isfinite(rate)):
+            continue
+        beyond = taus_beyond(spec, b - a, rate)
+        asked = taus_beyond(spec, 0, rate)  # every valid seconds value (none for octave etc.)
+        if len(beyond) < len(asked) or not asked:
+            reachable = True
+        if beyond:
+            longest = (b - a) // 2 / rate
+            print(f"companion analyze: warning: --taus {', '.join(f'{x:g}' for x in beyond)} s beyond "
+                  f"{st.key.label()}: its longest segment ({(b - a) / rate:.0f} s) reaches tau {longest:.4g} s; "
+                  "not shown", file=sys.stderr)
+    if streams and not reachable:
+        raise CompanionError(f"--taus {spec}: every cluster time is beyond the record (overlapping Allan deviation "
+                             "reaches half the longest gap-free segment)")

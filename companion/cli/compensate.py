@@ -8,7 +8,6 @@ import sys
 
 import numpy as np
 
-from companion.compensation.pipeline import METHODS, compensate
 from companion.cli.output import to_json, write_text
 from companion.errors import CompanionError
 from companion.samples import AXES, GYRO_AXES
@@ -62,6 +61,8 @@ def register(subparsers) -> None:
 
 
 def parse_methods(spec: str) -> tuple:
+    from companion.compensation.pipeline import METHODS  # scipy: loaded only when this command runs
+
     names = [s.strip().lower() for s in spec.split(",") if s.strip()]
     if not names or names == ["all"]:
         return METHODS
@@ -130,8 +131,14 @@ def format_table(result, axis: str, label: str) -> str:
 
 
 def run(args) -> int:
+    from companion.cli.output import check_output_path, check_plot_path
     from companion.sources import load
 
+    for opt, path in (("--json", args.json), ("--out", args.out)):
+        if path:
+            check_output_path(path, opt)
+    if args.plot:
+        check_plot_path(args.plot)
     axis = args.axis.strip().lower()
     if axis not in AXES:
         raise CompanionError(f"unknown --axis {args.axis!r}; expected one of {', '.join(AXES)}")
@@ -139,6 +146,8 @@ def run(args) -> int:
     res = load(args.source, args.config, duration=args.duration)
     t, z, rate, label = select_series(res, axis, args.stream, args.max_samples)
     progress = Progress(not args.quiet and z.shape[0] > 50_000 and sys.stderr.isatty())
+    from companion.compensation.pipeline import compensate
+
     try:
         result = compensate(z, rate, methods=methods, progress=progress, split=args.split)
     finally:

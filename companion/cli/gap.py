@@ -142,7 +142,13 @@ def format_report(r, source: str, label: str) -> str:
 def run(args) -> int:
     from companion.gap import run_gap
     from companion.sim.model import NoiseModel, load_model, save_model
+    from companion.cli.output import check_output_path, check_plot_path
 
+    for opt, path in (("--json", None if args.json == "-" else args.json), ("--out-model", args.out_model)):
+        if path:
+            check_output_path(path, opt)
+    if args.plot:
+        check_plot_path(args.plot)
     model = load_model(args.model)
     if args.axis not in model.axes:
         raise CompanionError(f"{args.model}: no terms for axis {args.axis} (has: {', '.join(model.axes) or 'none'})")

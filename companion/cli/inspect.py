@@ -133,8 +133,11 @@ def render(res) -> str:
 
 
 def run(args) -> int:
+    from companion.cli.output import check_output_path
     from companion.sources import load
 
+    if args.json:
+        check_output_path(args.json, "--json")
     res = load(args.source, config=args.config, duration=args.duration, baud=args.baud, require_imu=False)
     print(render(res), flush=True)
     if args.json:

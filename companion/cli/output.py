@@ -31,3 +31,45 @@ def write_text(path, text: str, what: str = "file") -> None:
             fh.write(text)
     except OSError as exc:
         raise CompanionError(f"{path}: cannot write {what} ({exc.strerror or exc})") from None
+
+
+# --- output paths, checked before any work (issue 14) -------------------------------------------------
+#: One rule for every file the CLI writes: the directory must already exist (nothing is created), the
+#: path must not be a directory, and it must be writable. Checked before the work starts, so a typo costs
+#: one line, not an analysis.
+PLOT_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp")
+
+
+def check_output_path(path, option: str) -> None:
+    """Refuse (one :class:`CompanionError` line naming ``option``) a path that cannot be written."""
+    import os
+
+    p = os.fspath(path)
+    if not p or p.endswith(os.sep):
+        raise CompanionError(f"{option} {p!r}: expected a file name")
+    if os.path.isdir(p):
+        raise CompanionError(f"{option} {p}: is a directory; give a file name")
+    parent = os.path.dirname(os.path.abspath(p))
+    if not os.path.isdir(parent):
+        what = "is not a directory" if os.path.exists(parent) else "does not exist"
+        raise CompanionError(f"{option} {p}: directory {parent} {what} (create it first)")
+    if os.path.exists(p):
+        if not os.access(p, os.W_OK):
+            raise CompanionError(f"{option} {p}: not writable")
+    elif not os.access(parent, os.W_OK | os.X_OK):
+        raise CompanionError(f"{option} {p}: directory {parent} is not writable")
+
+
+def check_plot_path(path, option: str = "--plot") -> None:
+    """An output path with an image format matplotlib writes, and matplotlib installed (without importing it)."""
+    import importlib.util
+    import os
+
+    check_output_path(path, option)
+    ext = os.path.splitext(os.fspath(path))[1].lower().lstrip(".")
+    if ext not in PLOT_FORMATS:
+        got = f"'.{ext}'" if ext else "no extension"
+        raise CompanionError(f"{option} {path}: {got} is not a plot format; use one of "
+                             + ", ".join("." + f for f in PLOT_FORMATS))
+    if importlib.util.find_spec("matplotlib") is None:
+        raise CompanionError("plotting needs matplotlib: pip install 'companion[plot]'")

@@ -40,7 +40,11 @@ watch it in MAVProxy:   graph NAMED_VALUE_FLOAT[IMU0GX_N].value
             in Mission Planner: Ctrl-F > Tuning > MAV_IMU0GX_N
 """
 
-LINK_KEYS = ("rate_hz", "messages", "compid", "heartbeat_s", "stale_s", "retry_s")
+#: Printed on stderr (also with --quiet) once a live link is open and SIGINT/SIGTERM are handled:
+#: supervisors and tests wait for it instead of a fixed time.
+READY_LINE = "companion run: listening on"
+
+LINK_KEYS = ("rate_hz", "messages", "compid", "heartbeat_s", "stale_s", "retry_s", "loss_warn", "loss_window_s")
 RUN_KEYS = ("report_period_s", "state_file", "save_period_s")
 
 
@@ -66,6 +70,12 @@ def register(subparsers) -> None:
     p.add_argument("--out-tlog", metavar="FILE", help="record what was received and sent (or, for a replay, the reports) to a tlog")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (default: run until Ctrl-C/SIGTERM)")
     p.add_argument("--quiet", action="store_true", help="only warnings and the final summary")
+    # i14: MAVLink 2 signing (companion/mavlink/signing.py, docs/run.md#signed-links)
+    p.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing with this 32-byte key (raw or 64 hex "
+                   "digits; the autopilot's key, set with SETUP_SIGNING): sign what we send, accept only "
+                   "correctly signed frames, count the rejected ones")
+    p.add_argument("--accept-unsigned", action="store_true",
+                   help="with --signing-key: also accept unsigned frames (wrongly signed ones are still refused)")
     p.set_defaults(func=run)
 
 
@@ -212,6 +222,21 @@ def print_summary(pipeline, out=None) -> None:
 
 
 def run(args) -> int:
+    # i14: signal handling first (a SIGTERM during start-up still saves and exits 0), then the imports
+    stop = {"flag": False}
+
+    def on_signal(signum, frame):
+        stop["flag"] = True
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _run(args, stop)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def _run(args, stop) -> int:
     from companion.mavlink.reporter import Reporter
     from companion.service.pipeline import Pipeline
     from companion.service.state import load_state, save_state
@@ -238,13 +263,9 @@ def run(args) -> int:
         parse_connection(src, args.baud)  # a clear error before anything else
     state_path = _state_path(args, extra, live=not is_replay)
     save_period = float(extra.get("save_period_s", 60.0))
+    _check_outputs(args, extra, state_path)  # i14: every output path checked before the work starts
+    args.signing = _signing_key(args, is_replay, warn)
 
-    stop = {"flag": False}
-
-    def on_signal(signum, frame):
-        stop["flag"] = True
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     writer = None
     try:
         if args.out_tlog:
@@ -270,17 +291,52 @@ def run(args) -> int:
             if not pipeline.channels:
                 raise CompanionError(f"{src}: no IMU data to replay")
         else:
-            pipeline = _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_period,
-                             writer, stop, log, warn)
+            pipeline, link = _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_period,
+                                   writer, stop, log, warn)
         if state_path is not None:
             _save(pipeline, state_path, save_state, warn)
         print_summary(pipeline)
+        if not is_replay:  # i14: link health (loss, reordering, late, rejected frames) per source
+            for line in link.stats.summary_lines():
+                print(line)
         return 0
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
         if writer is not None:
             writer.close()
+
+
+def _signing_key(args, is_replay, warn):
+    """i14: the signing key (bytes) of --signing-key, or None."""
+    if args.accept_unsigned and not args.signing_key:
+        raise CompanionError("--accept-unsigned needs --signing-key")
+    if not args.signing_key:
+        return None
+    if is_replay:
+        raise CompanionError("--signing-key applies to live links, not to a replayed log")
+    from companion.mavlink.signing import load_signing_key
+
+    return load_signing_key(args.signing_key, warn)
+
+
+def _check_outputs(args, extra, state_path) -> None:
+    """--out-tlog and a state file named by the user (--state, run.state_file) follow the CLI's one rule
+    (companion.cli.output.check_output_path: existing directory, writable, refused otherwise); only the
+    default state location ($XDG_STATE_HOME/companion) is created when missing."""
+    from companion.cli.output import check_output_path
+
+    if args.out_tlog:
+        check_output_path(args.out_tlog, "--out-tlog")
+    if state_path is None:
+        return
+    if args.state or extra.get("state_file"):
+        check_output_path(state_path, "--state" if args.state else "run.state_file")
+    else:
+        try:
+            state_path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CompanionError(f"default state file {state_path}: cannot create its directory "
+                                 f"({exc.strerror or exc}); give --state FILE or --no-state") from None
+        check_output_path(state_path, "state file")
 
 
 def _restore(pipeline, state_path, args, load_state, warn, log) -> None:
@@ -309,8 +365,15 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
     from companion.service.state import load_state, save_state
     from companion.sources.connection import open_connection
 
-    conn = open_connection(src, args.baud, source_system=pcfg.sysid or 1, source_component=link_cfg.compid)
+    conn = open_connection(src, args.baud, source_system=pcfg.sysid or 1, source_component=link_cfg.compid,
+                           mavlink2=args.signing is not None)
     try:
+        if args.signing is not None:  # i14
+            from companion.mavlink.signing import setup_signing
+
+            setup_signing(conn, args.signing, accept_unsigned=args.accept_unsigned)
+            log("MAVLink 2 signing on: sending signed frames, accepting "
+                + ("signed and unsigned" if args.accept_unsigned else "only correctly signed") + " frames")
         link = Link(conn, link_cfg, pcfg.sysid, log=log)
         if writer is not None:
             link.recorder = writer
@@ -319,7 +382,8 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
         _restore(pipeline, state_path, args, load_state, warn, log)
         if pipeline.sysid is not None and link.sysid is None:
             link.set_sysid(pipeline.sysid)
-        log(f"listening on {src}")
+        # i14: the readiness line, printed even with --quiet: the socket/port is open and signals are handled
+        print(f"{READY_LINE} {src}", file=sys.stderr, flush=True)
         t_start = time.monotonic()
         last_save = t_start
         stale = False
@@ -328,6 +392,7 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
             msg = conn.recv_match(blocking=True, timeout=0.1)
             now = time.monotonic()
             if msg is not None:
+                link.count(msg)  # i14: sequence numbers, loss, reordering per source
                 if writer is not None:
                     writer.write_raw(msg.get_msgbuf(), time.time())
                 if msg.get_type() != "BAD_DATA":
@@ -351,7 +416,7 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
             if args.duration is not None and now - t_start >= args.duration:
                 break
         log(f"stopping: {link.sent} messages sent, {reporter.sent} NAMED_VALUE_FLOAT, {reporter.texts} STATUSTEXT")
-        return pipeline
+        return pipeline, link
     finally:
         try:
             conn.close()

@@ -76,6 +76,8 @@ def register(subparsers) -> None:
     p.add_argument("--refuse-interval", action="store_true", help="answer SET_MESSAGE_INTERVAL with DENIED (tests the fallback)")
     p.add_argument("--record", metavar="FILE", help="write every received NAMED_VALUE_FLOAT/STATUSTEXT as JSON lines")
     p.add_argument("--quiet", action="store_true", help="print only STATUSTEXT and the final values")
+    p.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing with this 32-byte key, like an "
+                   "ArduPilot with signing set up: signs what it sends, ignores unsigned or wrongly signed frames")
     p.set_defaults(func=run)
 
 
@@ -191,6 +193,10 @@ def run(args) -> int:
     sim = ImuSimulator(model, rate, args.seed, degrade, arm)
     os.environ.setdefault("MAVLINK20", "1")  # speak MAVLink 2 like ArduPilot (pymavlink picks the dialect from it)
     conn = open_connection(args.connect, source_system=args.sysid, source_component=1)
+    if args.signing_key:  # i14: signing, as on an autopilot after SETUP_SIGNING
+        from companion.mavlink.signing import load_signing_key, setup_signing
+
+        setup_signing(conn, load_signing_key(args.signing_key))
     out = sys.stdout
     record = open(args.record, "w") if args.record else None
     stop = {"flag": False}

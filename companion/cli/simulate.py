@@ -85,10 +85,19 @@ def run(args) -> int:
         raise CompanionError(f"--duration {args.duration} s at {model.rate_hz} Hz gives fewer than 2 samples")
     if n > 50_000_000:
         raise CompanionError(f"{n} samples is too many (limit 5e7); shorten --duration")
+    from companion.sim.synth import check_model_rate
+
+    try:
+        check_model_rate(model)  # i14: a sinusoid above Nyquist, an impossible f0: refused before the work
+    except ValueError as exc:
+        raise CompanionError(f"{args.model}: {exc}") from None
     out = args.out
     low = out.lower()
     if not (low.endswith(".tlog") or low.endswith(".csv") or low.endswith(".csv.gz")):
         raise CompanionError(f"--out {out}: expected a .tlog, .csv or .csv.gz file name")
+    from companion.cli.output import check_output_path
+
+    check_output_path(out, "--out")
     try:
         t, gyro, accel = synthesize(model, args.duration, args.seed)
     except ValueError as exc:

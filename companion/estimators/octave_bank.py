@@ -47,7 +47,7 @@ sqrt(theta + s) - sqrt(theta) (= s / (2 p) when s << theta, sqrt(s) at the bound
 
 Streaming and block updates give bit-identical results: scalar samples are buffered (at most
 ``_BUF`` of them) and every path runs the same chunk-independent block code (element-wise operations in
-a fixed order, sequential recursions via ``scipy.signal.lfilter`` with carried state).
+a fixed order, sequential recursions summed in closed form, :func:`companion.allan.lsq.exp_sum`).
 """
 
 from __future__ import annotations
@@ -55,10 +55,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import nnls
-from scipy.signal import lfilter
 
 from companion.allan.confidence import edf_simple, oavar_covariance
+from companion.allan.lsq import exp_sum, nnls  # numpy-only: the live pipeline loads no scipy (issue 14)
 from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, linear_basis
 
 DEFAULT_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
@@ -200,8 +199,7 @@ class OctaveBankEstimator:
             d = c[k - (P - 1)] - c[k - (2 * P - 1)]
             x = d * d / (2.0 * self._m[j] ** 2)
             lam = self._lam[j]
-            out, zf = lfilter([1.0], [1.0, -lam], x, zi=[lam * self._S[j]])
-            self._S[j] = out[-1]
+            self._S[j] = exp_sum(x, lam, self._S[j])
 
     # ------------------------------------------------------------------ read-out
     def _events(self) -> np.ndarray:

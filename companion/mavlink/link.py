@@ -26,8 +26,122 @@ MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_RESULT_ACCEPTED = 0
 MAV_DATA_STREAM_RAW_SENSORS = 1
 MAV_COMP_ID_ONBOARD_COMPUTER = 191
+MAV_SEVERITY_WARNING = 4
+MAV_SEVERITY_NOTICE = 5
 
 IMU_MESSAGE_IDS = {"RAW_IMU": 27, "SCALED_IMU": 26, "SCALED_IMU2": 116, "SCALED_IMU3": 129, "HIGHRES_IMU": 105}
+
+
+# --- link health (issue 14): loss, reordering and late packets per source, from MAVLink sequence numbers ---
+
+IMU_TIME_FIELDS = {"RAW_IMU": "time_usec", "HIGHRES_IMU": "time_usec", "SCALED_IMU": "time_boot_ms",
+                   "SCALED_IMU2": "time_boot_ms", "SCALED_IMU3": "time_boot_ms"}
+
+
+class SourceStats:
+    """Counters of one sender (system id, component id): every MAVLink frame carries an 8-bit sequence
+    number that its sender increments per frame on the link, so a jump of d > 1 means d - 1 frames lost,
+    a frame behind the newest one is out of order (it was counted lost at the jump and is taken back), a
+    repeat of the last number is a duplicate. Jumps of 128 or more are read as reordering, not loss."""
+
+    __slots__ = ("received", "lost", "out_of_order", "duplicates", "late", "last_seq", "window_rx", "window_lost")
+
+    def __init__(self):
+        self.received = 0
+        self.lost = 0
+        self.out_of_order = 0
+        self.duplicates = 0
+        self.late = 0  # IMU samples older than the newest one of their stream (arrived after a later one)
+        self.last_seq: int | None = None
+        self.window_rx = 0
+        self.window_lost = 0
+
+    def on_seq(self, seq: int) -> None:
+        self.received += 1
+        self.window_rx += 1
+        if self.last_seq is None:
+            self.last_seq = seq
+            return
+        d = (seq - self.last_seq) & 0xFF
+        if d == 1:
+            self.last_seq = seq
+        elif d == 0:
+            self.duplicates += 1
+        elif d < 128:
+            self.lost += d - 1
+            self.window_lost += d - 1
+            self.last_seq = seq
+        else:  # behind the newest: a frame we had given up as lost
+            self.out_of_order += 1
+            if self.lost > 0:
+                self.lost -= 1
+            if self.window_lost > 0:
+                self.window_lost -= 1
+
+    @property
+    def expected(self) -> int:
+        return self.received - self.duplicates + self.lost
+
+    def loss_fraction(self) -> float:
+        return self.lost / self.expected if self.expected else 0.0
+
+    def as_dict(self) -> dict:
+        return {"received": self.received, "lost": self.lost, "loss": self.loss_fraction(),
+                "out_of_order": self.out_of_order, "duplicates": self.duplicates, "late": self.late}
+
+
+class LinkStats:
+    """Per-source link health: :class:`SourceStats` per (sysid, compid), bad frames, rejected (unsigned or
+    wrongly signed) frames, and the loss over the last ``window_s`` of wall clock for the warning."""
+
+    def __init__(self):
+        self.sources: dict[tuple[int, int], SourceStats] = {}
+        self.bad_frames = 0
+        self.rejected_signature = 0
+        self._imu_time: dict[tuple, float] = {}
+
+    def on_message(self, msg) -> None:
+        mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            if "signature" in str(getattr(msg, "reason", "")):
+                self.rejected_signature += 1  # unsigned, wrongly signed or replayed (signing is on)
+            else:
+                self.bad_frames += 1
+            return
+        key = (msg.get_srcSystem(), msg.get_srcComponent())
+        st = self.sources.get(key)
+        if st is None:
+            st = self.sources[key] = SourceStats()
+        st.on_seq(msg.get_seq())
+        field = IMU_TIME_FIELDS.get(mtype)
+        if field is not None:
+            t = getattr(msg, field, None)
+            k = (key, mtype, getattr(msg, "id", 0))
+            if t is not None:
+                newest = self._imu_time.get(k)
+                if newest is not None and t < newest and newest - t < (1e6 if field == "time_usec" else 1e3):
+                    st.late += 1  # older than one already received (a step back of >= 1 s is a reboot)
+                else:
+                    self._imu_time[k] = t
+
+    def window(self) -> tuple[int, int]:
+        """(received, lost) since the last call, summed over sources; restarts the window."""
+        rx = lost = 0
+        for st in self.sources.values():
+            rx += st.window_rx
+            lost += st.window_lost
+            st.window_rx = st.window_lost = 0
+        return rx, lost
+
+    def summary_lines(self) -> list[str]:
+        out = []
+        for (sysid, compid), st in sorted(self.sources.items()):
+            out.append(f"link from {sysid}/{compid}: {st.received} frames received, {st.lost} lost "
+                       f"({100 * st.loss_fraction():.1f} %), {st.out_of_order} out of order, {st.duplicates} duplicates, "
+                       f"{st.late} late IMU samples")
+        if self.bad_frames or self.rejected_signature:
+            out.append(f"link: {self.bad_frames} bad frames, {self.rejected_signature} rejected for their signature")
+        return out
 
 
 @dataclass
@@ -38,6 +152,8 @@ class LinkConfig:
     heartbeat_s: float = 1.0
     stale_s: float = 3.0
     retry_s: float = 5.0
+    loss_warn: float = 0.05  # STATUSTEXT when more than this fraction of frames was lost over loss_window_s
+    loss_window_s: float = 30.0
 
 
 class Link:
@@ -63,6 +179,9 @@ class Link:
         self.requests = 0
         self.sent = 0
         self.recorder = None  # a TlogWriter: every frame we send is also recorded
+        self.stats = LinkStats()
+        self._loss_window_start: float | None = None
+        self._loss_warned = False
         self._udp_server = bool(getattr(conn, "udp_server", False))
         self._conn_write = conn.write
         self._mav_seen = None
@@ -111,6 +230,10 @@ class Link:
         self._mav().heartbeat_send(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE)
 
     # --- receiving ---
+    def count(self, msg) -> None:
+        """Link accounting of every received frame (BAD_DATA included): sequence numbers per source."""
+        self.stats.on_message(msg)
+
     def on_message(self, msg, is_vehicle_imu: bool = False) -> None:
         """Track the vehicle: its autopilot component, acks to our requests, where its IMU data comes from."""
         mtype = msg.get_type()
@@ -151,6 +274,7 @@ class Link:
         if now - self.last_heartbeat_wall >= self.cfg.heartbeat_s:
             self.send_heartbeat()
             self.last_heartbeat_wall = now
+        self._check_loss(now)
         data_stale = self.last_imu_wall is None or now - self.last_imu_wall > self.cfg.stale_s
         if not data_stale:
             return
@@ -175,3 +299,29 @@ class Link:
             self._mav().request_data_stream_send(target, comp, MAV_DATA_STREAM_RAW_SENSORS, rate, 1)
         self.requests += 1
         self.log(f"asked for IMU data at {self.cfg.rate_hz:g} Hz" + (" (and REQUEST_DATA_STREAM)" if self.use_data_stream else ""))
+
+    def _check_loss(self, now: float) -> None:
+        """Every ``loss_window_s``: a WARNING STATUSTEXT when more than ``loss_warn`` of the frames of the
+        window were lost (at least 50 expected), a NOTICE when it is back below half of that."""
+        if self._loss_window_start is None:
+            self._loss_window_start = now
+            self.stats.window()
+            return
+        if now - self._loss_window_start < self.cfg.loss_window_s:
+            return
+        self._loss_window_start = now
+        rx, lost = self.stats.window()
+        expected = rx + lost
+        if expected < 50:
+            return
+        frac = lost / expected
+        if frac > self.cfg.loss_warn and not self._loss_warned:
+            self._loss_warned = True
+            text = f"companion: link loss {100 * frac:.0f}% ({lost}/{expected})"
+            self.log(text)
+            self.send_statustext(MAV_SEVERITY_WARNING, text)
+        elif self._loss_warned and frac < self.cfg.loss_warn / 2:
+            self._loss_warned = False
+            text = f"companion: link loss back to {100 * frac:.1f}%"
+            self.log(text)
+            self.send_statustext(MAV_SEVERITY_NOTICE, text)

@@ -14,7 +14,7 @@ quantization       angle quantisation: white angle error e_k of std Q, y_k = (e_
 bias_instability   flicker rate noise by spectral shaping: unit white noise of length L = 2^ceil(log2 4n)
                    is filtered in the frequency domain by |H(f)|^2 = fs (B^2 / 2 pi) / f, i.e. two-sided
                    PSD (B^2/2pi)/f (one-sided B^2/(pi f)) between the low cut-off f_L = fs/L (< 1/(4 T))
-                   and the high cut-off f0 = fs/2; DC removed. (Sampling aliases a little: +40 % AVAR at tau0, <1 %
+                   and the high cut-off f0 (the term's optional ``f0``, default fs/2); DC removed. (Sampling aliases a little: +40 % AVAR at tau0, <1 %
                    beyond 5 tau0.)  AVAR: the cosine-integral form with
                    f0 = fs/2 (thesis eq. (3.16)), i.e. the plateau 2 ln2/pi B^2 for tau >> tau0.
 random_walk        y_k = sum_{j<=k} w_j, w_j ~ N(0, K^2 tau0): PSD (K/2pi)^2 / f^2, AVAR K^2 tau/3 (C.4);
@@ -52,14 +52,17 @@ def quantization(Q: float, rate_hz: float, n: int, rng: np.random.Generator) -> 
     return np.diff(e) * rate_hz
 
 
-def flicker(B: float, rate_hz: float, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Flicker (1/f) rate noise, two-sided PSD (B^2 / 2 pi) / f for fs/L <= |f| <= fs/2 (L >= 4 n)."""
+def flicker(B: float, rate_hz: float, n: int, rng: np.random.Generator, f0: float | None = None) -> np.ndarray:
+    """Flicker (1/f) rate noise, two-sided PSD (B^2 / 2 pi) / f for fs/L <= |f| <= f0 (L >= 4 n); the
+    cut-off ``f0`` defaults to fs/2 (the whole band) and must lie in (0, fs/2]."""
     L = 1 << int(math.ceil(math.log2(max(4 * n, 2))))
     w = rng.standard_normal(L)
     W = np.fft.rfft(w)
     f = np.fft.rfftfreq(L, d=1.0 / rate_hz)
     H = np.zeros_like(f)
     H[1:] = np.sqrt(rate_hz * B**2 / (2.0 * math.pi * f[1:]))
+    if f0 is not None:
+        H[f > f0] = 0.0
     return np.fft.irfft(W * H, n=L)[:n]
 
 
@@ -98,6 +101,32 @@ def sinusoid(amplitude: float, freq_hz: float, rate_hz: float, n: int, rng: np.r
     return amplitude * np.sin(2.0 * math.pi * freq_hz * np.arange(n) / rate_hz + phase)
 
 
+def check_term_rate(term: Mapping, rate_hz: float) -> None:
+    """Terms that cannot be sampled at ``rate_hz`` (ValueError): a sinusoid at or above the Nyquist frequency
+    (it would alias to a lower one), a bias-instability cut-off f0 above it."""
+    nyquist = rate_hz / 2.0
+    e = term["effect"]
+    if e == "sinusoid" and term["freq_hz"] >= nyquist:
+        f = float(term["freq_hz"])
+        alias = abs(f - rate_hz * round(f / rate_hz))
+        raise ValueError(f"sinusoid freq_hz {f:g} is at or above the Nyquist frequency {nyquist:g} Hz of rate_hz "
+                         f"{rate_hz:g} (it would show up at {alias:g} Hz); use freq_hz < {nyquist:g}")
+    if e == "bias_instability" and term.get("f0") is not None and not 0 < term["f0"] <= nyquist * (1 + 1e-9):
+        raise ValueError(f"bias_instability f0 {term['f0']:g} Hz must be in (0, {nyquist:g}] (rate_hz / 2)")
+
+
+def check_model_rate(model) -> None:
+    """:func:`check_term_rate` for every term of a model, the axis named in the message (ValueError)."""
+    rate_hz = float(model["rate_hz"] if isinstance(model, Mapping) else model.rate_hz)
+    axes = model["axes"] if isinstance(model, Mapping) else model.axes
+    for axis, terms in axes.items():
+        for term in terms:
+            try:
+                check_term_rate(term, rate_hz)
+            except ValueError as exc:
+                raise ValueError(f"axis {axis}: {exc}") from None
+
+
 def synthesize_term(term: Mapping, rate_hz: float, n: int, rng: np.random.Generator) -> np.ndarray:
     """Rate samples (SI) of one term dict, e.g. ``{"effect": "white_noise", "N": 1e-3}``."""
     validate_term(term)
@@ -106,10 +135,9 @@ def synthesize_term(term: Mapping, rate_hz: float, n: int, rng: np.random.Genera
         return white_noise(term["N"], rate_hz, n, rng)
     if e == "quantization":
         return quantization(term["Q"], rate_hz, n, rng)
+    check_term_rate(term, rate_hz)
     if e == "bias_instability":
-        if term.get("f0") is not None and abs(term["f0"] - rate_hz / 2.0) > 1e-9 * rate_hz:
-            raise ValueError("bias_instability: the synthesiser's cut-off is f0 = rate_hz/2; omit f0 or set it so")
-        return flicker(term["B"], rate_hz, n, rng)
+        return flicker(term["B"], rate_hz, n, rng, term.get("f0"))
     if e == "random_walk":
         return random_walk(term["K"], rate_hz, n, rng)
     if e == "ramp":

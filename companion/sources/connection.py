@@ -57,25 +57,72 @@ def parse_connection(spec: str, baud: int | None = None) -> tuple[str, str]:
                          "(udpin:HOST:PORT, udpout:, udp:, tcp:, tcpin:, or a serial device with --baud)")
 
 
+def _resolve(kind_prefix: str, host: str, port: int, spec: str) -> None:
+    """A host name that does not resolve is one clear line now, not 'no IMU data' later."""
+    import socket
+
+    host = host.strip("[]")
+    try:
+        socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM if kind_prefix.startswith("udp") else socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise CompanionError(f"{spec}: cannot resolve host {host!r} ({getattr(exc, 'strerror', None) or exc})") from None
+
+
+UDP_RCVBUF = 4 << 20
+
+
+def _grow_receive_buffer(conn) -> None:
+    """Ask for a 4 MiB UDP receive buffer (the kernel caps it at net.core.rmem_max): a few seconds of IMU
+    data survive a pause of this process instead of being dropped by the kernel."""
+    import socket
+
+    try:
+        conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)
+    except (OSError, AttributeError):
+        pass
+
+
 def open_connection(spec: str, baud: int | None = None, source_system: int = 1, source_component: int = 191,
-                    dialect: str = "ardupilotmega", **kwargs):
+                    dialect: str = "ardupilotmega", retries: int = 3, mavlink2: bool = False, **kwargs):
     """Open a pymavlink link after :func:`parse_connection` accepted ``spec``.
 
     ``source_system``/``source_component`` identify us when we send (default compid 191 =
     MAV_COMP_ID_ONBOARD_COMPUTER; use the vehicle's sysid). ``robust_parsing`` is on, so corrupted bytes
     come back as BAD_DATA messages instead of exceptions. Extra ``kwargs`` go to
     ``mavutil.mavlink_connection`` (e.g. ``input=False`` for udpout). Returns the pymavlink connection.
+
+    ``mavlink2``: use MAVLink 2 from the start (needed for signing, :mod:`companion.mavlink.signing`).
+    Host names are resolved first; a ``tcp:`` server is tried ``retries`` more times a second apart (an
+    autopilot still booting). Whatever pymavlink prints while connecting ("[Errno 111] Connection refused
+    sleeping") is kept off stdout; a failure is one :class:`CompanionError` line.
     """
+    import contextlib
+    import io
+
     kind, s = parse_connection(spec, baud)
+    if mavlink2:  # speak MAVLink 2 from the first frame (signing needs it; pymavlink reads this variable)
+        os.environ["MAVLINK20"] = "1"
+    if kind == "net":
+        prefix, rest = s.split(":", 1)
+        host, port = rest.rsplit(":", 1)
+        if not (prefix in ("udpin", "udp", "tcpin") and host in ("0.0.0.0", "::", "[::]")):
+            _resolve(prefix, host, int(port), s)
     from pymavlink import mavutil
 
+    noise = io.StringIO()
     try:
-        return mavutil.mavlink_connection(s, baud=int(baud or DEFAULT_BAUD), source_system=source_system,
-                                          source_component=source_component, dialect=dialect,
-                                          robust_parsing=True, autoreconnect=kind == "serial", **kwargs)
+        with contextlib.redirect_stdout(noise):
+            conn = mavutil.mavlink_connection(s, baud=int(baud or DEFAULT_BAUD), source_system=source_system,
+                                              source_component=source_component, dialect=dialect,
+                                              robust_parsing=True, autoreconnect=kind == "serial",
+                                              retries=retries, **kwargs)
+        if s.startswith("udp"):
+            _grow_receive_buffer(conn)
+        return conn
     except Exception as exc:  # socket errors, serial errors: the user's link is not usable
-        reason = getattr(exc, "strerror", None) or str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise CompanionError(f"{s}: cannot open link ({reason})") from None
+        reason = (getattr(exc, "strerror", None) or str(exc).splitlines()[0]) if str(exc) else type(exc).__name__
+        tries = f" after {max(retries, 1)} attempts" if s.startswith("tcp:") else ""
+        raise CompanionError(f"{s}: cannot open link ({reason}){tries}") from None
 
 
 def platform_serial_hint() -> str:
