@@ -59,8 +59,9 @@ def register(subparsers) -> None:
     p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--online", action="store_true",
-                   help="also run the online estimator (octave bank, docs/online.md) over each axis: JSON key "
-                        "'online' per axis, table row with |offline - online| / offline")
+                   help="also run the online estimator (octave bank, model chosen from the data, docs/online.md) "
+                        "over each axis, the same report as `companion run`: JSON key 'online' per axis (terms with "
+                        "'bound': true for 95 %% upper bounds), table row 'online' ('< x' = bound)")
     p.set_defaults(func=run)
 
 
@@ -165,7 +166,7 @@ def analyze_stream(stream, axes, taus, progress=None, online=False) -> dict:
                 from companion.estimators import online_terms
 
                 y = stream.axis(axis)[a:b]
-                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate, entry["axes"][axis]["terms"])
+                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate)
         if progress:
             progress.step(f"{stream.key.message}[{stream.key.instance}] {axis}")
     return entry
@@ -230,24 +231,13 @@ def format_table(report: dict) -> str:
 
 
 def _online_row(r: dict, a: str) -> str:
-    """'online N 2.27 (0.41 %) ...': online values and the paper's |offline - online| / offline."""
-    off = {t["effect"]: t for t in r["terms"]}
-    cells, other = {}, []
-    for t in r["online"]:
-        p = PARAMS[t["effect"]][0]
-        v = units.to_datasheet(p, t[p], a)
-        o = off.get(t["effect"], {}).get(p)
-        d = f"{abs(o - t[p]) / o * 100:.2f} %" if o else "offline 0"
-        text = f"{_fmt(v)} ({d})"
-        if p in ("N", "B", "K"):
-            cells[p] = text
-        elif t[p] > 0 or o:
-            other.append(f"{p} {text} {units.datasheet_unit(p, a)}")
-    nonlin = sorted({t["effect"] for t in r["terms"]} - {t["effect"] for t in r["online"]})
-    if nonlin:
-        other.append(f"online has no {', '.join(nonlin)}: differences expected")
-    return (f"{'online':<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26} "
-            + "; ".join(other))
+    """'online N 1.05 [1.04, 1.06] ... B < 31 ...': the online report (companion.estimators.report, the same
+    text as `companion run`'s summary): resolved values with 95 % intervals, 95 % upper bounds as '< x'."""
+    from companion.estimators.report import cell, extra_text
+
+    cells = {p: cell(r["online"], p, a) for p in ("N", "B", "K")}
+    return (f"{'online':<5} {cells['N']:<28}{cells['B']:<26}{cells['K']:<26} "
+            + "; ".join(extra_text(r["online"], a)))
 
 
 def kalibr_yaml(report: dict) -> str:

@@ -217,3 +217,64 @@ def health_params(terms):
         if p and not t.get("bound") and p in t:
             out[p] = (float(t[p]), float(t.get("std", {}).get(p, math.inf)))
     return out
+
+
+def _fmt(v: float) -> str:
+    if v == 0 or not math.isfinite(v):
+        return f"{v:g}"
+    return f"{v:.3g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.2e}"
+
+
+def cell(terms, param, axis, interval=True) -> str:
+    """Table text of one reported parameter in datasheet units: ``1.05 [1.04, 1.06]`` for a resolved
+    value (``1.05 +- 0.006`` with ``interval=False``), ``< 3.1`` for a 95 % upper bound, ``n/a`` when the
+    parameter was not estimated."""
+    from companion import units
+
+    for t in terms or ():
+        if param in t and param not in ("tau_c", "freq_hz"):
+            v = units.to_datasheet(param, t[param], axis)
+            if t.get("bound"):
+                return f"< {_fmt(v)}"
+            if interval and param in t.get("ci95", {}):
+                lo, hi = (units.to_datasheet(param, x, axis) for x in t["ci95"][param])
+                return f"{_fmt(v)} [{_fmt(lo)}, {_fmt(hi)}]"
+            s = t.get("std", {}).get(param)
+            return f"{_fmt(v)} +- {_fmt(units.to_datasheet(param, s, axis))}" if s is not None else _fmt(v)
+    return "n/a"
+
+
+def extra_text(terms, axis) -> list[str]:
+    """Text of the resolved terms other than N, B, K (Q, R, Gauss-Markov, sinusoid) in datasheet units."""
+    from companion import units
+
+    out = []
+    for t in terms or ():
+        e = t.get("effect")
+        if t.get("bound") or e in ("white_noise", "bias_instability", "random_walk"):
+            continue
+        if e in NL_PARAMS:
+            lp, sp = NL_PARAMS[e]
+            out.append(f"{e} {lp} {cell([t], lp, axis, False)} {units.datasheet_unit(lp, axis)}, "
+                       f"{sp} {_fmt(t[sp])} {units.datasheet_unit(sp, axis)}")
+        else:
+            p = LINEAR_PARAM[e]
+            out.append(f"{p} {cell([t], p, axis, False)} {units.datasheet_unit(p, axis)}")
+    return out
+
+
+def summary_line(terms, axis, baseline=None) -> str:
+    """One line per axis for ``companion run``'s summary: N, B, K (value +- 1-sigma, or ``< bound``), the
+    ratio to a resolved baseline value for resolved values, then the other resolved terms."""
+    from companion import units
+
+    parts = []
+    for p in ("N", "B", "K"):
+        txt = cell(terms, p, axis, interval=False)
+        if txt == "n/a":
+            continue
+        vb = value_of(terms, p)
+        if baseline and vb and not vb[2] and p in baseline and baseline[p][0] > 0:
+            txt += f" ({vb[0] / baseline[p][0]:.2f}x baseline)"
+        parts.append(f"{p} {txt} {units.datasheet_unit(p, axis)}")
+    return "; ".join(parts + extra_text(terms, axis))
