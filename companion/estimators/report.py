@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.allan.fit import BASE_EFFECTS
 from companion.allan.terms import EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM
 
 #: every effect of the offline model is a candidate of the online model
@@ -118,6 +119,16 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     act = theta > 0
     if act.any():
         cov_t[np.ix_(act, act)] = prob.cov_theta(A[:, act])
+    # selection uncertainty: the interval of a resolved term is the envelope of its intervals in the selected
+    # model and in the model with every base effect (N, B, K) forced in -- a base effect the selection left
+    # out (e.g. a bias instability hidden under a Gauss-Markov hump) can otherwise shift N beyond its interval
+    sup = [x for x in LINEAR_EFFECTS if x in st.linear or (x in BASE_EFFECTS and x in candidates)]
+    A_s = _columns(sup, st.nonlin, tau)
+    th_s, _ = prob.solve(A_s)
+    cov_s = np.zeros((len(th_s), len(th_s)))
+    act_s = th_s > 0
+    if act_s.any():
+        cov_s[np.ix_(act_s, act_s)] = prob.cov_theta(A_s[:, act_s])
     resolved = {}
     for j, e in enumerate(st.linear):
         if theta[j] <= 0:
@@ -125,6 +136,10 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
         lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
         if lo > 0:
             p = LINEAR_PARAM[e]
+            k = sup.index(e)
+            if th_s[k] > 0 and list(sup) != list(st.linear):
+                lo_s, hi_s = _scaled_chi2_ci(th_s[k], cov_s[k, k], level)
+                lo, hi = min(lo, lo_s), max(hi, hi_s)
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
             resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
                            "bound": False}
@@ -225,22 +240,31 @@ def _fmt(v: float) -> str:
     return f"{v:.3g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.2e}"
 
 
+def _digits(v: float, s: float | None) -> str:
+    """``v`` with two significant digits of its uncertainty ``s`` (3 significant digits without one)."""
+    if s is None or not (s > 0 and math.isfinite(s)) or not math.isfinite(v) or abs(v) >= 1e5 or abs(v) < 1e-3:
+        return _fmt(v)
+    dec = max(0, 1 - math.floor(math.log10(s)))
+    return f"{v:.{dec}f}"
+
+
 def cell(terms, param, axis, interval=True) -> str:
-    """Table text of one reported parameter in datasheet units: ``1.05 [1.04, 1.06]`` for a resolved
-    value (``1.05 +- 0.006`` with ``interval=False``), ``< 3.1`` for a 95 % upper bound, ``n/a`` when the
-    parameter was not estimated."""
+    """Table text of one reported parameter in datasheet units: ``1.047 [1.041, 1.053]`` for a resolved
+    value (``1.047 +- 0.0031`` with ``interval=False``; digits from the uncertainty), ``< 3.1`` for a 95 %
+    upper bound, ``n/a`` when the parameter was not estimated."""
     from companion import units
 
     for t in terms or ():
         if param in t and param not in ("tau_c", "freq_hz"):
             v = units.to_datasheet(param, t[param], axis)
+            s = t.get("std", {}).get(param)
+            s = units.to_datasheet(param, s, axis) if s is not None else None
             if t.get("bound"):
                 return f"< {_fmt(v)}"
             if interval and param in t.get("ci95", {}):
                 lo, hi = (units.to_datasheet(param, x, axis) for x in t["ci95"][param])
-                return f"{_fmt(v)} [{_fmt(lo)}, {_fmt(hi)}]"
-            s = t.get("std", {}).get(param)
-            return f"{_fmt(v)} +- {_fmt(units.to_datasheet(param, s, axis))}" if s is not None else _fmt(v)
+                return f"{_digits(v, s)} [{_digits(lo, s)}, {_digits(hi, s)}]"
+            return f"{_digits(v, s)} +- {_fmt(float(f'{s:.2g}'))}" if s is not None else _fmt(v)
     return "n/a"
 
 
