@@ -53,7 +53,7 @@ def test_quick_refit_between_selections_and_state_round_trip():
     est = make_estimator("octave", rate_hz=FS)
     est.update(y[: y.size // 2])
     est.terms()  # selects the model
-    est.update(y[y.size // 2: y.size // 2 + y.size // 10])  # +20 %: no re-selection, quick refit
+    est.update(y[y.size // 2: y.size // 2 + y.size // 10])  # +20 %: no re-selection (x1.5 due), quick refit
     quick = by_effect(est.terms())
     full = by_effect(from_state_dict(est.state_dict()).terms())  # a restored estimator selects afresh
     for p, e in (("N", "white_noise"), ("K", "random_walk")):

@@ -23,7 +23,8 @@ unknown shape parameter). Intervals: fit_avar's (scaled chi-square, Satterthwait
 width / 3.92. Coverage is measured in benchmarks/bench_online.py (``coverage``).
 
 Speed. The selection costs 0.2-1 s. :class:`Structure` keeps the chosen model and the covariance of
-the Allan estimates at the time of the selection; until the data have grown by ``RESELECT`` (x1.25) the
+the Allan estimates at the time of the selection; until the data have grown by ``RESELECT`` (x1.5, or
+by 30 min of samples) the
 coefficients are re-solved with that structure (covariance rescaled by the model ratio per level and by
 the number of samples; a few ms), which is what ``companion run`` does between selections.
 """
@@ -42,8 +43,10 @@ from companion.allan.terms import EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM
 CANDIDATES = EFFECTS
 #: one-sided 95 % normal quantile (upper bounds)
 Z_UPPER = 1.6448536269514722
-#: re-select the model when the data have grown by this factor since the last selection
-RESELECT = 1.25
+#: re-select the model when the data have grown by this factor since the last selection, or by this many
+#: seconds of samples (so that a long run with forgetting still re-selects now and then)
+RESELECT = 1.5
+RESELECT_MAX_S = 1800.0
 NL_PARAMS = {"gauss_markov": ("sigma", "tau_c"), "sinusoid": ("amplitude", "freq_hz")}
 
 
@@ -202,7 +205,8 @@ def estimator_report(est, candidates=None, full=False):
     n_eff = est.n_effective()
     st = getattr(est, "_structure", None)
     m_now = np.round(tau * est.rate_hz).astype(np.int64)
-    if full or st is None or est.n_samples >= RESELECT * st.n_raw or not np.all(np.isin(st.m, m_now)):
+    due = st is None or est.n_samples >= RESELECT * st.n_raw or est.n_samples - st.n_raw >= RESELECT_MAX_S * est.rate_hz
+    if full or due or not np.all(np.isin(st.m, m_now)):
         _, st = select(tau, avar, edf, n_eff, est.rate_hz, candidates, n_raw=est.n_samples)
         est._structure = st
         cov = None
