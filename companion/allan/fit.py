@@ -159,8 +159,7 @@ def _best_shape(prob, effect, linear, others, tau):
         A = _columns(linear, others + [(effect, math.exp(log_s))], tau)
         return prob.solve(A)[1]
 
-    # the sinusoid AVAR at octave points oscillates with the frequency: its chi^2 has narrow valleys
-    grid = np.linspace(math.log(lo), math.log(hi), 25 if effect == "gauss_markov" else 481)
+    grid = np.linspace(math.log(lo), math.log(hi), 25 if effect == "gauss_markov" else 61)
     vals = np.array([chi(g) for g in grid])
     i = int(np.argmin(vals))
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
