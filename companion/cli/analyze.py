@@ -109,6 +109,10 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     tau_f, avar_f, _, _ = oavar(y, rate_hz, m=m_fit)
     fit = fit_avar(tau_f, avar_f, edf_simple(n + 1, m_fit, 0), effects=effects, n=n, rate_hz=rate_hz, m=m_fit,
                    level=level)
+    from companion.estimators.report import bounds_for_fit
+
+    # effects the fit left out (N, B, K): their 95 % upper bound, as the online report gives it (issue 13)
+    bounds = bounds_for_fit(fit, tau_f, avar_f, np.maximum(edf_simple(n + 1, m_fit, 0), 0.5), rate_hz, n)
     m = parse_taus(taus, n, rate_hz) if isinstance(taus, str) else cluster_sizes(n, taus)
     tau, avar, m, _ = oavar(y, rate_hz, m=m)
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in fit.terms]
@@ -117,7 +121,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     adev = np.sqrt(avar)
     lo, hi = adev_ci(adev, edf, level)
     out.update(tau=tau.tolist(), adev=adev.tolist(), adev_lo=lo.tolist(), adev_hi=hi.tolist(),
-               terms=fit.terms, edf=edf.tolist(),
+               terms=fit.terms, bounds=bounds, edf=edf.tolist(),
                fit={"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
                     "model_error": fit.model_error,
                     "points": int(len(tau_f)), "notes": fit.notes})
@@ -218,6 +222,10 @@ def format_table(report: dict) -> str:
                                     f"[{_fmt(units.to_datasheet(p, lo, a))}, {_fmt(units.to_datasheet(p, hi, a))}]")
                     else:
                         other.append(format_term(t, a))
+                for t in r.get("bounds") or ():
+                    p = {"white_noise": "N", "bias_instability": "B", "random_walk": "K"}.get(t["effect"])
+                    if p and p not in cells:
+                        cells[p] = f"< {_fmt(units.to_datasheet(p, t[p], a))}"
                 if r.get("fit") and r["fit"].get("model_error"):
                     other.append(f"misfit: +{100 * r['fit']['model_error']:.0f} % model error")
                 q = r.get("quantization")

@@ -77,15 +77,37 @@ def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ra
     edf0 = np.maximum(edf_simple(n + 1, m, 0), 0.5)
     fr = fit_avar(tau, avar, edf0, effects=list(candidates), n=n, rate_hz=rate_hz, m=m, max_ratio=max_ratio,
                   select=True)
+    return fr, structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw)
+
+
+def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure:
+    """The :class:`Structure` of a :func:`companion.allan.fit.fit_avar` result on the levels ``tau, avar``."""
+    tau = np.asarray(tau, float)
+    m = np.round(tau * rate_hz).astype(np.int64)
+    edf0 = np.asarray(edf0, float)
     linear = [t["effect"] for t in fr.terms if t["effect"] in LINEAR_EFFECTS]
     nonlin = [(t["effect"], float(t[NL_PARAMS[t["effect"]][1]])) for t in fr.terms if t["effect"] in NL_PARAMS]
     keep = np.isin(np.round(tau * rate_hz).astype(np.int64), np.round(fr.tau * rate_hz).astype(np.int64))
     cov = fr.avar_cov if fr.avar_cov is not None else np.diag(2.0 * np.asarray(avar)[keep] ** 2 / edf0[keep])
     model = np.maximum(np.asarray(fr.avar_fit, float), 1e-300) if len(fr.avar_fit) else np.asarray(avar)[keep]
     nl_ci = {t["effect"]: t.get("ci95", {}) for t in fr.terms if t["effect"] in NL_PARAMS}
-    st = Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
-                   int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci)
-    return fr, st
+    return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
+                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci)
+
+
+def bounds_for_fit(fr, tau, avar, edf0, rate_hz, n, effects=("white_noise", "bias_instability", "random_walk")):
+    """95 % upper bounds (report format, ``"bound": True``) of the ``effects`` an offline fit left out, with
+    the same rule as the online report: what ``companion analyze`` prints instead of '-'."""
+    if not fr.terms:
+        return []
+    st = structure_from_fit(fr, tau, avar, edf0, rate_hz, n)
+    keep = np.isin(np.round(np.asarray(tau, float) * rate_hz).astype(np.int64), st.m)
+    have = {t["effect"] for t in fr.terms}
+    missing = tuple(e for e in effects if e not in have)
+    if not missing:
+        return []
+    return [t for t in report(np.asarray(tau, float)[keep], np.asarray(avar, float)[keep], st, missing)
+            if t.get("bound")]
 
 
 def _problem(tau, avar, cov):
