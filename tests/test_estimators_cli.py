@@ -58,6 +58,12 @@ def test_analyze_online_within_truth(online_report, repo_root, axis):
         assert gm["ci95"]["tau_c"][0] <= gt["tau_c"] <= gm["ci95"]["tau_c"][1]
     else:
         assert "gauss_markov" not in on
+    # the offline fit's left-out effects are printed as bounds with the same rule: they contain the truth
+    for t in ax["bounds"]:
+        p = {"white_noise": "N", "bias_instability": "B", "random_walk": "K"}[t["effect"]]
+        assert t["bound"] and tr[p] <= t[p]
+    if tr["K"] == 0.0:
+        assert any(t["effect"] == "random_walk" for t in ax["bounds"])
 
 
 def test_run_prints_the_same_report_as_analyze_online(online_report, repo_root, capsys):
