@@ -408,11 +408,11 @@ def section_models(seeds, hours=2.0):
     return rows_all
 
 
-def section_coverage(seeds, hours=2.0, fs=50.0):
+def section_coverage(seeds, hours=2.0, fs=50.0, seed0=0):
     """Coverage of the online 95 % intervals (and bounds) over many seeds, N + B + K of the sample's gx."""
     terms = MODEL_CASES[2][2]
     n = int(hours * 3600 * fs)
-    print(f"\n== coverage: {seeds} seeds, {hours:g} h at {fs:g} Hz, truth N {truth_of(terms, 'N'):.3g} "
+    print(f"\n== coverage: {seeds} seeds ({seed0}..{seed0 + seeds - 1}), {hours:g} h at {fs:g} Hz, truth N {truth_of(terms, 'N'):.3g} "
           f"B {truth_of(terms, 'B'):.3g} K {truth_of(terms, 'K'):.3g} (SI); interval = 95 % CI of a resolved "
           "value, [0, bound] for a bound")
     cov = {p: [] for p in PAR}
@@ -420,7 +420,7 @@ def section_coverage(seeds, hours=2.0, fs=50.0):
     err = {p: [] for p in PAR}
     bounds = {p: 0 for p in PAR}
     t0 = time.perf_counter()
-    for seed in range(seeds):
+    for seed in range(seed0, seed0 + seeds):
         y = synthesize_axis(terms, fs, n, np.random.default_rng(seed))
         on, off = online_report(y, fs), offline_report(y, fs)
         for p in PAR:
@@ -447,11 +447,12 @@ def main():
                     default=["coverage", "models", "sim", "real", "miao", "memory", "speed", "conv"])
     ap.add_argument("--coverage-seeds", type=int, default=100)
     ap.add_argument("--model-seeds", type=int, default=5)
+    ap.add_argument("--seed0", type=int, default=0, help="first seed of the coverage section")
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--miao-seeds", type=int, default=2)
     a = ap.parse_args()
     for s in a.sections:
-        {"coverage": lambda: section_coverage(a.coverage_seeds), "models": lambda: section_models(a.model_seeds),
+        {"coverage": lambda: section_coverage(a.coverage_seeds, seed0=a.seed0), "models": lambda: section_models(a.model_seeds),
          "sim": lambda: section_sim(a.seeds), "real": section_real, "miao": lambda: section_miao(a.miao_seeds),
          "memory": section_memory, "speed": section_speed, "conv": section_convergence}[s]()
 
