@@ -138,8 +138,31 @@ def section_real(fs=100.0):
             off = offline(y, fs)
             rows.append((f"imu{i} {name}", off, online_octave(y, fs, fit="fit_avar")[0]))
             rows_d.append((f"imu{i} {name}", off, online_octave(y, fs, fit="diag")[0]))
-    table("octave bank, fit=fit_avar (analyze --online) vs offline fit, real data", rows)
-    table("octave bank, fit=diag (default, companion run) vs offline fit, real data", rows_d)
+    table("octave bank, fit=fit_avar (effects N, B, K) vs offline fit, real data", rows)
+    table("octave bank, fit=diag (effects N, B, K) vs offline fit, real data", rows_d)
+    print("\nonline report (default fit=model: analyze --online / companion run) vs offline with the same model "
+          "selection, real data; '<' = 95 % upper bound")
+    print(f"{'axis':<10}" + "".join(f"{'off ' + p:>14}{'on ' + p:>14}{'diff%':>7}" for p in PAR) + "  online extra terms")
+    diffs = {p: [] for p in PAR}
+    for i in (1, 2, 3):
+        g = load_adis(i)
+        for a, name in enumerate(("gx", "gy", "gz")):
+            y = g[:, a]
+            on, off = online_report(y, fs), offline_report(y, fs)
+            cells = ""
+            for p in PAR:
+                ov, _, _, ob = pick(off, p)
+                nv, _, _, nb = pick(on, p)
+                d = abs(nv - ov) / ov * 100 if ov > 0 and ob == nb else float("nan")
+                if not math.isnan(d):
+                    diffs[p].append(d)
+                cells += f"{('< ' if ob else '') + f'{ov:.4g}':>14}{('< ' if nb else '') + f'{nv:.4g}':>14}{d:7.2f}"
+            extra = [t["effect"] + (f" tau_c {t['tau_c']:.3g} s" if "tau_c" in t else "") +
+                     (f" f {t['freq_hz']:.4g} Hz" if "freq_hz" in t else "")
+                     for t in on if t["effect"] in ("gauss_markov", "sinusoid")]
+            print(f"imu{i} {name:<5}" + cells + "  " + ", ".join(extra))
+    print(f"{'max %':<10}" + "".join(f"{'':28}{(max(diffs[p]) if diffs[p] else float('nan')):7.2f}" for p in PAR)
+          + "  (value vs value, or bound vs bound)")
 
 
 def section_miao(seeds, n=1_000_000, fs=100.0):
@@ -205,6 +228,15 @@ def section_speed(fs=400.0):
     for v in y[:n1]:
         est2.update(v)
     ts = time.perf_counter() - t
+    est.fit = "model"
+    t = time.perf_counter()
+    est.terms(full=True)
+    tsel = time.perf_counter() - t
+    est.update(y[:100_000])  # +5 %: no re-selection
+    t = time.perf_counter()
+    est.terms()
+    tq = time.perf_counter() - t
+    est.fit = "diag"
     t = time.perf_counter()
     est.terms()
     tt = time.perf_counter() - t
@@ -219,6 +251,8 @@ def section_speed(fs=400.0):
     tm = time.perf_counter() - t
     print(f"octave bank block mode      {y.size / tb:12,.0f} /s   (target >= 1,000,000)")
     print(f"octave bank sample by sample{n1 / ts:12,.0f} /s   (target >= 50,000)")
+    print(f"terms() model, selection    {tsel * 1e3:9.1f} ms per call (fresh model selection, full=True)")
+    print(f"terms() model, between      {tq * 1e3:9.1f} ms per call (selected structure, rescaled covariance)")
     print(f"octave bank terms() diag    {tt * 1e3:9.1f} ms per call")
     print(f"octave bank terms() fit_avar{tf * 1e3:9.1f} ms per call")
     print(f"Miao SHAKF sample by sample {n2 / tm:12,.0f} /s")
@@ -289,14 +323,137 @@ def section_convergence(fs=100.0, n=1_800_000, plot=True):
         print(f"plot: {out.relative_to(ROOT)}")
 
 
+# ---------------------------------------------------------------- issue 13: full model, bounds, coverage
+def offline_report(y, fs):
+    """Offline reference with the same model selection and bound rule as the online report: the overlapping
+    ADEV at octave cluster sizes (all samples) through companion.estimators.report.select / report."""
+    from companion.estimators.report import report, select
+
+    m = cluster_sizes(y.size, "octave")
+    tau, av, _, _ = oavar(y, fs, m=m)
+    _, st = select(tau, av, edf_simple(y.size + 1, m, 0), y.size, fs)
+    keep = np.isin(m, st.m)
+    return report(tau[keep], av[keep], st)
+
+
+def online_report(y, fs):
+    est = make_estimator("octave", rate_hz=fs)  # defaults: every effect a candidate, fit "model"
+    est.update(y)
+    return est.terms(full=True)
+
+
+def pick(terms, p):
+    """(value, lo, hi, bound) of parameter p in a report; an effect left out entirely counts as (0, 0, 0)."""
+    for t in terms:
+        if p in t and p in t.get("ci95", {}):
+            lo, hi = t["ci95"][p]
+            return t[p], lo, hi, bool(t.get("bound"))
+    return 0.0, 0.0, 0.0, True
+
+
+MODEL_CASES = [  # name, rate, terms (SI, gyro-like; the sample log's magnitudes)
+    ("white only", 50.0, [{"effect": "white_noise", "N": 3.0e-4}]),
+    ("N+B", 100.0, [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "bias_instability", "B": 1.5e-4}]),
+    ("N+B+K", 50.0, [{"effect": "white_noise", "N": 3.5e-4}, {"effect": "bias_instability", "B": 1.5e-4},
+                     {"effect": "random_walk", "K": 6.0e-5}]),
+    ("N+K", 200.0, [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "random_walk", "K": 6.0e-5}]),
+    ("N+B+GM 0.03 s", 400.0, [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "bias_instability", "B": 1.5e-4},
+                              {"effect": "gauss_markov", "sigma": 3.0e-3, "tau_c": 0.03}]),
+    ("N+B+GM 20 s", 50.0, [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "bias_instability", "B": 1.0e-4},
+                           {"effect": "gauss_markov", "sigma": 6.0e-4, "tau_c": 20.0}]),
+    ("N+GM 100 s", 100.0, [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "gauss_markov", "sigma": 3.0e-4,
+                                                                     "tau_c": 100.0}]),
+    ("N+B+sinusoid 2 Hz", 100.0, [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "bias_instability", "B": 1.5e-4},
+                                  {"effect": "sinusoid", "amplitude": 2.0e-3, "freq_hz": 2.0}]),
+]
+
+
+def truth_of(terms, p):
+    return next((t[p] for t in terms if p in t), 0.0)
+
+
+def section_models(seeds, hours=2.0):
+    """Each term present or absent, 2 h at 50-400 Hz: online vs offline (same selection) vs truth."""
+    print(f"\n== models with each term present or absent, {hours:g} h, {seeds} seeds per case; online = octave "
+          "bank report (companion run / analyze --online), offline = overlapping ADEV of all samples, same "
+          "selection; '<' = 95 % upper bound")
+    print(f"{'case':<20}{'Hz':>5} {'p':>2} {'truth':>10} {'online (median)':>16} {'offline':>10} "
+          f"{'|on-off|/off max':>17} {'resolved':>9} {'covers truth':>13} {'absent->bound':>14} {'GM/sin found':>13}")
+    rows_all = []
+    for name, fs, terms in MODEL_CASES:
+        n = int(hours * 3600 * fs)
+        res = {p: [] for p in PAR}
+        found = 0
+        for seed in range(seeds):
+            y = synthesize_axis(terms, fs, n, np.random.default_rng(1000 + seed))
+            on, off = online_report(y, fs), offline_report(y, fs)
+            nl = {t["effect"] for t in terms} & {"gauss_markov", "sinusoid"}
+            found += int(bool(nl) and nl <= {t["effect"] for t in on})
+            for p in PAR:
+                res[p].append((pick(on, p), pick(off, p)))
+        for p in PAR:
+            tr = truth_of(terms, p)
+            on = np.array([r[0][0] for r in res[p]])
+            bound = np.array([r[0][3] for r in res[p]])
+            both = [abs(a[0] - b[0]) / b[0] * 100 for a, b in res[p] if not a[3] and not b[3] and b[0] > 0]
+            cover = np.mean([a[1] <= tr <= a[2] for a, _ in res[p]]) * 100
+            absent = f"{np.mean(bound) * 100:.0f} %" if tr == 0 else ""
+            med = np.median(on)
+            txt = ("< " if np.mean(bound) > 0.5 else "") + f"{med:.3g}"
+            offm = np.median([b[0] for _, b in res[p]])
+            print(f"{name:<20}{fs:5.0f} {p:>2} {tr:10.3g} {txt:>16} {offm:10.3g} "
+                  f"{(f'{max(both):.2f} %' if both else '-'):>17} {f'{np.mean(~bound) * 100:.0f} %':>9} "
+                  f"{cover:12.0f}% {absent:>14} {(f'{found}/{seeds}' if p == 'N' and nl else ''):>13}")
+            rows_all.append((name, p, tr, both, cover, bound))
+    return rows_all
+
+
+def section_coverage(seeds, hours=2.0, fs=50.0, seed0=0):
+    """Coverage of the online 95 % intervals (and bounds) over many seeds, N + B + K of the sample's gx."""
+    terms = MODEL_CASES[2][2]
+    n = int(hours * 3600 * fs)
+    print(f"\n== coverage: {seeds} seeds ({seed0}..{seed0 + seeds - 1}), {hours:g} h at {fs:g} Hz, truth N {truth_of(terms, 'N'):.3g} "
+          f"B {truth_of(terms, 'B'):.3g} K {truth_of(terms, 'K'):.3g} (SI); interval = 95 % CI of a resolved "
+          "value, [0, bound] for a bound")
+    cov = {p: [] for p in PAR}
+    cov_off = {p: [] for p in PAR}
+    err = {p: [] for p in PAR}
+    bounds = {p: 0 for p in PAR}
+    t0 = time.perf_counter()
+    for seed in range(seed0, seed0 + seeds):
+        y = synthesize_axis(terms, fs, n, np.random.default_rng(seed))
+        on, off = online_report(y, fs), offline_report(y, fs)
+        for p in PAR:
+            v, lo, hi, b = pick(on, p)
+            tr = truth_of(terms, p)
+            cov[p].append(lo <= tr <= hi)
+            bounds[p] += b
+            ov, olo, ohi, ob = pick(off, p)
+            cov_off[p].append(olo <= tr <= ohi)
+            if not b and not ob and ov > 0:
+                err[p].append((abs(v - ov) / ov * 100, abs(v - tr) / tr * 100, abs(ov - tr) / tr * 100))
+    print(f"{'param':<6}{'coverage':>10}{'offline':>9}{'bounds':>8}{'|on-off|/off med/max %':>24}{'|on-truth|/truth med %':>24}"
+          f"{'|off-truth|/truth med %':>25}")
+    for p in PAR:
+        e = np.array(err[p]) if err[p] else np.full((1, 3), np.nan)
+        print(f"{p:<6}{np.mean(cov[p]) * 100:9.0f}%{np.mean(cov_off[p]) * 100:8.0f}%{bounds[p]:8d}{np.median(e[:, 0]):12.2f} / {np.max(e[:, 0]):<9.2f}"
+              f"{np.median(e[:, 1]):24.2f}{np.median(e[:, 2]):25.2f}")
+    print(f"({time.perf_counter() - t0:.0f} s)")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("sections", nargs="*", default=["sim", "real", "miao", "memory", "speed", "conv"])
+    ap.add_argument("sections", nargs="*",
+                    default=["coverage", "models", "sim", "real", "miao", "memory", "speed", "conv"])
+    ap.add_argument("--coverage-seeds", type=int, default=100)
+    ap.add_argument("--model-seeds", type=int, default=5)
+    ap.add_argument("--seed0", type=int, default=0, help="first seed of the coverage section")
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--miao-seeds", type=int, default=2)
     a = ap.parse_args()
     for s in a.sections:
-        {"sim": lambda: section_sim(a.seeds), "real": section_real, "miao": lambda: section_miao(a.miao_seeds),
+        {"coverage": lambda: section_coverage(a.coverage_seeds, seed0=a.seed0), "models": lambda: section_models(a.model_seeds),
+         "sim": lambda: section_sim(a.seeds), "real": section_real, "miao": lambda: section_miao(a.miao_seeds),
          "memory": section_memory, "speed": section_speed, "conv": section_convergence}[s]()
 
 

@@ -1,25 +1,92 @@
-"""`companion analyze --online`: online terms next to the offline fit, on the shipped sample log."""
+"""`companion analyze --online` and `companion run` on the shipped sample log, against the truth of its
+model file (tlogs/sample_model.yaml): every reported value within its 95 % interval, every effect absent
+from the truth reported as a 95 % upper bound, and both commands print the same report (issue 13)."""
 
 from __future__ import annotations
 
 import json
+import math
+import re
 
+from pathlib import Path
+
+import pytest
+
+from companion import units
 from companion.cli.main import main
+from companion.sim.model import load_model
+
+ROOT = Path(__file__).resolve().parent.parent
+LSB = 1e-3  # RAW_IMU gyro: int16 mrad/s; dithered rounding adds white noise N_q = LSB sqrt(tau0 / 12)
 
 
-def test_analyze_online_json_and_table(tmp_path, repo_root, capsys):
-    out = tmp_path / "r.json"
-    rc = main(["analyze", str(repo_root / "tlogs" / "sample.tlog"), "--online", "--axes", "gx,gz",
+def truth(repo_root, axis):
+    model = load_model(repo_root / "tlogs" / "sample_model.yaml")
+    terms = {t["effect"]: t for t in model.axes[axis]}
+    n = math.hypot(terms["white_noise"]["N"], LSB * math.sqrt(1.0 / model.rate_hz / 12.0))
+    return {"N": n, "B": terms.get("bias_instability", {}).get("B", 0.0),
+            "K": terms.get("random_walk", {}).get("K", 0.0), "terms": terms}
+
+
+@pytest.fixture(scope="module")
+def online_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("online") / "r.json"
+    rc = main(["analyze", str(ROOT / "tlogs" / "sample.tlog"), "--online", "--axes", "gx,gy,gz",
                "--json", str(out), "--quiet"])
     assert rc == 0
-    table = capsys.readouterr().out
-    assert "online" in table and "%" in table
-    rep = json.loads(out.read_text())
-    for axis in ("gx", "gz"):
-        ax = rep["streams"][0]["axes"][axis]
-        off = {t["effect"]: t for t in ax["terms"]}
-        on = {t["effect"]: t for t in ax["online"]}
-        assert set(on) <= set(off) | {"quantization", "ramp"}
-        # same data, same fit procedure: N agrees to well under 1 % (the sample log is 20 min at 50 Hz)
-        assert abs(on["white_noise"]["N"] - off["white_noise"]["N"]) < 0.01 * off["white_noise"]["N"]
-        assert all(t["std"][k] >= 0 for t in ax["online"] for k in t["std"])
+    return json.loads(out.read_text())
+
+
+@pytest.mark.parametrize("axis", ["gx", "gy", "gz"])
+def test_analyze_online_within_truth(online_report, repo_root, axis):
+    ax = online_report["streams"][0]["axes"][axis]
+    tr = truth(repo_root, axis)
+    on = {t["effect"]: t for t in ax["online"]}
+    for e, p in (("white_noise", "N"), ("bias_instability", "B"), ("random_walk", "K")):
+        t = on[e]
+        lo, hi = t["ci95"][p]
+        assert lo <= tr[p] <= hi, (axis, p, tr[p], t)
+        assert t["bound"] is (lo == 0.0)
+        if tr[p] == 0.0:
+            assert t["bound"], (axis, p, t)  # nothing invented
+        assert t["std"][p] >= 0
+    # N is not inflated by the Gauss-Markov term of gy (was 4.6x the truth): the term is in the model
+    assert abs(on["white_noise"]["N"] - tr["N"]) < 0.02 * tr["N"]
+    if "gauss_markov" in tr["terms"]:
+        gm, gt = on["gauss_markov"], tr["terms"]["gauss_markov"]
+        assert gm["ci95"]["sigma"][0] <= gt["sigma"] <= gm["ci95"]["sigma"][1]
+        assert gm["ci95"]["tau_c"][0] <= gt["tau_c"] <= gm["ci95"]["tau_c"][1]
+    else:
+        assert "gauss_markov" not in on
+    # the offline fit's left-out effects are printed as bounds with the same rule: they contain the truth
+    for t in ax["bounds"]:
+        p = {"white_noise": "N", "bias_instability": "B", "random_walk": "K"}[t["effect"]]
+        assert t["bound"] and tr[p] <= t[p]
+    if tr["K"] == 0.0:
+        assert any(t["effect"] == "random_walk" for t in ax["bounds"])
+
+
+def test_run_prints_the_same_report_as_analyze_online(online_report, repo_root, capsys):
+    capsys.readouterr()
+    rc = main(["run", "--source", str(repo_root / "tlogs" / "sample.tlog"), "--baseline-s", "300", "--quiet",
+               "--no-state"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    for axis in ("gx", "gy", "gz"):
+        line = next(s for s in text.splitlines() if s.strip().startswith(axis + ":"))
+        on = {t["effect"]: t for t in online_report["streams"][0]["axes"][axis]["online"]}
+        tr = truth(repo_root, axis)
+        for e, p in (("white_noise", "N"), ("bias_instability", "B"), ("random_walk", "K")):
+            m = re.search(rf"\b{p} (< )?([0-9.e+-]+)( \+- ([0-9.e+-]+))?", line)
+            assert m, (p, line)
+            assert bool(m.group(1)) is on[e]["bound"], (axis, p, line, on[e])  # same terms resolved / bounded
+            v = units.from_datasheet(p, float(m.group(2)), axis)
+            if m.group(1):
+                assert tr[p] <= v * 1.001
+            else:
+                s = units.from_datasheet(p, float(m.group(4)), axis)
+                assert abs(v - tr[p]) <= 1.96 * s, (axis, p, line)  # within its 95 % interval of the truth
+                # run forgets (600 s / 7200 s memories) and skips the settling time: within the uncertainty
+                assert abs(v - on[e][p]) <= 2.5 * max(s, on[e]["std"][p]), (axis, p, line, on[e])
+        assert ("gauss_markov" in line) is ("gauss_markov" in on)
+    assert "degrading" not in text

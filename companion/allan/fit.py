@@ -266,7 +266,7 @@ def _scaled_chi2_ci(theta, var, level):
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
-             max_iter=4, max_ratio=256, segments=None) -> FitResult:
+             max_iter=4, max_ratio=256, segments=None, select=None) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring.
 
     ``edf``: EDF of each point (used for the first weights, and for the diagonal covariance when ``n`` or
@@ -275,6 +275,8 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     round(tau rate_hz)): number of rate samples and their rate, for the full model covariance.
     ``segments``: lengths (samples) of the segments of a pooled AVAR (:mod:`companion.allan.pooled`); the
     covariance is then the pooled one and ``n`` may be their sum.
+    ``select``: True runs the automatic selection over the candidates ``effects`` (e.g. with a sinusoid,
+    which the default candidate set leaves out); default: selection only when ``effects`` is None.
     """
     tau = np.asarray(tau, dtype=float)
     avar = np.asarray(avar, dtype=float)
@@ -289,8 +291,8 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     if tau.size == 0 or not np.any(avar > 0):
         return FitResult([], tau, np.zeros_like(tau), covariance_mode="full" if full else "diagonal",
                          notes=["no variance to fit (constant data)"])
-    auto = effects is None
-    effects = list(AUTO_EFFECTS) if auto else list(effects)
+    auto = effects is None if select is None else bool(select)
+    effects = list(AUTO_EFFECTS) if effects is None else list(effects)
     bad = [e for e in effects if e not in LINEAR_EFFECTS + NONLINEAR_EFFECTS]
     if bad:
         raise ValueError(f"unknown effect {bad[0]!r}")

@@ -80,8 +80,9 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true",
                    help="write the Kalibr file even for a stream slower than 10 Hz or shorter than 60 s")
     p.add_argument("--online", action="store_true",
-                   help="also run the online estimator (octave bank, docs/online.md) over each axis: JSON key "
-                        "'online' per axis, table row with |offline - online| / offline")
+                   help="also run the online estimator (octave bank, model chosen from the data, docs/online.md) "
+                        "over each axis, the same report as `companion run`: JSON key 'online' per axis (terms with "
+                        "'bound': true for 95 %% upper bounds), table row 'online' ('< x' = bound)")
     p.set_defaults(func=run)
 
 
@@ -162,6 +163,10 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     edf0 = np.array([edf_simple(int(c) + 2 * int(mm), mm, 0) for c, mm in zip(counts[keep], m_fit[keep])])
     fit = fit_avar(tau_f[keep], avar_f[keep], edf0, effects=effects, n=n, rate_hz=rate_hz, m=m_fit[keep],
                    level=level, segments=lengths if pooled else None)
+    from companion.estimators.report import bounds_for_fit
+
+    # effects the fit left out (N, B, K): their 95 % upper bound, as the online report gives it (issue 13)
+    bounds = bounds_for_fit(fit, tau_f[keep], avar_f[keep], np.maximum(edf0, 0.5), rate_hz, n)
     m = parse_taus(taus, max(lengths), rate_hz) if isinstance(taus, str) else cluster_sizes(max(lengths), taus)
     tau, avar, m, _ = pooled_oavar(pieces, rate_hz, m=m)
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in fit.terms]
@@ -180,7 +185,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
         if note:
             notes.append(note)
     out.update(tau=tau.tolist(), adev=adev.tolist(), adev_lo=lo.tolist(), adev_hi=hi.tolist(),
-               terms=terms, edf=edf.tolist(),
+               terms=terms, bounds=bounds, edf=edf.tolist(),
                fit={"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
                     "model_error": fit.model_error, "tau_min": float(tau_f[keep][0]) if keep.any() else None,
                     "points": int(keep.sum()), "notes": notes, "segments": len(pieces)})
@@ -343,7 +348,7 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
 
                 a, b = max(ranges, key=lambda r: r[1] - r[0])
                 y = col[a:b]
-                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate, entry["axes"][axis]["terms"])
+                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate)
         if progress:
             progress.step(f"{stream.key.message}[{stream.key.instance}] {axis}")
     return entry
@@ -422,6 +427,10 @@ def format_table(report: dict) -> str:
                                     f"[{_fmt(units.to_datasheet(p, lo, a))}, {_fmt(units.to_datasheet(p, hi, a))}]")
                     else:
                         other.append(format_term(t, a))
+                for t in r.get("bounds") or ():
+                    p = {"white_noise": "N", "bias_instability": "B", "random_walk": "K"}.get(t["effect"])
+                    if p and p not in cells:
+                        cells[p] = f"< {_fmt(units.to_datasheet(p, t[p], a))}"
                 if r.get("fit") and r["fit"].get("model_error"):
                     other.append(f"misfit: +{100 * r['fit']['model_error']:.0f} % model error")
                 for n_ in (r.get("fit") or {}).get("notes", []):
@@ -438,24 +447,13 @@ def format_table(report: dict) -> str:
 
 
 def _online_row(r: dict, a: str) -> str:
-    """'online N 2.27 (0.41 %) ...': online values and the paper's |offline - online| / offline."""
-    off = {t["effect"]: t for t in r["terms"]}
-    cells, other = {}, []
-    for t in r["online"]:
-        p = PARAMS[t["effect"]][0]
-        v = units.to_datasheet(p, t[p], a)
-        o = off.get(t["effect"], {}).get(p)
-        d = f"{abs(o - t[p]) / o * 100:.2f} %" if o else "offline 0"
-        text = f"{_fmt(v)} ({d})"
-        if p in ("N", "B", "K"):
-            cells[p] = text
-        elif t[p] > 0 or o:
-            other.append(f"{p} {text} {units.datasheet_unit(p, a)}")
-    nonlin = sorted({t["effect"] for t in r["terms"]} - {t["effect"] for t in r["online"]})
-    if nonlin:
-        other.append(f"online has no {', '.join(nonlin)}: differences expected")
-    return (f"{'online':<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26} "
-            + "; ".join(other))
+    """'online N 1.05 [1.04, 1.06] ... B < 31 ...': the online report (companion.estimators.report, the same
+    text as `companion run`'s summary): resolved values with 95 % intervals, 95 % upper bounds as '< x'."""
+    from companion.estimators.report import cell, extra_text
+
+    cells = {p: cell(r["online"], p, a) for p in ("N", "B", "K")}
+    return (f"{'online':<5} {cells['N']:<28}{cells['B']:<26}{cells['K']:<26} "
+            + "; ".join(extra_text(r["online"], a)))
 
 
 def kalibr_yaml(report: dict) -> str:

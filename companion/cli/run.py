@@ -60,6 +60,9 @@ def register(subparsers) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--baseline-s", type=float, metavar="S", help="learn the baseline from the first S s of still data (default 600)")
     g.add_argument("--baseline", metavar="FILE", help="baseline from a `companion analyze` JSON/YAML report or a saved baseline")
+    p.add_argument("--baseline-force", action="store_true",
+                   help="use --baseline even when it was measured on another stream (message, rate, sensor LSB, "
+                        "units); without it a mismatch is an error")
     p.add_argument("--state", metavar="FILE", help="state file (default: run.state_file, else "
                    "$XDG_STATE_HOME/companion/run_state.json on a live link, none for a replay)")
     p.add_argument("--no-state", action="store_true", help="do not read or write a state file")
@@ -129,6 +132,8 @@ def build(args, log):
         raise CompanionError(f"config: {exc}") from None
     if args.sysid is not None:
         pcfg.sysid = args.sysid
+    if getattr(args, "baseline_force", False):
+        pcfg.baseline_force = True
     if args.baseline_s is not None:
         if not args.baseline_s > 0:
             raise CompanionError("--baseline-s must be > 0")
@@ -191,8 +196,6 @@ def _state_path(args, extra, live: bool) -> Path | None:
 
 
 def print_summary(pipeline, out=None) -> None:
-    from companion import units
-
     out = out or sys.stdout
 
     rows = pipeline.summary()
@@ -205,18 +208,10 @@ def print_summary(pipeline, out=None) -> None:
         print(f"IMU{r['imu']} ({r['message']}, {rate}): {r['health']}; {r['still_s']:.0f} s still data used; "
               f"{c['samples']} samples, {c['blocks_moving']} moving blocks, {c['resets']} resets, {c['gaps']} gaps, "
               f"{c['duplicates']} duplicates", file=out)
+        from companion.estimators.report import summary_line
+
         for ax, d in r["axes"].items():
-            parts = []
-            for p in ("N", "B", "K"):
-                if p in d["current"]:
-                    v, s = d["current"][p]
-                    txt = f"{p} {units.to_datasheet(p, v, ax):.4g}"
-                    if math.isfinite(s):
-                        txt += f" +- {units.to_datasheet(p, s, ax):.2g}"
-                    if d["baseline"] and p in d["baseline"] and d["baseline"][p][0] > 0:
-                        txt += f" ({v / d['baseline'][p][0]:.2f}x baseline)"
-                    parts.append(txt + f" {units.datasheet_unit(p, ax)}")
-            print(f"  {ax}: " + "; ".join(parts), file=out)
+            print(f"  {ax}: " + summary_line(d["terms"], ax, d["baseline"]), file=out)
     for t, text in pipeline.transitions:
         print(f"  at {t:.0f} s: {text}", file=out)
 

@@ -49,19 +49,14 @@ def make_estimator(kind="octave", rate_hz=None, **cfg):
     return cls(rate_hz, **{k: v for k, v in cfg.items() if k in allowed})
 
 
-def online_terms(y, rate_hz, offline_terms=None, kind="octave", **cfg) -> list[dict]:
-    """Run an online estimator over the samples ``y`` and return its final terms. The effects are the linear
-    ones of ``offline_terms`` (so that online and offline fit the same model), else the default five; the
-    octave bank's coefficients are fitted with the offline procedure (``fit="fit_avar"``)."""
-    from companion.allan.terms import LINEAR_EFFECTS
-
-    effects = [t["effect"] for t in (offline_terms or []) if t["effect"] in LINEAR_EFFECTS]
-    cfg.setdefault("effects", tuple(effects) or DEFAULT_EFFECTS)
-    if kind == "octave":
-        cfg.setdefault("fit", "fit_avar")  # the offline procedure: differences come from the accumulators only
+def online_terms(y, rate_hz, kind="octave", **cfg) -> list[dict]:
+    """Run an online estimator over the samples ``y`` and return its final report: for the octave bank
+    (``fit="model"``, the default) the model chosen from the data with every effect of the offline model as
+    a candidate, each linear term resolved or as its 95 % upper bound (companion.estimators.report) -- the
+    same code path as ``companion run``."""
     est = make_estimator(kind, rate_hz=rate_hz, **cfg)
     est.update(y)
-    return est.terms()
+    return est.terms(full=True) if kind == "octave" else est.terms()
 
 
 def from_state_dict(d: dict):

@@ -47,7 +47,10 @@ import math
 import numpy as np
 
 from companion.allan.terms import LINEAR_PARAM, linear_basis
-from companion.estimators.octave_bank import DEFAULT_EFFECTS, check_effects
+from companion.allan.terms import LINEAR_EFFECTS
+from companion.estimators.octave_bank import check_effects
+
+DEFAULT_EFFECTS = LINEAR_EFFECTS
 from companion.estimators.recursive_avar import RecursiveAllanVariance
 
 
@@ -73,7 +76,7 @@ class MiaoSHAKF:
             raise ValueError(f"forgetting_s must be positive (or null), got {forgetting_s}")
         self.rate_hz = rate_hz
         self.tau0 = 1.0 / rate_hz
-        self.effects = check_effects(effects)
+        self.effects = tuple(e for e in check_effects(effects) if e in LINEAR_EFFECTS)  # the paper's x = [Q N B K R]
         self.params = [LINEAR_PARAM[e] for e in self.effects]
         x0 = dict(x0 or {})
         bad = sorted(set(x0) - set(self.params))

@@ -58,22 +58,25 @@ import numpy as np
 
 from companion.allan.confidence import edf_simple, oavar_covariance
 from companion.allan.lsq import exp_sum, nnls  # numpy-only: the live pipeline loads no scipy (issue 14)
-from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, linear_basis
+from companion.allan.terms import EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, linear_basis
 
-DEFAULT_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
+#: every effect of the offline model (the candidates of the model selection, companion.estimators.report)
+DEFAULT_EFFECTS = EFFECTS
 _BUF = 2048
-#: coefficient fits: diagonal weighted NNLS (default, fast), a cached GLS, the offline fit_avar (slow, exact match)
-FITS = ("fit_avar", "gls", "diag")
+#: coefficient fits: ``model`` (default: model chosen from the data, resolved values and 95 % bounds,
+#: companion.estimators.report), diagonal weighted NNLS, a cached GLS, the offline fit_avar (linear effects only)
+FITS = ("model", "fit_avar", "gls", "diag")
 
 
 def check_effects(effects) -> tuple[str, ...]:
     effects = tuple(effects)
-    bad = [e for e in effects if e not in LINEAR_EFFECTS]
-    if bad or not effects:
+    bad = [e for e in effects if e not in EFFECTS]
+    if bad or not any(e in LINEAR_EFFECTS for e in effects):
         raise ValueError(
-            f"online estimator effects must be a non-empty subset of {', '.join(LINEAR_EFFECTS)}; got {list(effects)}"
+            f"online estimator effects must be a subset of {', '.join(EFFECTS)} with at least one of "
+            f"{', '.join(LINEAR_EFFECTS)}; got {list(effects)}"
         )
-    return tuple(e for e in LINEAR_EFFECTS if e in effects)  # canonical order
+    return tuple(e for e in EFFECTS if e in effects)  # canonical order
 
 
 class OctaveBankEstimator:
@@ -88,7 +91,7 @@ class OctaveBankEstimator:
     kind = "octave"
 
     def __init__(self, rate_hz, effects=DEFAULT_EFFECTS, forgetting_s=None, phases=16, max_tau_s=20000.0,
-                 min_edf=1.0, fit="diag", gls_max_ratio=256):
+                 min_edf=1.0, fit="model", gls_max_ratio=256):
         rate_hz = float(rate_hz)
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
@@ -129,6 +132,7 @@ class OctaveBankEstimator:
         self._S = np.zeros(self.levels)
         self._buf: list[float] = []
         self._cache: dict = {}  # Cholesky factors of the GLS covariance (derived data, not state)
+        self._structure = None  # selected model (companion.estimators.report.Structure; derived, not state)
         self.n_rejected = 0
 
     # ------------------------------------------------------------------ updates
@@ -234,19 +238,29 @@ class OctaveBankEstimator:
         r = 1.0 / (self.forgetting_s * self.rate_hz)
         return min(n, (1.0 + math.exp(-r)) / -math.expm1(-r))
 
-    def terms(self) -> list[dict]:
-        """Current coefficients, one term per configured effect (0 when not supported by the data):
-        ``[{"effect": "white_noise", "N": v, "std": {"N": one_sigma}}, ...]`` in SI units."""
+    def terms(self, full: bool = False) -> list[dict]:
+        """Current coefficients in SI units.
+
+        ``fit="model"``: the model chosen from the data, each linear term resolved (value, ``std``, ``ci95``,
+        ``"bound": False``) or as its 95 % upper bound (``"bound": True``), Gauss-Markov and sinusoid terms
+        when selected (:func:`companion.estimators.report.estimator_report`; ``full`` forces a fresh model
+        selection). Other fits: one term per configured linear effect (0 when not supported by the data),
+        ``[{"effect": "white_noise", "N": v, "std": {"N": one_sigma}}, ...]``."""
+        if self.fit == "model":
+            from companion.estimators.report import estimator_report
+
+            return estimator_report(self, full=full)
+        effects = tuple(e for e in self.effects if e in LINEAR_EFFECTS)
         tau, avar, edf = self.avar()
         use = edf >= self.min_edf
-        theta, s_theta, floor = fit_theta(tau[use], avar[use], edf[use], self.effects, return_floor=True)
-        if self.fit == "fit_avar" and use.sum() > len(self.effects):
+        theta, s_theta, floor = fit_theta(tau[use], avar[use], edf[use], effects, return_floor=True)
+        if self.fit == "fit_avar" and use.sum() > len(effects):
             theta, s_theta = self._fit_avar(tau[use], avar[use], edf[use], theta, s_theta)
-        elif self.fit == "gls" and use.sum() > len(self.effects):
-            theta, s_theta = fit_theta_gls(tau[use], avar[use], theta, self.effects, self.n_effective(),
+        elif self.fit == "gls" and use.sum() > len(effects):
+            theta, s_theta = fit_theta_gls(tau[use], avar[use], theta, effects, self.n_effective(),
                                            self.rate_hz, self.gls_max_ratio, cache=self._cache, floor=floor)
         out = []
-        for e, th, st in zip(self.effects, theta, s_theta):
+        for e, th, st in zip(effects, theta, s_theta):
             p = LINEAR_PARAM[e]
             val = math.sqrt(max(th, 0.0))
             std = math.sqrt(max(th, 0.0) + st) - val if math.isfinite(st) else float("inf")
@@ -263,11 +277,12 @@ class OctaveBankEstimator:
         n = max(int(self.n_effective()), int(2 * m.max() + 2))
         # first weights as in `companion analyze`: white-noise EDF of the overlapping estimator (NIST SP 1065)
         edf0 = np.maximum(edf_simple(n + 1, m, 0), 0.5)
-        fr = fit_avar(tau, avar, edf0, effects=list(self.effects), n=n, rate_hz=self.rate_hz, m=m,
+        effects = [e for e in self.effects if e in LINEAR_EFFECTS]
+        fr = fit_avar(tau, avar, edf0, effects=effects, n=n, rate_hz=self.rate_hz, m=m,
                       max_ratio=self.gls_max_ratio)
-        theta = np.zeros(len(self.effects))
+        theta = np.zeros(len(effects))
         std = np.asarray(std_diag, float).copy()
-        for i, e in enumerate(self.effects):
+        for i, e in enumerate(effects):
             t = next((t for t in fr.terms if t["effect"] == e), None)
             if t is None:
                 continue

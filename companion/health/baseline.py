@@ -56,6 +56,9 @@ class Baseline:
     def __init__(self, source: str = "learned"):
         self.source = source
         self.axes: dict[tuple[int, str], dict[str, tuple[float, float]]] = {}
+        # per IMU: the stream the baseline was measured on (message, rate_hz, gyro_lsb, units; issue 13),
+        # checked against the live stream by companion.service.baseline_match
+        self.meta: dict[int, dict] = {}
 
     def set_axis(self, imu: int, axis: str, params: Mapping[str, tuple[float, float]]) -> None:
         self.axes[(int(imu), str(axis))] = {p: (float(v), float(s)) for p, (v, s) in params.items()}
@@ -74,7 +77,8 @@ class Baseline:
         axes = {}
         for (imu, axis), params in sorted(self.axes.items()):
             axes.setdefault(f"IMU{imu}", {})[axis] = {p: {"value": v, "std": _finite_or_none(s)} for p, (v, s) in params.items()}
-        return {"format": self.FORMAT, "version": 1, "source": self.source, "imus": axes}
+        return {"format": self.FORMAT, "version": 1, "source": self.source, "imus": axes,
+                "streams": {f"IMU{imu}": dict(m) for imu, m in sorted(self.meta.items())}}
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "Baseline":
@@ -93,6 +97,7 @@ class Baseline:
                                            for p, d in params.items()})
             if not b.axes:
                 raise ValueError("baseline file holds no axes")
+            b.meta = {_imu_index(k): dict(v) for k, v in (data.get("streams") or {}).items() if isinstance(v, Mapping)}
             return b
         return cls._from_analyze(data)
 
@@ -113,6 +118,11 @@ def _walk_analyze(node, b: Baseline, imu: int) -> None:
     if isinstance(node, Mapping):
         if "instance" in node and isinstance(node["instance"], int):
             imu = node["instance"]
+            if "message" in node and "rate_hz" in node and imu not in b.meta:  # an analyze stream entry (SI)
+                gx = (node.get("axes") or {}).get("gx") or {}
+                lsb = (gx.get("quantization") or {}).get("lsb") if isinstance(gx, Mapping) else None
+                b.meta[imu] = {"message": node["message"], "rate_hz": node["rate_hz"], "gyro_lsb": lsb,
+                               "units": "SI"}
         elif isinstance(node.get("key"), Mapping) and isinstance(node["key"].get("instance"), int):
             imu = node["key"]["instance"]
         for k, v in node.items():

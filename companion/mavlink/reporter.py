@@ -16,6 +16,14 @@ name                value                                        unit
 ``IMU{i}G_HLTH``    0 healthy, 1 degrading, 2 learning, 3 stale  -
 ==================  ==========================================  =========================
 
+Uncertainty and bounds (:meth:`Reporter.set_online_terms`, what ``companion run`` sends): each value
+``IMU{i}G{a}_{P}`` (P = Q, N, B, K, R) has a companion ``IMU{i}G{a}_{P}S`` = its 1-sigma in the same unit
+(e.g. ``IMU0GX_NS``). When the data do not resolve the term, ``_{P}`` carries its one-sided 95 % upper
+bound and ``_{P}S`` is sent as -1: **a negative sigma marks a bound** (sigmas are never negative). A
+Gauss-Markov term (only when resolved): ``_GM`` sigma (deg/h), ``_GMS`` its 1-sigma, ``_GMT`` correlation
+time (s); a sinusoid: ``_SA`` amplitude (deg/h), ``_SAS`` its 1-sigma, ``_SF`` frequency (Hz). Names of
+terms no longer reported stop being sent.
+
 Datasheet units come from :mod:`companion.units` (the only place they are defined). Cadence: every name
 once per ``period_s`` of *message* time (the IMU timestamps), the M names of a period spread evenly at
 offsets j * period_s / M so the link sees one small message at a time, never a burst. A jump of message
@@ -89,6 +97,37 @@ class Reporter:
         """Set ``IMU{i}{G|A}{a}_{P}`` from SI parameter values, converting to datasheet units."""
         for p, v in params_si.items():
             self.set_value(value_name(imu, axis, p), to_report_units(p, axis, v) if v is not None else math.nan)
+
+    #: report names of the nonlinear terms: (effect, param) -> suffix
+    NL_SUFFIX = {("gauss_markov", "sigma"): "GM", ("gauss_markov", "tau_c"): "GMT",
+                 ("sinusoid", "amplitude"): "SA", ("sinusoid", "freq_hz"): "SF"}
+
+    def set_online_terms(self, imu: int, axis: str, terms) -> None:
+        """Set the values, their 1-sigma (``_{P}S``; -1 for a 95 % upper bound) and the nonlinear terms of
+        one axis from an online report (companion.estimators.report; SI) -- see the module docstring."""
+        new: dict[str, float] = {}
+        for t in terms or ():
+            e = t.get("effect")
+            std = t.get("std") or {}
+            for p, v in t.items():
+                if p in ("effect", "std", "ci95", "bound") or not isinstance(v, (int, float)):
+                    continue
+                suffix = self.NL_SUFFIX.get((e, p), p if (e, p) not in self.NL_SUFFIX and len(p) == 1 else None)
+                if suffix is None:
+                    continue
+                try:
+                    name = value_name(imu, axis, suffix)
+                    new[name] = to_report_units(p, axis, v)
+                    if p in std:
+                        sname = value_name(imu, axis, suffix + "S")
+                        new[sname] = -1.0 if t.get("bound") else to_report_units(p, axis, std[p])
+                except ValueError:  # IMU index >= 10 with a long suffix: does not fit 10 characters
+                    continue
+        prefix = value_name(imu, axis, "N")[:-1]
+        for name in [k for k in self.values if k.startswith(prefix) and k not in new]:
+            self.values.pop(name, None)
+        for name, v in new.items():
+            self.set_value(name, v)
 
     def set_health(self, imu: int, state: int) -> None:
         self.set_value(health_name(imu), float(state))

@@ -32,7 +32,9 @@ from typing import Callable, Mapping
 import numpy as np
 
 from companion.estimators import from_state_dict as estimator_from_state, make_estimator
-from companion.health.baseline import Baseline, params_from_terms
+from companion.estimators.report import health_params as _health_params
+from companion.health.baseline import Baseline
+from companion.service.baseline_match import check_baseline, stream_meta, units_mismatch
 from companion.health.detector import DEGRADING, LEARNING, DetectorConfig, HealthDetector, STATE_NAMES
 from companion.mavlink.reporter import MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter
 from companion.samples import ACCEL_AXES, GYRO_AXES
@@ -53,6 +55,7 @@ class PipelineConfig:
     forgetting_fast_s: float = 600.0
     forgetting_slow_s: float = 7200.0
     accel: bool = False  # also estimate and report the accelerometer axes
+    baseline_force: bool = False  # use a loaded baseline even if it does not match the stream (issue 13)
     gyro_mean: float = 0.1  # rad/s
     gyro_std_factor: float = 5.0
     accel_shift: float = 0.3  # m/s^2
@@ -75,8 +78,8 @@ class PipelineConfig:
                 out.estimator = dict(v or {})
             elif k == "sysid":
                 out.sysid = None if v is None else int(v)
-            elif k == "accel":
-                out.accel = bool(v)
+            elif k in ("accel", "baseline_force"):
+                setattr(out, k, bool(v))
             else:
                 out.__setattr__(k, float(v))
                 if not float(v) > 0:
@@ -89,6 +92,7 @@ class Channel:
 
     def __init__(self, imu: int, message: str, cfg: PipelineConfig):
         self.imu, self.message, self.cfg = imu, message, cfg
+        self.gyro_lsb = None if message in ("HIGHRES_IMU", "CSV") else 1e-3  # set from the scale table in on_sample
         self.axes = GYRO_AXES + (ACCEL_AXES if cfg.accel else ())
         self.last_t: float | None = None
         self.dts: deque = deque(maxlen=64)
@@ -178,6 +182,8 @@ class Pipeline:
         ch = self.channels.get(key.instance)
         if ch is None:
             ch = self.channels[key.instance] = Channel(key.instance, key.message, self.cfg)
+            ch.gyro_lsb = None if key.message in ("HIGHRES_IMU", "CSV") else (
+                self.scales.lookup(key)[0] if self.scales is not None else 1e-3)
             self.log(f"IMU{key.instance}: {key.message} from {key.label()}")
         elif ch.message != key.message:
             self.ignored["other_message"] += 1
@@ -232,6 +238,8 @@ class Pipeline:
             rate = 1.0 / float(np.median(ch.dts))
             if ch.rate_hz is None:
                 ch.rate_hz = rate
+                if self.baseline_fixed and self._has_baseline(ch):
+                    check_baseline(self.baseline, ch, self.cfg.baseline_force, self.log)
                 ch.make_estimators(learning=not self._has_baseline(ch))
                 self.log(f"IMU{ch.imu}: {rate:.1f} Hz")
             elif abs(rate / ch.rate_hz - 1.0) > 0.2:
@@ -313,7 +321,8 @@ class Pipeline:
         if self.baseline is None:
             self.baseline = Baseline("learned")
         for ax, est in ch.learn.items():
-            self.baseline.set_axis(ch.imu, ax, params_from_terms(est.terms()))
+            self.baseline.set_axis(ch.imu, ax, _health_params(est.terms(full=True) if est.kind == "octave" else est.terms()))
+        self.baseline.meta[ch.imu] = stream_meta(ch)
         ch.learn = {}
         b = self.baseline.get(ch.imu, "gx") or {}
         n = b.get("N", (math.nan, math.nan))[0]
@@ -321,12 +330,20 @@ class Pipeline:
         self.reporter.statustext(f"IMU{ch.imu} gyro baseline learned", MAV_SEVERITY_NOTICE)
 
     # ------------------------------------------------------------------ checks and reports
-    def current_params(self, ch: Channel, ax: str) -> dict[str, tuple[float, float]]:
-        fast = params_from_terms(ch.fast[ax].terms())
-        slow = params_from_terms(ch.slow[ax].terms())
-        out = {p: v for p, v in fast.items() if p in FAST_PARAMS}
-        out.update({p: v for p, v in slow.items() if p in SLOW_PARAMS})
-        return out
+    # --- online report (issue 13): one code path with `analyze --online` (companion.estimators.report) ---
+    def report_terms(self, ch: Channel, ax: str, full: bool = False) -> list[dict]:
+        """The reported terms of one axis (SI; resolved values and 95 % bounds, ``"bound": True``): Q and N
+        from the fast estimator, B, K, R, Gauss-Markov and sinusoid from the slow one."""
+        def terms(est):
+            return est.terms(full=full) if est.kind == "octave" else est.terms()
+
+        fast = [t for t in terms(ch.fast[ax]) if t["effect"] in ("quantization", "white_noise")]
+        slow = [t for t in terms(ch.slow[ax]) if t["effect"] not in ("quantization", "white_noise")]
+        return fast + slow
+
+    def current_params(self, ch: Channel, ax: str, terms=None) -> dict[str, tuple[float, float]]:
+        """``{param: (value, std)}`` of the resolved parameters (a bound is not compared with a baseline)."""
+        return _health_params(self.report_terms(ch, ax) if terms is None else terms)
 
     def _check(self, ch: Channel, t: float) -> None:
         ch.next_check_t = t + self.cfg.check_s
@@ -336,14 +353,21 @@ class Pipeline:
             return
         effects_params = None
         for ax in ch.axes:
-            cur = self.current_params(ch, ax)
+            terms = self.report_terms(ch, ax)
+            cur = self.current_params(ch, ax, terms)
             ch.current[ax] = cur
             if effects_params is None:
                 effects_params = set(cur)
-            self.reporter.set_terms(ch.imu, ax, {p: v for p, (v, s) in cur.items()})
+            self.reporter.set_online_terms(ch.imu, ax, terms)
             base = self.baseline.get(ch.imu, ax) if self.baseline is not None else None
             if base is None or ch.learn:
                 continue
+            bad = units_mismatch(base, cur) if self.baseline_fixed and not self.cfg.baseline_force else None
+            if bad:
+                from companion.errors import CompanionError
+
+                raise CompanionError(f"baseline {self.baseline.source} does not match IMU{ch.imu} {ax}: {bad}; "
+                                     "use a baseline of this stream or --baseline-force")
             for tr in ch.detector.check(ax, cur, base):
                 text = tr.text()
                 self.transitions.append((t, text))
@@ -372,7 +396,8 @@ class Pipeline:
             if ch.fast and ch.fed_s > 0:
                 self._flush_feed(ch)
                 for ax in ch.axes:
-                    row["axes"][ax] = {"current": self.current_params(ch, ax),
+                    terms = self.report_terms(ch, ax, full=True)
+                    row["axes"][ax] = {"current": self.current_params(ch, ax, terms), "terms": terms,
                                        "baseline": self.baseline.get(imu, ax) if self.baseline else None}
             out.append(row)
         return out

@@ -1,0 +1,330 @@
+"""What an online estimator reports: the model chosen from the data, resolved values and 95 % bounds.
+
+One code path for ``companion analyze --online`` and ``companion run`` (numpy/scipy only).
+
+Model. The octave bank's Allan variances are fitted with every effect of the offline model as a
+candidate (quantization, white_noise, bias_instability, random_walk, ramp, gauss_markov, sinusoid): the
+offline procedure :func:`companion.allan.fit.fit_avar` with its automatic selection (BIC over N, B, K;
+the other effects, including one Gauss-Markov term with its correlation time and one sinusoid with its
+frequency, only on very strong evidence; GLS with the full model covariance of the Allan estimates).
+A correlated term the data show is therefore in the model, and its power does not land in N.
+
+Report. For every linear candidate (Q, N, B, K, R):
+
+- *resolved*: the term is in the selected model and the lower end of its 95 % interval is above 0:
+  ``{"effect", p: value, "std": {p: 1-sigma}, "ci95": {p: [lo, hi]}, "bound": False}``;
+- otherwise a one-sided 95 % *upper bound*: the term is added to the selected model, the GLS is solved
+  with theta = p^2 >= 0, and ``ub^2 = max(theta, 0) + 1.645 sd(theta)`` (sd from the inverse Fisher
+  information of the GLS; at theta = 0 the marginal with theta freed):
+  ``{"effect", p: ub, "std": {p: ...}, "ci95": {p: [0, ub]}, "bound": True}``.
+
+Gauss-Markov and sinusoid terms are reported only when selected (their bound would depend on the
+unknown shape parameter). Intervals: fit_avar's (scaled chi-square, Satterthwaite); 1-sigma = 95 %
+width / 3.92. Coverage is measured in benchmarks/bench_online.py (``coverage``).
+
+Speed. The selection costs 0.2-1 s. :class:`Structure` keeps the chosen model and the covariance of
+the Allan estimates at the time of the selection; until the data have grown by ``RESELECT`` (x1.5, or
+by 30 min of samples) the
+coefficients are re-solved with that structure (covariance rescaled by the model ratio per level and by
+the number of samples; a few ms), which is what ``companion run`` does between selections.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.allan.fit import BASE_EFFECTS
+from companion.allan.terms import EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM
+
+#: every effect of the offline model is a candidate of the online model
+CANDIDATES = EFFECTS
+#: one-sided 95 % normal quantile (upper bounds)
+Z_UPPER = 1.6448536269514722
+#: re-select the model when the data have grown by this factor since the last selection, or by this many
+#: seconds of samples (so that a long run with forgetting still re-selects now and then)
+RESELECT = 1.5
+RESELECT_MAX_S = 1800.0
+NL_PARAMS = {"gauss_markov": ("sigma", "tau_c"), "sinusoid": ("amplitude", "freq_hz")}
+
+
+@dataclass
+class Structure:
+    """The selected model and the covariance of the Allan estimates when it was selected."""
+
+    linear: list
+    nonlin: list  # [(effect, shape)]
+    m: np.ndarray  # cluster sizes of the fitted levels
+    cov: np.ndarray  # SI covariance of the Allan estimates at those levels
+    model: np.ndarray  # model AVAR at those levels at selection time
+    n: float  # (effective) samples at selection time
+    n_raw: int  # samples seen at selection time (for the re-selection rule)
+    model_error: float = 0.0
+    nl_ci: dict | None = None  # profile intervals of the nonlinear terms from the selection fit
+
+
+def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ratio=256):
+    """Select the model from the levels with :func:`companion.allan.fit.fit_avar` (automatic selection over
+    ``candidates``). Returns ``(FitResult, Structure)``."""
+    from companion.allan.confidence import edf_simple
+    from companion.allan.fit import fit_avar
+
+    tau = np.asarray(tau, float)
+    m = np.round(tau * rate_hz).astype(np.int64)
+    n = max(int(n), int(2 * m.max() + 2)) if m.size else int(n)
+    edf0 = np.maximum(edf_simple(n + 1, m, 0), 0.5)
+    fr = fit_avar(tau, avar, edf0, effects=list(candidates), n=n, rate_hz=rate_hz, m=m, max_ratio=max_ratio,
+                  select=True)
+    return fr, structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw)
+
+
+def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure:
+    """The :class:`Structure` of a :func:`companion.allan.fit.fit_avar` result on the levels ``tau, avar``."""
+    tau = np.asarray(tau, float)
+    m = np.round(tau * rate_hz).astype(np.int64)
+    edf0 = np.asarray(edf0, float)
+    linear = [t["effect"] for t in fr.terms if t["effect"] in LINEAR_EFFECTS]
+    nonlin = [(t["effect"], float(t[NL_PARAMS[t["effect"]][1]])) for t in fr.terms if t["effect"] in NL_PARAMS]
+    keep = np.isin(np.round(tau * rate_hz).astype(np.int64), np.round(fr.tau * rate_hz).astype(np.int64))
+    cov = fr.avar_cov if fr.avar_cov is not None else np.diag(2.0 * np.asarray(avar)[keep] ** 2 / edf0[keep])
+    model = np.maximum(np.asarray(fr.avar_fit, float), 1e-300) if len(fr.avar_fit) else np.asarray(avar)[keep]
+    nl_ci = {t["effect"]: t.get("ci95", {}) for t in fr.terms if t["effect"] in NL_PARAMS}
+    return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
+                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci)
+
+
+def bounds_for_fit(fr, tau, avar, edf0, rate_hz, n, effects=("white_noise", "bias_instability", "random_walk")):
+    """95 % upper bounds (report format, ``"bound": True``) of the ``effects`` an offline fit left out, with
+    the same rule as the online report: what ``companion analyze`` prints instead of '-'."""
+    if not fr.terms:
+        return []
+    st = structure_from_fit(fr, tau, avar, edf0, rate_hz, n)
+    keep = np.isin(np.round(np.asarray(tau, float) * rate_hz).astype(np.int64), st.m)
+    have = {t["effect"] for t in fr.terms}
+    missing = tuple(e for e in effects if e not in have)
+    if not missing:
+        return []
+    return [t for t in report(np.asarray(tau, float)[keep], np.asarray(avar, float)[keep], st, missing)
+            if t.get("bound")]
+
+
+def _problem(tau, avar, cov):
+    from companion.allan.fit import _Problem
+
+    scale = float(np.median(avar[avar > 0])) if np.any(avar > 0) else 1.0
+    return _Problem(tau, avar / scale, cov / scale**2), scale
+
+
+def _marginal_var(prob, A, theta, i):
+    """Variance of theta_i from the Fisher information, with theta_i freed if it sits at the bound 0."""
+    Aw = prob._w(A)
+    F = Aw.T @ Aw
+    idx = np.flatnonzero((theta > 0) | (np.arange(A.shape[1]) == i))
+    cov = np.linalg.pinv(F[np.ix_(idx, idx)])
+    return float(cov[list(idx).index(i), list(idx).index(i)])
+
+
+def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95):
+    """Resolved terms and bounds (see the module docstring) from the levels ``tau, avar`` (restricted to the
+    structure's levels) and the covariance ``cov`` of the Allan estimates (default: the structure's)."""
+    from companion.allan.fit import _columns, _scaled_chi2_ci
+
+    tau = np.asarray(tau, float)
+    avar = np.asarray(avar, float)
+    cov = st.cov if cov is None else cov
+    out = []
+    if tau.size == 0 or not np.any(avar > 0):
+        return out
+    prob, scale = _problem(tau, avar, cov)
+    A = _columns(st.linear, st.nonlin, tau)
+    theta, _ = prob.solve(A) if A.shape[1] else (np.zeros(0), 0.0)
+    cov_t = np.zeros((len(theta), len(theta)))
+    act = theta > 0
+    if act.any():
+        cov_t[np.ix_(act, act)] = prob.cov_theta(A[:, act])
+    # selection uncertainty: the interval of a resolved term is the envelope of its intervals in the selected
+    # model and in the model with every base effect (N, B, K) forced in -- a base effect the selection left
+    # out (e.g. a bias instability hidden under a Gauss-Markov hump) can otherwise shift N beyond its interval
+    sup = [x for x in LINEAR_EFFECTS if x in st.linear or (x in BASE_EFFECTS and x in candidates)]
+    A_s = _columns(sup, st.nonlin, tau)
+    th_s, _ = prob.solve(A_s)
+    cov_s = np.zeros((len(th_s), len(th_s)))
+    act_s = th_s > 0
+    if act_s.any():
+        cov_s[np.ix_(act_s, act_s)] = prob.cov_theta(A_s[:, act_s])
+    resolved = {}
+    for j, e in enumerate(st.linear):
+        if theta[j] <= 0:
+            continue
+        lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
+        if lo > 0:
+            p = LINEAR_PARAM[e]
+            k = sup.index(e)
+            if th_s[k] > 0 and list(sup) != list(st.linear):
+                lo_s, hi_s = _scaled_chi2_ci(th_s[k], cov_s[k, k], level)
+                lo, hi = min(lo, lo_s), max(hi, hi_s)
+            v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
+            resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
+                           "bound": False}
+    for e in LINEAR_EFFECTS:
+        if e not in candidates:
+            continue
+        if e in resolved:
+            out.append(resolved[e])
+            continue
+        p = LINEAR_PARAM[e]
+        lin = [x for x in LINEAR_EFFECTS if x == e or (x in st.linear and x != e)]
+        A2 = _columns(lin, st.nonlin, tau)
+        th2, _ = prob.solve(A2)
+        i = lin.index(e)
+        var = _marginal_var(prob, A2, th2, i)
+        th_i = max(float(th2[i]), 0.0)
+        ub = th_i + Z_UPPER * math.sqrt(max(var, 0.0))
+        ub_p = math.sqrt(ub * scale)
+        sd_p = math.sqrt((th_i + math.sqrt(max(var, 0.0))) * scale) - math.sqrt(th_i * scale)
+        out.append({"effect": e, p: ub_p, "std": {p: sd_p}, "ci95": {p: [0.0, ub_p]}, "bound": True})
+    for k, (e, shape) in enumerate(st.nonlin):
+        j = len(st.linear) + k
+        if theta[j] <= 0:
+            continue
+        lp, sp = NL_PARAMS[e]
+        lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
+        v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
+        ci = dict((st.nl_ci or {}).get(e, {}))
+        lo_p, hi_p = min(lo_p, ci.get(lp, [lo_p])[0]), max(hi_p, ci.get(lp, [0, hi_p])[1])
+        out.append({"effect": e, lp: v, sp: shape, "std": {lp: (hi_p - lo_p) / 3.92},
+                    "ci95": {lp: [lo_p, hi_p], sp: list(ci.get(sp, [shape, shape]))}, "bound": False})
+    return out
+
+
+def rescaled_cov(st: Structure, tau, avar, n):
+    """The selection-time covariance rescaled to the current data: per level by the ratio of the current
+    fitted model to the selection-time model (AVAR estimates' sd scale with the AVAR), and by n_sel / n."""
+    from companion.allan.fit import _columns
+
+    prob, scale = _problem(tau, avar, st.cov * (st.n / max(float(n), 1.0)))
+    A = _columns(st.linear, st.nonlin, tau)
+    if A.shape[1] == 0:
+        return st.cov
+    theta, _ = prob.solve(A)
+    model = np.maximum(A @ theta * scale, 1e-300)
+    r = model / st.model
+    return st.cov * (st.n / max(float(n), 1.0)) * np.outer(r, r)
+
+
+def estimator_report(est, candidates=None, full=False):
+    """The report of an :class:`companion.estimators.octave_bank.OctaveBankEstimator` (``fit="model"``):
+    a fresh selection when ``full`` or when due (no structure yet, or the data grew by RESELECT), else the
+    cached structure with a rescaled covariance. Caches the structure on ``est._structure``."""
+    candidates = tuple(candidates or est.effects)
+    tau, avar, edf = est.avar()
+    use = edf >= est.min_edf
+    tau, avar, edf = tau[use], avar[use], edf[use]
+    if tau.size < 3 or not np.any(avar > 0):
+        return []
+    n_eff = est.n_effective()
+    st = getattr(est, "_structure", None)
+    m_now = np.round(tau * est.rate_hz).astype(np.int64)
+    due = st is None or est.n_samples >= RESELECT * st.n_raw or est.n_samples - st.n_raw >= RESELECT_MAX_S * est.rate_hz
+    if full or due or not np.all(np.isin(st.m, m_now)):
+        _, st = select(tau, avar, edf, n_eff, est.rate_hz, candidates, n_raw=est.n_samples)
+        est._structure = st
+        cov = None
+    else:
+        cov = None
+    keep = np.isin(m_now, st.m)
+    tau, avar = tau[keep], avar[keep]
+    if cov is None and st.n_raw != est.n_samples:
+        cov = rescaled_cov(st, tau, avar, n_eff)
+    return report(tau, avar, st, candidates, cov=cov)
+
+
+# ---------------------------------------------------------------- presentation (tables, summaries)
+def value_of(terms, param):
+    """``(value, std, bound)`` of ``param`` in a list of reported terms, or None."""
+    for t in terms or ():
+        if param in t and param in t.get("std", {}):
+            return float(t[param]), float(t["std"][param]), bool(t.get("bound", False))
+    return None
+
+
+def health_params(terms):
+    """``{param: (value, std)}`` of the resolved linear parameters only: a bound is no value to compare."""
+    out = {}
+    for t in terms or ():
+        p = LINEAR_PARAM.get(t.get("effect"))
+        if p and not t.get("bound") and p in t:
+            out[p] = (float(t[p]), float(t.get("std", {}).get(p, math.inf)))
+    return out
+
+
+def _fmt(v: float) -> str:
+    if v == 0 or not math.isfinite(v):
+        return f"{v:g}"
+    return f"{v:.3g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.2e}"
+
+
+def _digits(v: float, s: float | None) -> str:
+    """``v`` with two significant digits of its uncertainty ``s`` (3 significant digits without one)."""
+    if s is None or not (s > 0 and math.isfinite(s)) or not math.isfinite(v) or abs(v) >= 1e5 or abs(v) < 1e-3:
+        return _fmt(v)
+    dec = max(0, 1 - math.floor(math.log10(s)))
+    return f"{v:.{dec}f}"
+
+
+def cell(terms, param, axis, interval=True) -> str:
+    """Table text of one reported parameter in datasheet units: ``1.047 [1.041, 1.053]`` for a resolved
+    value (``1.047 +- 0.0031`` with ``interval=False``; digits from the uncertainty), ``< 3.1`` for a 95 %
+    upper bound, ``n/a`` when the parameter was not estimated."""
+    from companion import units
+
+    for t in terms or ():
+        if param in t and param not in ("tau_c", "freq_hz"):
+            v = units.to_datasheet(param, t[param], axis)
+            s = t.get("std", {}).get(param)
+            s = units.to_datasheet(param, s, axis) if s is not None else None
+            if t.get("bound"):
+                return f"< {_fmt(v)}"
+            if interval and param in t.get("ci95", {}):
+                lo, hi = (units.to_datasheet(param, x, axis) for x in t["ci95"][param])
+                return f"{_digits(v, s)} [{_digits(lo, s)}, {_digits(hi, s)}]"
+            return f"{_digits(v, s)} +- {_fmt(float(f'{s:.2g}'))}" if s is not None else _fmt(v)
+    return "n/a"
+
+
+def extra_text(terms, axis) -> list[str]:
+    """Text of the resolved terms other than N, B, K (Q, R, Gauss-Markov, sinusoid) in datasheet units."""
+    from companion import units
+
+    out = []
+    for t in terms or ():
+        e = t.get("effect")
+        if t.get("bound") or e in ("white_noise", "bias_instability", "random_walk"):
+            continue
+        if e in NL_PARAMS:
+            lp, sp = NL_PARAMS[e]
+            out.append(f"{e} {lp} {cell([t], lp, axis, False)} {units.datasheet_unit(lp, axis)}, "
+                       f"{sp} {_fmt(t[sp])} {units.datasheet_unit(sp, axis)}")
+        else:
+            p = LINEAR_PARAM[e]
+            out.append(f"{p} {cell([t], p, axis, False)} {units.datasheet_unit(p, axis)}")
+    return out
+
+
+def summary_line(terms, axis, baseline=None) -> str:
+    """One line per axis for ``companion run``'s summary: N, B, K (value +- 1-sigma, or ``< bound``), the
+    ratio to a resolved baseline value for resolved values, then the other resolved terms."""
+    from companion import units
+
+    parts = []
+    for p in ("N", "B", "K"):
+        txt = cell(terms, p, axis, interval=False)
+        if txt == "n/a":
+            continue
+        vb = value_of(terms, p)
+        if baseline and vb and not vb[2] and p in baseline and baseline[p][0] > 0:
+            txt += f" ({vb[0] / baseline[p][0]:.2f}x baseline)"
+        parts.append(f"{p} {txt} {units.datasheet_unit(p, axis)}")
+    return "; ".join(parts + extra_text(terms, axis))

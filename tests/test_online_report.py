@@ -1,0 +1,92 @@
+"""The online report (companion.estimators.report): the model chosen from the data, resolved values and
+95 % upper bounds, against simulated truth over several seeds (calibration over 100 seeds is measured by
+benchmarks/bench_online.py coverage)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from companion.estimators import from_state_dict, make_estimator, online_terms
+from companion.mavlink.reporter import NAME_RE, Reporter
+from companion.sim.synth import synthesize_axis
+
+FS = 50.0
+
+
+def by_effect(terms):
+    return {t["effect"]: t for t in terms}
+
+
+def covers(t, p, truth):
+    lo, hi = t["ci95"][p]
+    return lo <= truth <= hi
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_absent_terms_are_bounds_present_terms_resolved(seed):
+    truth = [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "bias_instability", "B": 1.5e-4}]
+    y = synthesize_axis(truth, FS, int(3600 * FS), np.random.default_rng(seed))
+    on = by_effect(online_terms(y, FS))
+    assert not on["white_noise"]["bound"] and covers(on["white_noise"], "N", 3.0e-4)
+    assert not on["bias_instability"]["bound"] and covers(on["bias_instability"], "B", 1.5e-4)
+    for e, p in (("random_walk", "K"), ("quantization", "Q"), ("ramp", "R")):
+        assert on[e]["bound"] and on[e]["ci95"][p] == [0.0, on[e][p]] and on[e][p] > 0
+    assert "gauss_markov" not in on and "sinusoid" not in on
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_gauss_markov_is_in_the_model_and_n_is_not_inflated(seed):
+    truth = [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "gauss_markov", "sigma": 6.0e-4, "tau_c": 20.0}]
+    y = synthesize_axis(truth, FS, int(3600 * FS), np.random.default_rng(10 + seed))
+    on = by_effect(online_terms(y, FS))
+    assert covers(on["white_noise"], "N", 3.0e-4)
+    assert abs(on["white_noise"]["N"] / 3.0e-4 - 1) < 0.02
+    gm = on["gauss_markov"]
+    assert covers(gm, "sigma", 6.0e-4) and covers(gm, "tau_c", 20.0)
+    assert on["random_walk"]["bound"]
+
+
+def test_quick_refit_between_selections_and_state_round_trip():
+    truth = [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "random_walk", "K": 6.0e-5}]
+    y = synthesize_axis(truth, FS, int(3600 * FS), np.random.default_rng(5))
+    est = make_estimator("octave", rate_hz=FS)
+    est.update(y[: y.size // 2])
+    est.terms()  # selects the model
+    est.update(y[y.size // 2: y.size // 2 + y.size // 10])  # +20 %: no re-selection (x1.5 due), quick refit
+    quick = by_effect(est.terms())
+    full = by_effect(from_state_dict(est.state_dict()).terms())  # a restored estimator selects afresh
+    for p, e in (("N", "white_noise"), ("K", "random_walk")):
+        assert quick[e]["bound"] is full[e]["bound"] is False
+        assert abs(quick[e][p] / full[e][p] - 1) < 0.05
+        assert 0.5 < quick[e]["std"][p] / full[e]["std"][p] < 2.0
+
+
+class Sink:
+    def __init__(self):
+        self.sent = {}
+
+    def send_named_value_float(self, ms, name, value):
+        self.sent[name] = value
+
+    def send_statustext(self, sev, text):
+        pass
+
+
+def test_named_value_float_sigmas_and_bounds():
+    rep = Reporter(Sink(), 1.0)
+    terms = [{"effect": "white_noise", "N": 2.909e-4, "std": {"N": 2.909e-6}, "ci95": {"N": [2.85e-4, 2.97e-4]},
+              "bound": False},
+             {"effect": "random_walk", "K": 8.08e-6, "std": {"K": 1e-6}, "ci95": {"K": [0.0, 8.08e-6]}, "bound": True},
+             {"effect": "gauss_markov", "sigma": 4.848e-4, "tau_c": 20.0, "std": {"sigma": 4.848e-5},
+              "ci95": {"sigma": [4e-4, 6e-4], "tau_c": [15.0, 26.0]}, "bound": False}]
+    rep.set_online_terms(0, "gx", terms)
+    v = rep.values
+    assert all(NAME_RE.match(n) for n in v)
+    assert v["IMU0GX_N"] == pytest.approx(1.0, rel=1e-3) and v["IMU0GX_NS"] == pytest.approx(0.01, rel=1e-3)
+    assert v["IMU0GX_K"] == pytest.approx(100.0, rel=1e-3) and v["IMU0GX_KS"] == -1.0  # a bound
+    assert v["IMU0GX_GM"] == pytest.approx(100.0, rel=1e-3) and v["IMU0GX_GMS"] == pytest.approx(10.0, rel=1e-3)
+    assert v["IMU0GX_GMT"] == 20.0
+    rep.set_online_terms(0, "gx", terms[:2])  # the Gauss-Markov term is no longer resolved: its names stop
+    assert not any(n.startswith("IMU0GX_GM") for n in rep.values)
+    assert rep.tick(0.0) == 1 and rep.tick(1.0) >= 1

@@ -1,0 +1,92 @@
+"""`companion run` reports (issue 13): nothing invented on a healthy replay, 1-sigma and bound markers in
+NAMED_VALUE_FLOAT, a baseline that must match the stream."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.cli.main import main
+from companion.mavlink.reporter import NAME_RE, Reporter
+from companion.samples import StreamKey
+from companion.service.pipeline import Pipeline, PipelineConfig
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLE = ROOT / "tlogs" / "sample.tlog"
+KEY = StreamKey(1, 1, "HIGHRES_IMU", 0)
+FS = 50.0
+N_TRUE = 1.0e-3  # rad/s/sqrt(Hz), white noise only: no B, no K
+
+
+class Sink:
+    def __init__(self):
+        self.values, self.texts = {}, []
+
+    def send_named_value_float(self, ms, name, value):
+        self.values[name] = value
+
+    def send_statustext(self, sev, text):
+        self.texts.append(text)
+
+
+@pytest.mark.parametrize("seed", [0])
+def test_healthy_white_noise_replay_invents_no_b_or_k(seed):
+    rng = np.random.default_rng(seed)
+    sink = Sink()
+    p = Pipeline(PipelineConfig.from_mapping({"baseline_s": 300}), Reporter(sink, 1.0))
+    n = int(1200 * FS)
+    g = rng.normal(0.0, N_TRUE * math.sqrt(FS), (n, 3))
+    a = np.array([0.0, 0.0, -9.80665]) + rng.normal(0.0, 0.02, (n, 3))
+    for k in range(n):
+        p.on_sample(KEY, k / FS, g[k], a[k])
+    v = sink.values
+    assert all(NAME_RE.match(name) for name in v)
+    for ax in "XYZ":
+        assert v[f"IMU0G{ax}_BS"] == -1.0 and v[f"IMU0G{ax}_KS"] == -1.0  # bounds, not values
+        n_dh = N_TRUE / (math.pi / 180.0 / 60.0)
+        assert abs(v[f"IMU0G{ax}_N"] / n_dh - 1.0) < 4 * v[f"IMU0G{ax}_NS"] / n_dh + 1e-9
+        assert v[f"IMU0G{ax}_NS"] > 0
+    assert not any("degrading" in t for t in sink.texts)
+    assert v["IMU0G_HLTH"] == 0.0
+    ch = p.channels[0]
+    for ax in ("gx", "gy", "gz"):
+        assert set(p.current_params(ch, ax)) == {"N"}  # bounds are never compared with the baseline
+
+
+def baseline_file(tmp_path, message="RAW_IMU", rate=50.0, lsb=1e-3, scale=1.0):
+    axes = {}
+    for ax, n in (("gx", 3.5e-4), ("gy", 3.0e-4), ("gz", 4.0e-4)):
+        n = math.hypot(n, 4.1e-5) * scale
+        axes[ax] = {"terms": [{"effect": "white_noise", "N": n, "ci95": {"N": [0.99 * n, 1.01 * n]}}],
+                    "quantization": None if lsb is None else {"lsb": lsb}}
+    path = tmp_path / "base.json"
+    path.write_text(json.dumps({"source": "x", "streams": [{"message": message, "instance": 0, "sysid": 1,
+                                                            "compid": 1, "rate_hz": rate, "axes": axes}]}))
+    return str(path)
+
+
+@pytest.mark.parametrize("kw, msg", [
+    ({"message": "CSV", "rate": 100.0, "lsb": None}, "message CSV vs stream RAW_IMU; rate 100 Hz vs stream 50 Hz; "
+                                                      "gyro LSB none (float) vs stream 0.001 rad/s"),
+    ({"rate": 200.0}, "rate 200 Hz vs stream 50 Hz"),
+    ({"lsb": 2e-3}, "gyro LSB 0.002 rad/s vs stream 0.001 rad/s"),
+    ({"scale": 3437.75}, "not SI units"),  # N written in deg/sqrt(h) instead of rad/s/sqrt(Hz)
+])
+def test_a_baseline_of_another_stream_is_one_error_line(tmp_path, capsys, kw, msg):
+    path = baseline_file(tmp_path, **kw)
+    rc = main(["run", "--source", str(SAMPLE), "--baseline", path, "--quiet", "--no-state"])
+    err = capsys.readouterr().err
+    assert rc == 2 and msg in err and "--baseline-force" in err and len(err.strip().splitlines()) == 1
+    if "scale" not in kw:
+        rc = main(["run", "--source", str(SAMPLE), "--baseline", path, "--baseline-force", "--quiet", "--no-state"])
+        assert rc == 0
+
+
+def test_a_matching_baseline_is_accepted(tmp_path, capsys):
+    rc = main(["run", "--source", str(SAMPLE), "--baseline", baseline_file(tmp_path), "--quiet", "--no-state"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "healthy" in out and "degrading" not in out
