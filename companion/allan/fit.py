@@ -55,11 +55,9 @@ from scipy.optimize import brentq, minimize_scalar, nnls
 from scipy.stats import chi2 as chi2_dist
 
 from companion.allan.confidence import oavar_covariance
-from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term, linear_basis
+from companion.allan.terms import BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term, linear_basis
 
 NONLINEAR_EFFECTS = ("gauss_markov", "sinusoid")
-#: the usual gyro model (IEEE 952): every subset of these is compared by BIC
-BASE_EFFECTS = ("white_noise", "bias_instability", "random_walk")
 #: quantization, ramp, gauss_markov and sinusoid enter only if they lower the BIC by more than this
 #: ("very strong" evidence on the scale of Kass & Raftery 1995: 2 ln(Bayes factor) > 10)
 EXTRA_BIC_MARGIN = 10.0

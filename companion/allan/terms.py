@@ -55,6 +55,8 @@ OPTIONAL_PARAMS: dict[str, tuple[str, ...]] = {"bias_instability": ("f0",)}
 
 #: The five linear terms of Miao et al. 2014, x = [Q N B K R], eq. (3.5).
 LINEAR_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
+#: the usual gyro model (IEEE 952): every subset of these is compared by BIC (companion.allan.fit)
+BASE_EFFECTS = ("white_noise", "bias_instability", "random_walk")
 LINEAR_PARAM = {"quantization": "Q", "white_noise": "N", "bias_instability": "B", "random_walk": "K", "ramp": "R"}
 
 BIAS_PLATEAU = 2.0 * math.log(2.0) / math.pi  # 0.4413: AVAR plateau / B^2 (ADEV plateau 0.6643 B)

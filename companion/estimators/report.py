@@ -36,8 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.allan.fit import BASE_EFFECTS
-from companion.allan.terms import EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM
+from companion.allan.terms import BASE_EFFECTS, EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM
 
 #: every effect of the offline model is a candidate of the online model
 CANDIDATES = EFFECTS
