@@ -7,11 +7,14 @@ memory ``FIT_TAU_BLOCKS``; entries clipped to +-0.1 so that a frozen gyro can ne
 scale factor of -1); blocks with evidence of a fault are not fitted. c is a slowly tracking reference
 (EWMA over ``REF_TAU_BLOCKS`` blocks, frozen while evidence builds and during a fault).
 
-Statistic per block and axis: the mean residual d = mean(y_i) - mean(y_j)(I + E) - c and its
-uncertainty sigma_d^2 = 2 var(r) / n (white part, doubled for colour) + sigma_n^2 m^T (S + lambda I)^-1 m
+Statistics per block and axis: the mean residual d = mean(y_i) - mean(y_j)(I + E) - c and its
+uncertainty sigma_d^2 = 2 var_w(r) / n (var_w: the white variance of the residual from its second
+differences, doubled for colour) + sigma_n^2 m^T (S + lambda I)^-1 m
 (the predictive variance of the fitted E at the block's mean rate m: the regression's own uncertainty, so
 the first seconds of a flight, before E is known, are tested with the 3 % prior and not falsely).
-Two CUSUMs (faults eq. (1)) of the Gaussian mean-shift LLR with delta = +-0.5 deg/s, h = 15. A +1 deg/s
+Two CUSUMs (faults eq. (1)) of the Gaussian mean-shift LLR with delta = +-0.5 deg/s, h = 15, each fed
+the larger of that LLR and the chi-square LLR of a residual white-variance rise by 4 against the sum of
+both IMUs' still noise references (a gyro frozen or noisy in steady flight). A +1 deg/s
 bias of one IMU: about 10 nats per block once E is fitted; a gyro frozen in flight: the whole rotation
 rate shows in d (and stuck.py flags it anyway).
 
@@ -26,7 +29,7 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.faults import FAULT, OK, Cusum, gauss_mean_llr
+from companion.health.faults import DD_NU_PER_SAMPLE, FAULT, OK, Cusum, chi2_llr, gauss_mean_llr
 
 DEG = math.pi / 180.0
 DELTA = 0.5 * DEG
@@ -38,6 +41,7 @@ FIT_TAU_BLOCKS = 600.0
 REF_TAU_BLOCKS = 60.0
 MOTION_RMS = 0.02  # rad/s: a block with this much (demeaned) rotation is fitted
 WARM_BLOCKS = 5
+VAR_R1 = 4.0  # residual white variance rise the variance LLR is tuned to (2x its std)
 
 
 class PairDisagreement:
@@ -70,8 +74,8 @@ class PairDisagreement:
         xi, xj = yi - mi, yj - mj
         r = (yi - yj - yj @ self.E)
         d0 = r.mean(axis=0)
-        var_r = r.var(axis=0, ddof=1)
-        sig_n2 = float(noise_var) if noise_var else float(np.max(_white_var(r)))
+        var_r = _white_var(r)  # the white part: a healthy residual is white; a disagreement is not
+        sig_n2 = float(noise_var) if noise_var else float(np.max(var_r))
         sig_n2 = max(sig_n2, 1e-14)
         lam = sig_n2 / PRIOR_STD ** 2
         P = np.linalg.inv(self.S + lam * np.eye(3))
@@ -83,13 +87,17 @@ class PairDisagreement:
         changed = []
         evidence = False
         self.blocks += 1
+        nu = DD_NU_PER_SAMPLE * (m - 2)
         for a in range(3):
             if self.blocks <= WARM_BLOCKS:
                 break
             was = self.axis_state(a)
             s = math.sqrt(var_d[a])
-            self.up[a].step(gauss_mean_llr(d[a], s, DELTA))
-            self.down[a].step(gauss_mean_llr(-d[a], s, DELTA))
+            llr_v = chi2_llr(var_r[a] / noise_var, nu, VAR_R1) if noise_var else -math.inf
+            # the mean-shift CUSUMs carry the residual-variance evidence too (a frozen or very noisy gyro
+            # during steady flight has little mean offset but a residual that is no longer white noise)
+            self.up[a].step(max(gauss_mean_llr(d[a], s, DELTA), llr_v))
+            self.down[a].step(max(gauss_mean_llr(-d[a], s, DELTA), llr_v))
             if self.axis_state(a) != was:
                 changed.append(a)
                 self.value[a] = d[a] / DEG

@@ -156,7 +156,7 @@ DD_NU_PER_SAMPLE = 2.0 / (140.0 / 36.0)
 class BlockStats:
     """Statistics of one block of one IMU (arrays of shape (3,), one per gyro axis).
 
-    * ``n``: samples; ``mean``: block mean (rad/s); ``rms``: root mean square (rad/s)
+    * ``n``: samples; ``mean``: block mean without the spike samples (rad/s); ``rms``: root mean square
     * ``v2``: white-noise variance from the second differences dd_k = y_k - 2 y_{k-1} + y_{k-2}, with the
       outliers (and their neighbours) left out: v2 = mean(dd^2) / 6. Smooth motion (a hand turning the
       vehicle, below ~2 Hz) barely enters (its second difference is (2 pi f / fs)^2 times its amplitude).
@@ -211,6 +211,10 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     bad[1:] |= out[:-1]
     bad[:-1] |= out[1:]
     keep = ~bad
+    spike_sample = np.zeros(y.shape, dtype=bool)  # dd_j is centred on sample j + 1
+    spike_sample[1:-1] = out
+    clean = ~spike_sample
+    mean = np.where(clean.any(axis=0), np.sum(np.where(clean, y, 0.0), axis=0) / np.maximum(clean.sum(axis=0), 1), mean)
     m2 = keep.sum(axis=0)
     v2 = np.where(m2 > 0, np.sum(np.where(keep, dd * dd, 0.0), axis=0) / np.maximum(m2, 1) / 6.0, np.nan)
     return BlockStats(n, mean, rms, v2, m2.astype(float), spikes, spikes_solo, top, top_run, changes)

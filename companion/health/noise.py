@@ -33,6 +33,7 @@ class NoiseDetector:
     def __init__(self):
         self.cusum = Cusum(H_ON, H_OFF)
         self.u_avg = math.nan
+        self.run: list = []
         self.value = math.nan
 
     @property
@@ -44,10 +45,13 @@ class NoiseDetector:
             return False
         u = v2 / ref.sigma2
         if self.cusum.state == OK and self.cusum.s == 0.0:
-            self.u_avg = u
-        else:
-            self.u_avg = u if not math.isfinite(self.u_avg) else (1 - EWMA_W) * self.u_avg + EWMA_W * u
+            self.run = []
+        self.run.append(u)
+        self.u_avg = u if not math.isfinite(self.u_avg) else (1 - EWMA_W) * self.u_avg + EWMA_W * u
         changed = self.cusum.step(chi2_llr(u, ref.nu, R1))
+        if changed and self.cusum.state != OK:  # the ratio quoted: the last blocks of the evidence
+            last = self.run[-3:]
+            self.u_avg = sum(last) / len(last)
         self.value = math.sqrt(max(self.u_avg, 0.0))
         return changed
 

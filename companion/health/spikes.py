@@ -53,7 +53,8 @@ class SpikeDetector:
         self.run[0] += int(count)
         self.run[1] += int(n)
         changed = self.cusum.step(llr)
-        self.value = 100.0 * (self.run[0] / self.run[1] if self.run[1] else self.rate)
+        # the run starts at a spike: leave that one out (a Poisson rate counted from an event is biased)
+        self.value = 100.0 * (max(self.run[0] - 1, 1) / self.run[1] if self.run[1] else self.rate)
         if changed and self.cusum.state == 0:
             self.value = 100.0 * self.rate
         return changed

@@ -348,10 +348,11 @@ class Pipeline:
         * accel: |accel| std above ``accel_std``, the mean accel vector ``accel_shift`` away from the
           still reference (a new attitude), or an accel axis' std above ``accel_std_factor`` x its still
           reference and above ``accel_std_min`` (handling, vibration);
-        * rotation: a gyro axis' block mean above ``gyro_mean`` and significant against the block's own
-          noise (5 sigma), on this IMU and, when others exist, on the IMU agreeing most with "no rotation"
-          (the smallest |mean| over IMUs with two, the median with three): one frozen or biased gyro
-          cannot declare motion;
+        * rotation: the block mean rate above ``gyro_mean`` and significant against the block's own noise
+          (5 sigma), on the IMU agreeing most with "no rotation" when others exist (per axis the smaller
+          |mean| of two, the median of three): one frozen or biased gyro cannot declare motion; with one
+          IMU only the rotation about gravity counts (a rotation about a horizontal axis tilts the vehicle
+          and shows in the accel shift test; a gyro drifting or frozen at a rate alone is not motion);
         * vibration: with other IMUs, their gyros vibrating too (an axis above ``gyro_std_factor`` x its
           still noise on this and on another IMU); alone, two axes of this gyro above it and the accel
           axis std above 1.5x its reference.
@@ -380,9 +381,19 @@ class Pipeline:
         others = [o for o in self.channels.values() if o is not ch and o.last_stats is not None
                   and o.last_t is not None and ch.last_t is not None and abs(o.last_t - ch.last_t) < 2 * cfg.block_s]
         means += [self._rotation(o.last_stats) for o in others]
-        rot = np.abs(np.array(means))
-        consensus = rot[0] if len(means) == 1 else (rot.min(axis=0) if len(means) == 2 else np.median(rot, axis=0))
-        if np.any(consensus > cfg.gyro_mean):
+        rot = np.array(means)
+        if len(means) == 1:
+            w = rot[0]
+        elif len(means) == 2:  # the IMU claiming less rotation, per axis
+            w = np.where(np.abs(rot[0]) <= np.abs(rot[1]), rot[0], rot[1])
+        else:
+            w = np.median(rot, axis=0)
+        # A rotation about a horizontal axis tilts the vehicle: the accelerometer sees it (the shift test
+        # above) within the block. Unseen by the accel, only a rotation about gravity (yaw) is physical;
+        # a lone gyro drifting or frozen at a rate is not motion.
+        g_dir = a_mean / max(float(np.linalg.norm(a_mean)), 1e-9)
+        yaw = abs(float(np.dot(w, g_dir)))
+        if yaw > cfg.gyro_mean or (len(means) > 1 and np.any(np.abs(w) > cfg.gyro_mean)):
             return False
         # vibration, by agreement of IMUs / axes
         k2 = cfg.gyro_std_factor ** 2
@@ -518,6 +529,8 @@ class Pipeline:
             if ch is not None:
                 self.reporter.set_fault(ch.imu, ch.faults.code())
                 self.reporter.set_health(ch.imu, self.health(ch))
+            if ev.kind != "disagree" and len(self.channels) == 2 and self.disagree:
+                self._name_disagreement(t)  # another fault may tell which of the two disagrees
 
     def _feed(self, ch: Channel, data: np.ndarray) -> None:
         """Queue a still block for the estimators (updated in batches of about ``check_s``: same result,
