@@ -197,10 +197,23 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     scale = np.median(a, axis=0) / 0.6745
     floor = 0.5 * np.sqrt(np.mean(dd * dd, axis=0))  # only matters where the median is 0 (coarse rounding)
     scale = np.maximum(scale, floor if dd_scale_ref is None else np.maximum(dd_scale_ref, 1e-12))
+    # local scale: the MAD of each quarter and its neighbours (vibration that starts mid-block is not a spike)
+    m = a.shape[0]
+    q = max(m // 4, 1)
+    edges = list(range(0, m, q))
+    qs = np.array([np.median(a[e:e + q], axis=0) / 0.6745 for e in edges])
+    qmax = np.maximum(qs, np.maximum(np.vstack([qs[:1], qs[:-1]]), np.vstack([qs[1:], qs[-1:]])))
+    local = np.repeat(qmax, q, axis=0)[:m]
+    scale = np.maximum(scale, local)
     out = a > k * scale
     prev = np.vstack([np.zeros((1, a.shape[1])), a[:-1]])
     nxt = np.vstack([a[1:], np.zeros((1, a.shape[1]))])
     peak = out & (a >= prev) & (a > nxt)
+    # isolated: nothing above half the peak 2-5 samples away (a spike is -2A flanked by A, then noise)
+    for j, c in zip(*np.nonzero(peak)):
+        around = np.concatenate([a[max(j - 5, 0):max(j - 1, 0), c], a[j + 2:j + 6, c]])
+        if around.size and around.max() >= 0.5 * a[j, c]:
+            peak[j, c] = False
     spikes = np.count_nonzero(peak, axis=0)
     near = peak.copy()
     near[1:] |= peak[:-1]

@@ -50,8 +50,7 @@ class NoiseDetector:
         self.u_avg = u if not math.isfinite(self.u_avg) else (1 - EWMA_W) * self.u_avg + EWMA_W * u
         changed = self.cusum.step(chi2_llr(u, ref.nu, R1))
         if changed and self.cusum.state != OK:  # the ratio quoted: the last blocks of the evidence
-            last = self.run[-3:]
-            self.u_avg = sum(last) / len(last)
+            self.u_avg = self.run[-1]  # the block that decided (earlier ones may predate the jump)
         self.value = math.sqrt(max(self.u_avg, 0.0))
         return changed
 
