@@ -19,7 +19,7 @@ exponential, tau 200 s: 95 % within 10 min), random flights (arm, take-off, mano
 rad/s, vibration, landing, disarm) and handlings (picked up, turned, put down in a new attitude), int16
 rounding with 0.7 LSB of noise on IMU0; any fault or degradation STATUSTEXT is a false alarm.
 
-    python benchmarks/bench_faults.py --quick          # a few seeds and 2 healthy IMU-hours (about 2 min)
+    python benchmarks/bench_faults.py --quick          # 3 seeds per kind (no B x2), 2 healthy IMU-hours
     python benchmarks/bench_faults.py                  # 20 seeds per kind, 100 healthy IMU-hours
     python benchmarks/bench_faults.py --skip-healthy --seeds 5 --kinds stuck,noise
 """
@@ -191,6 +191,44 @@ def run_case(kind, seed, max_delay):
     return out
 
 
+def run_b2(seed, max_delay=3600.0):
+    """B x2 with the baseline from `companion analyze` (analyze_axis: the same code) of a 2 h still log of the
+    same gyro (another seed); the degradation adds an independent flicker of B sqrt(3) at t_d."""
+    from companion.cli.analyze import analyze_axis
+    from companion.health.baseline import Baseline, params_from_terms
+    from companion.sim.vehicle import Degradation
+
+    rng = np.random.default_rng(30_000 + seed)
+    model, sig = random_model(rng)
+    axis = AXES[rng.integers(3)]
+    pre = VehicleSimulator(model, imus=1, seed=90_000 + seed)
+    g = np.round(pre.run(7200.0).gyro[0] / LSB) * LSB
+    base = Baseline("analyze")
+    for j, a in enumerate(AXES):
+        base.set_axis(0, a, params_from_terms(analyze_axis(g[:, j], RATE, lsb=LSB)["terms"]))
+    b_true = [t["B"] for t in model["axes"][axis] if t["effect"] == "bias_instability"][0]
+    t_d = 1200.0
+    deg = Degradation(at=t_d, axis=axis, term={"effect": "bias_instability", "B": b_true * math.sqrt(3.0)})
+    sim = VehicleSimulator(model, imus=1, seed=seed, degrade=deg)
+    sink = Sink()
+    p = Pipeline(PipelineConfig(), Reporter(sink, 1.0), baseline=base)
+    word = f"IMU0 gyro {axis[1].upper()} degrading: B"
+    t0 = sim.t_start + t_d
+
+    def watch(t):
+        return any(text.startswith(word) and tt >= t0 for tt, text in p.transitions)
+
+    replay_vehicle(sim, p, t_d + max_delay, lsb=LSB, on_chunk=watch, chunk_s=10.0)
+    hit = [(tt, text) for tt, text in p.transitions if text.startswith(word) and tt >= t0]
+    early = [(tt, text) for tt, text in p.transitions if tt < t0]
+    b_b = base.get(0, axis)["B"]
+    desc = (f"B {units.to_datasheet('B', b_true, axis):.0f} deg/h, baseline {units.to_datasheet('B', b_b[0], axis):.1f}"
+            f" +- {units.to_datasheet('B', b_b[1], axis):.1f}")
+    return {"kind": "B2", "seed": seed, "desc": desc, "limit": math.nan, "axis": axis, "imu": 0,
+            "delay": hit[0][0] - t0 if hit else math.nan, "text": hit[0][1] if hit else "not flagged",
+            "early": early[0] if early else None, "other": None}
+
+
 def healthy_run(seed, hours, imus=2):
     rng = np.random.default_rng(20_000 + seed)
     model0, _ = random_model(rng, sigma_lsb=0.7)  # IMU0 at 0.7 LSB: the coarse-rounding case
@@ -206,7 +244,7 @@ def healthy_run(seed, hours, imus=2):
 
 
 TARGET = {"stuck": 10, "noise": 10, "bias": 15, "drift": None, "spikes": 30, "N2": 30, "N1.5": 120, "saturate": None,
-          "flight_stuck2": 10, "flight_bias2": 10, "flight_stuck3": 10, "flight_bias3": 10}
+          "flight_stuck2": 10, "flight_bias2": 10, "flight_stuck3": 10, "flight_bias3": 10, "B2": 3600}
 MAX_DELAY = {"stuck": 60, "noise": 60, "bias": 90, "drift": 600, "spikes": 120, "N2": 120, "N1.5": 400, "saturate": 300,
              "flight_stuck2": 60, "flight_bias2": 60, "flight_stuck3": 60, "flight_bias3": 60}
 
@@ -215,22 +253,28 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="3 seeds per kind, 1 healthy run of 1 h x 2 IMUs")
     ap.add_argument("--seeds", type=int, default=None, help="seeds per fault kind (default 20, quick 3)")
-    ap.add_argument("--kinds", default=",".join(TARGET), help="comma-separated subset of: " + ", ".join(TARGET))
+    ap.add_argument("--kinds", default=None, help="comma-separated subset of: " + ", ".join(TARGET))
     ap.add_argument("--healthy-runs", type=int, default=None, help="healthy runs (default 10, quick 1)")
     ap.add_argument("--healthy-hours", type=float, default=None, help="hours per healthy run, 2 IMUs each (default 5, quick 1)")
+    ap.add_argument("--b2-seeds", type=int, default=3, help="seeds of the B x2 case (each simulates 2 h + 80 min)")
+    ap.add_argument("--first-run", type=int, default=0, help="seed of the first healthy run (to split the runs over processes)")
     ap.add_argument("--skip-healthy", action="store_true")
     ap.add_argument("--skip-faults", action="store_true")
     args = ap.parse_args()
     seeds = args.seeds or (3 if args.quick else 20)
+    kinds = args.kinds or ",".join(k for k in TARGET if not (args.quick and k == "B2"))
     runs = args.healthy_runs or (1 if args.quick else 10)
     hours = args.healthy_hours or (1.0 if args.quick else 5.0)
     t_all = time.time()
     if not args.skip_faults:
         print(f"detection delay at {RATE:g} Hz, 1 mrad/s rounding, fresh random parameters, {seeds} seeds per kind")
         print(f"{'kind':>14} {'target':>7} {'median':>8} {'max':>8} {'limit(med)':>11} {'named':>6}  ranges / misses")
-        for kind in args.kinds.split(","):
+        for kind in kinds.split(","):
             kind = kind.strip()
-            res = [run_case(kind, s, MAX_DELAY[kind]) for s in range(seeds)]
+            if kind == "B2":
+                res = [run_b2(s) for s in range(min(seeds, args.b2_seeds))]
+            else:
+                res = [run_case(kind, s, MAX_DELAY[kind]) for s in range(seeds)]
             d = np.array([r["delay"] for r in res])
             lim = np.array([r["limit"] for r in res])
             ok = np.isfinite(d)
@@ -249,7 +293,7 @@ def main():
     if not args.skip_healthy:
         t0 = time.time()
         total, n_alarm = 0.0, 0
-        for r in range(runs):
+        for r in range(args.first_run, args.first_run + runs):
             alarms, nf, nh, moving = healthy_run(r, hours)
             total += 2 * hours
             n_alarm += len(alarms)
