@@ -41,7 +41,7 @@ from companion.health import bias, disagreement, noise, spikes, stuck  # noqa: E
 from companion.mavlink.reporter import Reporter  # noqa: E402
 from companion.service.pipeline import Pipeline, PipelineConfig  # noqa: E402
 from companion.service.replay import replay_vehicle  # noqa: E402
-from companion.sim.vehicle import Fault, Flight, Handling, Schedule, VehicleSimulator, WarmUp  # noqa: E402
+from companion.sim.vehicle import Fault, Flight, Schedule, VehicleSimulator, WarmUp  # noqa: E402
 
 RATE = 100.0
 LSB = 1e-3

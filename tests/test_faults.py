@@ -112,7 +112,6 @@ def test_noise_rise_detected_near_its_information_limit_and_not_on_healthy():
 
 
 def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
-    rng = np.random.default_rng(7)
     sigma = 2e-3
     jumps, quiet = [], 0
     for seed in range(8):

@@ -77,7 +77,7 @@ def test_each_fault_is_named_with_its_code_and_severity(kind, size, words, code,
     assert sink.values["IMU0G_HLTH"] == 1.0 and sink.values["IMU0G_FLT"] == KIND_CODE[code]
     out = io.StringIO()
     print_summary(p, out)
-    assert f"FAULT: {text.split(' +')[0].split(' 0')[0]}" in out.getvalue() or "FAULT: " + words in out.getvalue()
+    assert "FAULT: " + words in out.getvalue()
 
 
 def test_noise_jump_is_not_hidden_by_the_motion_gate():
