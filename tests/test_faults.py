@@ -260,3 +260,25 @@ def test_event_texts_fit_statustext():
                      "IMU0 gyro X spikes 0.4 %", "IMU1 gyro X disagrees with IMU0/IMU2",
                      "IMU0 gyro Z bias drift -0.35 deg/s", "IMU0 gyro X stuck cleared"]
     assert all(len(t) <= 50 for t in texts)
+
+
+def test_resolution_loss_and_float_data_untested():
+    from companion.health.resolution import ResolutionDetector
+
+    rng = np.random.default_rng(5)
+    d = ResolutionDetector()
+    for _ in range(300):
+        st = block_stats(rounded_noise(rng, FS, 3 * LSB))
+        assert not d.update(float(st.step[0]), int(st.changes[0]))
+    assert d.lsb == pytest.approx(LSB)
+    flagged = False
+    for k in range(12):  # the output now moves in 4 mrad/s steps
+        y = np.round(rng.normal(0, 8 * LSB, (FS, 3)) / (4 * LSB)) * 4 * LSB
+        st = block_stats(y)
+        flagged |= d.update(float(st.step[0]), int(st.changes[0]))
+    assert flagged and d.value == pytest.approx(4.0)
+    f = ResolutionDetector()  # float data: no LSB, never tested
+    for _ in range(50):
+        st = block_stats(rng.normal(0, 1e-3, (FS, 3)))
+        assert not f.update(float(st.step[0]), int(st.changes[0]))
+    assert f.lsb == 0.0

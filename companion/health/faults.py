@@ -46,8 +46,10 @@ KIND_CODE = {
     "rate": 7,
     "disagree": 8,
     "allan": 9,
+    "resolution": 10,
 }
-PRIORITY = ("stuck", "disagree", "saturation", "noise", "spikes", "bias_jump", "bias_drift", "rate", "allan")
+PRIORITY = ("stuck", "disagree", "saturation", "noise", "spikes", "resolution", "bias_jump", "bias_drift", "rate",
+            "allan")
 #: kinds sent as CRITICAL (MAV_SEVERITY_CRITICAL = 2); in-flight disagreement too (decided by the caller)
 CRITICAL_KINDS = ("stuck",)
 
@@ -80,13 +82,14 @@ class FaultEvent:
             "rate": self.detail or f"rate {v:.0f} Hz",
             "disagree": f"disagrees with {self.detail}",
             "allan": self.detail,
+            "resolution": f"resolution lost: steps {v:.0f}x LSB",
         }[self.kind]
         return f"{where} {body}"[:50]
 
 
 KIND_WORDS = {"stuck": "stuck", "noise": "noise", "bias_jump": "bias jump", "bias_drift": "bias drift",
               "spikes": "spikes", "saturation": "saturation", "rate": "timing", "disagree": "disagreement",
-              "allan": "Allan terms"}
+              "allan": "Allan terms", "resolution": "resolution loss"}
 
 
 class FaultDetector(Protocol):
@@ -164,7 +167,8 @@ class BlockStats:
     * ``spikes``: isolated outliers |dd| > SPIKE_K robust sigmas (one count per spike: the local maximum);
       ``spikes_solo``: those not coinciding (+-1 sample) with one on another axis (a shock moves every axis)
     * ``top``: max |y|; ``top_run``: longest run of consecutive samples at exactly +-top
-    * ``changes``: number of consecutive samples that differ (0: every value equal)
+    * ``changes``: number of consecutive samples that differ (0: every value equal); ``step``: the
+      smallest non-zero |y_k - y_{k-1}| (nan without change)
     """
 
     n: int
@@ -177,6 +181,7 @@ class BlockStats:
     top: np.ndarray
     top_run: np.ndarray
     changes: np.ndarray
+    step: np.ndarray
 
 
 def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float = SPIKE_K) -> BlockStats:
@@ -188,10 +193,12 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     top = np.max(np.abs(y), axis=0)
     at_top = np.abs(y) == top
     top_run = np.array([_longest_run(at_top[:, j]) for j in range(y.shape[1])])
-    changes = np.count_nonzero(np.diff(y, axis=0), axis=0) if n > 1 else np.zeros(y.shape[1], int)
+    dy = np.abs(np.diff(y, axis=0)) if n > 1 else np.zeros((0, y.shape[1]))
+    changes = np.count_nonzero(dy, axis=0)
+    step = np.where(changes > 0, np.min(np.where(dy > 0, dy, np.inf), axis=0, initial=np.inf), np.nan)
     if n < 5:
         z = np.zeros(y.shape[1])
-        return BlockStats(n, mean, rms, np.full(y.shape[1], np.nan), z, z, z, top, top_run, changes)
+        return BlockStats(n, mean, rms, np.full(y.shape[1], np.nan), z, z, z, top, top_run, changes, step)
     dd = y[2:] - 2.0 * y[1:-1] + y[:-2]
     a = np.abs(dd)
     scale = np.median(a, axis=0) / 0.6745
@@ -230,7 +237,7 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     mean = np.where(clean.any(axis=0), np.sum(np.where(clean, y, 0.0), axis=0) / np.maximum(clean.sum(axis=0), 1), mean)
     m2 = keep.sum(axis=0)
     v2 = np.where(m2 > 0, np.sum(np.where(keep, dd * dd, 0.0), axis=0) / np.maximum(m2, 1) / 6.0, np.nan)
-    return BlockStats(n, mean, rms, v2, m2.astype(float), spikes, spikes_solo, top, top_run, changes)
+    return BlockStats(n, mean, rms, v2, m2.astype(float), spikes, spikes_solo, top, top_run, changes, step)
 
 
 def _longest_run(mask: np.ndarray) -> int:

@@ -2,7 +2,7 @@
 
 ``ImuFaults.on_block`` runs the checks valid on every block (stuck, spikes, saturation, timing: still or
 moving, armed or not); ``ImuFaults.on_quiet`` the ones valid only on still, settled blocks (noise, bias
-jump/drift) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them.
+jump/drift, resolution) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them.
 Disagreement lives with the pairs of IMUs (disagreement.py, driven by service/pipeline.py) and the Allan
 rise with detector.py; both feed ``set_external`` so that one code per IMU is reported.
 """
@@ -17,6 +17,7 @@ import numpy as np
 from companion.health.bias import BiasDetector
 from companion.health.faults import (FAULT, KIND_CODE, OK, PRIORITY, AxisRef, BlockStats, FaultEvent)
 from companion.health.noise import NoiseDetector
+from companion.health.resolution import ResolutionDetector
 from companion.health.saturation import SaturationDetector
 from companion.health.spikes import SpikeDetector
 from companion.health.stuck import StuckDetector
@@ -34,16 +35,17 @@ class AxisFaults:
         self.bias = BiasDetector()
         self.spikes = SpikeDetector()
         self.saturation = SaturationDetector(abs_limit)
+        self.resolution = ResolutionDetector()
 
     def states(self) -> dict[str, int]:
         return {"stuck": self.stuck.state, "noise": self.noise.state, "bias_jump": self.bias.state,
                 "bias_drift": self.bias.drift_state, "spikes": self.spikes.state,
-                "saturation": self.saturation.state}
+                "saturation": self.saturation.state, "resolution": self.resolution.state}
 
     def state_dict(self) -> dict:
         return {"ref": self.ref.state_dict(), "stuck": self.stuck.state_dict(), "noise": self.noise.state_dict(),
                 "bias": self.bias.state_dict(), "spikes": self.spikes.state_dict(),
-                "saturation": self.saturation.state_dict()}
+                "saturation": self.saturation.state_dict(), "resolution": self.resolution.state_dict()}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.ref.load_state_dict(d.get("ref", {}))
@@ -52,6 +54,7 @@ class AxisFaults:
         self.bias.load_state_dict(d.get("bias", {}))
         self.spikes.load_state_dict(d.get("spikes", {}))
         self.saturation.load_state_dict(d.get("saturation", {}))
+        self.resolution.load_state_dict(d.get("resolution", {}))
 
 
 class ImuFaults:
@@ -97,6 +100,8 @@ class ImuFaults:
                 continue
             if af.stuck.state == FAULT:
                 continue
+            if af.resolution.update(float(st.step[j]), int(st.changes[j])):
+                ev.append(FaultEvent(self.imu, ax, "resolution", af.resolution.state, af.resolution.value))
             if af.noise.update(af.ref, v2):
                 ev.append(FaultEvent(self.imu, ax, "noise", af.noise.state, af.noise.value))
             for kind in af.bias.update(af.ref, x, v2, st.n, (extra_var or {}).get(ax, 0.0)):

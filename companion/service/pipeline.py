@@ -660,7 +660,7 @@ class Pipeline:
                 af = ch.faults.axes[ax]
                 v = {"stuck": math.nan, "noise": af.noise.value, "bias_jump": af.bias.value,
                      "bias_drift": af.bias.drift_value, "spikes": af.spikes.value,
-                     "saturation": af.saturation.value}[kind]
+                     "saturation": af.saturation.value, "resolution": af.resolution.value}[kind]
                 ev = FaultEvent(ch.imu, ax, kind, FAULT, v)
             out.append(ev.text())
         return out
