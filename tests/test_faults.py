@@ -94,7 +94,7 @@ def test_noise_rise_detected_near_its_information_limit_and_not_on_healthy():
         sigma = rng.uniform(1.0, 4.0) * LSB
         refs = learn_ref(rng, sigma)
         d = NoiseDetector()
-        for _ in range(900):
+        for _ in range(600):
             st = block_stats(rounded_noise(rng, FS, sigma), scale_of(refs))
             false += d.update(refs[0], float(st.v2[0]))
         for f in delays:
@@ -152,7 +152,7 @@ def test_spikes_named_as_spikes_not_noise():
         sigma = rng.uniform(0.7, 4.0) * LSB
         refs = learn_ref(rng, sigma)
         sp, nd = SpikeDetector(), NoiseDetector()
-        for _ in range(1800):
+        for _ in range(900):
             st = block_stats(rounded_noise(rng, FS, sigma), scale_of(refs))
             false += sp.update(refs[0], int(st.spikes[0]), st.n)
         frac = rng.uniform(0.002, 0.01)
