@@ -146,7 +146,7 @@ class Fault:
             raise _err(f"fault kind {self.kind!r} unknown; expected one of {', '.join(FAULT_KINDS)}")
         object.__setattr__(self, "at", _finite("fault time (at)", self.at, lo=0.0))
         size = FAULT_DEFAULT_SIZE[self.kind] if self.size is None else self.size
-        name = f"fault size of {self.kind} ({FAULT_SIZE_UNITS[self.kind]})"
+        name = f"size of a {self.kind} fault ({FAULT_SIZE_UNITS[self.kind]})"
         if self.kind in ("stuck", "noise"):
             size = _finite(name, size, lo=0.0)
         elif self.kind == "spikes":
