@@ -230,7 +230,7 @@ def test_integrated_body_rates_rotate_gravity_as_the_accelerometers_see_it(event
     fs = 1000.0
     sch = Schedule(handlings=(Handling(2.0, 10.0),)) if event == "handling" else Schedule(flights=(Flight(2.0, 40.0),))
     sim = VehicleSimulator(WHITE, seed=11, rate_hz=fs, schedule=sch)
-    for e in sim.events:
+    for e in sim.motion.events:
         if e.vib is not None:
             e.vib = [(0.0, lines) for _, lines in e.vib]  # vibration off: it is not a rotation of the body
     end = sch.events()[0].end
