@@ -135,7 +135,9 @@ class Schedule:
         """Random non-overlapping flights and handlings over ``duration_s`` (benchmarks, soak tests).
 
         Events start after ``first_s`` and are separated by at least ``rest_s`` of rest plus an
-        exponential gap; flight and handling durations are uniform in ``flight_s`` / ``handling_s``;
+        exponential gap (event starts at ``flights_per_hour + handlings_per_hour`` per hour of rest; each
+        is a flight with probability flights/(flights + handlings)); durations are uniform in ``flight_s``
+        / ``handling_s`` (the last one cut short to end by ``duration_s``);
         ``flight_kw`` go to every :class:`Flight` (max_rate, vibration).
         """
         rng = np.random.default_rng(seed)
@@ -146,15 +148,14 @@ class Schedule:
             return cls()
         while True:
             t += rng.exponential(1.0 / rate)
-            if rng.random() < flights_per_hour / (flights_per_hour + handlings_per_hour):
-                d = rng.uniform(*flight_s)
-                if t + d > duration_s:
-                    break
+            fly = rng.random() < flights_per_hour / (flights_per_hour + handlings_per_hour)
+            lo, hi = flight_s if fly else handling_s
+            d = min(rng.uniform(lo, hi), duration_s - t)  # the last event is cut short to fit
+            if d < lo:
+                break
+            if fly:
                 flights.append(Flight(t, t + d, **flight_kw))
             else:
-                d = rng.uniform(*handling_s)
-                if t + d > duration_s:
-                    break
                 handlings.append(Handling(t, d))
             t += d + rest_s
         return cls(tuple(flights), tuple(handlings))
