@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -77,10 +78,22 @@ def read_record(path):
     return nvf, texts
 
 
-def sim_against_run(tmp_path, model_text, sim_args, duration, speedup, run_args=(), slack_s=60.0):
+def link_losses(tmp_path) -> dict:
+    """{message: fraction of the IMU messages sim-autopilot sent that run did not count} from both outputs."""
+    sent = re.search(r"sent (.*?) and \d+ HEARTBEAT", (tmp_path / "sim.out").read_text())
+    got = dict(re.findall(r"^IMU\d \((\w+), [^)]*\): .*?; (\d+) samples", (tmp_path / "run.out").read_text(), re.M))
+    out = {}
+    for count, name in re.findall(r"(\d+) (\w+)", sent.group(1) if sent else ""):
+        out[name] = 1.0 - int(got.get(name, 0)) / max(int(count), 1)
+    return out
+
+
+def sim_against_run(tmp_path, model_text, sim_args, duration, speedup, run_args=(), slack_s=60.0, max_loss=0.02):
     """Run ``companion run`` on a free UDP port, wait until it listens, play ``sim-autopilot SIM_ARGS`` into
-    it for ``duration`` simulated seconds at ``speedup``, stop run (SIGTERM); returns (nvf, texts) as
-    sim-autopilot recorded them (``t_sim`` = time since boot, the simulation starts at 1 s)."""
+    it for ``duration`` simulated seconds at ``speedup`` (the simulation starts when run asks for data),
+    stop run (SIGTERM); returns (nvf, texts) as sim-autopilot recorded them (``t_sim`` = time since boot,
+    the simulation starts at 1 s). Fails with a clear message when the link lost more than ``max_loss``
+    of the IMU messages (UDP drops what a busy receiver cannot take: lower the speedup)."""
     (tmp_path / "model.yaml").write_text(model_text)
     port = free_udp_port()
     wall = duration / speedup
@@ -100,4 +113,7 @@ def sim_against_run(tmp_path, model_text, sim_args, duration, speedup, run_args=
         for p in (sim, run):
             if p is not None:
                 stop(p)
+    loss = link_losses(tmp_path)
+    assert loss and max(loss.values()) <= max_loss, (
+        f"UDP loopback lost IMU messages {loss} at {speedup:g}x: the receiver could not keep up (busy machine?)")
     return read_record(tmp_path / "rx.jsonl")

@@ -87,7 +87,8 @@ def register(subparsers) -> None:
     p.add_argument("--wall-limit", type=float, metavar="S", help="stop after S wall-clock seconds in any case")
     p.add_argument("--sysid", type=int, default=1, help="system id of the simulated vehicle (default 1)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the simulator (default 0)")
-    p.add_argument("--wait-request", action="store_true", help="send no IMU data until asked (SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM)")
+    p.add_argument("--wait-request", action="store_true", help="idle (HEARTBEAT once a wall second) until asked for IMU data "
+                   "(SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM); simulated time starts then")
     p.add_argument("--refuse-interval", action="store_true", help="answer SET_MESSAGE_INTERVAL with DENIED (tests the fallback)")
     p.add_argument("--record", metavar="FILE", help="write every received NAMED_VALUE_FLOAT/STATUSTEXT as JSON lines")
     p.add_argument("--quiet", action="store_true", help="print only STATUSTEXT and the final values")
@@ -141,48 +142,61 @@ def run(args) -> int:
     counts = {"raw_imu": 0, "scaled_imu2": 0, "scaled_imu3": 0, "heartbeat": 0, "named_value_float": 0,
               "statustext": 0, "commands": 0}
     sending = {mid: not args.wait_request for mid in IMU_MSG_IDS[:sim.imus]}
-    wall0 = time.monotonic()
+    wall_start = time.monotonic()
+    wall0 = None if args.wait_request else wall_start  # simulated time runs from wall0 (the first request)
+    next_idle_hb = wall_start
     next_hb = 1.0
     mav = conn.mav
     senders = (lambda ti, a, g: mav.raw_imu_send(int(round(ti * 1e6)), *a, *g, 0, 0, 0, 0, 4200),
                lambda ti, a, g: mav.scaled_imu2_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, 4200),
                lambda ti, a, g: mav.scaled_imu3_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, 4200))
     count_keys = ("raw_imu", "scaled_imu2", "scaled_imu3")
+
+    def heartbeat(armed: bool) -> None:
+        base_mode = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+        mav.heartbeat_send(MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, 0,
+                           MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY)
+        counts["heartbeat"] += 1
+
     try:
         while not stop["flag"]:
-            wall = time.monotonic() - wall0
-            t_sim = 1.0 + wall * args.speedup
-            if args.duration is not None:
-                t_sim = min(t_sim, 1.0 + args.duration)
-            blk = sim.take_until(t_sim)
-            t = blk.t.tolist()
-            ints = [_imu_ints(blk, i) for i in range(sim.imus)]
-            hb_times = []
-            while next_hb <= t_sim:
-                hb_times.append(next_hb)
-                next_hb += 1.0
-            k = 0
-            for th in hb_times + [math.inf]:
-                while k < len(t) and t[k] < th:
-                    for i, mid in enumerate(IMU_MSG_IDS[:sim.imus]):
-                        if sending[mid]:
-                            senders[i](t[k], ints[i][0][k], ints[i][1][k])
-                            counts[count_keys[i]] += 1
-                    k += 1
-                if th != math.inf:
-                    armed = bool(sim.armed_at(th))
-                    base_mode = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-                    mav.heartbeat_send(MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, 0,
-                                       MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY)
-                    counts["heartbeat"] += 1
+            now = time.monotonic()
+            if wall0 is None:  # --wait-request: idle, HEARTBEAT once a wall second, simulated time stands still
+                t_sim = 1.0
+                if now >= next_idle_hb:
+                    heartbeat(False)
+                    next_idle_hb += 1.0
+            else:
+                t_sim = 1.0 + (now - wall0) * args.speedup
+                if args.duration is not None:
+                    t_sim = min(t_sim, 1.0 + args.duration)
+                blk = sim.take_until(t_sim)
+                t = blk.t.tolist()
+                ints = [_imu_ints(blk, i) for i in range(sim.imus)]
+                hb_times = []
+                while next_hb <= t_sim:
+                    hb_times.append(next_hb)
+                    next_hb += 1.0
+                k = 0
+                for th in hb_times + [math.inf]:
+                    while k < len(t) and t[k] < th:
+                        for i, mid in enumerate(IMU_MSG_IDS[:sim.imus]):
+                            if sending[mid]:
+                                senders[i](t[k], ints[i][0][k], ints[i][1][k])
+                                counts[count_keys[i]] += 1
+                        k += 1
+                    if th != math.inf:
+                        heartbeat(bool(sim.armed_at(th)))
             while True:
                 msg = conn.recv_match(blocking=False)
                 if msg is None:
                     break
                 _on_reply(msg, args, sim, mav, values, counts, record, out, t_sim, sending)
+            if wall0 is None and any(sending.values()):
+                wall0 = time.monotonic()  # asked: the simulation starts now
             if args.duration is not None and t_sim >= 1.0 + args.duration:
                 break
-            if args.wall_limit is not None and wall >= args.wall_limit:
+            if args.wall_limit is not None and now - wall_start >= args.wall_limit:
                 break
             time.sleep(0.005)
     finally:
