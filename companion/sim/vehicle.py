@@ -20,6 +20,7 @@ Stable API
                            warmup=WarmUp(amplitude=math.radians(0.1), tau_s=200))
     blk = sim.take_until(t_end)      # the samples with t <= t_end not taken yet (continues block by block)
     blk = sim.run(duration_s)        # or: everything up to t_start + duration_s
+    for blk in sim.blocks(duration_s, block_s=600): ...   # or: the same in blocks (constant memory)
     blk.t                            # (n,) time since boot, s (the message timestamp)
     blk.gyro[i], blk.accel[i]        # (n, 3) IMU i in SI: rad/s, m/s^2 (body FRD; -9.81 on z when level)
     t, g, a = blk.imu(i)             # the same as a tuple
@@ -28,6 +29,8 @@ Stable API
     sim.armed_at(t)                  # armed flag at times since boot (for HEARTBEATs)
     sim.set_rate(hz)                 # a SET_MESSAGE_INTERVAL: the next samples come at the new rate
     write_tlog("x.tlog", sim, 3600)  # RAW_IMU / SCALED_IMU2 / SCALED_IMU3 + HEARTBEAT (ArduPilot units)
+    Schedule.random(36_000, seed=3)  # random non-overlapping flights and handlings (soak runs, benchmarks)
+    sim.gyro_matrix[i], sim.gyro_bias[i], sim.warmup_amplitude[i]   # IMU i's drawn errors (truth for tests)
 
 Time: samples are stamped in seconds since the autopilot booted; the first sample is at ``t_start``
 (1.0 s). Every schedule and fault time (``Flight.arm_at``, ``Handling.at``, ``Fault.at`` ...) is in
@@ -35,7 +38,7 @@ seconds since the simulation start, i.e. ``t - t_start``.
 
 Components (the order in which an IMU's gyro output is built, rad/s):
 
-1. body rate ``w`` (+ shared vibration while armed) -> ``C_i w``, with ``C_i = (I + diag(s_i)) R(m_i)``: a
+1. body rate ``w`` (vibration included while armed) -> ``C_i w``, with ``C_i = (I + diag(s_i)) R(m_i)``: a
    scale-factor error ``s_i`` per axis (uniform in +-``ImuSpread.scale``) and a misalignment rotation
    ``R(m_i)`` by an angle uniform in [0, ``ImuSpread.misalignment_deg``] about a random axis. The
    accelerometer uses the same mounting rotation and its own scale errors.
