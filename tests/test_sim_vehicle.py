@@ -196,7 +196,9 @@ def test_fault_validation_gives_one_clear_line():
              (lambda: VehicleSimulator({"rate_hz": FS, "axes": {"gx": [{"effect": "random_walk", "K": 1e-4}]}},
                                        fault=Fault("noise", 1.0)), "white_noise"),
              (lambda: Schedule(flights=(Flight(10, 100),), handlings=(Handling(90, 20),)), "overlaps"),
-             (lambda: Flight(10, 12), "4 s"), (lambda: VehicleSimulator(WHITE, imus=4), "1, 2 or 3")]
+             (lambda: Flight(10, 12), "4 s"), (lambda: VehicleSimulator(WHITE, imus=4), "1, 2 or 3"),
+             (lambda: VehicleSimulator({"rate_hz": FS, "axes": {"gx": [{"effect": "white_noise"}]}}), "needs parameter"),
+             (lambda: VehicleSimulator({"rate_hz": FS, "axes": {"mx": []}}), "unknown")]
     for make, word in cases:
         with pytest.raises(CompanionError) as e:
             make()

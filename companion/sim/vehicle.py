@@ -71,6 +71,7 @@ import numpy as np
 
 from companion.sim.motion import (BodyMotion, Flight, Handling, Schedule, _err, _finite, body_rates,
                                    rotation_nb, specific_force_at_rest)
+from companion.allan.terms import validate_term
 from companion.sim.synth import flicker, quantization
 
 GYRO_AXES = ("gx", "gy", "gz")
@@ -254,7 +255,19 @@ class VehicleSimulator:
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise _err(f"rate must be > 0 Hz, got {rate_hz!r}")
         axes = model["axes"] if isinstance(model, Mapping) else model.axes
+        unknown = sorted(set(axes) - set(GYRO_AXES + ACCEL_AXES))
+        if unknown:
+            raise _err(f"model axis {unknown[0]!r} unknown (expected gx, gy, gz, ax, ay, az)")
         self.axes = {a: [dict(t) for t in (axes.get(a) or [])] for a in GYRO_AXES + ACCEL_AXES}
+        for a, terms in self.axes.items():
+            for t in terms:
+                try:
+                    validate_term(t)
+                except ValueError as exc:
+                    raise _err(f"model axis {a}: {exc}") from None
+                f0 = t.get("f0") if t["effect"] == "bias_instability" else None
+                if f0 is not None and abs(f0 - self.rate_hz / 2.0) > 1e-9 * self.rate_hz:
+                    raise _err(f"model axis {a}: bias_instability is synthesised with f0 = rate/2; omit f0 or set it so")
         if isinstance(imus, bool) or not isinstance(imus, (int, np.integer)) or not 1 <= imus <= MAX_IMUS:
             raise _err(f"number of IMUs must be 1, 2 or 3, got {imus!r}")
         self.imus = int(imus)
