@@ -3,6 +3,8 @@ and one error line for every bad combination (checked before any file or socket 
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -69,3 +71,21 @@ def test_simulate_without_vehicle_refuses_vehicle_options(tmp_path, capsys):
     (tmp_path / "m.yaml").write_text(MODEL)
     rc = main(["simulate", str(tmp_path / "m.yaml"), "--duration", "10", "--out", str(tmp_path / "x.tlog"), "--imus", "2"])
     assert rc == 2 and "--imus needs --vehicle" in capsys.readouterr().err
+
+
+def test_vehicle_tlog_replayed_by_run_sees_the_flight_as_motion(tmp_path, capsys):
+    """`run --source` on a simulated vehicle tlog: both IMUs decoded, the armed flight (HEARTBEAT armed bit)
+    and the handling are not learned from (moving blocks), the rest is; no flag on the healthy vehicle."""
+    (tmp_path / "m.yaml").write_text(MODEL)
+    out = tmp_path / "v.tlog"
+    assert main(["simulate", str(tmp_path / "m.yaml"), "--duration", "400", "--out", str(out), "--vehicle", "--imus", "2",
+                 "--handle-at", "100", "--handle-s", "20", "--arm-at", "200", "--disarm-at", "320", "--seed", "2"]) == 0
+    capsys.readouterr()
+    assert main(["run", "--source", str(out), "--baseline-s", "60", "--quiet", "--no-state"]) == 0
+    said = capsys.readouterr().out
+    rows = re.findall(r"^IMU(\d) \((\w+), 100.0 Hz\): (\w+); (\d+) s still data used; (\d+) samples, (\d+) moving blocks", said, re.M)
+    assert [(r[0], r[1]) for r in rows] == [("0", "RAW_IMU"), ("1", "SCALED_IMU2")], said
+    for _, _, health, still_s, samples, moving in rows:
+        assert health == "healthy" and int(samples) == 40_000
+        assert 120 + 10 <= int(moving) <= 120 + 20 + 2 * 12  # flight, handling, look-ahead/settling edges
+        assert 200 <= int(still_s) <= 400 - 120 - 20
