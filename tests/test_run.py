@@ -188,13 +188,18 @@ def test_sigterm_saves_state_and_exits_cleanly(tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-m", "companion", "run", "--source", f"udpin:127.0.0.1:{port}",
-                             "--state", str(tmp_path / "st.json"), "--duration", "30"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    from loopback import wait_for_text
+
+    log = tmp_path / "run.err"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "companion", "run", "--source", f"udpin:127.0.0.1:{port}",
+                                 "--state", str(tmp_path / "st.json"), "--duration", "60"], env=env,
+                                stdout=subprocess.PIPE, stderr=fh, text=True)
     try:
-        time.sleep(2.0)
+        wait_for_text(log, "listening on", proc)  # its signal handlers are installed by then
         proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=15)
+        out, _ = proc.communicate(timeout=15)
+        err = log.read_text()
     finally:
         if proc.poll() is None:
             proc.kill()

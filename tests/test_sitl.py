@@ -17,10 +17,11 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
+
+from loopback import wait_for_text
 
 pytestmark = pytest.mark.network
 
@@ -131,7 +132,7 @@ def run_loop(tmp_path, via_mavproxy=False, speedup=30.0, duration=900.0, degrade
                         "--baseline-s", str(baseline_s), "--duration", str(wall + 15), "--out-tlog",
                         str(tmp_path / "rx.tlog")], tmp_path, "run.out")
         procs.append(run)
-        time.sleep(1.0)
+        wait_for_text(tmp_path / "run.out", "listening on", run)
         sim, _ = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{sim_target}",
                         "--speedup", str(speedup), "--duration", str(duration), "--degrade-at", str(degrade_at),
                         "--degrade-factor", "2", "--degrade-axis", "gx", "--wait-request", "--wall-limit",
@@ -175,7 +176,7 @@ def test_request_data_stream_fallback_when_interval_refused(tmp_path):
     run, _ = start(["run", "--source", f"udpin:127.0.0.1:{port}", "--no-state", "--duration", "25"], tmp_path, "run.out")
     sim = None
     try:
-        time.sleep(1.0)
+        wait_for_text(tmp_path / "run.out", "listening on", run)
         sim, _ = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{port}",
                         "--speedup", "10", "--duration", "80", "--wait-request", "--refuse-interval",
                         "--wall-limit", "30"], tmp_path, "sim.out")
