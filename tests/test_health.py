@@ -15,7 +15,11 @@ def test_log_ratio_bound_matches_delta_method():
     ratio, lower = log_ratio_bound(2.0, 0.1, 1.0, 0.05, z=3.0)
     assert ratio == pytest.approx(2.0)
     assert lower == pytest.approx(math.log(2.0) - 3.0 * math.hypot(0.05, 0.05))
-    assert math.isnan(log_ratio_bound(1.0, 0.1, 0.0, 0.1, 3.0)[0])  # zero baseline: undefined
+    # zero or unresolved baseline: against its upper bound b + z s_b (eq. (3)), never a ratio to 0
+    assert log_ratio_bound(1.0, 0.1, 0.0, 0.1, 3.0) == pytest.approx((1.0 / 0.3, math.log(1.0 / 0.3) - 0.3))
+    assert log_ratio_bound(1.0, 0.1, 0.1, 0.1, 3.0)[0] == pytest.approx(1.0 / 0.4)
+    assert math.isnan(log_ratio_bound(1.0, 0.1, 0.0, 0.0, 3.0)[0])  # zero with no uncertainty: undefined
+    assert math.isnan(log_ratio_bound(1.0, 0.1, 0.0, math.inf, 3.0)[0])
     assert log_ratio_bound(2.0, math.inf, 1.0, 0.1, 3.0)[1] == -math.inf  # no uncertainty: never conclusive
 
 

@@ -16,8 +16,13 @@ DESCRIPTION = """\
 Watch the gyros of a vehicle for hours: per IMU and axis, online Allan-variance noise coefficients
 (N angle random walk, B bias instability, K rate random walk) learned while the vehicle is still
 (disarmed and not moving), sent back on the link as NAMED_VALUE_FLOAT (IMU0GX_N ... in datasheet
-units) with a health flag IMU0G_HLTH (0 healthy, 1 degrading, 2 learning, 3 stale) and a STATUSTEXT
-on every health change, e.g. "IMU0 gyro X degrading: N 2.1x baseline".
+units) with a health flag IMU0G_HLTH (0 healthy, 1 degrading or faulty, 2 learning, 3 stale), a fault
+code IMU0G_FLT and a STATUSTEXT on every change, e.g. "IMU0 gyro X degrading: N 2.1x baseline".
+
+Every block of samples is also checked for the ways a gyro fails: stuck (frozen), noise jump, bias
+jump or drift, spikes, saturation, rate drop, and (with two or three IMUs, also in flight) an IMU
+that disagrees with the others, e.g. "IMU0 gyro X stuck" (CRITICAL), "IMU1 gyro X disagrees with
+IMU0/IMU2". The run summary lists the active faults.
 
 The baseline (what healthy looks like) is learned from the first --baseline-s seconds of still data or
 loaded from a report of `companion analyze` (--baseline FILE). It is kept, with the estimator state,
@@ -208,6 +213,8 @@ def print_summary(pipeline, out=None) -> None:
         print(f"IMU{r['imu']} ({r['message']}, {rate}): {r['health']}; {r['still_s']:.0f} s still data used; "
               f"{c['samples']} samples, {c['blocks_moving']} moving blocks, {c['resets']} resets, {c['gaps']} gaps, "
               f"{c['duplicates']} duplicates", file=out)
+        for text in r.get("faults") or ():
+            print(f"  FAULT: {text}", file=out)
         from companion.estimators.report import summary_line
 
         for ax, d in r["axes"].items():

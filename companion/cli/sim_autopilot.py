@@ -1,4 +1,5 @@
-"""``companion sim-autopilot``: a simulated, disarmed vehicle on a MAVLink link (SITL loopback for `companion run`)."""
+"""``companion sim-autopilot``: a simulated ArduPilot vehicle (1-3 IMUs, flights, handling, faults) on a MAVLink link
+(SITL loopback for `companion run`); the vehicle itself is :mod:`companion.sim.vehicle`."""
 
 from __future__ import annotations
 
@@ -12,21 +13,33 @@ import time
 
 import numpy as np
 
+from companion.cli.vehicle_options import FAULT_HELP, add_fault_options, add_vehicle_options, build_simulator
 from companion.errors import CompanionError
 
 DESCRIPTION = """\
-Play a disarmed vehicle: HEARTBEAT once per simulated second and RAW_IMU from the noise simulator
-(companion.sim) in ArduPilot units (gyro int16 mrad/s, accel int16 mG, rounded to the nearest LSB, so
-the 1 mrad/s rounding adds white noise of variance LSB^2/12 per sample, i.e. N_q = 1e-3/sqrt(12 rate)
-rad/s/sqrt(Hz) -- choose a model noise well above it or add it to your truth). It honours
-MAV_CMD_SET_MESSAGE_INTERVAL (answers COMMAND_ACK and changes the RAW_IMU rate) and REQUEST_DATA_STREAM,
-and prints what comes back (STATUSTEXT as it arrives, the last NAMED_VALUE_FLOAT values at the end).
+Play an ArduPilot vehicle on a MAVLink link for loopback tests of `companion run`: HEARTBEAT once per
+simulated second (armed bit while a flight is armed) and the IMUs of companion.sim.vehicle in ArduPilot
+units: IMU0 as RAW_IMU, IMU1 as SCALED_IMU2, IMU2 as SCALED_IMU3 (--imus 1..3), gyro int16 mrad/s and
+accel int16 mG, rounded to the nearest LSB (the 1 mrad/s rounding adds white noise of variance LSB^2/12
+per sample, i.e. N_q = 1e-3/sqrt(12 rate) rad/s/sqrt(Hz): choose a model noise well above it or add it
+to your truth). It honours MAV_CMD_SET_MESSAGE_INTERVAL (COMMAND_ACK; the rate of all IMUs changes) and
+REQUEST_DATA_STREAM, and prints what comes back (STATUSTEXT as it arrives, the last NAMED_VALUE_FLOAT
+values at the end).
 
-Time is simulated: --speedup X sends X simulated seconds per wall second with message timestamps in
-simulated time. Optional: a degradation (--degrade-at S: from then on the term --degrade-term of axis
---degrade-axis is multiplied by --degrade-factor, by adding an independent component of the same kind
-scaled by sqrt(F^2 - 1)), and an armed, moving period (--arm-at S --arm-s D) to check that flight and
-handling neither corrupt the estimates nor raise flags.
+Time is simulated: --speedup X sends X simulated seconds per wall second, message timestamps in simulated
+time since boot (the first sample at 1 s). Every time option (--arm-at, --handle-at, --fault-at, ...) is
+in seconds since the simulation start.
+
+The vehicle: all IMUs see the same body rotation and vibration, each through its own scale-factor error
+(--scale-spread) and misalignment (--misalign-deg), with its own bias and its own model noise. A flight
+(--arm-at S --disarm-at S): armed on the ground, take-off, manoeuvres with body rates up to about
+--max-rate, vibration, landing, disarm. Handling (--handle-at S ...): the disarmed vehicle picked up and
+turned by hand for --handle-s seconds and put down in another attitude. --warmup-deg-s: a cold-start bias
+drift (exponential, --warmup-tau-s).
+
+""" + FAULT_HELP + """\
+The older noise degradation (--degrade-at S: term --degrade-term of axis --degrade-axis multiplied by
+--degrade-factor by adding an independent component of the same kind scaled by sqrt(F^2 - 1)) still works.
 """
 
 EPILOG = """\
@@ -34,6 +47,12 @@ examples:
   companion sim-autopilot --model gyro.yaml --connect udpout:127.0.0.1:14551
   companion sim-autopilot --model gyro.yaml --connect udpout:127.0.0.1:14551 --speedup 30 --duration 900 \\
       --degrade-at 400 --degrade-factor 2 --degrade-axis gx --record replies.jsonl
+  two IMUs, a flight from 300 to 900 s, IMU1's gyro X frozen in flight at 600 s:
+  companion sim-autopilot --model gyro.yaml --connect udpout:127.0.0.1:14551 --speedup 10 --imus 2 \\
+      --arm-at 300 --disarm-at 900 --fault stuck --fault-at 600 --fault-imu 1 --fault-axis gx
+  a +1 deg/s bias jump on IMU0 gyro Z while disarmed, handled by hand at 200 s, warm-up drift:
+  companion sim-autopilot --model gyro.yaml --connect udpout:127.0.0.1:14551 --handle-at 200 \\
+      --warmup-deg-s 0.1 --fault bias --fault-at 400 --fault-size 0.01745 --fault-axis gz
 
 model file (SI units, see companion simulate):
   rate_hz: 100
@@ -50,118 +69,53 @@ MAV_STATE_STANDBY = 3
 MAV_STATE_ACTIVE = 4
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 RAW_IMU_ID = 27
+SCALED_IMU2_ID = 116
+SCALED_IMU3_ID = 129
+IMU_MSG_IDS = (RAW_IMU_ID, SCALED_IMU2_ID, SCALED_IMU3_ID)  # IMU0, IMU1, IMU2
 G0 = 9.80665
-DEGRADE_EFFECT = {"N": "white_noise", "B": "bias_instability", "K": "random_walk"}
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("sim-autopilot", help="simulated disarmed vehicle sending RAW_IMU (SITL loopback)",
+    p = subparsers.add_parser("sim-autopilot", help="simulated ArduPilot vehicle with 1-3 IMUs, flights and faults (SITL loopback)",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", required=True, metavar="MODEL.yaml", help="noise model (companion.sim.model format)")
     p.add_argument("--connect", required=True, metavar="CONN", help="where to send, e.g. udpout:127.0.0.1:14551")
-    p.add_argument("--rate", type=float, metavar="HZ", help="RAW_IMU rate before any request (default: the model's rate_hz)")
+    p.add_argument("--rate", type=float, metavar="HZ", help="IMU message rate before any request (default: the model's rate_hz)")
     p.add_argument("--speedup", type=float, default=1.0, metavar="X", help="simulated seconds per wall second (default 1)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S simulated seconds (default: until Ctrl-C)")
     p.add_argument("--wall-limit", type=float, metavar="S", help="stop after S wall-clock seconds in any case")
     p.add_argument("--sysid", type=int, default=1, help="system id of the simulated vehicle (default 1)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the simulator (default 0)")
-    p.add_argument("--degrade-at", type=float, metavar="S", help="simulated time at which the gyro degrades")
-    p.add_argument("--degrade-factor", type=float, default=2.0, metavar="F", help="factor on the degraded term (default 2)")
-    p.add_argument("--degrade-axis", default="gx", choices=("gx", "gy", "gz"), help="degraded axis (default gx)")
-    p.add_argument("--degrade-term", default="N", choices=("N", "B", "K"), help="degraded term (default N)")
-    p.add_argument("--arm-at", type=float, metavar="S", help="arm and move (flight) at simulated time S")
-    p.add_argument("--arm-s", type=float, default=60.0, metavar="D", help="armed, moving period in seconds (default 60)")
-    p.add_argument("--wait-request", action="store_true", help="send no RAW_IMU until asked (SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM)")
+    p.add_argument("--wait-request", action="store_true", help="idle (HEARTBEAT once a wall second) until asked for IMU data "
+                   "(SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM); simulated time starts then")
     p.add_argument("--refuse-interval", action="store_true", help="answer SET_MESSAGE_INTERVAL with DENIED (tests the fallback)")
     p.add_argument("--record", metavar="FILE", help="write every received NAMED_VALUE_FLOAT/STATUSTEXT as JSON lines")
     p.add_argument("--quiet", action="store_true", help="print only STATUSTEXT and the final values")
     p.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing with this 32-byte key, like an "
                    "ArduPilot with signing set up: signs what it sends, ignores unsigned or wrongly signed frames")
+    add_vehicle_options(p)
+    add_fault_options(p, degrade=True)
     p.set_defaults(func=run)
 
 
-class ImuSimulator:
-    """Blocks of SI gyro/accel samples from the model, continuing across blocks; rate may change."""
-
-    BLOCK_S = 600.0
-
-    def __init__(self, model, rate_hz: float, seed: int, degrade=None, arm=None):
-        from companion.sim.synth import synthesize_axis
-
-        self.synth = synthesize_axis
-        self.model = model
-        self.rate_hz = float(rate_hz)
-        self.rng = np.random.default_rng(seed)
-        self.degrade = degrade  # (t0, axis, extra term)
-        self.arm = arm  # (t0, t1)
-        self.t_next = 1.0  # s since boot of the next sample
-        self.interval_set = False  # a SET_MESSAGE_INTERVAL wins over REQUEST_DATA_STREAM (as in ArduPilot)
-        self.last = {}
-        self._t = np.zeros(0)
-        self._g = np.zeros((0, 3))
-        self._a = np.zeros((0, 3))
-        self._i = 0
-
-    def set_rate(self, rate_hz: float) -> None:
-        if rate_hz > 0 and abs(rate_hz - self.rate_hz) > 1e-9:
-            self.rate_hz = float(rate_hz)
-            self._t, self._i = np.zeros(0), 0  # regenerate from t_next at the new rate
-
-    def _block(self) -> None:
-        n = max(1, int(round(self.BLOCK_S * self.rate_hz)))
-        t = self.t_next + np.arange(n) / self.rate_hz
-        g = np.zeros((n, 3))
-        a = np.zeros((n, 3))
-        for j, ax in enumerate(("gx", "gy", "gz", "ax", "ay", "az")):
-            terms = self.model.axes.get(ax) or []
-            y = np.zeros(n)
-            for i, term in enumerate(terms):  # term by term: random walk and ramp continue across blocks
-                c = self.synth([term], self.rate_hz, n, self.rng)
-                if term["effect"] in ("random_walk", "ramp"):
-                    c += self.last.get((ax, i), 0.0) + (term.get("R", 0.0) / self.rate_hz if (ax, i) in self.last else 0.0)
-                    self.last[(ax, i)] = float(c[-1])
-                y += c
-            if self.degrade is not None and ax == self.degrade[1] and t[-1] >= self.degrade[0]:
-                extra = self.synth([self.degrade[2]], self.rate_hz, n, self.rng)
-                if self.degrade[2]["effect"] == "random_walk":  # starts from 0 at the degradation, continues
-                    i0 = int(np.searchsorted(t, self.degrade[0]))
-                    extra += self.last.get("extra", 0.0) - (extra[i0] if t[0] < self.degrade[0] else extra[0])
-                    self.last["extra"] = float(extra[-1])
-                y = y + np.where(t >= self.degrade[0], extra, 0.0)
-            if j < 3:
-                g[:, j] = y
-            else:
-                a[:, j - 3] = y
-        if not self.model.axes.get("ax") and not self.model.axes.get("ay") and not self.model.axes.get("az"):
-            a += self.rng.normal(0.0, 0.02, (n, 3))  # a plausible accelerometer at rest
-        a[:, 2] -= G0  # gravity, body z down (ArduPilot's FRD: -1 g on z at rest)
-        if self.arm is not None:
-            m = (t >= self.arm[0]) & (t < self.arm[1])
-            if m.any():  # flight: turning and vibrating
-                g[m] += 0.5 * np.sin(2 * np.pi * 0.3 * t[m])[:, None]
-                a[m] += self.rng.normal(0.0, 2.0, (int(m.sum()), 3))
-        self._t, self._g, self._a, self._i = t, g, a, 0
-
-    def take_until(self, t_end: float):
-        """Samples with t <= t_end: (t, gyro, accel) arrays."""
-        ts, gs, as_ = [], [], []
-        while self.t_next <= t_end:
-            if self._i >= self._t.size:
-                self._block()
-            j = int(np.searchsorted(self._t, t_end, side="right"))
-            ts.append(self._t[self._i:j])
-            gs.append(self._g[self._i:j])
-            as_.append(self._a[self._i:j])
-            self._i = j
-            self.t_next = self._t[j] if j < self._t.size else self._t[-1] + 1.0 / self.rate_hz
-        if not ts:
-            return np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))
-        return np.concatenate(ts), np.concatenate(gs), np.concatenate(as_)
+def _imu_ints(blk, i):
+    """IMU i of a block as int16 accel (mG) and gyro (mrad/s) rows, rounded to the nearest LSB."""
+    a = np.clip(np.rint(blk.accel[i] / (G0 * 1e-3)), -32768, 32767).astype(int).tolist()
+    g = np.clip(np.rint(blk.gyro[i] / 1e-3), -32768, 32767).astype(int).tolist()
+    return a, g
 
 
-def _int16(x):
-    return int(max(-32768, min(32767, round(x))))
+def _describe(sim) -> str:
+    names = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")[:sim.imus]
+    parts = [f"{sim.imus} IMU(s) ({', '.join(names)}) at {sim.rate_hz:g} Hz"]
+    for f in sim.schedule.flights:
+        parts.append(f"flight {f.arm_at:g}-{f.disarm_at:g} s")
+    for h in sim.schedule.handlings:
+        parts.append(f"handling {h.at:g}-{h.end:g} s")
+    if sim.fault is not None:
+        parts.append("fault " + sim.fault.describe())
+    return "sim-autopilot: " + "; ".join(parts)
 
 
 def run(args) -> int:
@@ -174,23 +128,10 @@ def run(args) -> int:
         v = getattr(args, name)
         if v is not None and not v > 0:
             raise CompanionError(f"--{name.replace('_', '-')} must be > 0")
-    if not args.degrade_factor >= 1.0:
-        raise CompanionError("--degrade-factor must be >= 1 (a degradation makes a term larger)")
     model = load_model(args.model)
-    gyro_terms = model.axes.get(args.degrade_axis) or []
-    degrade = None
-    if args.degrade_at is not None:
-        effect = DEGRADE_EFFECT[args.degrade_term]
-        base = [t for t in gyro_terms if t["effect"] == effect]
-        if not base:
-            raise CompanionError(f"--degrade-term {args.degrade_term}: the model has no {effect} on {args.degrade_axis}")
-        extra = {"effect": effect, args.degrade_term: base[0][args.degrade_term] * math.sqrt(args.degrade_factor**2 - 1.0)}
-        degrade = (args.degrade_at + 1.0, args.degrade_axis, extra)  # time since boot starts at 1 s
-    arm = None if args.arm_at is None else (args.arm_at + 1.0, args.arm_at + 1.0 + args.arm_s)
-    rate = float(args.rate or model.rate_hz)
-    if not rate > 0:
+    if args.rate is not None and not args.rate > 0:
         raise CompanionError("--rate must be > 0")
-    sim = ImuSimulator(model, rate, args.seed, degrade, arm)
+    sim = build_simulator(args, model, args.rate)
     os.environ.setdefault("MAVLINK20", "1")  # speak MAVLink 2 like ArduPilot (pymavlink picks the dialect from it)
     conn = open_connection(args.connect, source_system=args.sysid, source_component=1)
     if args.signing_key:  # i14: signing, as on an autopilot after SETUP_SIGNING
@@ -198,50 +139,70 @@ def run(args) -> int:
 
         setup_signing(conn, load_signing_key(args.signing_key))
     out = sys.stdout
+    if not args.quiet:
+        print(_describe(sim), file=out, flush=True)
     record = open(args.record, "w") if args.record else None
     stop = {"flag": False}
     old = {s: signal.signal(s, lambda *a: stop.__setitem__("flag", True)) for s in (signal.SIGINT, signal.SIGTERM)}
     values: dict[str, float] = {}
-    counts = {"raw_imu": 0, "heartbeat": 0, "named_value_float": 0, "statustext": 0, "commands": 0}
-    sending = not args.wait_request
-    wall0 = time.monotonic()
+    counts = {"raw_imu": 0, "scaled_imu2": 0, "scaled_imu3": 0, "heartbeat": 0, "named_value_float": 0,
+              "statustext": 0, "commands": 0}
+    sending = {mid: not args.wait_request for mid in IMU_MSG_IDS[:sim.imus]}
+    wall_start = time.monotonic()
+    wall0 = None if args.wait_request else wall_start  # simulated time runs from wall0 (the first request)
+    next_idle_hb = wall_start
     next_hb = 1.0
     mav = conn.mav
+    senders = (lambda ti, a, g: mav.raw_imu_send(int(round(ti * 1e6)), *a, *g, 0, 0, 0, 0, 4200),
+               lambda ti, a, g: mav.scaled_imu2_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, 4200),
+               lambda ti, a, g: mav.scaled_imu3_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, 4200))
+    count_keys = ("raw_imu", "scaled_imu2", "scaled_imu3")
+
+    def heartbeat(armed: bool) -> None:
+        base_mode = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+        mav.heartbeat_send(MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, 0,
+                           MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY)
+        counts["heartbeat"] += 1
+
     try:
         while not stop["flag"]:
-            wall = time.monotonic() - wall0
-            t_sim = 1.0 + wall * args.speedup
-            if args.duration is not None:
-                t_sim = min(t_sim, 1.0 + args.duration)
-            armed = arm is not None and arm[0] <= t_sim < arm[1]
-            t, g, a = sim.take_until(t_sim)
-            hb_times = []
-            while next_hb <= t_sim:
-                hb_times.append(next_hb)
-                next_hb += 1.0
-            k = 0
-            for th in hb_times + [math.inf]:
-                while k < t.size and t[k] < th:
-                    if sending:
-                        mav.raw_imu_send(int(round(t[k] * 1e6)),
-                                         _int16(a[k, 0] / (G0 * 1e-3)), _int16(a[k, 1] / (G0 * 1e-3)), _int16(a[k, 2] / (G0 * 1e-3)),
-                                         _int16(g[k, 0] / 1e-3), _int16(g[k, 1] / 1e-3), _int16(g[k, 2] / 1e-3),
-                                         0, 0, 0, 0, 4200)
-                        counts["raw_imu"] += 1
-                    k += 1
-                if th != math.inf:
-                    base_mode = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-                    mav.heartbeat_send(MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, 0,
-                                       MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY)
-                    counts["heartbeat"] += 1
+            now = time.monotonic()
+            if wall0 is None:  # --wait-request: idle, HEARTBEAT once a wall second, simulated time stands still
+                t_sim = 1.0
+                if now >= next_idle_hb:
+                    heartbeat(False)
+                    next_idle_hb += 1.0
+            else:
+                t_sim = 1.0 + (now - wall0) * args.speedup
+                if args.duration is not None:
+                    t_sim = min(t_sim, 1.0 + args.duration)
+                blk = sim.take_until(t_sim)
+                t = blk.t.tolist()
+                ints = [_imu_ints(blk, i) for i in range(sim.imus)]
+                hb_times = []
+                while next_hb <= t_sim:
+                    hb_times.append(next_hb)
+                    next_hb += 1.0
+                k = 0
+                for th in hb_times + [math.inf]:
+                    while k < len(t) and t[k] < th:
+                        for i, mid in enumerate(IMU_MSG_IDS[:sim.imus]):
+                            if sending[mid]:
+                                senders[i](t[k], ints[i][0][k], ints[i][1][k])
+                                counts[count_keys[i]] += 1
+                        k += 1
+                    if th != math.inf:
+                        heartbeat(bool(sim.armed_at(th)))
             while True:
                 msg = conn.recv_match(blocking=False)
                 if msg is None:
                     break
-                sending = _on_reply(msg, args, sim, mav, values, counts, record, out, t_sim, sending)
+                _on_reply(msg, args, sim, mav, values, counts, record, out, t_sim, sending)
+            if wall0 is None and any(sending.values()):
+                wall0 = time.monotonic()  # asked: the simulation starts now
             if args.duration is not None and t_sim >= 1.0 + args.duration:
                 break
-            if args.wall_limit is not None and wall >= args.wall_limit:
+            if args.wall_limit is not None and now - wall_start >= args.wall_limit:
                 break
             time.sleep(0.005)
     finally:
@@ -250,7 +211,8 @@ def run(args) -> int:
         if record is not None:
             record.close()
         conn.close()
-    print(f"sim-autopilot: sent {counts['raw_imu']} RAW_IMU and {counts['heartbeat']} HEARTBEAT "
+    sent = " + ".join(f"{counts[count_keys[i]]} {count_keys[i].upper()}" for i in range(sim.imus))
+    print(f"sim-autopilot: sent {sent} and {counts['heartbeat']} HEARTBEAT "
           f"({sim.rate_hz:g} Hz at the end); received {counts['named_value_float']} NAMED_VALUE_FLOAT, "
           f"{counts['statustext']} STATUSTEXT, {counts['commands']} requests", file=out)
     for name in sorted(values):
@@ -259,7 +221,8 @@ def run(args) -> int:
     return 0
 
 
-def _on_reply(msg, args, sim, mav, values, counts, record, out, t_sim, sending) -> bool:
+def _on_reply(msg, args, sim, mav, values, counts, record, out, t_sim, sending) -> None:
+    """Answer a request (``sending``: message id -> on/off, changed in place) or record a report."""
     mtype = msg.get_type()
     if mtype == "NAMED_VALUE_FLOAT":
         counts["named_value_float"] += 1
@@ -276,17 +239,14 @@ def _on_reply(msg, args, sim, mav, values, counts, record, out, t_sim, sending) 
         counts["commands"] += 1
         if args.refuse_interval:
             mav.command_ack_send(MAV_CMD_SET_MESSAGE_INTERVAL, 2)  # MAV_RESULT_DENIED
-            return sending
-        if int(msg.param1) == RAW_IMU_ID:
+            return
+        mid = int(msg.param1)
+        if mid in sending:  # one of our IMU messages; all IMUs share one rate (the last one asked for)
             sim.interval_set = True
             interval = msg.param2
             if interval > 0:
                 sim.set_rate(1e6 / interval)
-                sending = True
-            elif interval == 0:
-                sending = True
-            else:
-                sending = False
+            sending[mid] = interval >= 0
         mav.command_ack_send(MAV_CMD_SET_MESSAGE_INTERVAL, 0)  # MAV_RESULT_ACCEPTED
         if not args.quiet:
             print(f"request: SET_MESSAGE_INTERVAL id {int(msg.param1)} {msg.param2:.0f} us", file=out, flush=True)
@@ -295,7 +255,7 @@ def _on_reply(msg, args, sim, mav, values, counts, record, out, t_sim, sending) 
         if (msg.req_stream_id in (0, 1) and msg.start_stop and msg.req_message_rate > 0
                 and not sim.interval_set):  # MAV_DATA_STREAM_ALL or RAW_SENSORS
             sim.set_rate(min(50.0, float(msg.req_message_rate)))
-            sending = True
+            for mid in sending:
+                sending[mid] = True
         if not args.quiet:
             print(f"request: REQUEST_DATA_STREAM {msg.req_stream_id} at {msg.req_message_rate} Hz", file=out, flush=True)
-    return sending

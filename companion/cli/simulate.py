@@ -27,6 +27,12 @@ Model YAML (SI units):
       - {effect: white_noise, N: 1.0e-3}          # rad/s/sqrt(Hz)
       - {effect: bias_instability, B: 2.0e-5}     # rad/s
       - {effect: gauss_markov, sigma: 1.0e-4, tau_c: 20.0}
+
+--vehicle: a whole vehicle instead of one IMU's noise (companion.sim.vehicle): 1-3 IMUs (--imus; IMU0 as
+RAW_IMU, IMU1 as SCALED_IMU2, IMU2 as SCALED_IMU3, ArduPilot units) on one rigid body with per-IMU
+scale-factor, misalignment and bias differences, a flight (--arm-at/--disarm-at: HEARTBEAT armed,
+manoeuvres, vibration), handling by hand (--handle-at), a warm-up drift and one gyro fault (--fault),
+written to a .tlog only. The options are those of `companion sim-autopilot`; times in s since the start.
 """
 
 EPILOG = """\
@@ -34,6 +40,10 @@ examples:
   companion simulate tlogs/sample_model.yaml --duration 1200 --out tlogs/sample.tlog --seed 1
   companion simulate model.yaml --duration 7200 --out sim.csv.gz --seed 3
   companion simulate model.yaml --duration 600 --out hr.tlog --message HIGHRES_IMU
+  two IMUs, a flight, IMU1's gyro X frozen in flight; then replay it through the health monitor:
+  companion simulate model.yaml --duration 2400 --out stuck.tlog --vehicle --imus 2 --arm-at 1200 \\
+      --disarm-at 2000 --fault stuck --fault-at 1500 --fault-imu 1
+  companion run --source stuck.tlog --baseline-s 300
 """
 
 MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
@@ -49,7 +59,38 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--message", default="RAW_IMU", choices=MESSAGES, help="IMU message of a tlog (default RAW_IMU)")
     p.add_argument("--sysid", type=int, default=1, help="MAVLink system id of a tlog (default 1)")
+    p.add_argument("--vehicle", action="store_true", help="simulate a vehicle with 1-3 IMUs, flights, handling and a fault (below)")
+    from companion.cli.vehicle_options import add_fault_options, add_vehicle_options
+
+    add_vehicle_options(p)
+    add_fault_options(p)
     p.set_defaults(func=run)
+
+
+VEHICLE_ONLY = {"imus": 1, "arm_at": None, "disarm_at": None, "arm_s": None, "handle_at": None, "warmup_deg_s": 0.0,
+                "fault": None, "fault_at": None, "fault_size": None}
+
+
+def run_vehicle(args, model) -> int:
+    """``--vehicle``: companion.sim.vehicle into a tlog (RAW_IMU / SCALED_IMU2 / SCALED_IMU3 + HEARTBEAT)."""
+    from companion.cli.vehicle_options import build_simulator
+    from companion.sim.vehicle import IMU_MESSAGES, write_tlog
+
+    if not args.out.lower().endswith(".tlog"):
+        raise CompanionError(f"--out {args.out}: --vehicle writes a .tlog (one IMU message type per IMU)")
+    if args.message != "RAW_IMU":
+        raise CompanionError("--message does not apply to --vehicle (IMU0 RAW_IMU, IMU1 SCALED_IMU2, IMU2 SCALED_IMU3)")
+    sim = build_simulator(args, model)
+    try:
+        counts = write_tlog(args.out, sim, args.duration, sysid=args.sysid)
+    except OSError as exc:
+        raise CompanionError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    what = [f"{counts['imu_messages'] // sim.imus} {IMU_MESSAGES[i]}" for i in range(sim.imus)]
+    extra = [f"fault {sim.fault.describe()}"] if sim.fault is not None else []
+    extra += [f"flight {f.arm_at:g}-{f.disarm_at:g} s" for f in sim.schedule.flights]
+    print(f"wrote {args.out}: {' + '.join(what)} and {counts['heartbeats']} HEARTBEAT messages, "
+          f"{args.duration:g} s at {sim.rate_hz:g} Hz" + "".join(f"; {e}" for e in extra))
+    return 0
 
 
 def synthesize(model, duration_s: float, seed: int):
@@ -81,6 +122,13 @@ def run(args) -> int:
     if not (args.duration > 0 and math.isfinite(args.duration)):
         raise CompanionError("--duration must be a positive number of seconds")
     n = int(round(args.duration * model.rate_hz))
+    if args.vehicle:
+        if n > 50_000_000:
+            raise CompanionError(f"{n} samples per IMU is too many (limit 5e7); shorten --duration")
+        return run_vehicle(args, model)
+    used = [k for k, v in VEHICLE_ONLY.items() if getattr(args, k) != v]
+    if used:
+        raise CompanionError(f"--{used[0].replace('_', '-')} needs --vehicle")
     if n < 2:
         raise CompanionError(f"--duration {args.duration} s at {model.rate_hz} Hz gives fewer than 2 samples")
     if n > 50_000_000:

@@ -10,7 +10,11 @@ The parameter is *high* when the lower z-sigma bound of the ratio exceeds the al
 
     L - z sigma_L > ln(ratio_on)                                                            (2)
 
-i.e. we are z-sigma confident that it rose by more than ``ratio_on``. Hysteresis: the state goes to
+i.e. we are z-sigma confident that it rose by more than ``ratio_on``. A baseline of zero or one that is
+unresolved (b < 2 s_b) is replaced by its upper bound u = b + z s_b:
+
+    ln(x / u) - z s_x / x > ln(ratio_on)                                                    (3)
+ Hysteresis: the state goes to
 DEGRADING after ``hold_on`` consecutive checks satisfying (2), and back to HEALTHY only after
 ``hold_off`` consecutive checks with L - z sigma_L < ln(ratio_off), ratio_off < ratio_on. A decrease
 (an improvement) never raises a flag. A check with a non-finite or missing figure changes nothing.
@@ -62,9 +66,20 @@ class DetectorConfig:
 
 
 def log_ratio_bound(x: float, s_x: float, b: float, s_b: float, z: float) -> tuple[float, float]:
-    """Return (ratio x/b, lower z-sigma bound of ln(x/b)) per eq. (1)-(2); (nan, nan) if undefined."""
-    if not (x > 0 and b > 0 and math.isfinite(x) and math.isfinite(b)):
+    """Return (ratio x/b, lower z-sigma bound of ln(x/b)) per eq. (1)-(2); (nan, nan) if undefined.
+
+    A baseline that is zero or unresolved (b < 2 s_b: its interval reaches zero) is replaced by its upper
+    bound u = b + z s_b, and the current value's lower bound is tested against it: ratio x / u, lower
+    bound ln(x / u) - z s_x / x (eq. (3)). A term that was not seen in the baseline can thus still be
+    flagged when it clearly appears (e.g. K after a bias jump), never from the uncertainty of a ratio to 0.
+    """
+    if not (x > 0 and math.isfinite(x)):
         return math.nan, math.nan
+    if not (b > 0 and math.isfinite(b)) or (math.isfinite(s_b) and b < 2.0 * s_b):
+        upper = (b if math.isfinite(b) and b > 0 else 0.0) + z * s_b
+        if not (math.isfinite(upper) and upper > 0 and math.isfinite(s_x)):
+            return math.nan, math.nan
+        return x / upper, math.log(x / upper) - z * s_x / x
     if not (math.isfinite(s_x) and math.isfinite(s_b)):
         return x / b, -math.inf  # no usable uncertainty: never conclusive
     sigma_l = math.hypot(s_x / x, s_b / b)

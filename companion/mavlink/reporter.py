@@ -14,7 +14,12 @@ name                value                                        unit
 ``IMU{i}A{a}_B``    accel bias instability (optional)            mg
 ``IMU{i}A{a}_K``    accel random walk (optional)                 m/s/h^1.5
 ``IMU{i}G_HLTH``    0 healthy, 1 degrading, 2 learning, 3 stale  -
+``IMU{i}G_FLT``     fault kind code (0 none; table below)        -
 ==================  ==========================================  =========================
+
+``IMU{i}G_FLT`` (companion.health.faults.KIND_CODE; the most severe active fault of the IMU's gyros):
+0 none, 1 stuck, 2 noise, 3 bias jump, 4 bias drift, 5 spikes, 6 saturation, 7 rate drop / irregular
+timing, 8 disagreement with another IMU, 9 Allan term (N, B, K) above its baseline.
 
 Uncertainty and bounds (:meth:`Reporter.set_online_terms`, what ``companion run`` sends): each value
 ``IMU{i}G{a}_{P}`` (P = Q, N, B, K, R) has a companion ``IMU{i}G{a}_{P}S`` = its 1-sigma in the same unit
@@ -39,6 +44,7 @@ from typing import Mapping, Protocol
 from companion import units
 
 NAME_RE = re.compile(r"^[A-Z0-9_]{1,10}$")
+MAV_SEVERITY_CRITICAL = 2
 MAV_SEVERITY_WARNING = 4
 MAV_SEVERITY_NOTICE = 5
 MAV_SEVERITY_INFO = 6
@@ -60,6 +66,13 @@ def value_name(imu: int, axis: str, param: str) -> str:
 
 def health_name(imu: int) -> str:
     name = f"IMU{int(imu)}G_HLTH"
+    if not NAME_RE.match(name):
+        raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} is not <= 10 characters of [A-Z0-9_]")
+    return name
+
+
+def fault_name(imu: int) -> str:
+    name = f"IMU{int(imu)}G_FLT"
     if not NAME_RE.match(name):
         raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} is not <= 10 characters of [A-Z0-9_]")
     return name
@@ -131,6 +144,10 @@ class Reporter:
 
     def set_health(self, imu: int, state: int) -> None:
         self.set_value(health_name(imu), float(state))
+
+    def set_fault(self, imu: int, code: int) -> None:
+        """``IMU{i}G_FLT``: the fault kind code of the IMU (0: none)."""
+        self.set_value(fault_name(imu), float(code))
 
     def tick(self, t_s: float) -> int:
         """Send what is due at message time ``t_s``; return the number of messages sent."""

@@ -31,6 +31,7 @@ from companion.sources import messages as M
 G0 = 9.80665
 DEFAULT_GYRO_SCALE = 1e-3  # rad/s per LSB (mrad/s)
 DEFAULT_ACCEL_SCALE = G0 * 1e-3  # m/s^2 per LSB (mG)
+MAV_STATE_ACTIVE = 4
 
 
 def _int16(values: np.ndarray) -> np.ndarray:
@@ -78,13 +79,15 @@ def imu_payloads(message: str, t_s, gyro, accel, instance: int = 0, temperature=
     return rec
 
 
-def heartbeat_payload() -> np.ndarray:
-    """One HEARTBEAT payload: a disarmed ArduPilot quadrotor in standby."""
-    rec = np.zeros(1, dtype=M.HEARTBEAT.dtype)
+def heartbeat_payload(armed=False) -> np.ndarray:
+    """HEARTBEAT payloads of an ArduPilot quadrotor: disarmed in standby, or armed (``base_mode`` bit 7,
+    MAV_MODE_FLAG_SAFETY_ARMED) and active. ``armed`` a bool (one row) or an array of bools (one row each)."""
+    armed = np.atleast_1d(np.asarray(armed, dtype=bool))
+    rec = np.zeros(armed.shape[0], dtype=M.HEARTBEAT.dtype)
     rec["type"] = M.MAV_TYPE_QUADROTOR
     rec["autopilot"] = M.MAV_AUTOPILOT_ARDUPILOTMEGA
-    rec["base_mode"] = 0x01  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, not armed (bit 7 clear)
-    rec["system_status"] = M.MAV_STATE_STANDBY
+    rec["base_mode"] = np.where(armed, 0x81, 0x01)  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED (+ SAFETY_ARMED)
+    rec["system_status"] = np.where(armed, MAV_STATE_ACTIVE, M.MAV_STATE_STANDBY)
     rec["mavlink_version"] = 3
     return rec
 
@@ -204,6 +207,83 @@ def write_imu_tlog(path, t_s, gyro, accel, message: str = "RAW_IMU", sysid: int 
     return n
 
 
+class ImuTlogStream:
+    """Several IMU streams and HEARTBEATs merged in time order into one tlog, appended block by block.
+
+    >>> with ImuTlogStream("x.tlog") as out:
+    ...     out.write([("RAW_IMU", 0, t, g0, a0), ("SCALED_IMU2", 1, t, g1, a1)], heartbeat_t, heartbeat_armed)
+
+    Each ``write`` takes streams ``(message, instance, t_s, gyro, accel)`` in SI (units, rounding and
+    clipping as :func:`imu_payloads`) and HEARTBEAT times (s since boot) with their armed flags; the
+    records of one call are sorted by time (a HEARTBEAT before samples of the same time, then the
+    streams in the order given) and appended. Calls must come in time order. Sequence numbers
+    continue across calls (mod 256); record stamps are ``t0_unix + t`` in microseconds.
+    """
+
+    def __init__(self, path, sysid: int = 1, compid: int = 1, mavlink2: bool = True, t0_unix: float = 1.7e9,
+                 gyro_scale: float | None = None, accel_scale: float | None = None):
+        self._fh = open(path, "wb")
+        self.sysid, self.compid, self.mavlink2, self.t0_unix = sysid, compid, mavlink2, t0_unix
+        self.gyro_scale, self.accel_scale = gyro_scale, accel_scale
+        self.records = 0
+
+    def write(self, streams, heartbeat_t=(), heartbeat_armed=None) -> int:
+        """Append one time-ordered block; returns the number of records written."""
+        hb_t = np.asarray(heartbeat_t, dtype=np.float64).reshape(-1)
+        armed = np.zeros(hb_t.shape[0], bool) if heartbeat_armed is None else np.asarray(heartbeat_armed, bool).reshape(-1)
+        rows, ids, extras, bases, times, keys = [], [], [], [], [], []
+        if hb_t.size:
+            rows.append(heartbeat_payload(armed).view(np.uint8).reshape(hb_t.size, M.HEARTBEAT.full_len))
+            ids.append(np.full(hb_t.size, M.HEARTBEAT.msgid))
+            extras.append(np.full(hb_t.size, M.HEARTBEAT.crc_extra))
+            bases.append(np.full(hb_t.size, M.HEARTBEAT.base_len))
+            times.append(hb_t)
+            keys.append(np.full(hb_t.size, -1))
+        for k, (message, instance, t_s, gyro, accel) in enumerate(streams):
+            layout = M.IMU_LAYOUTS.get(message)
+            if layout is None:
+                raise ValueError(f"unknown IMU message {message!r}; expected one of {', '.join(M.IMU_LAYOUTS)}")
+            rec = imu_payloads(message, t_s, gyro, accel, instance, None, self.gyro_scale, self.accel_scale)
+            n = rec.shape[0]
+            rows.append(rec.view(np.uint8).reshape(n, layout.full_len))
+            ids.append(np.full(n, layout.msgid))
+            extras.append(np.full(n, layout.crc_extra))
+            bases.append(np.full(n, layout.base_len))
+            times.append(np.asarray(t_s, dtype=np.float64).reshape(-1))
+            keys.append(np.full(n, k))
+        if not rows:
+            return 0
+        t_all = np.concatenate(times)
+        order = np.lexsort((np.concatenate(keys), t_all))
+        total = t_all.shape[0]
+        width = max(r.shape[1] for r in rows)
+        payloads = np.zeros((total, width), dtype=np.uint8)
+        start = 0
+        for r in rows:
+            payloads[start:start + r.shape[0], :r.shape[1]] = r
+            start += r.shape[0]
+        payloads = payloads[order]
+        msgid = np.concatenate(ids).astype(np.int64)[order]
+        extra = np.concatenate(extras).astype(np.uint16)[order]
+        base = np.concatenate(bases).astype(np.int64)[order]
+        seq = ((self.records + np.arange(total)) & 0xFF).astype(np.uint8)
+        frames, flen = encode_frames(payloads, msgid, extra, seq, self.sysid, self.compid, self.mavlink2, base)
+        stamps = np.rint((self.t0_unix + t_all[order]) * 1e6).astype(np.uint64)
+        self._fh.write(pack_records(stamps, frames, flen))
+        self.records += total
+        return total
+
+    def close(self) -> None:
+        self._fh.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
 class TlogWriter:
     """Write any pymavlink message object to a tlog with a timestamp (tests, small files).
 
@@ -246,5 +326,5 @@ class TlogWriter:
         return False
 
 
-__all__ = ["write_imu_tlog", "TlogWriter", "imu_payloads", "encode_frames", "pack_records",
+__all__ = ["write_imu_tlog", "ImuTlogStream", "TlogWriter", "imu_payloads", "encode_frames", "pack_records",
            "DEFAULT_GYRO_SCALE", "DEFAULT_ACCEL_SCALE"]

@@ -36,7 +36,11 @@ from companion.estimators.report import health_params as _health_params
 from companion.health.baseline import Baseline
 from companion.service.baseline_match import check_baseline, stream_meta, units_mismatch
 from companion.health.detector import DEGRADING, LEARNING, DetectorConfig, HealthDetector, STATE_NAMES
-from companion.mavlink.reporter import MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter
+from companion.health.disagreement import PairDisagreement
+from companion.health.faults import FAULT, OK, FaultEvent, block_stats
+from companion.health.monitor import ImuFaults
+from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
+                                        Reporter)
 from companion.samples import ACCEL_AXES, GYRO_AXES
 
 FAST_PARAMS = ("Q", "N")
@@ -60,6 +64,10 @@ class PipelineConfig:
     gyro_std_factor: float = 5.0
     accel_shift: float = 0.3  # m/s^2
     accel_std: float = 0.5  # m/s^2
+    accel_std_factor: float = 3.0  # accel axis std above this x its still reference = moving (handling)
+    accel_std_min: float = 0.05  # m/s^2: ... and above this
+    gyro_limit: float = 32.767  # rad/s: range limit of the gyro (int16 mrad/s); a sample there is saturated
+    fault_ref_s: float = 30.0  # still data learned as the reference of the fast fault detectors
     reset_s: float = 1.0
     gap_s: float = 0.5
     estimator: dict = field(default_factory=dict)  # passed to make_estimator (e.g. effects, phases, max_tau_s)
@@ -98,6 +106,7 @@ class Channel:
         self.dts: deque = deque(maxlen=64)
         self.rate_hz: float | None = None
         self.block: list = []
+        self.block_arrays: list = []  # the same block, as arrays (Pipeline.on_samples)
         self.block_t0: float | None = None
         self.pending = None  # still block waiting for the look-ahead
         self.still_run_s = 0.0
@@ -112,6 +121,11 @@ class Channel:
         self.feed_buf_s = 0.0
         self.next_check_t: float | None = None
         self.detector = HealthDetector(imu, cfg.health)
+        self.faults = ImuFaults(imu, cfg.gyro_limit, max(1, int(round(cfg.fault_ref_s / cfg.block_s))))
+        self.last_stats = None  # BlockStats of the last closed block (motion consensus between IMUs)
+        self.pending_stats = None
+        self.ref_accel_std = None
+        self.recent: deque = deque(maxlen=3)  # (t, gyro) of the last closed blocks (IMU disagreement)
         self.counts = {"samples": 0, "duplicates": 0, "backwards": 0, "resets": 0, "gaps": 0,
                        "blocks_still": 0, "blocks_moving": 0, "blocks_fed": 0, "rate_changes": 0}
         self.current: dict[str, dict[str, tuple[float, float]]] = {}
@@ -142,6 +156,9 @@ class Pipeline:
         self.channels: dict[int, Channel] = {}
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[str] = []
+        self.pairs: dict[tuple[int, int], PairDisagreement] = {}
+        self.pair_done: dict[tuple[int, int], float] = {}
+        self.disagree: dict[tuple[int, str], str] = {}  # (imu, axis) -> detail of an active disagreement
         self._decode = None
 
     # ------------------------------------------------------------------ input
@@ -213,13 +230,70 @@ class Pipeline:
         c["samples"] += 1
         if ch.block_t0 is None:
             ch.block_t0 = t
-        ch.block.append((t, *gyro, *accel))
+        if ch.block_arrays:
+            ch.block_arrays.append(np.array([(t, *gyro, *accel)], dtype=float))
+        else:
+            ch.block.append((t, *gyro, *accel))
         if t - ch.block_t0 >= self.cfg.block_s - 0.5 * self._period(ch):
             self._close_block(ch)
         if ch.next_check_t is not None and t >= ch.next_check_t:
             self._check(ch, t)
         self.reporter.tick(t)
         return True
+
+    def on_samples(self, key, t, gyro, accel) -> int:
+        """Many samples of one IMU at once (arrays (n,), (n, 3), (n, 3)): the same blocks, checks and
+        reports as :meth:`on_sample` one by one, much faster. Timestamps that are not strictly increasing
+        within ``gap_s`` (and the first samples of a stream) take the sample-by-sample path. Returns the
+        number of samples used."""
+        t = np.asarray(t, dtype=float)
+        gyro = np.asarray(gyro, dtype=float).reshape(-1, 3)
+        accel = np.asarray(accel, dtype=float).reshape(-1, 3)
+        ch = self.channels.get(key.instance)
+        n = t.size
+        start = 0
+        if ch is None or ch.rate_hz is None or key.sysid != self.sysid or ch.message != key.message or ch.last_t is None:
+            start = min(n, 200)
+            used = sum(bool(self.on_sample(key, t[k], gyro[k], accel[k])) for k in range(start))
+            if start == n:
+                return used
+            ch = self.channels.get(key.instance)
+            if ch is None or ch.rate_hz is None or ch.message != key.message or key.sysid != self.sysid:
+                return used + sum(bool(self.on_sample(key, t[k], gyro[k], accel[k])) for k in range(start, n))
+        else:
+            used = 0
+        tt = t[start:]
+        dt = np.diff(np.concatenate(([ch.last_t], tt)))
+        if not (np.all(dt > 0.0) and np.all(dt <= self.cfg.gap_s)):
+            return used + sum(bool(self.on_sample(key, t[k], gyro[k], accel[k])) for k in range(start, n))
+        rows = np.column_stack([tt, gyro[start:], accel[start:]])
+        ch.dts.extend(dt[-ch.dts.maxlen:].tolist())
+        ch.counts["samples"] += tt.size
+        ch.last_t = float(tt[-1])
+        if ch.block:
+            ch.block_arrays.insert(0, np.asarray(ch.block, dtype=float))
+            ch.block = []
+        i = 0
+        m = tt.size
+        stride = max(1, int(0.05 * (ch.rate_hz or 100.0)))
+        while i < m:
+            if ch.block_t0 is None:
+                ch.block_t0 = float(tt[i])
+            j = int(np.searchsorted(tt, ch.block_t0 + self.cfg.block_s - 0.5 * self._period(ch), side="left"))
+            if j >= m:
+                ch.block_arrays.append(rows[i:])
+                for k in range(i, m, stride):
+                    self.reporter.tick(float(tt[k]))
+                break
+            ch.block_arrays.append(rows[i:j + 1])
+            for k in range(i, j + 1, stride):
+                self.reporter.tick(float(tt[k]))
+            self._close_block(ch)
+            if ch.next_check_t is not None and tt[j] >= ch.next_check_t:
+                self._check(ch, float(tt[j]))
+            self.reporter.tick(float(tt[j]))
+            i = j + 1
+        return used + m
 
     @staticmethod
     def _period(ch: Channel) -> float:
@@ -228,12 +302,22 @@ class Pipeline:
     def _break(self, ch: Channel) -> None:
         """Time discontinuity: drop the partial block and the look-ahead, settle again."""
         ch.block, ch.block_t0, ch.pending, ch.still_run_s = [], None, None, 0.0
+        ch.block_arrays = []
+        ch.pending_stats = None
         ch.next_check_t = None
+        ch.recent.clear()
 
     # ------------------------------------------------------------------ blocks
     def _close_block(self, ch: Channel) -> None:
-        data = np.asarray(ch.block, dtype=float)
-        ch.block, ch.block_t0 = [], None
+        parts = ch.block_arrays + ([np.asarray(ch.block, dtype=float)] if ch.block else [])
+        data = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        ch.block, ch.block_arrays, ch.block_t0 = [], [], None
+        st = block_stats(data[:, 1:4], ch.faults.dd_scale_ref())
+        still = (not self.armed) and self._still(ch, data, st)
+        ch.last_stats = st
+        ch.recent.append((data[:, 0].copy(), data[:, 1:4].copy()))
+        self._report(ch.faults.on_block(st, data[:, 0], still), float(data[-1, 0]))
+        self._pairs(ch)
         if len(ch.dts) >= 8:
             rate = 1.0 / float(np.median(ch.dts))
             if ch.rate_hz is None:
@@ -247,40 +331,214 @@ class Pipeline:
                 self.log(f"IMU{ch.imu}: rate changed {ch.rate_hz:.1f} -> {rate:.1f} Hz: estimators restart")
                 ch.rate_hz = rate
                 ch.make_estimators(learning=not self._has_baseline(ch))
-                ch.pending, ch.still_run_s = None, 0.0
+                ch.pending, ch.pending_stats, ch.still_run_s = None, None, 0.0
                 return
         if ch.rate_hz is None:
             return
         duration = data.shape[0] / ch.rate_hz
-        still = (not self.armed) and self._still(ch, data)
         ch.counts["blocks_still" if still else "blocks_moving"] += 1
         if not still:
-            ch.pending, ch.still_run_s = None, 0.0
+            ch.pending, ch.pending_stats, ch.still_run_s = None, None, 0.0
             return
         if ch.pending is not None:
+            self._report(ch.faults.on_quiet(ch.pending_stats, self._bias_extra_var(ch)), float(ch.pending[-1, 0]))
             self._feed(ch, ch.pending)
-        ch.pending = data if ch.still_run_s >= self.cfg.settle_s else None
+        settled = ch.still_run_s >= self.cfg.settle_s
+        ch.pending = data if settled else None
+        ch.pending_stats = st if settled else None
         ch.still_run_s += duration
 
-    def _still(self, ch: Channel, data: np.ndarray) -> bool:
-        g, a = data[:, 1:4], data[:, 4:7]
+    def _still(self, ch: Channel, data: np.ndarray, st=None) -> bool:
+        """Motion gate from the accelerometer and from the agreement of IMUs and axes, never from one gyro
+        axis' own noise level (a gyro whose noise jumps while the accel and the other IMUs stay quiet is
+        faulty, not moving):
+
+        * accel: |accel| std above ``accel_std``, the mean accel vector ``accel_shift`` away from the
+          still reference (a new attitude), or an accel axis' std above ``accel_std_factor`` x its still
+          reference and above ``accel_std_min`` (handling, vibration);
+        * rotation: the block mean rate above ``gyro_mean`` and significant against the block's own noise
+          (5 sigma), on the IMU agreeing most with "no rotation" when others exist (per axis the smaller
+          |mean| of two, the median of three): one frozen or biased gyro cannot declare motion; with one
+          IMU only the rotation about gravity counts (a rotation about a horizontal axis tilts the vehicle
+          and shows in the accel shift test; a gyro drifting or frozen at a rate alone is not motion);
+        * vibration: with other IMUs, their gyros vibrating too (an axis above ``gyro_std_factor`` x its
+          still noise on this and on another IMU); alone, two axes of this gyro above it and the accel
+          axis std above 1.5x its reference.
+        """
         cfg = self.cfg
-        if np.any(np.abs(g.mean(axis=0)) > cfg.gyro_mean):
-            return False
-        g_std = g.std(axis=0)
+        g, a = data[:, 1:4], data[:, 4:7]
+        if st is None:
+            st = block_stats(g, ch.faults.dd_scale_ref())
+        n = g.shape[0]
         a_mean = a.mean(axis=0)
+        a_std = a.std(axis=0)
         if np.linalg.norm(a, axis=1).std() > cfg.accel_std:
             return False
         if ch.ref_accel is not None and np.linalg.norm(a_mean - ch.ref_accel) > cfg.accel_shift:
             # moved to a new attitude; it becomes the reference once still for settle_s
             ch.ref_accel = a_mean if ch.still_run_s == 0.0 and ch.pending is None else ch.ref_accel
             return False
-        if ch.ref_gyro_std is not None and np.any(g_std > cfg.gyro_std_factor * np.maximum(ch.ref_gyro_std, 1e-6)):
+        accel_up = 1.0
+        if ch.ref_accel_std is not None:
+            ratio = a_std / np.maximum(ch.ref_accel_std, 1e-9)
+            if np.any((ratio > cfg.accel_std_factor) & (a_std > cfg.accel_std_min)):
+                return False
+            accel_up = float(ratio.max())
+        # rotation, by consensus of the IMUs
+        means = [self._rotation(st)]
+        others = [o for o in self.channels.values() if o is not ch and o.last_stats is not None
+                  and o.last_t is not None and ch.last_t is not None and abs(o.last_t - ch.last_t) < 2 * cfg.block_s]
+        means += [self._rotation(o.last_stats) for o in others]
+        rot = np.array(means)
+        if len(means) == 1:
+            w = rot[0]
+        elif len(means) == 2:  # the IMU claiming less rotation, per axis
+            w = np.where(np.abs(rot[0]) <= np.abs(rot[1]), rot[0], rot[1])
+        else:
+            w = np.median(rot, axis=0)
+        # A rotation about a horizontal axis tilts the vehicle: the accelerometer sees it (the shift test
+        # above) within the block. Unseen by the accel, only a rotation about gravity (yaw) is physical;
+        # a lone gyro drifting or frozen at a rate is not motion.
+        g_dir = a_mean / max(float(np.linalg.norm(a_mean)), 1e-9)
+        yaw = abs(float(np.dot(w, g_dir)))
+        if yaw > cfg.gyro_mean or (len(means) > 1 and np.any(np.abs(w) > cfg.gyro_mean)):
             return False
+        # vibration, by agreement of IMUs / axes
+        k2 = cfg.gyro_std_factor ** 2
+        mine = self._noise_ratio(ch, st)
+        if mine is not None:
+            if others:
+                theirs = [self._noise_ratio(o, o.last_stats) for o in others]
+                if np.any(mine > k2) and any(r is not None and np.any(r > k2) for r in theirs):
+                    return False
+            elif np.count_nonzero(mine > k2) >= 2 and accel_up > 1.5:
+                return False
         w = 0.05
         ch.ref_accel = a_mean if ch.ref_accel is None else (1 - w) * ch.ref_accel + w * a_mean
-        ch.ref_gyro_std = g_std if ch.ref_gyro_std is None else (1 - w) * ch.ref_gyro_std + w * g_std
+        ch.ref_accel_std = a_std if ch.ref_accel_std is None else (1 - w) * ch.ref_accel_std + w * a_std
         return True
+
+    @staticmethod
+    def _rotation(st) -> np.ndarray:
+        """Block means that are significant rotation (5 sigma of the block's white noise), else 0."""
+        sig = np.sqrt(np.nan_to_num(st.v2, nan=0.0) / max(st.n, 1))
+        return np.where(np.abs(st.mean) > 5.0 * sig, st.mean, 0.0)
+
+    @staticmethod
+    def _noise_ratio(ch: Channel, st) -> np.ndarray | None:
+        refs = [af.ref for af in ch.faults.axes.values()]
+        if st is None or not all(r.ready and r.sigma2 > 0 for r in refs):
+            return None
+        return np.nan_to_num(st.v2, nan=0.0) / np.array([r.sigma2 for r in refs])
+
+    def _bias_extra_var(self, ch: Channel) -> dict[str, float]:
+        """Allan-predicted wander of a block mean around the bias reference: 0.44 B^2 + K^2 T / 3."""
+        out = {}
+        from companion.health.bias import REF_TAU_BLOCKS
+
+        for ax in ("gx", "gy", "gz"):
+            b = self.baseline.get(ch.imu, ax) if self.baseline is not None else None
+            if not b:
+                continue
+            v = 0.0
+            if "B" in b and math.isfinite(b["B"][0]):
+                v += 0.44 * b["B"][0] ** 2
+            if "K" in b and math.isfinite(b["K"][0]):
+                v += b["K"][0] ** 2 * REF_TAU_BLOCKS * self.cfg.block_s / 3.0
+            out[ax] = v
+        return out
+
+    # ------------------------------------------------------------------ IMU disagreement
+    def _pairs(self, ch: Channel) -> None:
+        """Compare this IMU with every other over the time both have covered since the pair's last check."""
+        for other in list(self.channels.values()):
+            if other is ch or not other.recent or not ch.recent:
+                continue
+            i, j = sorted((ch.imu, other.imu))
+            ci, cj = self.channels[i], self.channels[j]
+            key = (i, j)
+            pair = self.pairs.get(key)
+            if pair is None:
+                pair = self.pairs[key] = PairDisagreement(i, j)
+            ti = np.concatenate([b[0] for b in ci.recent])
+            tj = np.concatenate([b[0] for b in cj.recent])
+            t_end = min(ti[-1], tj[-1])
+            t_done = self.pair_done.get(key, -math.inf)
+            if t_end < t_done - self.cfg.reset_s:  # reboot: time starts again
+                t_done = -math.inf
+            mask = (ti > t_done) & (ti <= t_end) & (ti >= tj[0])
+            if np.count_nonzero(mask) < 10:
+                continue
+            t = ti[mask]
+            k = np.clip(np.searchsorted(tj, t), 1, tj.size - 1)
+            period = float(np.median(np.diff(tj))) if tj.size > 1 else 0.0
+            near = np.minimum(np.abs(tj[k] - t), np.abs(tj[k - 1] - t))
+            ok = near <= 1.5 * period
+            if np.count_nonzero(ok) < 10:
+                self.pair_done[key] = t_end
+                continue
+            gi = np.concatenate([b[1] for b in ci.recent])[mask][ok]
+            gj_all = np.concatenate([b[1] for b in cj.recent])
+            gj = np.column_stack([np.interp(t[ok], tj, gj_all[:, a]) for a in range(3)])
+            self.pair_done[key] = t_end
+            nv = [ci.faults.noise_ref(ax) for ax in ("gx", "gy", "gz")] + [cj.faults.noise_ref(ax) for ax in ("gx", "gy", "gz")]
+            noise_var = (max(nv[:3]) + max(nv[3:])) if all(v is not None for v in nv) else None
+            if pair.update(gi, gj, noise_var):
+                self._name_disagreement(float(t[-1]))
+
+    def _name_disagreement(self, t: float) -> None:
+        """From pair states to named IMUs: with three or more the odd one out (its pairs disagree, the
+        others agree); with two both are suspects unless only one of them has another fault."""
+        imus = sorted(self.channels)
+        for a, ax in enumerate(("gx", "gy", "gz")):
+            bad = {k for k, p in self.pairs.items() if p.axis_state(a) == FAULT}
+            named: dict[int, list[int]] = {}
+            if len(imus) == 2 and bad:
+                i, j = imus
+                other_faults = {k: [f for f in self.channels[k].faults.active() if f[0] != "disagree"] for k in (i, j)}
+                if other_faults[i] and not other_faults[j]:
+                    named = {i: [j]}
+                elif other_faults[j] and not other_faults[i]:
+                    named = {j: [i]}
+                else:
+                    named = {i: [j], j: [i]}
+            elif len(imus) >= 3 and bad:
+                partners = {k: sorted(p[0] if p[1] == k else p[1] for p in bad if k in p) for k in imus}
+                most = max(len(v) for v in partners.values())
+                named = {k: v for k, v in partners.items() if len(v) >= 2 and len(v) == most}
+            for k in imus:
+                was = (k, ax) in self.disagree
+                now = k in named
+                if was == now:
+                    continue
+                pair = self.pairs.get(tuple(sorted((k, named[k][0])))) if now else None
+                value = pair.value[a] if pair is not None else math.nan
+                detail = "/".join(f"IMU{o}" for o in named[k]) if now else ""
+                if now:
+                    self.disagree[(k, ax)] = detail
+                else:
+                    self.disagree.pop((k, ax), None)
+                self.channels[k].faults.set_external("disagree", ax, FAULT if now else OK)
+                self._report([FaultEvent(k, ax, "disagree", FAULT if now else OK, value, detail,
+                                         critical=self.armed and now)], t)
+
+    # ------------------------------------------------------------------ fault reports
+    def _report(self, events: list, t: float) -> None:
+        for ev in events:
+            text = ev.text()
+            self.transitions.append((t, text))
+            self.log(text)
+            if ev.state == FAULT:
+                sev = MAV_SEVERITY_CRITICAL if ev.critical else MAV_SEVERITY_WARNING
+            else:
+                sev = MAV_SEVERITY_NOTICE
+            self.reporter.statustext(text, sev)
+            ch = self.channels.get(ev.imu)
+            if ch is not None:
+                self.reporter.set_fault(ch.imu, ch.faults.code())
+                self.reporter.set_health(ch.imu, self.health(ch))
+            if ev.kind != "disagree" and len(self.channels) == 2 and self.disagree:
+                self._name_disagreement(t)  # another fault may tell which of the two disagrees
 
     def _feed(self, ch: Channel, data: np.ndarray) -> None:
         """Queue a still block for the estimators (updated in batches of about ``check_s``: same result,
@@ -349,7 +607,8 @@ class Pipeline:
         ch.next_check_t = t + self.cfg.check_s
         self._flush_feed(ch)
         if ch.fed_s < self.cfg.min_report_s:
-            self.reporter.set_health(ch.imu, LEARNING)
+            self.reporter.set_health(ch.imu, self.health(ch) if ch.faults.active() else LEARNING)
+            self.reporter.set_fault(ch.imu, ch.faults.code())
             return
         effects_params = None
         for ax in ch.axes:
@@ -373,9 +632,16 @@ class Pipeline:
                 self.transitions.append((t, text))
                 self.log(text)
                 self.reporter.statustext(text, MAV_SEVERITY_WARNING if tr.state == DEGRADING else MAV_SEVERITY_NOTICE)
+                if ax in ("gx", "gy", "gz"):
+                    high = any(d.state == DEGRADING for (a, _), d in ch.detector.detectors.items() if a == ax)
+                    ch.faults.set_external("allan", ax, FAULT if high else OK)
         self.reporter.set_health(ch.imu, self.health(ch))
+        self.reporter.set_fault(ch.imu, ch.faults.code())
 
     def health(self, ch: Channel) -> int:
+        """0 healthy, 1 degrading (any fault, even while the Allan baseline is still being learned), 2 learning."""
+        if ch.faults.active():
+            return DEGRADING
         if ch.learn or not self._has_baseline(ch):
             return LEARNING
         return ch.detector.state
@@ -392,7 +658,8 @@ class Pipeline:
         out = []
         for imu, ch in sorted(self.channels.items()):
             row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
-                   "health": STATE_NAMES[self.health(ch)], "counts": dict(ch.counts), "axes": {}}
+                   "health": STATE_NAMES[self.health(ch)], "counts": dict(ch.counts), "axes": {},
+                   "faults": self.fault_texts(ch)}
             if ch.fast and ch.fed_s > 0:
                 self._flush_feed(ch)
                 for ax in ch.axes:
@@ -400,6 +667,27 @@ class Pipeline:
                     row["axes"][ax] = {"current": self.current_params(ch, ax, terms), "terms": terms,
                                        "baseline": self.baseline.get(imu, ax) if self.baseline else None}
             out.append(row)
+        return out
+
+    def fault_texts(self, ch: Channel) -> list[str]:
+        """The active faults of an IMU in plain words, most severe first (what the STATUSTEXTs said)."""
+        out = []
+        for kind, ax in ch.faults.active():
+            if kind == "disagree":
+                ev = FaultEvent(ch.imu, ax, kind, FAULT, detail=self.disagree.get((ch.imu, ax), "another IMU"))
+            elif kind == "allan":
+                worst = [(d.ratio, p) for (a, p), d in ch.detector.detectors.items() if a == ax and d.state == DEGRADING]
+                r, p = max(worst) if worst else (math.nan, "N")
+                ev = FaultEvent(ch.imu, ax, kind, FAULT, detail=f"degrading: {p} {r:.1f}x baseline")
+            elif kind == "rate":
+                ev = FaultEvent(ch.imu, "", kind, FAULT, ch.faults.timing.value, ch.faults.timing.detail)
+            else:
+                af = ch.faults.axes[ax]
+                v = {"stuck": math.nan, "noise": af.noise.value, "bias_jump": af.bias.value,
+                     "bias_drift": af.bias.drift_value, "spikes": af.spikes.value,
+                     "saturation": af.saturation.value, "resolution": af.resolution.value}[kind]
+                ev = FaultEvent(ch.imu, ax, kind, FAULT, v)
+            out.append(ev.text())
         return out
 
     # ------------------------------------------------------------------ persistence
@@ -415,9 +703,12 @@ class Pipeline:
                 "slow": {a: e.state_dict() for a, e in ch.slow.items()},
                 "learn": {a: e.state_dict() for a, e in ch.learn.items()},
                 "detector": ch.detector.state_dict(),
+                "faults": ch.faults.state_dict(),
             }
+        pairs = {f"{i}-{j}": p.state_dict() for (i, j), p in self.pairs.items()}
         return {"format": STATE_FORMAT, "version": 1, "sysid": self.sysid,
-                "baseline": self.baseline.to_dict() if self.baseline is not None else None, "channels": chans}
+                "baseline": self.baseline.to_dict() if self.baseline is not None else None, "channels": chans,
+                "pairs": pairs, "disagree": [[k, a, d] for (k, a), d in self.disagree.items()]}
 
     def load_state_dict(self, d: Mapping) -> None:
         """Restore a saved state; raises ValueError (caller warns and starts fresh) if it is not ours."""
@@ -436,7 +727,16 @@ class Pipeline:
                 raise ValueError("state holds other axes than configured")
             ch.fed_s, ch.learned_s = float(c["fed_s"]), float(c["learned_s"])
             ch.detector.load_state_dict(c["detector"])
+            if c.get("faults") is not None:
+                ch.faults.load_state_dict(c["faults"])
             channels[ch.imu] = ch
+        pairs = {}
+        for key, pd in (d.get("pairs") or {}).items():
+            i, j = (int(v) for v in key.split("-"))
+            pairs[(i, j)] = PairDisagreement(i, j)
+            pairs[(i, j)].load_state_dict(pd)
+        self.pairs = pairs
+        self.disagree = {(int(k), str(a)): str(dt) for k, a, dt in d.get("disagree") or []}
         baseline = None
         if d.get("baseline") is not None:
             baseline = Baseline.from_dict(d["baseline"])

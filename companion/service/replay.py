@@ -137,3 +137,32 @@ def replay_log(path, pipeline, stop=lambda: False) -> dict:
     return {"frames": int(res.totals.get("frames", 0)), "bad_frames": int(res.totals.get("bad_frames", 0)),
             "bad_bytes": int(res.totals.get("bad_bytes", 0)), "heartbeats": int(hb_t.shape[0]),
             "imu_samples": int(t_all.shape[0]), "used": int(used)}
+
+
+def replay_vehicle(sim, pipeline, duration_s: float, lsb: float | None = None, chunk_s: float = 1.0,
+                   sysid: int = 1, on_chunk=None) -> int:
+    """Feed a :class:`companion.sim.vehicle.VehicleSimulator` to ``pipeline`` for ``duration_s`` of message
+    time: a HEARTBEAT (armed bit from the simulator) before every ``chunk_s`` of samples, the IMU samples
+    through :meth:`Pipeline.on_samples` (IMU i as RAW_IMU / SCALED_IMU2 / SCALED_IMU3), the gyro rounded to
+    ``lsb`` rad/s when given (ArduPilot's int16 mrad/s: 1e-3). ``on_chunk(t_end)`` after each chunk (stop
+    early by returning True). Returns the samples fed per IMU."""
+    from companion.samples import StreamKey
+    from companion.sim.vehicle import IMU_MESSAGES
+
+    keys = [StreamKey(sysid, 1, IMU_MESSAGES[i], i) for i in range(sim.imus)]
+    t_stop = sim.t_start + float(duration_s)
+    fed = 0
+    while sim.t_next < t_stop - 0.5 / sim.rate_hz:
+        blk = sim.take_until(min(sim.t_next + chunk_s, t_stop) - 0.5 / sim.rate_hz)
+        if blk.n == 0:
+            break
+        pipeline.on_heartbeat(sysid, 2, 3, 128 if bool(blk.armed[0]) else 0)
+        for i, key in enumerate(keys):
+            g = blk.gyro[i]
+            if lsb:
+                g = np.round(g / lsb) * lsb
+            pipeline.on_samples(key, blk.t, g, blk.accel[i])
+        fed += blk.n
+        if on_chunk is not None and on_chunk(float(blk.t[-1])):
+            break
+    return fed

@@ -1,0 +1,307 @@
+"""Gyro fault detection of `companion run`: delay per fault kind beside its information limit, and false alarms.
+
+Drives the real pipeline (companion.service.pipeline.Pipeline through its block API on_samples: the same
+blocks, motion gate, detectors and reports as sample by sample) with the multi-IMU vehicle simulator
+(companion.sim.vehicle), gyro rounded to 1 mrad/s like ArduPilot's RAW_IMU/SCALED_IMU2/3, 100 Hz.
+
+Every case draws FRESH RANDOM parameters from its seed: the gyro's white noise (0.7-4 LSB per sample),
+bias instability (10-50 deg/h), rate random walk (10-100 deg/h^1.5), the fault's time, axis, IMU and
+size (ranges printed), the vehicle's scale/misalignment spread, warm-up and schedule.
+
+Delay: from the fault to the first STATUSTEXT that names the right IMU, axis and kind (a name that is
+wrong counts as a miss and is printed). The information limit beside it is the delay of an oracle CUSUM
+that knows the fault exactly, with the same threshold h: h / (fs * KL per sample) (Lorden 1971):
+variance ratio r: KL = (r - 1 - ln r) / 2; mean step d on white noise sigma: d^2 / (2 sigma^2);
+spikes at a rate p against the healthy outlier rate: p ln(p / p0) - p + p0; a frozen output: one sample.
+
+False alarms: runs of H hours with two IMUs (every IMU-hour counts), each with warm-up drift (0.1 deg/s,
+exponential, tau 200 s: 95 % within 10 min), random flights (arm, take-off, manoeuvres up to ~1.5
+rad/s, vibration, landing, disarm) and handlings (picked up, turned, put down in a new attitude), int16
+rounding with 0.7 LSB of noise on IMU0; any fault or degradation STATUSTEXT is a false alarm.
+
+    python benchmarks/bench_faults.py --quick          # 3 seeds per kind (no B x2), 2 healthy IMU-hours
+    python benchmarks/bench_faults.py                  # 20 seeds per kind, 100 healthy IMU-hours
+    python benchmarks/bench_faults.py --skip-healthy --seeds 5 --kinds stuck,noise
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from companion import units  # noqa: E402
+from companion.health import bias, disagreement, noise, spikes, stuck  # noqa: E402
+from companion.mavlink.reporter import Reporter  # noqa: E402
+from companion.service.pipeline import Pipeline, PipelineConfig  # noqa: E402
+from companion.service.replay import replay_vehicle  # noqa: E402
+from companion.sim.vehicle import Fault, Flight, Schedule, VehicleSimulator, WarmUp  # noqa: E402
+
+RATE = 100.0
+LSB = 1e-3
+DEG = math.pi / 180.0
+AXES = ("gx", "gy", "gz")
+
+
+class Sink:
+    def __init__(self):
+        self.texts = []
+
+    def send_named_value_float(self, *a):
+        pass
+
+    def send_statustext(self, sev, text):
+        self.texts.append((sev, text))
+
+
+def random_model(rng, sigma_lsb=None):
+    """Fresh per-axis noise: white noise std sigma (LSB per sample), B, K; returns (model, sigmas)."""
+    axes, sig = {}, {}
+    for a in AXES:
+        s = (sigma_lsb if sigma_lsb is not None else rng.uniform(0.7, 4.0)) * LSB
+        sig[a] = s
+        axes[a] = [{"effect": "white_noise", "N": s / math.sqrt(RATE)},
+                   {"effect": "bias_instability", "B": units.from_datasheet("B", rng.uniform(10, 50))},
+                   {"effect": "random_walk", "K": units.from_datasheet("K", rng.uniform(10, 100))}]
+    return {"rate_hz": RATE, "axes": axes}, sig
+
+
+def total_sigma(s):
+    """Per-sample std after 1 mrad/s rounding (Sheppard: + LSB^2/12)."""
+    return math.sqrt(s * s + LSB * LSB / 12.0)
+
+
+def make_pipeline(baseline_s=300.0):
+    sink = Sink()
+    p = Pipeline(PipelineConfig(baseline_s=baseline_s), Reporter(sink, 1.0))
+    return p, sink
+
+
+def expected_words(kind, imu, axis):
+    a = axis[1].upper()
+    return {"stuck": [f"IMU{imu} gyro {a} stuck"],
+            "noise": [f"IMU{imu} gyro {a} noise"],
+            "bias": [f"IMU{imu} gyro {a} bias jump", f"IMU{imu} gyro {a} bias drift"],
+            "drift": [f"IMU{imu} gyro {a} bias drift", f"IMU{imu} gyro {a} bias jump"],
+            "spikes": [f"IMU{imu} gyro {a} spikes"],
+            "saturate": [f"IMU{imu} gyro {a} saturated"],
+            "flight": [f"IMU{imu} gyro {a} stuck", f"IMU{imu} gyro {a} disagrees"]}[kind]
+
+
+FAULT_WORDS = ("stuck", "noise", "bias", "spikes", "saturated", "disagrees", "degrading", "rate", "timing")
+
+
+def run_case(kind, seed, max_delay):
+    """One fault case with fresh random parameters; returns a dict (delay, limit, named, text, params)."""
+    rng = np.random.default_rng(10_000 + seed)
+    model, sig = random_model(rng)
+    axis = AXES[rng.integers(3)]
+    s_tot = total_sigma(sig[axis])
+    h = None
+    imus, imu = 1, 0
+    sched = Schedule()
+    t_f = float(rng.uniform(360.0, 480.0))
+    amp = 0.3
+    if kind == "stuck":
+        size = float(rng.uniform(0.0, 0.3)) * sig[axis]
+        r = max((size * size + LSB * LSB / 12.0 * (size > 0)) / s_tot ** 2, 1e-12)
+        limit = 1.0 / RATE if size == 0 else stuck.H_ON / (RATE * 0.5 * (r - 1 - math.log(r)))
+        desc = f"dither {size / s_tot:.2f} sigma"
+        fault_kind = "stuck"
+    elif kind in ("noise", "N2", "N1.5"):
+        size = {"N2": 2.0, "N1.5": 1.5}.get(kind) or float(math.exp(rng.uniform(math.log(3), math.log(100))))
+        r = ((size * sig[axis]) ** 2 + LSB ** 2 / 12) / s_tot ** 2
+        limit = noise.H_ON / (RATE * 0.5 * (r - 1 - math.log(r)))
+        desc = f"x{size:.2f}"
+        fault_kind = "noise"
+    elif kind == "bias":
+        size = float(rng.uniform(0.3, 2.0)) * DEG * (1 if rng.random() < 0.5 else -1)
+        limit = bias.H_ON / (RATE * size * size / (2 * s_tot ** 2))
+        desc = f"{size / DEG:+.2f} deg/s"
+        fault_kind = "bias"
+    elif kind == "drift":
+        size = float(rng.uniform(2e-5, 2e-4)) * (1 if rng.random() < 0.5 else -1)
+        # oracle: a ramp D t: cumulative KL D^2 fs t^3 / (6 sigma^2) = h
+        limit = (6 * bias.H_ON * s_tot ** 2 / (size * size * RATE)) ** (1 / 3)
+        desc = f"{size / DEG:+.4f} deg/s per s"
+        fault_kind = "drift"
+    elif kind == "spikes":
+        size = float(rng.uniform(0.002, 0.01))
+        p0 = spikes.LAMBDA0_FLOOR
+        limit = spikes.H_ON / (RATE * (size * math.log(size / p0) - size + p0))
+        desc = f"{100 * size:.2f} % of {amp} rad/s"
+        fault_kind = "spikes"
+    elif kind == "saturate":
+        size = float(rng.uniform(0.3, 1.0))
+        sched = Schedule(flights=(Flight(t_f - 60.0, t_f + 600.0),))
+        limit = float("nan")
+        desc = f"clip +-{size:.2f} rad/s in flight"
+        fault_kind = "saturate"
+    elif kind in ("flight_stuck2", "flight_bias2", "flight_stuck3", "flight_bias3"):
+        imus = 2 if kind.endswith("2") else 3
+        imu = int(rng.integers(imus))
+        sched = Schedule(flights=(Flight(t_f - float(rng.uniform(30, 120)), t_f + 600.0),))
+        if "stuck" in kind:
+            fault_kind, size = "stuck", 0.0
+            limit = 1.0 / RATE
+            desc = f"{imus} IMUs, IMU{imu} frozen in flight"
+        else:
+            fault_kind, size = "bias", 1.0 * DEG * (1 if rng.random() < 0.5 else -1)
+            limit = disagreement.H_ON / (RATE * size * size / (2 * 2 * s_tot ** 2))
+            desc = f"{imus} IMUs, IMU{imu} {size / DEG:+.0f} deg/s in flight"
+    else:
+        raise ValueError(kind)
+    fault = Fault(fault_kind, at=t_f, size=size, imu=imu, axis=axis, amplitude=amp)
+    sim = VehicleSimulator(model, imus=imus, seed=seed, schedule=sched, fault=fault, warmup=WarmUp())
+    p, sink = make_pipeline()
+    words = expected_words("flight" if kind.startswith("flight") else fault_kind, imu, axis)
+    t0 = sim.t_start + t_f
+    found = {}
+
+    def watch(t):
+        for tt, text in p.transitions:
+            if "cleared" in text or "back to normal" in text or "learned" in text:
+                continue
+            if tt < t0:
+                found.setdefault("early", (tt, text))
+            elif any(text.startswith(w) for w in words):
+                found["hit"] = (tt, text)
+                return True
+            else:
+                found.setdefault("other", (tt, text))
+        return False
+
+    replay_vehicle(sim, p, t_f + max_delay, lsb=LSB, on_chunk=watch, chunk_s=1.0)
+    watch(0)
+    out = {"kind": kind, "seed": seed, "desc": desc, "limit": limit, "axis": axis, "imu": imu}
+    if "hit" in found:
+        out["delay"] = found["hit"][0] - t0
+        out["text"] = found["hit"][1]
+    else:
+        out["delay"] = math.nan
+        out["text"] = (found.get("other") or found.get("early") or (None, "not flagged"))[1]
+    out["early"] = found.get("early")
+    out["other"] = found.get("other")
+    return out
+
+
+def run_b2(seed, max_delay=3600.0):
+    """B x2 with the baseline from `companion analyze` (analyze_axis: the same code) of a 2 h still log of the
+    same gyro (another seed); the degradation adds an independent flicker of B sqrt(3) at t_d."""
+    from companion.cli.analyze import analyze_axis
+    from companion.health.baseline import Baseline, params_from_terms
+    from companion.sim.vehicle import Degradation
+
+    rng = np.random.default_rng(30_000 + seed)
+    model, sig = random_model(rng)
+    axis = AXES[rng.integers(3)]
+    pre = VehicleSimulator(model, imus=1, seed=90_000 + seed)
+    g = np.round(pre.run(7200.0).gyro[0] / LSB) * LSB
+    base = Baseline("analyze")
+    for j, a in enumerate(AXES):
+        base.set_axis(0, a, params_from_terms(analyze_axis(g[:, j], RATE, lsb=LSB)["terms"]))
+    b_true = [t["B"] for t in model["axes"][axis] if t["effect"] == "bias_instability"][0]
+    t_d = 1200.0
+    deg = Degradation(at=t_d, axis=axis, term={"effect": "bias_instability", "B": b_true * math.sqrt(3.0)})
+    sim = VehicleSimulator(model, imus=1, seed=seed, degrade=deg)
+    sink = Sink()
+    p = Pipeline(PipelineConfig(), Reporter(sink, 1.0), baseline=base)
+    word = f"IMU0 gyro {axis[1].upper()} degrading: B"
+    t0 = sim.t_start + t_d
+
+    def watch(t):
+        return any(text.startswith(word) and tt >= t0 for tt, text in p.transitions)
+
+    replay_vehicle(sim, p, t_d + max_delay, lsb=LSB, on_chunk=watch, chunk_s=10.0)
+    hit = [(tt, text) for tt, text in p.transitions if text.startswith(word) and tt >= t0]
+    early = [(tt, text) for tt, text in p.transitions if tt < t0]
+    b_b = base.get(0, axis)["B"]
+    desc = (f"B {units.to_datasheet('B', b_true, axis):.0f} deg/h, baseline {units.to_datasheet('B', b_b[0], axis):.1f}"
+            f" +- {units.to_datasheet('B', b_b[1], axis):.1f}")
+    return {"kind": "B2", "seed": seed, "desc": desc, "limit": math.nan, "axis": axis, "imu": 0,
+            "delay": hit[0][0] - t0 if hit else math.nan, "text": hit[0][1] if hit else "not flagged",
+            "early": early[0] if early else None, "other": None}
+
+
+def healthy_run(seed, hours, imus=2):
+    rng = np.random.default_rng(20_000 + seed)
+    model0, _ = random_model(rng, sigma_lsb=0.7)  # IMU0 at 0.7 LSB: the coarse-rounding case
+    dur = hours * 3600.0
+    sched = Schedule.random(dur, seed=seed, flights_per_hour=1.5, handlings_per_hour=2.0)
+    sim = VehicleSimulator(model0, imus=imus, seed=seed, schedule=sched, warmup=WarmUp(amplitude=0.1 * DEG, tau_s=200.0))
+    p, sink = make_pipeline(baseline_s=600.0)
+    replay_vehicle(sim, p, dur, lsb=LSB, chunk_s=10.0)
+    alarms = [(t, text) for t, text in p.transitions
+              if any(w in text for w in FAULT_WORDS) and "cleared" not in text and "back to normal" not in text]
+    moving = sum(ch.counts["blocks_moving"] for ch in p.channels.values())
+    return alarms, len(sched.flights), len(sched.handlings), moving
+
+
+TARGET = {"stuck": 10, "noise": 10, "bias": 15, "drift": None, "spikes": 30, "N2": 30, "N1.5": 120, "saturate": None,
+          "flight_stuck2": 10, "flight_bias2": 10, "flight_stuck3": 10, "flight_bias3": 10, "B2": 3600}
+MAX_DELAY = {"stuck": 60, "noise": 60, "bias": 90, "drift": 600, "spikes": 120, "N2": 120, "N1.5": 400, "saturate": 300,
+             "flight_stuck2": 60, "flight_bias2": 60, "flight_stuck3": 60, "flight_bias3": 60}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="3 seeds per kind, 1 healthy run of 1 h x 2 IMUs")
+    ap.add_argument("--seeds", type=int, default=None, help="seeds per fault kind (default 20, quick 3)")
+    ap.add_argument("--kinds", default=None, help="comma-separated subset of: " + ", ".join(TARGET))
+    ap.add_argument("--healthy-runs", type=int, default=None, help="healthy runs (default 10, quick 1)")
+    ap.add_argument("--healthy-hours", type=float, default=None, help="hours per healthy run, 2 IMUs each (default 5, quick 1)")
+    ap.add_argument("--b2-seeds", type=int, default=3, help="seeds of the B x2 case (each simulates 2 h + 80 min)")
+    ap.add_argument("--first-run", type=int, default=0, help="seed of the first healthy run (to split the runs over processes)")
+    ap.add_argument("--skip-healthy", action="store_true")
+    ap.add_argument("--skip-faults", action="store_true")
+    args = ap.parse_args()
+    seeds = args.seeds or (3 if args.quick else 20)
+    kinds = args.kinds or ",".join(k for k in TARGET if not (args.quick and k == "B2"))
+    runs = args.healthy_runs or (1 if args.quick else 10)
+    hours = args.healthy_hours or (1.0 if args.quick else 5.0)
+    t_all = time.time()
+    if not args.skip_faults:
+        print(f"detection delay at {RATE:g} Hz, 1 mrad/s rounding, fresh random parameters, {seeds} seeds per kind")
+        print(f"{'kind':>14} {'target':>7} {'median':>8} {'max':>8} {'limit(med)':>11} {'named':>6}  ranges / misses")
+        for kind in kinds.split(","):
+            kind = kind.strip()
+            if kind == "B2":
+                res = [run_b2(s) for s in range(min(seeds, args.b2_seeds))]
+            else:
+                res = [run_case(kind, s, MAX_DELAY[kind]) for s in range(seeds)]
+            d = np.array([r["delay"] for r in res])
+            lim = np.array([r["limit"] for r in res])
+            ok = np.isfinite(d)
+            tgt = TARGET[kind]
+            med = f"{np.median(d[ok]):.1f} s" if ok.any() else "-"
+            mx = f"{np.max(d[ok]):.1f} s" if ok.any() else "-"
+            lm = f"{np.nanmedian(lim):.2f} s" if np.isfinite(lim).any() else "-"
+            late = int(np.sum(d[ok] > tgt)) if tgt else 0
+            print(f"{kind:>14} {(str(tgt) + ' s') if tgt else '-':>7} {med:>8} {mx:>8} {lm:>11} {ok.sum():>3}/{len(res)}"
+                  f"  e.g. {res[0]['desc']}; {res[0]['text']}" + (f"; {late} over target" if late else ""), flush=True)
+            for r in res:
+                if not math.isfinite(r["delay"]) or r["early"]:
+                    print(f"{'':>14}   seed {r['seed']}: {r['desc']} on IMU{r['imu']} {r['axis']}: "
+                          f"{'MISSED, said: ' + r['text'] if not math.isfinite(r['delay']) else ''}"
+                          f"{' EARLY ' + str(r['early']) if r['early'] else ''}", flush=True)
+    if not args.skip_healthy:
+        t0 = time.time()
+        total, n_alarm = 0.0, 0
+        for r in range(args.first_run, args.first_run + runs):
+            alarms, nf, nh, moving = healthy_run(r, hours)
+            total += 2 * hours
+            n_alarm += len(alarms)
+            print(f"healthy run {r}: {hours:g} h x 2 IMUs, {nf} flights, {nh} handlings, {moving} moving blocks: "
+                  f"{len(alarms)} false alarms" + (f" e.g. {alarms[:3]}" if alarms else ""), flush=True)
+        print(f"FALSE ALARMS: {n_alarm} in {total:g} simulated healthy IMU-hours ({time.time() - t0:.0f} s wall)")
+    print(f"total {time.time() - t_all:.0f} s wall")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,162 @@
+"""Bias jump and bias drift of a gyro axis, from the means of still blocks.
+
+Jump. x_k is the mean of still block k, r a slowly tracking reference (EWMA over ``REF_TAU_BLOCKS``
+still blocks, frozen while evidence builds and during a fault) and sigma_m the block mean's uncertainty,
+Allan-predicted: sigma_m^2 = max(sigma0^2, v2_k) / n (white noise; the larger of the reference and the
+block's own, so a noisy block never looks like a jump) + 0.44 B^2 + K^2 T / 3 (flicker and random walk of
+the baseline over the reference memory T), each with the 1-sigma of the baseline. Two CUSUMs
+(faults eq. (1)) of the Gaussian mean-shift LLR for delta = +-0.2 deg/s:
+
+    llr = (delta / sigma_m^2) (x_k - r - delta / 2)
+
+A jump of 0.3 deg/s gives +2.6e-3 rad/s per block above the allowance delta / 2 = 0.1 deg/s: with the
+ADIS16405-like noise (sigma_m = 6.7e-4 rad/s) 20 nats per block, flagged in 1-2 still blocks (plus the
+motion gate's look-ahead). A cold-start warm-up (0.1 deg/s, exponential, 10 min) moves at most 5e-4 deg/s
+per second: the reference lags it by <= 0.03 deg/s, far inside the allowance (benchmarks/bench_faults.py:
+0 false alarms in 100 h with warm-ups).
+
+Drift. e, an EWMA of x over ``DRIFT_TAU_BLOCKS``, against the bias mu0 of the reference period:
+|e - mu0| - 4 sigma_e > ``DRIFT_TOL`` (0.3 deg/s: 3x the warm-up, far above the bias wander of a
+MEMS gyro between restarts of a few hours) for ``DRIFT_HOLD`` blocks flags a drift; it clears below
+0.7 x the tolerance. A drift of D deg/s per s is flagged about 0.3 / D s after it starts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Mapping
+
+import numpy as np
+
+from companion.health.faults import FAULT, OK, AxisRef, Cusum, gauss_mean_llr
+
+DEG = math.pi / 180.0
+DELTA = 0.2 * DEG  # rad/s, mean shift the jump CUSUMs are tuned to
+H_ON = 20.0
+H_OFF = 20.0
+REF_TAU_BLOCKS = 60.0
+DRIFT_TAU_BLOCKS = 20.0
+DRIFT_TOL = 0.3 * DEG
+DRIFT_HOLD = 5
+HIST_BLOCKS = 90
+RAMP_NATS = 4.0  # log-likelihood margin for naming a ramp (drift) rather than a step (jump)
+
+
+class BiasDetector:
+    """Two kinds in one module: ``bias_jump`` (state) and ``bias_drift`` (drift_state)."""
+
+    kind = "bias_jump"
+
+    def __init__(self):
+        self.up = Cusum(H_ON, H_OFF)
+        self.down = Cusum(H_ON, H_OFF)
+        self.r = math.nan  # tracking reference (rad/s)
+        self.e = math.nan  # drift EWMA
+        self.run: list = []  # offsets x - r since the evidence started
+        self.hist: deque = deque(maxlen=HIST_BLOCKS)  # recent still-block means (step or ramp?)
+        self.value = math.nan  # jump size (deg/s)
+        self.drift_state = OK
+        self.drift_count = 0
+        self.drift_value = math.nan
+        self.drift_r = math.nan  # the reference when the drift was flagged
+
+    @property
+    def state(self) -> int:
+        return FAULT if FAULT in (self.up.state, self.down.state) else OK
+
+    def update(self, ref: AxisRef, x: float, v2: float, n: int, extra_var: float = 0.0) -> list[str]:
+        """One still block; returns the kinds that changed state (``bias_jump``, ``bias_drift``)."""
+        if not (ref.ready and math.isfinite(x) and n > 0):
+            return []
+        out = []
+        if math.isnan(self.r):
+            self.r = ref.mu
+        if math.isnan(self.e):
+            self.e = x
+        var_m = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + extra_var
+        sig = math.sqrt(max(var_m, 1e-18))
+        d = x - self.r
+        was = self.state
+        if was == OK and self.up.s == 0.0 and self.down.s == 0.0:
+            self.run = []
+        self.run.append(d)
+        self.hist.append(x)
+        if self.drift_state == OK:  # a drift already flagged is not named again as jumps
+            self.up.step(gauss_mean_llr(d, sig, DELTA))
+            self.down.step(gauss_mean_llr(-d, sig, DELTA))
+        if self.state != was:
+            if self.state == FAULT:
+                if self._is_ramp(sig):  # the evidence grew like a ramp: a drift, not a step
+                    self.up.state = self.down.state = OK
+                    self.up.s = self.down.s = 0.0
+                    if self.drift_state == OK:
+                        self.drift_state, self.drift_count, self.drift_r = FAULT, 0, self.r
+                        self.drift_value = (x - ref.mu) / DEG
+                        out.append("bias_drift")
+                else:
+                    out.append("bias_jump")
+                    self.value = sum(self.run) / len(self.run) / DEG
+            else:
+                out.append("bias_jump")
+                self.r = x  # back to normal: follow from here
+        quiet = self.state == OK and self.up.s < 0.25 * H_ON and self.down.s < 0.25 * H_ON
+        if quiet:
+            self.r += (x - self.r) / REF_TAU_BLOCKS
+        # drift against the reference period's bias
+        self.e += (x - self.e) / DRIFT_TAU_BLOCKS
+        sig_e = sig / math.sqrt(2.0 * DRIFT_TAU_BLOCKS)
+        off = self.e - ref.mu
+        if self.drift_state == OK:
+            self.drift_count = self.drift_count + 1 if abs(off) - 4.0 * sig_e > DRIFT_TOL else 0
+            if self.drift_count >= DRIFT_HOLD and self.state == OK:
+                self.drift_state, self.drift_count, self.drift_value = FAULT, 0, off / DEG
+                self.drift_r = ref.mu
+                out.append("bias_drift")
+        else:
+            last = list(self.hist)[-DRIFT_HOLD:]
+            back = abs(off) < 0.7 * DRIFT_TOL and abs(sum(last) / len(last) - self.drift_r) < 0.5 * DELTA
+            self.drift_count = self.drift_count + 1 if back else 0
+            if self.drift_count >= DRIFT_HOLD:
+                self.drift_state, self.drift_count = OK, 0
+                out.append("bias_drift")
+        return out
+
+    def _is_ramp(self, sig: float) -> bool:
+        """Step or ramp? Over the recent still-block means, the best single step (two constants) against
+        the best hinge (a constant, then a ramp from some block on): a ramp when its Gaussian
+        log-likelihood is ``RAMP_NATS`` better."""
+        x = np.asarray(self.hist, dtype=float)
+        n = x.size
+        if n < 8:
+            return False
+        c1, c2 = np.cumsum(x), np.cumsum(x * x)
+        best_step = math.inf
+        for k in range(2, n):
+            a, b = x[:k], x[k:]
+            rss = (c2[k - 1] - c1[k - 1] ** 2 / k) + max((c2[-1] - c2[k - 1]) - (c1[-1] - c1[k - 1]) ** 2 / (n - k), 0.0)
+            best_step = min(best_step, rss)
+        i = np.arange(n, dtype=float)
+        best_ramp = math.inf
+        for k in range(0, n - 3):
+            h = np.maximum(0.0, i - k)
+            A = np.column_stack([np.ones(n), h])
+            coef, res, *_ = np.linalg.lstsq(A, x, rcond=None)
+            rss = float(res[0]) if res.size else float(np.sum((A @ coef - x) ** 2))
+            best_ramp = min(best_ramp, rss)
+        return (best_step - best_ramp) / (2.0 * sig * sig) > RAMP_NATS
+
+    def state_dict(self) -> dict:
+        f = lambda v: None if math.isnan(v) else v  # noqa: E731
+        return {"up": self.up.state_dict(), "down": self.down.state_dict(), "r": f(self.r), "e": f(self.e),
+                "value": f(self.value), "drift_state": self.drift_state, "drift_count": self.drift_count,
+                "drift_value": f(self.drift_value), "drift_r": f(self.drift_r), "hist": list(self.hist)}
+
+    def load_state_dict(self, d: Mapping) -> None:
+        g = lambda k: math.nan if d.get(k) is None else float(d[k])  # noqa: E731
+        self.up.load_state_dict(d.get("up", {}))
+        self.down.load_state_dict(d.get("down", {}))
+        self.r, self.e, self.value, self.drift_value = g("r"), g("e"), g("value"), g("drift_value")
+        self.drift_state, self.drift_count = int(d.get("drift_state", OK)), int(d.get("drift_count", 0))
+        self.drift_r = g("drift_r")
+        self.hist = deque((float(v) for v in d.get("hist") or []), maxlen=HIST_BLOCKS)

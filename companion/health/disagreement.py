@@ -1,0 +1,134 @@
+"""Disagreement between two IMUs' gyros, valid at rest and in flight (the difference cancels the motion).
+
+For a pair (i, j) the model is y_i = (I + E)^T-free form  y_i = y_j + y_j E + c + noise: E (3x3) the small
+scale-factor and misalignment difference, c the bias difference. E is fitted by ridge regression on the
+block-demeaned samples of blocks with motion (Bayesian prior E ~ N(0, 0.03^2) per entry, exponential
+memory ``FIT_TAU_BLOCKS``; entries clipped to +-0.1 so that a frozen gyro can never be "explained" as a
+scale factor of -1); blocks with evidence of a fault are not fitted. c is a slowly tracking reference
+(EWMA over ``REF_TAU_BLOCKS`` blocks, frozen while evidence builds and during a fault).
+
+Statistics per block and axis: the mean residual d = mean(y_i) - mean(y_j)(I + E) - c and its
+uncertainty sigma_d^2 = 2 var_w(r) / n (var_w: the white variance of the residual from its second
+differences, doubled for colour) + sigma_n^2 m^T (S + lambda I)^-1 m
+(the predictive variance of the fitted E at the block's mean rate m: the regression's own uncertainty, so
+the first seconds of a flight, before E is known, are tested with the 3 % prior and not falsely).
+Two CUSUMs (faults eq. (1)) of the Gaussian mean-shift LLR with delta = +-0.5 deg/s, h = 15, each fed
+the larger of that LLR and the chi-square LLR of a residual white-variance rise by 4 against the sum of
+both IMUs' still noise references (a gyro frozen or noisy in steady flight). A +1 deg/s
+bias of one IMU: about 10 nats per block once E is fitted; a gyro frozen in flight: the whole rotation
+rate shows in d (and stuck.py flags it anyway).
+
+With three IMUs the odd one out is the IMU whose two pairs disagree while the third pair agrees
+(service/pipeline.py names it: ``IMU1 gyro X disagrees with IMU0/IMU2``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import numpy as np
+
+from companion.health.faults import DD_NU_PER_SAMPLE, FAULT, OK, Cusum, chi2_llr, gauss_mean_llr
+
+DEG = math.pi / 180.0
+DELTA = 0.5 * DEG
+H_ON = 15.0
+H_OFF = 15.0
+PRIOR_STD = 0.03  # expected scale/misalignment difference between two IMUs
+E_CLIP = 0.1
+FIT_TAU_BLOCKS = 600.0
+REF_TAU_BLOCKS = 60.0
+MOTION_RMS = 0.02  # rad/s: a block with this much (demeaned) rotation is fitted
+WARM_BLOCKS = 5
+VAR_R1 = 4.0  # residual white variance rise the variance LLR is tuned to (2x its std)
+
+
+class PairDisagreement:
+    kind = "disagree"
+
+    def __init__(self, i: int, j: int):
+        self.i, self.j = i, j
+        self.S = np.zeros((3, 3))
+        self.T = np.zeros((3, 3))
+        self.E = np.zeros((3, 3))
+        self.c = np.full(3, np.nan)
+        self.blocks = 0
+        self.up = [Cusum(H_ON, H_OFF) for _ in range(3)]
+        self.down = [Cusum(H_ON, H_OFF) for _ in range(3)]
+        self.value = np.full(3, np.nan)  # residual at the transition (deg/s)
+
+    def axis_state(self, a: int) -> int:
+        return FAULT if FAULT in (self.up[a].state, self.down[a].state) else OK
+
+    @property
+    def state(self) -> int:
+        return FAULT if any(self.axis_state(a) == FAULT for a in range(3)) else OK
+
+    def update(self, yi: np.ndarray, yj: np.ndarray, noise_var: float | None = None) -> list[int]:
+        """Aligned samples (m, 3) of both IMUs; returns the axes (0..2) whose state changed."""
+        m = yi.shape[0]
+        if m < 10:
+            return []
+        mi, mj = yi.mean(axis=0), yj.mean(axis=0)
+        xi, xj = yi - mi, yj - mj
+        r = (yi - yj - yj @ self.E)
+        d0 = r.mean(axis=0)
+        var_r = _white_var(r)  # the white part: a healthy residual is white; a disagreement is not
+        sig_n2 = float(noise_var) if noise_var else float(np.max(var_r))
+        sig_n2 = max(sig_n2, 1e-14)
+        lam = sig_n2 / PRIOR_STD ** 2
+        P = np.linalg.inv(self.S + lam * np.eye(3))
+        var_pred = sig_n2 * float(mj @ P @ mj)
+        var_d = 2.0 * var_r / m + var_pred + 1e-14
+        if np.isnan(self.c).any():
+            self.c = d0.copy()
+        d = d0 - self.c
+        changed = []
+        evidence = False
+        self.blocks += 1
+        nu = DD_NU_PER_SAMPLE * (m - 2)
+        for a in range(3):
+            if self.blocks <= WARM_BLOCKS:
+                break
+            was = self.axis_state(a)
+            s = math.sqrt(var_d[a])
+            llr_v = chi2_llr(var_r[a] / noise_var, nu, VAR_R1) if noise_var else -math.inf
+            # the mean-shift CUSUMs carry the residual-variance evidence too (a frozen or very noisy gyro
+            # during steady flight has little mean offset but a residual that is no longer white noise)
+            self.up[a].step(max(gauss_mean_llr(d[a], s, DELTA), llr_v))
+            self.down[a].step(max(gauss_mean_llr(-d[a], s, DELTA), llr_v))
+            if self.axis_state(a) != was:
+                changed.append(a)
+                self.value[a] = d[a] / DEG
+                if self.axis_state(a) == OK:
+                    self.c[a] = d0[a]
+            if self.axis_state(a) == FAULT or self.up[a].s > 0.25 * H_ON or self.down[a].s > 0.25 * H_ON:
+                evidence = True
+        if not evidence:
+            self.c += (d0 - self.c) / (REF_TAU_BLOCKS if self.blocks > WARM_BLOCKS else self.blocks)
+            if np.sqrt(np.mean(xj * xj, axis=0)).max() > MOTION_RMS:
+                g = math.exp(-1.0 / FIT_TAU_BLOCKS)
+                self.S = g * self.S + xj.T @ xj
+                self.T = g * self.T + xj.T @ (xi - xj)
+                self.E = np.clip(np.linalg.solve(self.S + lam * np.eye(3), self.T), -E_CLIP, E_CLIP)
+        return changed
+
+    def state_dict(self) -> dict:
+        return {"i": self.i, "j": self.j, "S": self.S.tolist(), "T": self.T.tolist(), "E": self.E.tolist(),
+                "c": [None if np.isnan(v) else float(v) for v in self.c], "blocks": self.blocks,
+                "up": [c.state_dict() for c in self.up], "down": [c.state_dict() for c in self.down]}
+
+    def load_state_dict(self, d: Mapping) -> None:
+        self.S, self.T, self.E = (np.asarray(d[k], dtype=float).reshape(3, 3) for k in ("S", "T", "E"))
+        self.c = np.array([np.nan if v is None else float(v) for v in d["c"]])
+        self.blocks = int(d.get("blocks", 0))
+        for c, s in zip(self.up, d.get("up", [])):
+            c.load_state_dict(s)
+        for c, s in zip(self.down, d.get("down", [])):
+            c.load_state_dict(s)
+
+
+def _white_var(r: np.ndarray) -> np.ndarray:
+    dd = r[2:] - 2.0 * r[1:-1] + r[:-2]
+    return np.mean(dd * dd, axis=0) / 6.0

@@ -1,0 +1,322 @@
+"""Fault taxonomy of a gyro: the common interface of the fault detectors, their codes and block statistics.
+
+Every detector (one module per kind: ``stuck``, ``noise``, ``bias``, ``spikes``, ``saturation``,
+``timing``, ``disagreement``) follows the same small contract, in the spirit of PX4's DataValidator:
+
+* ``update(...)`` with the statistics of one block of samples (``BlockStats``, one column per axis);
+  it returns a ``FaultEvent`` when the state changed (OK -> FAULT or FAULT -> OK), else None;
+* ``state`` is ``OK`` or ``FAULT``; ``value`` the figure the report quotes (ratio, offset, percentage);
+* ``state_dict()`` / ``load_state_dict()`` for the run state file.
+
+Most detectors are a CUSUM (Page 1954) of a per-block log-likelihood ratio (LLR, nats) between a
+healthy hypothesis H0 (the reference learned from still data) and a fault hypothesis H1:
+
+    S_k = max(0, S_{k-1} + llr_k),   FAULT when S_k > h                                      (1)
+
+A CUSUM with threshold h has an in-control average run length of about e^h blocks (Lorden's bound:
+ARL0 >= e^h), and a detection delay close to h / KL(H1 || H0), the information limit for that
+false-alarm rate (Lorden 1971). Once in FAULT the same recursion with -llr (evidence for healthy)
+clears it when it exceeds ``h_off``.
+
+Numbers (codes) for the NAMED_VALUE_FLOAT ``IMU{i}G_FLT`` (the most severe active fault of the IMU):
+see ``KIND_CODE``. Pure numpy; no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping, Protocol
+
+import numpy as np
+
+OK = 0
+FAULT = 1
+
+#: fault kind -> code sent as IMU{i}G_FLT (0: no fault). Ordered by severity: the highest-priority
+#: active kind (lowest position in PRIORITY) is the one reported.
+KIND_CODE = {
+    "none": 0,
+    "stuck": 1,
+    "noise": 2,
+    "bias_jump": 3,
+    "bias_drift": 4,
+    "spikes": 5,
+    "saturation": 6,
+    "rate": 7,
+    "disagree": 8,
+    "allan": 9,
+    "resolution": 10,
+}
+PRIORITY = ("stuck", "disagree", "saturation", "noise", "spikes", "resolution", "bias_jump", "bias_drift", "rate",
+            "allan")
+#: kinds sent as CRITICAL (MAV_SEVERITY_CRITICAL = 2); in-flight disagreement too (decided by the caller)
+CRITICAL_KINDS = ("stuck",)
+
+
+@dataclass
+class FaultEvent:
+    """One state change of one detector: what the STATUSTEXT says."""
+
+    imu: int
+    axis: str  # "gx", "gy", "gz", or "" for the whole IMU (timing)
+    kind: str
+    state: int  # FAULT or OK
+    value: float = math.nan
+    detail: str = ""  # extra words (e.g. "IMU0/IMU2" for a disagreement)
+    critical: bool = False
+
+    def text(self) -> str:
+        """STATUSTEXT (<= 50 characters), e.g. ``IMU0 gyro X noise 6.1x baseline``."""
+        where = f"IMU{self.imu} gyro" + (f" {self.axis[1].upper()}" if self.axis else "")
+        if self.state == OK:
+            return f"{where} {KIND_WORDS[self.kind]} cleared"[:50]
+        v = self.value
+        body = {
+            "stuck": "stuck",
+            "noise": f"noise {v:.1f}x baseline",
+            "bias_jump": f"bias jump {v:+.2f} deg/s",
+            "bias_drift": f"bias drift {v:+.2f} deg/s",
+            "spikes": f"spikes {v:.2g} %",
+            "saturation": f"saturated at {v:.3g} rad/s",
+            "rate": self.detail or f"rate {v:.0f} Hz",
+            "disagree": f"disagrees with {self.detail}",
+            "allan": self.detail,
+            "resolution": f"resolution lost: steps {v:.0f}x LSB",
+        }[self.kind]
+        return f"{where} {body}"[:50]
+
+
+KIND_WORDS = {"stuck": "stuck", "noise": "noise", "bias_jump": "bias jump", "bias_drift": "bias drift",
+              "spikes": "spikes", "saturation": "saturation", "rate": "timing", "disagree": "disagreement",
+              "allan": "Allan terms", "resolution": "resolution loss"}
+
+
+class FaultDetector(Protocol):
+    """The small interface every fault detector implements."""
+
+    kind: str
+    state: int
+    value: float
+
+    def state_dict(self) -> dict: ...
+
+    def load_state_dict(self, d: Mapping) -> None: ...
+
+
+class Cusum:
+    """One-sided CUSUM (1) with a reverse CUSUM that clears the fault; plain floats."""
+
+    def __init__(self, h_on: float, h_off: float):
+        self.h_on, self.h_off = float(h_on), float(h_off)
+        self.state = OK
+        self.s = 0.0  # evidence for the fault (while OK) or for healthy (while FAULT)
+
+    def step(self, llr: float) -> bool:
+        """Add one block's LLR (positive favours the fault); return True when the state changed."""
+        if not math.isfinite(llr):
+            return False
+        if self.state == OK:
+            self.s = max(0.0, self.s + llr)
+            if self.s > self.h_on:
+                self.state, self.s = FAULT, 0.0
+                return True
+        else:
+            self.s = max(0.0, self.s - llr)
+            if self.s > self.h_off:
+                self.state, self.s = OK, 0.0
+                return True
+        return False
+
+    def state_dict(self) -> dict:
+        return {"state": self.state, "s": self.s}
+
+    def load_state_dict(self, d: Mapping) -> None:
+        self.state, self.s = int(d.get("state", OK)), float(d.get("s", 0.0))
+
+
+def chi2_llr(u: float, nu: float, r1: float) -> float:
+    """LLR of a variance ratio r1 against 1 for one block: u = s^2 / sigma0^2 with nu degrees of freedom.
+
+    nu s^2 / sigma^2 ~ chi2(nu): llr = (nu / 2) * ((1 - 1 / r1) * u - ln r1).
+    """
+    return 0.5 * nu * ((1.0 - 1.0 / r1) * u - math.log(r1))
+
+
+def gauss_mean_llr(x: float, sigma: float, delta: float) -> float:
+    """Two-sided-ready LLR of a mean shift ``delta`` (same sign as wanted) for one block mean x +- sigma."""
+    return (delta / (sigma * sigma)) * (x - 0.5 * delta)
+
+
+# --------------------------------------------------------------------------------------------- block statistics
+SPIKE_K = 6.0  # outlier threshold in robust sigmas of the second differences (see spikes.py)
+#: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
+#: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
+DD_NU_PER_SAMPLE = 2.0 / (140.0 / 36.0)
+
+
+@dataclass
+class BlockStats:
+    """Statistics of one block of one IMU (arrays of shape (3,), one per gyro axis).
+
+    * ``n``: samples; ``mean``: block mean without the spike samples (rad/s); ``rms``: root mean square
+    * ``v2``: white-noise variance from the second differences dd_k = y_k - 2 y_{k-1} + y_{k-2}, with the
+      outliers (and their neighbours) left out: v2 = mean(dd^2) / 6. Smooth motion (a hand turning the
+      vehicle, below ~2 Hz) barely enters (its second difference is (2 pi f / fs)^2 times its amplitude).
+    * ``m2``: number of second differences used for v2 (chi-square dof nu = DD_NU_PER_SAMPLE * m2)
+    * ``spikes``: isolated outliers |dd| > SPIKE_K robust sigmas (one count per spike: the local maximum);
+      ``spikes_solo``: those not coinciding (+-1 sample) with one on another axis (a shock moves every axis)
+    * ``top``: max |y|; ``top_run``: longest run of consecutive samples at exactly +-top
+    * ``changes``: number of consecutive samples that differ (0: every value equal); ``step``: the
+      smallest non-zero |y_k - y_{k-1}| (nan without change)
+    """
+
+    n: int
+    mean: np.ndarray
+    rms: np.ndarray
+    v2: np.ndarray
+    m2: np.ndarray
+    spikes: np.ndarray
+    spikes_solo: np.ndarray
+    top: np.ndarray
+    top_run: np.ndarray
+    changes: np.ndarray
+    step: np.ndarray
+
+
+def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float = SPIKE_K) -> BlockStats:
+    """Per-axis statistics of a block ``y`` of shape (n, 3) (rad/s)."""
+    y = np.asarray(y, dtype=float)
+    n = y.shape[0]
+    mean = y.mean(axis=0)
+    rms = np.sqrt(np.mean(y * y, axis=0))
+    top = np.max(np.abs(y), axis=0)
+    at_top = np.abs(y) == top
+    top_run = np.array([_longest_run(at_top[:, j]) for j in range(y.shape[1])])
+    dy = np.abs(np.diff(y, axis=0)) if n > 1 else np.zeros((0, y.shape[1]))
+    changes = np.count_nonzero(dy, axis=0)
+    step = np.where(changes > 0, np.min(np.where(dy > 0, dy, np.inf), axis=0, initial=np.inf), np.nan)
+    if n < 5:
+        z = np.zeros(y.shape[1])
+        return BlockStats(n, mean, rms, np.full(y.shape[1], np.nan), z, z, z, top, top_run, changes, step)
+    dd = y[2:] - 2.0 * y[1:-1] + y[:-2]
+    a = np.abs(dd)
+    scale = np.median(a, axis=0) / 0.6745
+    floor = 0.5 * np.sqrt(np.mean(dd * dd, axis=0))  # only matters where the median is 0 (coarse rounding)
+    scale = np.maximum(scale, floor if dd_scale_ref is None else np.maximum(dd_scale_ref, 1e-12))
+    # local scale: the MAD of each quarter and its neighbours (vibration that starts mid-block is not a spike)
+    m = a.shape[0]
+    q = max(m // 4, 1)
+    edges = list(range(0, m, q))
+    qs = np.array([np.median(a[e:e + q], axis=0) / 0.6745 for e in edges])
+    qmax = np.maximum(qs, np.maximum(np.vstack([qs[:1], qs[:-1]]), np.vstack([qs[1:], qs[-1:]])))
+    local = np.repeat(qmax, q, axis=0)[:m]
+    scale = np.maximum(scale, local)
+    out = a > k * scale
+    prev = np.vstack([np.zeros((1, a.shape[1])), a[:-1]])
+    nxt = np.vstack([a[1:], np.zeros((1, a.shape[1]))])
+    peak = out & (a >= prev) & (a > nxt)
+    # isolated: nothing above half the peak 2-5 samples away (a spike is -2A flanked by A, then noise)
+    for j, c in zip(*np.nonzero(peak)):
+        around = np.concatenate([a[max(j - 5, 0):max(j - 1, 0), c], a[j + 2:j + 6, c]])
+        if around.size and around.max() >= 0.5 * a[j, c]:
+            peak[j, c] = False
+    spikes = np.count_nonzero(peak, axis=0)
+    near = peak.copy()
+    near[1:] |= peak[:-1]
+    near[:-1] |= peak[1:]
+    others = near.sum(axis=1, keepdims=True) - near  # peaks of the other axes within +-1 sample
+    spikes_solo = np.count_nonzero(peak & (others == 0), axis=0)
+    bad = out.copy()
+    bad[1:] |= out[:-1]
+    bad[:-1] |= out[1:]
+    keep = ~bad
+    spike_sample = np.zeros(y.shape, dtype=bool)  # dd_j is centred on sample j + 1
+    spike_sample[1:-1] = out
+    clean = ~spike_sample
+    mean = np.where(clean.any(axis=0), np.sum(np.where(clean, y, 0.0), axis=0) / np.maximum(clean.sum(axis=0), 1), mean)
+    m2 = keep.sum(axis=0)
+    v2 = np.where(m2 > 0, np.sum(np.where(keep, dd * dd, 0.0), axis=0) / np.maximum(m2, 1) / 6.0, np.nan)
+    return BlockStats(n, mean, rms, v2, m2.astype(float), spikes, spikes_solo, top, top_run, changes, step)
+
+
+def _longest_run(mask: np.ndarray) -> int:
+    if not mask.any():
+        return 0
+    m = np.concatenate(([0], mask.view(np.int8) if mask.dtype == bool else mask.astype(np.int8), [0]))
+    d = np.diff(m)
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    return int((ends - starts).max())
+
+
+@dataclass
+class AxisRef:
+    """What healthy still data of one axis looks like, learned from the first ``ref_blocks`` quiet blocks.
+
+    * ``sigma2``: white-noise variance (pooled v2), ``nu``: chi-square dof of one block's v2, the smaller of
+      the white-noise figure and the one measured from the spread of v2 (coarse rounding spreads it)
+    * ``mu``: mean rate (the bias at the start), ``spike_rate``: outliers per sample
+    """
+
+    sigma2: float = math.nan
+    nu: float = math.nan
+    mu: float = math.nan
+    spike_rate: float = 0.0
+    blocks: int = 0
+    _v2: list | None = None
+    _mu: list | None = None
+    _spk: int = 0
+    _samples: int = 0
+
+    @property
+    def ready(self) -> bool:
+        return math.isfinite(self.sigma2)
+
+    def add(self, v2: float, m2: float, mean: float, spikes: int, n: int, ref_blocks: int) -> bool:
+        """Add one quiet block; returns True when the reference becomes ready."""
+        if self.ready or not math.isfinite(v2):
+            return False
+        if self._v2 is None:
+            self._v2, self._mu = [], []
+        self._v2.append(v2)
+        self._mu.append(mean)
+        self._spk += int(spikes)
+        self._samples += int(n)
+        self.blocks += 1
+        if self.blocks < ref_blocks:
+            return False
+        v = np.asarray(self._v2)
+        s2 = float(v.mean())
+        nu_white = DD_NU_PER_SAMPLE * max(m2, 1.0)
+        if s2 > 0:
+            rel = float(v.var(ddof=1)) / (s2 * s2)
+            nu_emp = 2.0 / rel if rel > 0 else nu_white
+            # the spread of a variance estimated from ref_blocks values is itself uncertain: keep 70 %
+            nu = min(nu_white, 0.7 * nu_emp)
+        else:
+            nu = nu_white
+        self.sigma2, self.nu = s2, max(nu, 2.0)
+        self.mu = float(np.mean(self._mu))
+        self.spike_rate = self._spk / max(self._samples, 1)
+        self._v2 = self._mu = None
+        return True
+
+    def state_dict(self) -> dict:
+        return {"sigma2": _f(self.sigma2), "nu": _f(self.nu), "mu": _f(self.mu), "spike_rate": self.spike_rate,
+                "blocks": self.blocks, "v2": self._v2, "means": self._mu, "spk": self._spk, "samples": self._samples}
+
+    def load_state_dict(self, d: Mapping) -> None:
+        self.sigma2, self.nu, self.mu = _nan(d.get("sigma2")), _nan(d.get("nu")), _nan(d.get("mu"))
+        self.spike_rate = float(d.get("spike_rate", 0.0))
+        self.blocks = int(d.get("blocks", 0))
+        self._v2 = list(d["v2"]) if d.get("v2") is not None else None
+        self._mu = list(d["means"]) if d.get("means") is not None else None
+        self._spk, self._samples = int(d.get("spk", 0)), int(d.get("samples", 0))
+
+
+def _f(x: float):
+    return x if math.isfinite(x) else None
+
+
+def _nan(x) -> float:
+    return math.nan if x is None else float(x)

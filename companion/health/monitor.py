@@ -1,0 +1,147 @@
+"""All fault detectors of one IMU: per-axis references and detectors, the timing detector, the reported code.
+
+``ImuFaults.on_block`` runs the checks valid on every block (stuck, spikes, saturation, timing: still or
+moving, armed or not); ``ImuFaults.on_quiet`` the ones valid only on still, settled blocks (noise, bias
+jump/drift, resolution) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them.
+Disagreement lives with the pairs of IMUs (disagreement.py, driven by service/pipeline.py) and the Allan
+rise with detector.py; both feed ``set_external`` so that one code per IMU is reported.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import numpy as np
+
+from companion.health.bias import BiasDetector
+from companion.health.faults import (FAULT, KIND_CODE, OK, PRIORITY, AxisRef, BlockStats, FaultEvent)
+from companion.health.noise import NoiseDetector
+from companion.health.resolution import ResolutionDetector
+from companion.health.saturation import SaturationDetector
+from companion.health.spikes import SpikeDetector
+from companion.health.stuck import StuckDetector
+from companion.health.timing import TimingDetector
+
+AXES = ("gx", "gy", "gz")
+REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detectors
+
+
+class AxisFaults:
+    def __init__(self, abs_limit: float):
+        self.ref = AxisRef()
+        self.stuck = StuckDetector()
+        self.noise = NoiseDetector()
+        self.bias = BiasDetector()
+        self.spikes = SpikeDetector()
+        self.saturation = SaturationDetector(abs_limit)
+        self.resolution = ResolutionDetector()
+
+    def states(self) -> dict[str, int]:
+        return {"stuck": self.stuck.state, "noise": self.noise.state, "bias_jump": self.bias.state,
+                "bias_drift": self.bias.drift_state, "spikes": self.spikes.state,
+                "saturation": self.saturation.state, "resolution": self.resolution.state}
+
+    def state_dict(self) -> dict:
+        return {"ref": self.ref.state_dict(), "stuck": self.stuck.state_dict(), "noise": self.noise.state_dict(),
+                "bias": self.bias.state_dict(), "spikes": self.spikes.state_dict(),
+                "saturation": self.saturation.state_dict(), "resolution": self.resolution.state_dict()}
+
+    def load_state_dict(self, d: Mapping) -> None:
+        self.ref.load_state_dict(d.get("ref", {}))
+        self.stuck.load_state_dict(d.get("stuck", {}))
+        self.noise.load_state_dict(d.get("noise", {}))
+        self.bias.load_state_dict(d.get("bias", {}))
+        self.spikes.load_state_dict(d.get("spikes", {}))
+        self.saturation.load_state_dict(d.get("saturation", {}))
+        self.resolution.load_state_dict(d.get("resolution", {}))
+
+
+class ImuFaults:
+    def __init__(self, imu: int, abs_limit: float = math.inf, ref_blocks: int = REF_BLOCKS):
+        self.imu = imu
+        self.ref_blocks = int(ref_blocks)
+        self.axes = {ax: AxisFaults(abs_limit) for ax in AXES}
+        self.timing = TimingDetector()
+        self.external: dict[tuple[str, str], int] = {}  # (kind, axis) -> state, e.g. ("disagree", "gx")
+        self.quiet_blocks = 0
+
+    # ------------------------------------------------------------------ inputs
+    def dd_scale_ref(self) -> np.ndarray | None:
+        refs = [a.ref for a in self.axes.values()]
+        if not all(r.ready for r in refs):
+            return None
+        return np.array([math.sqrt(6.0 * r.sigma2) for r in refs])
+
+    def on_block(self, st: BlockStats, t: np.ndarray, still: bool) -> list[FaultEvent]:
+        """Every block: stuck, spikes, saturation, timing."""
+        ev = []
+        if self.timing.update(t):
+            ev.append(FaultEvent(self.imu, "", "rate", self.timing.state, self.timing.value, self.timing.detail))
+        for j, (ax, af) in enumerate(self.axes.items()):
+            if af.stuck.update(af.ref, float(st.v2[j]), int(st.changes[j]), st.n):
+                ev.append(FaultEvent(self.imu, ax, "stuck", af.stuck.state, critical=True))
+            count = int(st.spikes[j] if still else st.spikes_solo[j])
+            if af.stuck.state == OK and af.spikes.update(af.ref, count, st.n):
+                ev.append(FaultEvent(self.imu, ax, "spikes", af.spikes.state, af.spikes.value))
+            if af.saturation.update(af.ref, float(st.top[j]), int(st.top_run[j])):
+                ev.append(FaultEvent(self.imu, ax, "saturation", af.saturation.state, af.saturation.value))
+        return ev
+
+    def on_quiet(self, st: BlockStats, extra_var: Mapping[str, float] | None = None) -> list[FaultEvent]:
+        """A still, settled block: learn the references, then noise and bias."""
+        ev = []
+        self.quiet_blocks += 1
+        for j, (ax, af) in enumerate(self.axes.items()):
+            v2, x = float(st.v2[j]), float(st.mean[j])
+            if not af.ref.ready:
+                if af.stuck.state == OK and af.spikes.state == OK:
+                    af.ref.add(v2, float(st.m2[j]), x, int(st.spikes[j]), st.n, self.ref_blocks)
+                continue
+            if af.stuck.state == FAULT:
+                continue
+            if af.resolution.update(float(st.step[j]), int(st.changes[j])):
+                ev.append(FaultEvent(self.imu, ax, "resolution", af.resolution.state, af.resolution.value))
+            if af.noise.update(af.ref, v2):
+                ev.append(FaultEvent(self.imu, ax, "noise", af.noise.state, af.noise.value))
+            for kind in af.bias.update(af.ref, x, v2, st.n, (extra_var or {}).get(ax, 0.0)):
+                if kind == "bias_jump":
+                    ev.append(FaultEvent(self.imu, ax, kind, af.bias.state, af.bias.value))
+                else:
+                    ev.append(FaultEvent(self.imu, ax, kind, af.bias.drift_state, af.bias.drift_value))
+        return ev
+
+    def set_external(self, kind: str, axis: str, state: int) -> None:
+        if state == FAULT:
+            self.external[(kind, axis)] = FAULT
+        else:
+            self.external.pop((kind, axis), None)
+
+    # ------------------------------------------------------------------ outputs
+    def active(self) -> list[tuple[str, str]]:
+        """Active faults as (kind, axis), most severe first."""
+        out = [(k, ax) for ax, af in self.axes.items() for k, s in af.states().items() if s == FAULT]
+        if self.timing.state == FAULT:
+            out.append(("rate", ""))
+        out += [k for k, s in self.external.items() if s == FAULT]
+        return sorted(out, key=lambda ka: (PRIORITY.index(ka[0]), ka[1]))
+
+    def code(self) -> int:
+        act = self.active()
+        return KIND_CODE[act[0][0]] if act else 0
+
+    def noise_ref(self, axis: str) -> float | None:
+        r = self.axes[axis].ref
+        return r.sigma2 if r.ready else None
+
+    def state_dict(self) -> dict:
+        return {"axes": {ax: af.state_dict() for ax, af in self.axes.items()}, "timing": self.timing.state_dict(),
+                "external": [[k, a] for (k, a) in self.external], "quiet_blocks": self.quiet_blocks}
+
+    def load_state_dict(self, d: Mapping) -> None:
+        for ax, s in (d.get("axes") or {}).items():
+            if ax in self.axes:
+                self.axes[ax].load_state_dict(s)
+        self.timing.load_state_dict(d.get("timing", {}))
+        self.external = {(k, a): FAULT for k, a in d.get("external", [])}
+        self.quiet_blocks = int(d.get("quiet_blocks", 0))

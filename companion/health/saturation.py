@@ -1,0 +1,58 @@
+"""Saturation / clipping of a gyro axis: the output sits at a limit.
+
+Two statistics per block: (a) a sample at the message's range limit (``abs_limit``: 32.767 rad/s for
+int16 mrad/s) and (b) a plateau: a run of at least ``RUN`` consecutive samples exactly at the block's
+largest |value|, that value far above the noise (>= 0.05 rad/s and 10 sigma0), at the same level in
+``BLOCKS`` of the last ``WINDOW`` blocks (a clip level is fixed; the peak of healthy motion with noise
+on top is neither flat for 5 samples nor at one exact level again and again). Cleared after
+``CLEAR_BLOCKS`` blocks without either.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Mapping
+
+from companion.health.faults import FAULT, OK, AxisRef
+
+RUN = 5
+BLOCKS = 3
+WINDOW = 10
+CLEAR_BLOCKS = 60
+MIN_LEVEL = 0.05  # rad/s
+
+
+class SaturationDetector:
+    kind = "saturation"
+
+    def __init__(self, abs_limit: float = math.inf):
+        self.abs_limit = abs_limit
+        self.state = OK
+        self.levels: deque = deque(maxlen=WINDOW)
+        self.quiet = 0
+        self.value = math.nan
+
+    def update(self, ref: AxisRef, top: float, top_run: int) -> bool:
+        noise = 10.0 * math.sqrt(ref.sigma2) if ref.ready else 0.0
+        hit = top >= 0.999 * self.abs_limit
+        level = top if (top_run >= RUN and top >= max(MIN_LEVEL, noise)) else None
+        self.levels.append(level)
+        same = sum(1 for v in self.levels if v is not None and level is not None and abs(v - level) <= 1e-9 * max(1.0, level))
+        now = hit or (level is not None and same >= BLOCKS)
+        if self.state == OK and now:
+            self.state, self.value, self.quiet = FAULT, top, 0
+            return True
+        if self.state == FAULT:
+            self.quiet = 0 if (hit or level is not None) else self.quiet + 1
+            if self.quiet >= CLEAR_BLOCKS:
+                self.state = OK
+                return True
+        return False
+
+    def state_dict(self) -> dict:
+        return {"state": self.state, "quiet": self.quiet, "value": None if math.isnan(self.value) else self.value}
+
+    def load_state_dict(self, d: Mapping) -> None:
+        self.state, self.quiet = int(d.get("state", OK)), int(d.get("quiet", 0))
+        self.value = math.nan if d.get("value") is None else float(d["value"])

@@ -1,0 +1,69 @@
+"""Rate drop and irregular timing of one IMU stream (message time).
+
+Per block: the rate (n - 1) / (t_last - t_first) and the jitter std(dt) / mean(dt). The reference is
+the median rate of the first ``REF_BLOCKS`` blocks. FAULT when, in ``HOLD`` consecutive blocks, the rate
+is below ``DROP`` x the reference (a stream that lost 30 % of its samples) or the jitter is above
+``JITTER`` (intervals scattered by 30 % of the period; ArduPilot's streams at 100 Hz show a few %).
+Cleared after ``HOLD`` good blocks. A stream that stops altogether is the link's "stale" (HLTH 3).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import numpy as np
+
+from companion.health.faults import FAULT, OK
+
+REF_BLOCKS = 10
+HOLD = 5
+DROP = 0.7
+JITTER = 0.3
+
+
+class TimingDetector:
+    kind = "rate"
+
+    def __init__(self):
+        self.state = OK
+        self.ref_rate = math.nan
+        self._rates: list = []
+        self.count = 0
+        self.value = math.nan
+        self.detail = ""
+
+    def update(self, t: np.ndarray) -> bool:
+        if t.size < 5 or t[-1] <= t[0]:
+            return False
+        dt = np.diff(t)
+        rate = (t.size - 1) / float(t[-1] - t[0])
+        jitter = float(dt.std() / dt.mean())
+        if math.isnan(self.ref_rate):
+            self._rates.append(rate)
+            if len(self._rates) >= REF_BLOCKS:
+                self.ref_rate = float(np.median(self._rates))
+                self._rates = []
+            return False
+        bad = rate < DROP * self.ref_rate or jitter > JITTER
+        if self.state == OK:
+            self.count = self.count + 1 if bad else 0
+            if self.count >= HOLD:
+                self.state, self.count, self.value = FAULT, 0, rate
+                self.detail = (f"rate {rate:.0f} Hz (was {self.ref_rate:.0f})" if rate < DROP * self.ref_rate
+                               else f"timing irregular ({100 * jitter:.0f} % jitter)")
+                return True
+        else:
+            self.count = self.count + 1 if not bad else 0
+            if self.count >= HOLD:
+                self.state, self.count = OK, 0
+                return True
+        return False
+
+    def state_dict(self) -> dict:
+        return {"state": self.state, "ref_rate": None if math.isnan(self.ref_rate) else self.ref_rate,
+                "count": self.count}
+
+    def load_state_dict(self, d: Mapping) -> None:
+        self.state, self.count = int(d.get("state", OK)), int(d.get("count", 0))
+        self.ref_rate = math.nan if d.get("ref_rate") is None else float(d["ref_rate"])

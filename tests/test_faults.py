@@ -1,0 +1,284 @@
+"""Fault detectors against simulated truth over many seeds (companion/health: stuck, noise, bias, spikes,
+saturation, timing, disagreement), each fed block statistics exactly as the pipeline does."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.health.bias import BiasDetector
+from companion.health.disagreement import PairDisagreement
+from companion.health.faults import FAULT, OK, AxisRef, FaultEvent, block_stats
+from companion.health.noise import NoiseDetector
+from companion.health.saturation import SaturationDetector
+from companion.health.spikes import SpikeDetector
+from companion.health.stuck import StuckDetector
+from companion.health.timing import TimingDetector
+
+FS = 100
+LSB = 1e-3
+DEG = math.pi / 180
+
+
+def rounded_noise(rng, n, sigma, mean=0.0):
+    return np.round((mean + rng.normal(0.0, sigma, (n, 3))) / LSB) * LSB
+
+
+def learn_ref(rng, sigma, blocks=30, mean=0.0):
+    refs = [AxisRef() for _ in range(3)]
+    for _ in range(blocks):
+        st = block_stats(rounded_noise(rng, FS, sigma, mean))
+        for j, r in enumerate(refs):
+            r.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n, blocks)
+    assert all(r.ready for r in refs)
+    return refs
+
+
+def scale_of(refs):
+    return np.array([math.sqrt(6 * r.sigma2) for r in refs])
+
+
+def test_block_stats_white_variance_ignores_smooth_motion_and_spikes():
+    rng = np.random.default_rng(0)
+    v = []
+    for _ in range(200):
+        t = np.arange(FS) / FS
+        y = rng.normal(0, 0.01, (FS, 3)) + 0.5 * np.sin(2 * np.pi * 0.3 * t + rng.uniform(0, 6))[:, None]
+        y[50, 0] += 0.3  # one spike on x
+        st = block_stats(y)
+        v.append(st.v2)
+        assert st.spikes[0] == 1 and st.spikes[1] == 0
+    v = np.array(v)
+    # mean of 200 blocks: relative std sqrt(2 / (200 * 50)) = 1.4 %; 5 sigma
+    assert np.mean(v) == pytest.approx(1e-4, rel=0.07)
+
+
+@pytest.mark.parametrize("sigma_lsb", [0.7, 3.0])
+def test_stuck_caught_fast_with_or_without_dither_and_never_on_healthy_rounded_noise(sigma_lsb):
+    sigma = sigma_lsb * LSB
+    flagged_healthy, delays = 0, []
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        refs = learn_ref(rng, sigma)
+        dets = [StuckDetector() for _ in range(3)]
+        for _ in range(600):  # 10 healthy minutes per seed and axis
+            st = block_stats(rounded_noise(rng, FS, sigma), scale_of(refs))
+            for j, d in enumerate(dets):
+                flagged_healthy += d.update(refs[j], float(st.v2[j]), int(st.changes[j]), st.n)
+        frozen = rng.normal(0, sigma, 3)
+        dither = rng.uniform(0, 0.3) * sigma * (seed % 2)  # half exactly frozen, half with a small dither
+        for k in range(20):
+            y = frozen + rng.normal(0, dither, (FS, 3)) if dither else np.tile(frozen, (FS, 1))
+            st = block_stats(y, scale_of(refs))
+            if dets[0].update(refs[0], float(st.v2[0]), int(st.changes[0]), st.n):
+                delays.append(k + 1)
+                break
+    assert flagged_healthy == 0
+    assert len(delays) == 10 and max(delays) <= 3
+
+
+def test_stuck_without_reference_uses_equal_values():
+    d = StuckDetector()
+    ref = AxisRef()
+    assert not d.update(ref, 0.0, 0, 100)
+    assert d.update(ref, 0.0, 0, 100) and d.state == FAULT
+    assert d.update(ref, 1e-4, 90, 100) and d.state == OK
+
+
+def test_noise_rise_detected_near_its_information_limit_and_not_on_healthy():
+    false, delays = 0, {2.0: [], 1.5: [], 1.3: []}
+    for seed in range(12):
+        rng = np.random.default_rng(100 + seed)
+        sigma = rng.uniform(1.0, 4.0) * LSB
+        refs = learn_ref(rng, sigma)
+        d = NoiseDetector()
+        for _ in range(600):
+            st = block_stats(rounded_noise(rng, FS, sigma), scale_of(refs))
+            false += d.update(refs[0], float(st.v2[0]))
+        for f in delays:
+            d = NoiseDetector()
+            for k in range(300):
+                st = block_stats(rounded_noise(rng, FS, f * sigma), scale_of(refs))
+                if d.update(refs[0], float(st.v2[0])):
+                    delays[f].append(k + 1)
+                    assert d.value == pytest.approx(f, rel=0.35)
+                    break
+    assert false == 0
+    assert len(delays[2.0]) == 12 and max(delays[2.0]) <= 5  # limit h / KL = 20 / (50 * 0.5 * (4 - 1 - ln 4)) = 0.5 blocks
+    assert len(delays[1.5]) == 12 and max(delays[1.5]) <= 15
+    assert len(delays[1.3]) == 12 and max(delays[1.3]) <= 60
+
+
+def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
+    sigma = 2e-3
+    jumps, quiet = [], 0
+    for seed in range(8):
+        rng = np.random.default_rng(200 + seed)
+        refs = learn_ref(rng, sigma)
+        d = BiasDetector()
+        warm = 0.1 * DEG * (1 - np.exp(-np.arange(1200) / 200.0)) * (1 if seed % 2 else -1)
+        for k in range(1200):  # 20 min of cold-start warm-up: 0.1 deg/s exponential, tau 200 s
+            st = block_stats(rounded_noise(rng, FS, sigma, warm[k]), scale_of(refs))
+            quiet += len(d.update(refs[0], float(st.mean[0]), float(st.v2[0]), st.n))
+        step = rng.uniform(0.3, 1.0) * DEG * (1 if seed % 2 else -1)
+        for k in range(30):
+            st = block_stats(rounded_noise(rng, FS, sigma, warm[-1] + step), scale_of(refs))
+            if "bias_jump" in d.update(refs[0], float(st.mean[0]), float(st.v2[0]), st.n):
+                jumps.append((k + 1, d.value, step / DEG))
+                break
+    assert quiet == 0
+    assert len(jumps) == 8 and max(k for k, _, _ in jumps) <= 3
+    for _, v, s in jumps:
+        assert v == pytest.approx(s, abs=0.15)
+    # a slow ramp: named a drift
+    rng = np.random.default_rng(9)
+    refs = learn_ref(rng, sigma)
+    d = BiasDetector()
+    kinds = []
+    for k in range(400):
+        st = block_stats(rounded_noise(rng, FS, sigma, 2e-5 * max(k - 60, 0)), scale_of(refs))
+        kinds += d.update(refs[0], float(st.mean[0]), float(st.v2[0]), st.n)
+        if kinds:
+            break
+    assert kinds == ["bias_drift"] and d.drift_state == FAULT
+
+
+def test_spikes_named_as_spikes_not_noise():
+    delays, noise_flags, false = [], 0, 0
+    for seed in range(10):
+        rng = np.random.default_rng(300 + seed)
+        sigma = rng.uniform(0.7, 4.0) * LSB
+        refs = learn_ref(rng, sigma)
+        sp, nd = SpikeDetector(), NoiseDetector()
+        for _ in range(900):
+            st = block_stats(rounded_noise(rng, FS, sigma), scale_of(refs))
+            false += sp.update(refs[0], int(st.spikes[0]), st.n)
+        frac = rng.uniform(0.002, 0.01)
+        for k in range(60):
+            y = rounded_noise(rng, FS, sigma)
+            hit = rng.random(FS) < frac
+            y[hit, 0] += 0.3 * rng.choice([-1, 1], hit.sum())
+            st = block_stats(y, scale_of(refs))
+            noise_flags += nd.update(refs[0], float(st.v2[0]))
+            if sp.update(refs[0], int(st.spikes[0]), st.n):
+                delays.append(k + 1)
+                break
+    assert false == 0 and noise_flags == 0
+    assert len(delays) == 10 and max(delays) <= 30
+
+
+def test_saturation_at_a_clip_level_and_at_the_range_limit():
+    rng = np.random.default_rng(4)
+    refs = learn_ref(rng, 2e-3)
+    d = SaturationDetector(abs_limit=32.767)
+    changed = []
+    for k in range(20):  # manoeuvres reaching 1.2 rad/s, clipped at 0.8
+        t = (k * FS + np.arange(FS)) / FS
+        y = rounded_noise(rng, FS, 2e-3) + 1.2 * np.sin(2 * np.pi * 0.7 * t)[:, None]
+        y[:, 0] = np.clip(y[:, 0], -0.8, 0.8)
+        st = block_stats(y, scale_of(refs))
+        changed.append(d.update(refs[0], float(st.top[0]), int(st.top_run[0])))
+    assert any(changed) and d.state == FAULT and d.value == pytest.approx(0.8)
+    healthy = SaturationDetector(abs_limit=32.767)  # the same motion unclipped (axis y): never
+    for k in range(200):
+        t = (k * FS + np.arange(FS)) / FS
+        y = rounded_noise(rng, FS, 2e-3) + 1.2 * np.sin(2 * np.pi * 0.7 * t)[:, None]
+        st = block_stats(y, scale_of(refs))
+        assert not healthy.update(refs[1], float(st.top[1]), int(st.top_run[1]))
+    hard = SaturationDetector(abs_limit=32.767)
+    assert hard.update(refs[0], 32.767, 1)
+
+
+def test_timing_rate_drop_and_jitter():
+    d = TimingDetector()
+    rng = np.random.default_rng(1)
+    t0 = 0.0
+    for k in range(30):
+        t = t0 + np.arange(100) / 100.0
+        assert not d.update(t)
+        t0 = t[-1] + 0.01
+    for k in range(5):  # every second sample lost: 50 Hz
+        t = t0 + np.arange(50) / 50.0
+        ch = d.update(t)
+        t0 = t[-1] + 0.02
+    assert ch and d.state == FAULT and "50 Hz" in d.detail
+    d2 = TimingDetector()
+    for k in range(10):
+        d2.update(np.arange(100) / 100.0 + k)
+    for k in range(5):
+        t = np.cumsum(rng.uniform(0.002, 0.018, 100)) + 20 + k
+        ch = d2.update(t)
+    assert ch and "irregular" in d2.detail
+
+
+def rotation(rng, n, t0):
+    t = (t0 + np.arange(n)) / FS
+    w = np.column_stack([1.2 * np.sin(2 * np.pi * 0.4 * t + 1), 0.9 * np.sin(2 * np.pi * 0.7 * t),
+                         0.6 * np.sin(2 * np.pi * 0.2 * t + 2)])
+    return w + 0.02 * rng.normal(size=(n, 3))  # shared vibration
+
+
+def test_disagreement_tolerates_scale_and_misalignment_in_fast_rotation_and_catches_a_bias():
+    delays, false = [], 0
+    for seed in range(6):
+        rng = np.random.default_rng(400 + seed)
+        sigma = rng.uniform(1, 4) * LSB
+        s = np.eye(3) + np.diag(rng.uniform(-0.01, 0.01, 3))
+        ang = rng.uniform(0, 0.5) * DEG
+        ax = rng.normal(size=3)
+        ax /= np.linalg.norm(ax)
+        K = np.array([[0, -ax[2], ax[1]], [ax[2], 0, -ax[0]], [-ax[1], ax[0], 0]])
+        C = s @ (np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K)
+        pair = PairDisagreement(0, 1)
+        b0, b1 = rng.normal(0, 0.5 * DEG, 3), rng.normal(0, 0.5 * DEG, 3)
+        for k in range(600):
+            w = rotation(rng, FS, k * FS)
+            y0 = w + b0 + rng.normal(0, sigma, (FS, 3))
+            y1 = w @ C.T + b1 + rng.normal(0, sigma, (FS, 3))
+            false += len(pair.update(np.round(y0 / LSB) * LSB, np.round(y1 / LSB) * LSB, 2 * sigma ** 2 + LSB ** 2 / 6))
+        step = DEG * (1 if seed % 2 else -1)
+        for k in range(20):
+            w = rotation(rng, FS, (600 + k) * FS)
+            y0 = w + b0 + rng.normal(0, sigma, (FS, 3))
+            y1 = w @ C.T + b1 + rng.normal(0, sigma, (FS, 3))
+            y1[:, 2] += step
+            if 2 in pair.update(y0, y1, 2 * sigma ** 2 + LSB ** 2 / 6):
+                delays.append(k + 1)
+                break
+    assert false == 0
+    assert len(delays) == 6 and max(delays) <= 10
+
+
+def test_event_texts_fit_statustext():
+    texts = [FaultEvent(0, "gx", "stuck", FAULT).text(), FaultEvent(0, "gx", "noise", FAULT, 6.12).text(),
+             FaultEvent(0, "gx", "bias_jump", FAULT, 1.2).text(), FaultEvent(0, "gx", "spikes", FAULT, 0.4).text(),
+             FaultEvent(1, "gx", "disagree", FAULT, detail="IMU0/IMU2").text(),
+             FaultEvent(0, "gz", "bias_drift", FAULT, -0.35).text(), FaultEvent(0, "gx", "stuck", OK).text()]
+    assert texts == ["IMU0 gyro X stuck", "IMU0 gyro X noise 6.1x baseline", "IMU0 gyro X bias jump +1.20 deg/s",
+                     "IMU0 gyro X spikes 0.4 %", "IMU1 gyro X disagrees with IMU0/IMU2",
+                     "IMU0 gyro Z bias drift -0.35 deg/s", "IMU0 gyro X stuck cleared"]
+    assert all(len(t) <= 50 for t in texts)
+
+
+def test_resolution_loss_and_float_data_untested():
+    from companion.health.resolution import ResolutionDetector
+
+    rng = np.random.default_rng(5)
+    d = ResolutionDetector()
+    for _ in range(300):
+        st = block_stats(rounded_noise(rng, FS, 3 * LSB))
+        assert not d.update(float(st.step[0]), int(st.changes[0]))
+    assert d.lsb == pytest.approx(LSB)
+    flagged = False
+    for k in range(12):  # the output now moves in 4 mrad/s steps
+        y = np.round(rng.normal(0, 8 * LSB, (FS, 3)) / (4 * LSB)) * 4 * LSB
+        st = block_stats(y)
+        flagged |= d.update(float(st.step[0]), int(st.changes[0]))
+    assert flagged and d.value == pytest.approx(4.0)
+    f = ResolutionDetector()  # float data: no LSB, never tested
+    for _ in range(50):
+        st = block_stats(rng.normal(0, 1e-3, (FS, 3)))
+        assert not f.update(float(st.step[0]), int(st.changes[0]))
+    assert f.lsb == 0.0

@@ -1,0 +1,120 @@
+"""`companion run` pipeline against the vehicle simulator: faults named (STATUSTEXT, IMU{i}G_HLTH, IMU{i}G_FLT,
+severity), a healthy handled/flown vehicle never flagged, the motion gate never hiding a fault, state kept."""
+
+from __future__ import annotations
+
+import io
+import math
+
+import pytest
+
+from companion import units
+from companion.cli.run import print_summary
+from companion.health.faults import KIND_CODE
+from companion.mavlink.reporter import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_WARNING, Reporter
+from companion.service.pipeline import Pipeline, PipelineConfig
+from companion.service.replay import replay_vehicle
+from companion.sim.vehicle import Fault, Flight, Handling, Schedule, VehicleSimulator, WarmUp
+
+LSB = 1e-3
+DEG = math.pi / 180
+
+
+def model(sigma_lsb=2.0):
+    return {"rate_hz": 100.0, "axes": {a: [
+        {"effect": "white_noise", "N": sigma_lsb * LSB / 10.0},
+        {"effect": "bias_instability", "B": units.from_datasheet("B", 30.0)},
+        {"effect": "random_walk", "K": units.from_datasheet("K", 40.0)}] for a in ("gx", "gy", "gz")}}
+
+
+class Sink:
+    def __init__(self):
+        self.values, self.texts = {}, []
+
+    def send_named_value_float(self, ms, name, value):
+        self.values[name] = value
+
+    def send_statustext(self, sev, text):
+        self.texts.append((sev, text))
+
+
+def run(duration, imus=1, fault=None, schedule=None, seed=1, sigma_lsb=2.0, baseline_s=200.0):
+    sim = VehicleSimulator(model(sigma_lsb), imus=imus, seed=seed, schedule=schedule or Schedule(), fault=fault,
+                           warmup=WarmUp())
+    sink = Sink()
+    p = Pipeline(PipelineConfig(baseline_s=baseline_s), Reporter(sink, 1.0))
+    replay_vehicle(sim, p, duration, lsb=LSB)
+    return p, sink
+
+
+def fault_texts(sink):
+    return [(s, t) for s, t in sink.texts if "learned" not in t]
+
+
+def test_healthy_handled_and_flown_two_imus_no_alarm():
+    sched = Schedule(flights=(Flight(330.0, 560.0),), handlings=(Handling(250.0, 25.0), Handling(620.0, 20.0)))
+    p, sink = run(800.0, imus=2, schedule=sched, sigma_lsb=0.7)
+    assert fault_texts(sink) == []
+    assert sink.values["IMU0G_HLTH"] == 0.0 and sink.values["IMU1G_HLTH"] == 0.0
+    assert sink.values["IMU0G_FLT"] == 0.0 and sink.values["IMU1G_FLT"] == 0.0
+    assert p.channels[0].counts["blocks_moving"] >= 230 + 40  # flight and handlings seen as motion
+
+
+@pytest.mark.parametrize("kind, size, words, code, severity", [
+    ("stuck", 0.0, "IMU0 gyro Y stuck", "stuck", MAV_SEVERITY_CRITICAL),
+    ("noise", 6.0, "IMU0 gyro Y noise", "noise", MAV_SEVERITY_WARNING),
+    ("bias", 1.0 * DEG, "IMU0 gyro Y bias jump +", "bias_jump", MAV_SEVERITY_WARNING),
+    ("spikes", 0.005, "IMU0 gyro Y spikes", "spikes", MAV_SEVERITY_WARNING),
+])
+def test_each_fault_is_named_with_its_code_and_severity(kind, size, words, code, severity):
+    p, sink = run(330.0, fault=Fault(kind, at=280.0, size=size, axis="gy"))
+    texts = fault_texts(sink)
+    assert texts, "not flagged"
+    sev, text = texts[0]
+    assert text.startswith(words) and sev == severity
+    t_flag = p.transitions[[t for _, t in p.transitions].index(text)][0]
+    assert t_flag - 281.0 <= 15.0
+    assert sink.values["IMU0G_HLTH"] == 1.0 and sink.values["IMU0G_FLT"] == KIND_CODE[code]
+    out = io.StringIO()
+    print_summary(p, out)
+    assert "FAULT: " + words in out.getvalue()
+
+
+def test_noise_jump_is_not_hidden_by_the_motion_gate():
+    """x30 noise on one axis: the accel and the other axes stay quiet, so the blocks stay still."""
+    p, sink = run(320.0, fault=Fault("noise", at=270.0, size=30.0, axis="gx"))
+    assert fault_texts(sink)[0][1].startswith("IMU0 gyro X noise")
+    assert p.channels[0].counts["blocks_moving"] <= 3
+
+
+def test_stuck_during_baseline_learning_is_flagged_before_any_baseline():
+    p, sink = run(120.0, fault=Fault("stuck", at=60.0, size=0.0, axis="gz"), baseline_s=600.0)
+    assert fault_texts(sink)[0] == (MAV_SEVERITY_CRITICAL, "IMU0 gyro Z stuck")
+    assert sink.values["IMU0G_HLTH"] == 1.0  # a fault overrides "learning"
+
+
+@pytest.mark.parametrize("imus, kind", [(3, "stuck"), (3, "bias"), (2, "stuck")])
+def test_in_flight_fault_named_from_the_disagreement(imus, kind):
+    fault = Fault(kind, at=300.0, size=0.0 if kind == "stuck" else 1.0 * DEG, imu=imus - 1, axis="gx")
+    p, sink = run(312.0, imus=imus, fault=fault, schedule=Schedule(flights=(Flight(240.0, 600.0),)))
+    texts = fault_texts(sink)
+    odd = imus - 1
+    others = "/".join(f"IMU{k}" for k in range(imus) if k != odd)
+    assert (MAV_SEVERITY_CRITICAL, f"IMU{odd} gyro X disagrees with {others}") in texts
+    if kind == "stuck":
+        assert (MAV_SEVERITY_CRITICAL, f"IMU{odd} gyro X stuck") in texts
+    assert not any(t.startswith("IMU0") for _, t in texts if imus == 3)
+    assert sink.values[f"IMU{odd}G_HLTH"] == 1.0
+    t_first = min(t for t, text in p.transitions if text.startswith(f"IMU{odd}"))
+    assert t_first - 301.0 <= 10.0
+
+
+def test_fault_state_survives_a_restart():
+    p, sink = run(300.0, fault=Fault("stuck", at=260.0, size=0.0, axis="gx"))
+    state = p.state_dict()
+    sink2 = Sink()
+    p2 = Pipeline(PipelineConfig(baseline_s=200.0), Reporter(sink2, 1.0))
+    p2.load_state_dict(state)
+    ch = p2.channels[0]
+    assert ch.faults.active()[0] == ("stuck", "gx")  # the most severe first
+    assert ch.faults.axes["gy"].ref.ready and p2.health(ch) == 1
