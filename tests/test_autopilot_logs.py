@@ -69,6 +69,13 @@ def test_shared_dataflash_equals_dfreader(shared_data, name):
         assert len(res.meta["modes"]) == 3
     else:
         assert log.counts()["PARM"] == 1077
+    assert main(["inspect", str(shared_data / "ardupilot" / name)]) == 0
+
+
+def test_inspect_prints_log_parameters_and_armed_state(shared_data, capsys):
+    assert main(["inspect", str(shared_data / "ardupilot" / "dronekit_log171.bin")]) == 0
+    out = capsys.readouterr().out
+    assert "INS_GYRO_FILTER 20" in out and "log: armed state: 72.6 s armed" in out
 
 
 def test_shared_isbd_equals_dfreader(shared_data):

@@ -22,8 +22,9 @@ from companion.errors import CompanionError
 from companion.samples import ACCEL_AXES, AXES, GYRO_AXES
 
 DESCRIPTION = """\
-Post-flight noise analysis. For every IMU stream of SOURCE (a .tlog, a CSV time_s,gx,gy,gz,ax,ay,az in
-rad/s and m/s^2, or a connection string listened to for --duration s) and every axis: the overlapping
+Post-flight noise analysis. For every IMU stream of SOURCE (a .tlog, an ArduPilot DataFlash .bin, a PX4
+.ulg, a CSV time_s,gx,gy,gz,ax,ay,az in rad/s and m/s^2 -- each optionally .gz -- or a connection string
+listened to for --duration s) and every axis: the overlapping
 Allan deviation with 95 % confidence intervals (EDF from the fitted noise model), and an automatic
 weighted fit of the IEEE 952 terms (white noise N, bias instability B, rate random walk K; quantization Q,
 ramp R and a Gauss-Markov term only when the data demand them), each with a 95 % interval.
