@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from companion.errors import CompanionError
 
@@ -111,7 +112,7 @@ class DataFlashLog:
         body = f.length - 3
         if off.shape[0] == 0 or body <= 0:
             return np.zeros(0, dtype=f.dtype)
-        rows = self.buf[(off + 3)[:, None] + np.arange(body)]
+        rows = sliding_window_view(self.buf, body)[off + 3]  # copies only the bodies (uint8)
         return np.ascontiguousarray(rows).view(f.dtype).reshape(-1)
 
     def values(self, name: str, column: str, rec: np.ndarray | None = None) -> np.ndarray:
@@ -206,7 +207,7 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     n = buf.shape[0]
     if n < 3:
         raise CompanionError(f"{source}: not a DataFlash log (too short)")
-    h = np.flatnonzero((buf[:-1] == HEAD1) & (buf[1:] == HEAD2)) if n > 1 else np.zeros(0, np.int64)
+    h = _headers(buf)
     h = h[h + 3 < n]  # DFReader reads a header only while ofs + 3 < data_len
     if h.shape[0] == 0 or buf[h[0] + 2] != FMT_TYPE:
         raise CompanionError(f"{source}: not a DataFlash log (no 0xA3 0x95 FMT header at the start)")
@@ -214,7 +215,7 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     # formats: every FMT candidate whose body decodes; the chain decides which are real
     fmt_dt = _dtype("BBnNZ", ["Type", "Length", "Name", "Format", "Columns"])
     fc = h[(types == FMT_TYPE) & (h + FMT_LEN <= n)]
-    frec = np.ascontiguousarray(buf[(fc + 3)[:, None] + np.arange(FMT_LEN - 3)]).view(fmt_dt).reshape(-1)
+    frec = np.ascontiguousarray(sliding_window_view(buf, FMT_LEN - 3)[fc + 3]).view(fmt_dt).reshape(-1)
     length = np.full(257, -1, dtype=np.int64)  # index 256: never used
     length[FMT_TYPE] = FMT_LEN
     cand_fmt: dict[int, list] = {}
@@ -260,21 +261,41 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     return log
 
 
-def _orbit(succ: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, int | None]:
+def _headers(buf: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
+    """Offsets of every 0xA3 0x95 pair, searched in 1 MiB chunks (temporaries stay small for big logs)."""
+    n = buf.shape[0]
+    parts = []
+    for s0 in range(0, max(n - 1, 0), chunk):
+        seg = buf[s0:min(s0 + chunk + 1, n)]
+        parts.append(np.flatnonzero((seg[:-1] == HEAD1) & (seg[1:] == HEAD2)) + s0)
+    return np.concatenate(parts) if parts else np.zeros(0, np.int64)
+
+
+def _orbit(succ: np.ndarray, known: np.ndarray, block: int = 1 << 18) -> tuple[np.ndarray, int | None]:
     """Candidates visited from candidate 0 following ``succ`` (index K = past the end), stopping before
     the first candidate of an undefined type. Pointer doubling: with ``J = succ^(2^k)`` the next 2^k
-    nodes of the orbit are ``J[first 2^k nodes]``, so the loop runs log2(K) times, each step in numpy."""
+    nodes of the orbit are ``J[first 2^k nodes]``, so the loop runs log2(block) times per block of
+    candidates, each step in numpy. Blocks (starting at the orbit's next node) keep the temporaries small."""
     K = succ.shape[0]
-    J = np.append(np.where(known, succ, K), K).astype(np.int64)
-    orbit = np.zeros(1, dtype=np.int64)
-    while orbit[-1] < K:
-        orbit = np.concatenate([orbit, J[orbit]])
-        J = J[J]
-    orbit = orbit[orbit < K]
-    bad = np.flatnonzero(~known[orbit])
-    if bad.shape[0]:
-        return orbit[:bad[0]], int(orbit[bad[0]])
-    return orbit, None
+    parts = []
+    i = 0
+    while i < K:
+        b = min(K, i + block)
+        L = b - i
+        J = np.where(known[i:b], succ[i:b], K) - i
+        J = np.append(np.minimum(J, L), L).astype(np.int64)  # L: leaves the block (or the file)
+        orbit = np.zeros(1, dtype=np.int64)
+        while orbit[-1] < L:
+            orbit = np.concatenate([orbit, J[orbit]])
+            J = J[J]
+        orbit = orbit[orbit < L]
+        bad = np.flatnonzero(~known[i + orbit])
+        if bad.shape[0]:
+            parts.append(orbit[:bad[0]] + i)
+            return np.concatenate(parts), int(i + orbit[bad[0]])
+        parts.append(orbit + i)
+        i = int(succ[i + orbit[-1]])
+    return (np.concatenate(parts) if parts else np.zeros(0, np.int64)), None
 
 
 def open_log(path) -> DataFlashLog:
