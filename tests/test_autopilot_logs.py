@@ -441,3 +441,28 @@ def test_chain_walk_equals_a_plain_loop():
             i = int(succ[i])
         got, got_stop = _orbit(succ, known, block=int(rng.integers(1, 200)))
         assert got.tolist() == chain and got_stop == stop
+
+
+def test_ulog_gyro_fifo_samples(tmp_path):
+    from pyulog import ULog
+
+    from companion.sim.ulog_writer import write_ulog
+
+    rng = np.random.default_rng(13)
+    n = 400
+    t = 1.0 + np.arange(n) / 100.0
+    counts = rng.integers(-300, 300, (1000, 3)).astype(np.int16)
+    scale = 1.0e-3
+    p = tmp_path / "fifo.ulg"
+    write_ulog(p, t, rng.normal(0, 1e-3, (1, n, 3)), rng.normal(0, 1e-2, (1, n, 3)),
+               fifo=(2.0, 1000.0, counts, scale, 12))
+    u = ULog(str(p))
+    rows = next(len(d.data["timestamp"]) for d in u.data_list if d.name == "sensor_gyro_fifo")
+    res = load(p)
+    (st,) = [s for s in res.streams if s.key.message == "sensor_gyro_fifo"]
+    assert res.messages["sensor_gyro_fifo[0]"] == rows == 84  # ceil(1000 / 12)
+    assert st.samples == 1000
+    np.testing.assert_array_equal(st.gyro, counts.astype(float) * float(np.float32(scale)))  # int16 x scale
+    np.testing.assert_allclose(st.t, 2.0 + np.arange(1000) / 1000.0, atol=2e-6)
+    assert st.rate_hz == pytest.approx(1000.0, rel=1e-3)
+    assert st.gyro_lsb == pytest.approx(scale)
