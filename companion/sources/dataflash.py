@@ -112,7 +112,11 @@ class DataFlashLog:
         body = f.length - 3
         if off.shape[0] == 0 or body <= 0:
             return np.zeros(0, dtype=f.dtype)
-        rows = sliding_window_view(self.buf, body)[off + 3]  # copies only the bodies (uint8)
+        need = f.dtype.itemsize
+        if need > body:
+            raise CompanionError(f"{self.source}: FMT of {name} gives {f.length} bytes but its format "
+                                 f"{f.format!r} needs {need + 3}: a corrupt or foreign log")
+        rows = sliding_window_view(self.buf, need)[off + 3]  # copies only the bodies (uint8)
         return np.ascontiguousarray(rows).view(f.dtype).reshape(-1)
 
     def values(self, name: str, column: str, rec: np.ndarray | None = None) -> np.ndarray:
