@@ -466,3 +466,18 @@ def test_ulog_gyro_fifo_samples(tmp_path):
     np.testing.assert_allclose(st.t, 2.0 + np.arange(1000) / 1000.0, atol=2e-6)
     assert st.rate_hz == pytest.approx(1000.0, rel=1e-3)
     assert st.gyro_lsb == pytest.approx(scale)
+
+
+def test_undefined_type_stops_like_dfreader_and_is_reported(tmp_path, capsys):
+    rng = np.random.default_rng(14)
+    n = 1000
+    t = 1.0 + np.arange(n) / 100.0
+    p = tmp_path / "stop.bin"
+    write_imu_log(p, t, rng.normal(0, 1e-3, (1, n, 3)), rng.normal(0, 1e-2, (1, n, 3)), layout="4.x")
+    b = bytearray(p.read_bytes())
+    j = b.find(b"\xa3\x95", len(b) // 2)
+    b[j + 2] = 200  # a type no FMT defines: DFReader stops there
+    p.write_bytes(bytes(b))
+    _compare_df(p)
+    assert main(["inspect", str(p)]) == 0
+    assert "reading stopped at byte" in capsys.readouterr().out
