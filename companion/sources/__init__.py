@@ -135,12 +135,9 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
     meta["imu_extras"] = {k.instance: {n: int(np.nansum(v)) if n.endswith("errors") else None
                                        for n, v in e.items()} for k, e in extras.items()}
     meta["notes"] = []
-    if log.stopped_at is not None:
-        meta["stopped_at"] = int(log.stopped_at)
-        meta["notes"].append(f"{Path(str(path)).name}: reading stopped at byte {log.stopped_at} of {log.buf.shape[0]} "
-                             "(a message type no FMT defines: a corrupt block); the rest is not read, as DFReader does")
     if log.bad_bytes:
-        meta["notes"].append(f"{Path(str(path)).name}: {log.bad_bytes} bytes outside valid messages skipped")
+        meta["notes"].append(f"{Path(str(path)).name}: {log.bad_bytes} bytes outside valid messages skipped "
+                             "(corrupt blocks or headers of undefined message types)")
     return LoadResult(str(path), streams, totals, counts, meta)
 
 

@@ -15,10 +15,10 @@ f/d   float32/64                             n/N/Z char[4/16/64]
 g     float16                                a     int16[32]
 ====  =========  ==========================  ====  =========  ==========================
 
-How the file is walked (exactly DFReader's rules, so the counts agree): from offset 0, a message is
-read where ``0xA3 0x95`` stands and the next one starts ``Length`` bytes later; at a byte that is not a
-header the reader moves on by one byte (garbage counted in ``bad_bytes``); a header with a type no FMT
-has defined ends the walk. The walk is vectorised: every ``0xA3 0x95`` position is a candidate, its
+How the file is walked (DFReader's rules, so the counts agree): from offset 0, a message is read where
+``0xA3 0x95`` stands and the next one starts ``Length`` bytes later; at a byte that is not a header, or a
+header of a type no FMT defines, the reader moves on by one byte (garbage counted in ``bad_bytes``), as
+DFReader's default (Cython) indexer does. The walk is vectorised: every ``0xA3 0x95`` position is a candidate, its
 successor is the first candidate at or after ``position + Length`` (``searchsorted``), and the chain
 of successors from the first candidate is found by pointer doubling (log2(n) numpy steps, no Python
 loop over messages). Bodies of one type are then gathered into a numpy structured array in one fancy-indexing
@@ -86,7 +86,6 @@ class DataFlashLog:
     formats: dict[int, Format]
     offsets: dict[int, np.ndarray]  # type -> int64 offsets of the headers, file order
     bad_bytes: int = 0
-    stopped_at: int | None = None  # offset of a header with an undefined type (walk ended there)
     names: dict[str, int] = field(default_factory=dict)
 
     def counts(self) -> dict[str, int]:
@@ -230,17 +229,17 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     for t, lst in cand_fmt.items():
         if t != FMT_TYPE and lst[0][1] >= 3:
             length[t] = lst[0][1]
+    # a header of a type no FMT defines is garbage: skipped byte by byte like any bad byte, as DFReader's
+    # (Cython) indexer does -- its pure-Python fallback stops there instead
+    known = length[types] > 0
+    h, types = h[known], types[known]
     ln = length[types]
-    known = ln > 0
-    nxt = h + np.where(known, ln, 1)
-    succ = np.searchsorted(h, nxt, side="left")
-    chain, stopped = _orbit(succ, known)
-    if stopped is not None:
-        stopped = int(h[stopped])
+    succ = np.searchsorted(h, h + ln, side="left")
+    chain, _ = _orbit(succ, np.ones(h.shape[0], dtype=bool))
     pos = h[chain]
     typ = types[chain]
     covered = int(np.minimum(pos + length[typ], n).sum() - pos.sum())
-    end = stopped if stopped is not None else n
+    end = n
     bad_bytes = max(0, int(end - covered))
     # formats actually on the chain
     on_fmt = set(pos[typ == FMT_TYPE].tolist())
@@ -260,7 +259,7 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     offsets = {}
     for grp in np.split(order, bounds) if order.shape[0] else []:
         offsets[int(typ[grp[0]])] = pos[grp]
-    log = DataFlashLog(source, buf, formats, offsets, bad_bytes=bad_bytes, stopped_at=stopped)
+    log = DataFlashLog(source, buf, formats, offsets, bad_bytes=bad_bytes)
     log.names = {f.name: t for t, f in formats.items()}
     return log
 
