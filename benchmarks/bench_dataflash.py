@@ -9,6 +9,8 @@ Timed (best of --repeat runs, wall and CPU):
 - companion reader: ``dataflash.open_log`` + ``imu_raw_streams`` (the same arrays);
 - companion ``sources.load``: the reader plus the timing analysis, batch-sampler streams and metadata
   (PARM, armed state, modes), i.e. all that ``companion analyze`` reads.
+Memory: the reader's peak traced allocation (tracemalloc, numpy included) beside the size of the IMU arrays it
+returns; the file itself is memory-mapped.
 Values are compared element by element (time, gyro, accel of every IMU message) and must be identical.
 """
 
@@ -54,6 +56,17 @@ def ours_arrays(path):
     return {r.key.instance: np.column_stack([r.t, r.gyro, r.accel]) for r in raws}
 
 
+def peak_memory(path):
+    """Peak traced allocation (numpy included) of reading the IMU arrays, and the size of those arrays."""
+    import tracemalloc
+
+    tracemalloc.start()
+    out = ours_arrays(path)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return peak, sum(v.nbytes for v in out.values())
+
+
 def timed(fn, repeat):
     best_w, best_c, out = float("inf"), float("inf"), None
     for _ in range(repeat):
@@ -70,6 +83,7 @@ def bench(path, repeat):
     w_own, c_own, own = timed(lambda: ours_arrays(path), repeat)
     w_load, c_load, _ = timed(lambda: load(path), repeat)
     n = sum(v.shape[0] for v in ref.values())
+    peak, arrays = peak_memory(path)
     same = sorted(ref) == sorted(own) and all(np.array_equal(ref[k], own[k]) for k in ref)
     print(f"{Path(path).name}: {size / 1e6:.1f} MB, {n} IMU messages in {len(ref)} instances; values identical: {same}")
     print(f"  DFReader            {w_ref * 1e3:9.1f} ms wall {c_ref * 1e3:9.1f} ms CPU")
@@ -77,6 +91,8 @@ def bench(path, repeat):
           f"{w_ref / w_own:6.1f}x wall {c_ref / c_own:6.1f}x CPU")
     print(f"  companion load()    {w_load * 1e3:9.1f} ms wall {c_load * 1e3:9.1f} ms CPU   "
           f"{w_ref / w_load:6.1f}x wall {c_ref / c_load:6.1f}x CPU")
+    print(f"  companion reader peak memory {peak / 1e6:.1f} MB for {arrays / 1e6:.1f} MB of IMU arrays "
+          f"(file memory-mapped, {size / 1e6:.1f} MB, not counted)")
     return same
 
 

@@ -69,6 +69,13 @@ def test_shared_dataflash_equals_dfreader(shared_data, name):
         assert len(res.meta["modes"]) == 3
     else:
         assert log.counts()["PARM"] == 1077
+    assert main(["inspect", str(shared_data / "ardupilot" / name)]) == 0
+
+
+def test_inspect_prints_log_parameters_and_armed_state(shared_data, capsys):
+    assert main(["inspect", str(shared_data / "ardupilot" / "dronekit_log171.bin")]) == 0
+    out = capsys.readouterr().out
+    assert "INS_GYRO_FILTER 20" in out and "log: armed state: 72.6 s armed" in out
 
 
 def test_shared_isbd_equals_dfreader(shared_data):
@@ -414,3 +421,64 @@ def test_start_end_and_tlog_gz(tmp_path, capsys):
         gz.write_bytes(gzip.compress(tl.read_bytes()))
         assert main(["inspect", str(gz)]) == 0
         assert "RAW_IMU" in capsys.readouterr().out
+
+
+def test_chain_walk_equals_a_plain_loop():
+    """The vectorised chain walk (pointer doubling in blocks) visits exactly what DFReader's loop visits."""
+    from companion.sources.dataflash import _orbit
+
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        K = int(rng.integers(1, 3000))
+        succ = np.minimum(np.arange(K) + rng.integers(1, 4, K), K)
+        known = rng.random(K) > 0.002
+        chain, i, stop = [], 0, None
+        while i < K:
+            if not known[i]:
+                stop = i
+                break
+            chain.append(i)
+            i = int(succ[i])
+        got, got_stop = _orbit(succ, known, block=int(rng.integers(1, 200)))
+        assert got.tolist() == chain and got_stop == stop
+
+
+def test_ulog_gyro_fifo_samples(tmp_path):
+    from pyulog import ULog
+
+    from companion.sim.ulog_writer import write_ulog
+
+    rng = np.random.default_rng(13)
+    n = 400
+    t = 1.0 + np.arange(n) / 100.0
+    counts = rng.integers(-300, 300, (1000, 3)).astype(np.int16)
+    scale = 1.0e-3
+    p = tmp_path / "fifo.ulg"
+    write_ulog(p, t, rng.normal(0, 1e-3, (1, n, 3)), rng.normal(0, 1e-2, (1, n, 3)),
+               fifo=(2.0, 1000.0, counts, scale, 12))
+    u = ULog(str(p))
+    rows = next(len(d.data["timestamp"]) for d in u.data_list if d.name == "sensor_gyro_fifo")
+    res = load(p)
+    (st,) = [s for s in res.streams if s.key.message == "sensor_gyro_fifo"]
+    assert res.messages["sensor_gyro_fifo[0]"] == rows == 84  # ceil(1000 / 12)
+    assert st.samples == 1000
+    np.testing.assert_array_equal(st.gyro, counts.astype(float) * float(np.float32(scale)))  # int16 x scale
+    np.testing.assert_allclose(st.t, 2.0 + np.arange(1000) / 1000.0, atol=2e-6)
+    assert st.rate_hz == pytest.approx(1000.0, rel=1e-3)
+    assert st.gyro_lsb == pytest.approx(scale)
+
+
+def test_undefined_type_is_skipped_like_dfreader_and_reported(tmp_path, capsys):
+    rng = np.random.default_rng(14)
+    n = 1000
+    t = 1.0 + np.arange(n) / 100.0
+    p = tmp_path / "stop.bin"
+    write_imu_log(p, t, rng.normal(0, 1e-3, (1, n, 3)), rng.normal(0, 1e-2, (1, n, 3)), layout="4.x")
+    b = bytearray(p.read_bytes())
+    j = b.find(b"\xa3\x95", len(b) // 2)
+    b[j + 2] = 200  # a type no FMT defines: DFReader's indexer skips it byte by byte
+    p.write_bytes(bytes(b))
+    log = _compare_df(p)
+    assert log.counts()["IMU"] == n - 1 and log.bad_bytes > 0
+    assert main(["inspect", str(p)]) == 0
+    assert "bytes outside valid messages skipped" in capsys.readouterr().out

@@ -21,8 +21,9 @@ from companion.errors import CompanionError
 from companion.samples import ACCEL_AXES, AXES, GYRO_AXES
 
 DESCRIPTION = """\
-Post-flight noise analysis. For every IMU stream of SOURCE (a .tlog, a CSV time_s,gx,gy,gz,ax,ay,az in
-rad/s and m/s^2, or a connection string listened to for --duration s) and every axis: the overlapping
+Post-flight noise analysis. For every IMU stream of SOURCE (a .tlog, an ArduPilot DataFlash .bin, a PX4
+.ulg, a CSV time_s,gx,gy,gz,ax,ay,az in rad/s and m/s^2 -- each optionally .gz -- or a connection string
+listened to for --duration s) and every axis: the overlapping
 Allan deviation with 95 % confidence intervals (EDF from the fitted noise model), and an automatic
 weighted fit of the IEEE 952 terms (white noise N, bias instability B, rate random walk K; quantization Q,
 ramp R and a Gauss-Markov term only when the data demand them), each with a 95 % interval.
@@ -157,9 +158,12 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     cut = max(float(tau_min or 0.0), detected)
     why = "from the log's filter parameter" if (tau_min or 0.0) >= detected else "detected in the data"
     keep = tau_f >= cut * (1 - 1e-9)
-    if keep.sum() < 3:  # keep at least the three longest-but-shortest points
-        keep = np.zeros_like(keep)
-        keep[:min(3, keep.shape[0])] = True
+    short_note = None
+    if keep.sum() < 3:  # too short a record to leave the roll-off out: fit everything, and say so
+        if cut > 0 and tau_f.shape[0]:
+            short_note = (f"the record is too short to leave the low-pass roll-off (below {cut:.3g} s) out of the "
+                          "fit: N may read low")
+        keep = np.ones_like(keep)
     edf0 = np.array([edf_simple(int(c) + 2 * int(mm), mm, 0) for c, mm in zip(counts[keep], m_fit[keep])])
     fit = fit_avar(tau_f[keep], avar_f[keep], edf0, effects=effects, n=n, rate_hz=rate_hz, m=m_fit[keep],
                    level=level, segments=lengths if pooled else None)
@@ -189,6 +193,8 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
                fit={"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
                     "model_error": fit.model_error, "tau_min": float(tau_f[keep][0]) if keep.any() else None,
                     "points": int(keep.sum()), "notes": notes, "segments": len(pieces)})
+    if short_note:
+        out["fit"]["notes"].append(short_note)
     if cut > 0 and (~keep).any():
         out["fit"]["notes"].append(f"cluster times below {tau_f[keep][0]:.3g} s left out of the fit (low-pass "
                                    f"roll-off, {why})")
@@ -434,7 +440,7 @@ def format_table(report: dict) -> str:
                 if r.get("fit") and r["fit"].get("model_error"):
                     other.append(f"misfit: +{100 * r['fit']['model_error']:.0f} % model error")
                 for n_ in (r.get("fit") or {}).get("notes", []):
-                    if n_.startswith("N from a local") or n_.startswith("cluster times below"):
+                    if n_.startswith(("N from a local", "cluster times below", "the record is too short")):
                         other.append(n_)
                 q = r.get("quantization")
                 if q and q.get("note"):

@@ -16,7 +16,9 @@ and gyro zero only carries a compass); plus the frame totals (valid frames, bad 
 Sample times come from the messages' own timestamps; nothing is resampled or dropped silently
 (duplicates, backward steps and reboots are counted, see docs/ingestion.md).
 
-SOURCE is a .tlog file, a CSV file (.csv/.csv.gz, header time_s,gx,gy,gz,ax,ay,az; rad/s, m/s^2), or a
+SOURCE is a .tlog file, an ArduPilot DataFlash .bin log (every IMU, batch-sampler bursts ISB_GYRO/ISB_ACCEL,
+parameters and armed state), a PX4 .ulg (sensor_combined, sensor_gyro, sensor_gyro_fifo, vehicle_imu), a CSV
+file (header time_s,gx,gy,gz,ax,ay,az; rad/s, m/s^2) -- each optionally gzip-compressed (.gz) -- or a
 pymavlink connection string (udpin:HOST:PORT, udpout:, udp:, tcp:, tcpin:, a serial device with --baud)
 listened to for --duration seconds."""
 
@@ -25,6 +27,8 @@ examples:
   companion inspect flight.tlog
   companion inspect flight.tlog --json streams.json
   companion inspect imu.csv.gz
+  companion inspect 00000042.BIN                    # ArduPilot DataFlash: IMU[0..2], ISB_GYRO, INS_GYRO_FILTER, armed
+  companion inspect log_3_2024-5-1.ulg              # PX4 ULog
   companion inspect udpin:0.0.0.0:14550 --duration 10
   companion inspect /dev/ttyACM0 --baud 921600 --duration 5
   companion inspect flight.tlog --config my.yaml     # per-stream gyro_scale/accel_scale (streams: section)
@@ -42,7 +46,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("inspect", help="list the IMU streams of a tlog, CSV file or live link",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("source", metavar="SOURCE", help=".tlog, .csv/.csv.gz, or a connection string")
+    p.add_argument("source", metavar="SOURCE", help=".tlog, .bin, .ulg, .csv (each optionally .gz), or a connection string")
     p.add_argument("--json", metavar="OUT", help="also write {streams: [...], frames, bad_bytes, bad_frames} to OUT")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="seconds to listen on a live connection (required for links)")
@@ -128,8 +132,34 @@ def render(res) -> str:
     if not doc["streams"]:
         lines.append("(no IMU messages)")
     lines.append(f"frames {doc['frames']}, bad bytes {doc['bad_bytes']}, bad frames {doc['bad_frames']}")
+    lines += log_lines(res)
     lines += [f"note: {n}" for n in notes(res)]
     return "\n".join(lines)
+
+
+FILTER_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_FAST_SAMPLE", "INS_LOG_BAT_MASK", "INS_LOG_BAT_OPT",
+                 "IMU_GYRO_CUTOFF", "IMU_ACCEL_CUTOFF", "IMU_INTEG_RATE")
+
+
+def log_lines(res) -> list[str]:
+    """What an autopilot log says about its IMU data: filter parameters, armed periods, modes (one line each)."""
+    meta = getattr(res, "meta", None) or {}
+    fmt = meta.get("format")
+    if fmt not in ("dataflash", "ulog"):
+        return []
+    out = []
+    params = meta.get("params") or {}
+    p = [f"{k} {params[k]:g}" for k in FILTER_PARAMS if k in params]
+    out.append(f"log: {'ArduPilot DataFlash' if fmt == 'dataflash' else 'PX4 ULog'}, {len(params)} parameters"
+               + (f" ({', '.join(p)})" if p else ""))
+    if meta.get("has_armed_state"):
+        arm = [f"{t:.1f} s {'armed' if a else 'disarmed'}" for t, a in meta.get("armed") or []]
+        out.append("log: armed state: " + (", ".join(arm) if arm else "never armed"))
+    if meta.get("modes"):
+        k = len(meta["modes"])
+        out.append(f"log: {k} mode {'entry' if k == 1 else 'entries'} ({', '.join(f'{t:.1f} s' for t, _ in meta['modes'][:5])}"
+                   + (", ..." if k > 5 else "") + ")")
+    return out
 
 
 def run(args) -> int:

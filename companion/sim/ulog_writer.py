@@ -7,7 +7,8 @@ padding); initial parameters ``P`` (``float NAME`` / ``int32_t NAME``); then sub
 ``uint16 size, uint8 type, payload``.
 
 Topics written (fields as the readers need them): ``sensor_combined`` (primary IMU; gyro averaged over
-``gyro_integral_dt``), ``sensor_gyro``/``sensor_accel`` per ``multi_id``, ``vehicle_status`` (``arming_state``
+``gyro_integral_dt``), ``sensor_gyro``/``sensor_accel`` per ``multi_id``, optionally ``sensor_gyro_fifo``,
+``vehicle_status`` (``arming_state``
 2 = armed, 1 = standby). Only for tests and examples.
 """
 
@@ -18,7 +19,7 @@ import struct
 import numpy as np
 
 MAGIC = b"ULog\x01\x12\x35"
-_C = {"uint64_t": "<u8", "uint32_t": "<u4", "int32_t": "<i4", "float": "<f4", "uint8_t": "u1"}
+_C = {"uint64_t": "<u8", "uint32_t": "<u4", "int32_t": "<i4", "float": "<f4", "uint8_t": "u1", "int16_t": "<i2"}
 
 FORMATS = {
     "sensor_combined": [("uint64_t", "timestamp", 0), ("float", "gyro_rad", 3), ("uint32_t", "gyro_integral_dt", 0),
@@ -30,6 +31,9 @@ FORMATS = {
     "sensor_accel": [("uint64_t", "timestamp", 0), ("uint64_t", "timestamp_sample", 0), ("uint32_t", "device_id", 0),
                      ("float", "x", 0), ("float", "y", 0), ("float", "z", 0), ("float", "temperature", 0),
                      ("uint32_t", "error_count", 0)],
+    "sensor_gyro_fifo": [("uint64_t", "timestamp", 0), ("uint64_t", "timestamp_sample", 0),
+                         ("uint32_t", "device_id", 0), ("float", "dt", 0), ("float", "scale", 0),
+                         ("uint8_t", "samples", 0), ("int16_t", "x", 32), ("int16_t", "y", 32), ("int16_t", "z", 32)],
     "vehicle_status": [("uint64_t", "timestamp", 0), ("uint8_t", "arming_state", 0), ("uint8_t", "nav_state", 0)],
 }
 
@@ -46,10 +50,12 @@ def _msg(kind: bytes, payload: bytes) -> bytes:
 
 
 def write_ulog(path, t_s, gyro, accel, combined=None, params: dict | None = None,
-               armed: list[tuple[float, bool]] | None = None, temperature: float = 45.0) -> int:
+               armed: list[tuple[float, bool]] | None = None, temperature: float = 45.0, fifo=None) -> int:
     """Write a ULog: ``t_s`` (n,) s since boot, ``gyro``/``accel`` (k, n, 3) as sensor_gyro/sensor_accel of
     ``k`` IMUs; ``combined`` = (gyro, accel) (n, 3) each for sensor_combined (default: IMU 0's data).
-    Returns the bytes written."""
+    ``fifo`` = (t0_s, rate_hz, counts (m, 3) int16, scale, per_message): a sensor_gyro_fifo[0] topic whose
+    message j holds samples [j*per, (j+1)*per) (the last message may hold fewer), the last one at
+    ``timestamp_sample``. Returns the bytes written."""
     t_s = np.asarray(t_s, dtype=float)
     gyro, accel = np.asarray(gyro, dtype=float), np.asarray(accel, dtype=float)
     if gyro.ndim == 2:
@@ -68,13 +74,31 @@ def write_ulog(path, t_s, gyro, accel, combined=None, params: dict | None = None
         else:
             out += _msg(b"P", bytes([len(f"float {pname}")]) + f"float {pname}".encode() + struct.pack("<f", float(v)))
     subs = [("sensor_combined", 0)] + [(s, i) for i in range(k) for s in ("sensor_gyro", "sensor_accel")]
+    if fifo is not None:
+        subs.append(("sensor_gyro_fifo", 0))
     subs.append(("vehicle_status", 0))
     for msg_id, (name, mid) in enumerate(subs):
         out += _msg(b"A", struct.pack("<BH", mid, msg_id) + name.encode())
     blocks = []  # (timestamps, bytes rows)
     for msg_id, (name, mid) in enumerate(subs):
         dt = _dtype(name)
-        if name == "vehicle_status":
+        if name == "sensor_gyro_fifo":
+            t0f, rate, counts, scale, per = fifo
+            counts = np.asarray(counts, dtype=np.int16)
+            m = counts.shape[0]
+            nmsg = -(-m // per)
+            rec = np.zeros(nmsg, dtype=dt)
+            k_last = np.minimum((np.arange(nmsg) + 1) * per, m) - 1
+            rec["samples"] = k_last - np.arange(nmsg) * per + 1
+            rec["timestamp_sample"] = np.round((t0f + k_last / rate) * 1e6).astype(np.uint64)
+            rec["timestamp"] = rec["timestamp_sample"] + 50
+            rec["dt"], rec["scale"], rec["device_id"] = 1e6 / rate, scale, 1000
+            pad = np.zeros((nmsg * per, 3), dtype=np.int16)
+            pad[:m] = counts
+            blk = pad.reshape(nmsg, per, 3)
+            for j, ax in enumerate("xyz"):
+                rec[ax][:, :per] = blk[:, :, j]
+        elif name == "vehicle_status":
             trans = sorted(armed or [])
             times = np.unique(np.r_[np.arange(float(t_s[0]), float(t_s[-1]), 1.0), [a for a, _ in trans]])
             rec = np.zeros(times.shape[0], dtype=dt)

@@ -134,8 +134,10 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
     meta["isb_bursts"] = bursts
     meta["imu_extras"] = {k.instance: {n: int(np.nansum(v)) if n.endswith("errors") else None
                                        for n, v in e.items()} for k, e in extras.items()}
-    if log.stopped_at is not None:
-        meta["stopped_at"] = int(log.stopped_at)
+    meta["notes"] = []
+    if log.bad_bytes:
+        meta["notes"].append(f"{Path(str(path)).name}: {log.bad_bytes} bytes outside valid messages skipped "
+                             "(corrupt blocks or headers of undefined message types)")
     return LoadResult(str(path), streams, totals, counts, meta)
 
 

@@ -15,10 +15,10 @@ f/d   float32/64                             n/N/Z char[4/16/64]
 g     float16                                a     int16[32]
 ====  =========  ==========================  ====  =========  ==========================
 
-How the file is walked (exactly DFReader's rules, so the counts agree): from offset 0, a message is
-read where ``0xA3 0x95`` stands and the next one starts ``Length`` bytes later; at a byte that is not a
-header the reader moves on by one byte (garbage counted in ``bad_bytes``); a header with a type no FMT
-has defined ends the walk. The walk is vectorised: every ``0xA3 0x95`` position is a candidate, its
+How the file is walked (DFReader's rules, so the counts agree): from offset 0, a message is read where
+``0xA3 0x95`` stands and the next one starts ``Length`` bytes later; at a byte that is not a header, or a
+header of a type no FMT defines, the reader moves on by one byte (garbage counted in ``bad_bytes``), as
+DFReader's default (Cython) indexer does. The walk is vectorised: every ``0xA3 0x95`` position is a candidate, its
 successor is the first candidate at or after ``position + Length`` (``searchsorted``), and the chain
 of successors from the first candidate is found by pointer doubling (log2(n) numpy steps, no Python
 loop over messages). Bodies of one type are then gathered into a numpy structured array in one fancy-indexing
@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from companion.errors import CompanionError
 
@@ -85,7 +86,6 @@ class DataFlashLog:
     formats: dict[int, Format]
     offsets: dict[int, np.ndarray]  # type -> int64 offsets of the headers, file order
     bad_bytes: int = 0
-    stopped_at: int | None = None  # offset of a header with an undefined type (walk ended there)
     names: dict[str, int] = field(default_factory=dict)
 
     def counts(self) -> dict[str, int]:
@@ -111,7 +111,11 @@ class DataFlashLog:
         body = f.length - 3
         if off.shape[0] == 0 or body <= 0:
             return np.zeros(0, dtype=f.dtype)
-        rows = self.buf[(off + 3)[:, None] + np.arange(body)]
+        need = f.dtype.itemsize
+        if need > body:
+            raise CompanionError(f"{self.source}: FMT of {name} gives {f.length} bytes but its format "
+                                 f"{f.format!r} needs {need + 3}: a corrupt or foreign log")
+        rows = sliding_window_view(self.buf, need)[off + 3]  # copies only the bodies (uint8)
         return np.ascontiguousarray(rows).view(f.dtype).reshape(-1)
 
     def values(self, name: str, column: str, rec: np.ndarray | None = None) -> np.ndarray:
@@ -206,7 +210,7 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     n = buf.shape[0]
     if n < 3:
         raise CompanionError(f"{source}: not a DataFlash log (too short)")
-    h = np.flatnonzero((buf[:-1] == HEAD1) & (buf[1:] == HEAD2)) if n > 1 else np.zeros(0, np.int64)
+    h = _headers(buf)
     h = h[h + 3 < n]  # DFReader reads a header only while ofs + 3 < data_len
     if h.shape[0] == 0 or buf[h[0] + 2] != FMT_TYPE:
         raise CompanionError(f"{source}: not a DataFlash log (no 0xA3 0x95 FMT header at the start)")
@@ -214,7 +218,7 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     # formats: every FMT candidate whose body decodes; the chain decides which are real
     fmt_dt = _dtype("BBnNZ", ["Type", "Length", "Name", "Format", "Columns"])
     fc = h[(types == FMT_TYPE) & (h + FMT_LEN <= n)]
-    frec = np.ascontiguousarray(buf[(fc + 3)[:, None] + np.arange(FMT_LEN - 3)]).view(fmt_dt).reshape(-1)
+    frec = np.ascontiguousarray(sliding_window_view(buf, FMT_LEN - 3)[fc + 3]).view(fmt_dt).reshape(-1)
     length = np.full(257, -1, dtype=np.int64)  # index 256: never used
     length[FMT_TYPE] = FMT_LEN
     cand_fmt: dict[int, list] = {}
@@ -225,17 +229,17 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     for t, lst in cand_fmt.items():
         if t != FMT_TYPE and lst[0][1] >= 3:
             length[t] = lst[0][1]
+    # a header of a type no FMT defines is garbage: skipped byte by byte like any bad byte, as DFReader's
+    # (Cython) indexer does -- its pure-Python fallback stops there instead
+    known = length[types] > 0
+    h, types = h[known], types[known]
     ln = length[types]
-    known = ln > 0
-    nxt = h + np.where(known, ln, 1)
-    succ = np.searchsorted(h, nxt, side="left")
-    chain, stopped = _orbit(succ, known)
-    if stopped is not None:
-        stopped = int(h[stopped])
+    succ = np.searchsorted(h, h + ln, side="left")
+    chain, _ = _orbit(succ, np.ones(h.shape[0], dtype=bool))
     pos = h[chain]
     typ = types[chain]
     covered = int(np.minimum(pos + length[typ], n).sum() - pos.sum())
-    end = stopped if stopped is not None else n
+    end = n
     bad_bytes = max(0, int(end - covered))
     # formats actually on the chain
     on_fmt = set(pos[typ == FMT_TYPE].tolist())
@@ -255,26 +259,46 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     offsets = {}
     for grp in np.split(order, bounds) if order.shape[0] else []:
         offsets[int(typ[grp[0]])] = pos[grp]
-    log = DataFlashLog(source, buf, formats, offsets, bad_bytes=bad_bytes, stopped_at=stopped)
+    log = DataFlashLog(source, buf, formats, offsets, bad_bytes=bad_bytes)
     log.names = {f.name: t for t, f in formats.items()}
     return log
 
 
-def _orbit(succ: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, int | None]:
+def _headers(buf: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
+    """Offsets of every 0xA3 0x95 pair, searched in 1 MiB chunks (temporaries stay small for big logs)."""
+    n = buf.shape[0]
+    parts = []
+    for s0 in range(0, max(n - 1, 0), chunk):
+        seg = buf[s0:min(s0 + chunk + 1, n)]
+        parts.append(np.flatnonzero((seg[:-1] == HEAD1) & (seg[1:] == HEAD2)) + s0)
+    return np.concatenate(parts) if parts else np.zeros(0, np.int64)
+
+
+def _orbit(succ: np.ndarray, known: np.ndarray, block: int = 1 << 18) -> tuple[np.ndarray, int | None]:
     """Candidates visited from candidate 0 following ``succ`` (index K = past the end), stopping before
     the first candidate of an undefined type. Pointer doubling: with ``J = succ^(2^k)`` the next 2^k
-    nodes of the orbit are ``J[first 2^k nodes]``, so the loop runs log2(K) times, each step in numpy."""
+    nodes of the orbit are ``J[first 2^k nodes]``, so the loop runs log2(block) times per block of
+    candidates, each step in numpy. Blocks (starting at the orbit's next node) keep the temporaries small."""
     K = succ.shape[0]
-    J = np.append(np.where(known, succ, K), K).astype(np.int64)
-    orbit = np.zeros(1, dtype=np.int64)
-    while orbit[-1] < K:
-        orbit = np.concatenate([orbit, J[orbit]])
-        J = J[J]
-    orbit = orbit[orbit < K]
-    bad = np.flatnonzero(~known[orbit])
-    if bad.shape[0]:
-        return orbit[:bad[0]], int(orbit[bad[0]])
-    return orbit, None
+    parts = []
+    i = 0
+    while i < K:
+        b = min(K, i + block)
+        L = b - i
+        J = np.where(known[i:b], succ[i:b], K) - i
+        J = np.append(np.minimum(J, L), L).astype(np.int64)  # L: leaves the block (or the file)
+        orbit = np.zeros(1, dtype=np.int64)
+        while orbit[-1] < L:
+            orbit = np.concatenate([orbit, J[orbit]])
+            J = J[J]
+        orbit = orbit[orbit < L]
+        bad = np.flatnonzero(~known[i + orbit])
+        if bad.shape[0]:
+            parts.append(orbit[:bad[0]] + i)
+            return np.concatenate(parts), int(i + orbit[bad[0]])
+        parts.append(orbit + i)
+        i = int(succ[i + orbit[-1]])
+    return (np.concatenate(parts) if parts else np.zeros(0, np.int64)), None
 
 
 def open_log(path) -> DataFlashLog:

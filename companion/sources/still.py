@@ -2,8 +2,8 @@
 
 Allan analysis of a flight log must use only the stretches where the vehicle stood still: a flight (or a
 hand carrying the vehicle) puts real rotation into the gyro and turns N into junk. :func:`select_still`
-decides on a common time grid of ``window_s`` windows (default 1 s, longer for streams slower than 16 Hz
-so that a window holds 16 samples):
+decides on a common time grid of ``window_s`` windows (default 1 s; longer when even the fastest IMU stream
+is slower than 16 Hz, so that a window holds 16 of its samples):
 
 1. **armed state** from the log (DataFlash ``EV``/``ARM``, ULog ``vehicle_status``): every armed window,
    widened by ``guard_s`` on each side (motors spin up before take-off and down after landing), is out;
@@ -203,10 +203,11 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         return StillSelection([], "all" if use_all else "none", total_s=t_hi - t_lo, outside_s=outside,
                               min_segment_s=min_segment_s,
                               notes=[f"--start/--end select nothing of the record {t_lo:.1f}-{t_hi:.1f} s"])
-    # windows of 1 s, longer for slow streams so that every window holds >= 16 samples of each IMU
+    # windows of 1 s, longer when even the fastest IMU stream is slower than 16 Hz (a window must hold
+    # 16 samples of it); decimated per-IMU topics (1-2 Hz) then only count where they have 2 samples
     if window_s is None:
         rates = [s.rate_hz for s in imus if np.isfinite(s.rate_hz) and s.rate_hz > 0]
-        window_s = max(1.0, 16.0 / min(rates)) if rates else 1.0
+        window_s = max(1.0, 16.0 / max(rates)) if rates else 1.0
     nb = max(1, int(np.ceil((hi - lo) / window_s)))
     has = np.zeros(nb, dtype=bool)
     moving = np.zeros(nb, dtype=bool)

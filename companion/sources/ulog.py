@@ -8,8 +8,9 @@ else ``timestamp``, in microseconds since boot):
   ``accelerometer_m_s2[3]`` (its own time offset ``accelerometer_timestamp_relative`` is ignored);
 - ``sensor_gyro`` / ``sensor_accel`` per ``multi_id``: one IMU's calibrated, filtered output; the accel of
   the same ``multi_id`` is interpolated (linearly) onto the gyro times, NaN if it is absent;
-- ``sensor_gyro_fifo``: raw FIFO samples, ``samples`` values per message of int16 ``x/y/z[32]`` x
-  ``scale`` (rad/s), spaced ``dt`` us, the last one at ``timestamp_sample``; accel columns NaN;
+- ``sensor_gyro_fifo`` / ``sensor_accel_fifo``: raw FIFO samples, ``samples`` values per message of int16
+  ``x/y/z[32]`` x ``scale`` (rad/s or m/s^2), spaced ``dt`` us, the last one at ``timestamp_sample`` (an
+  assumption: the message definition does not say); the other sensor's columns NaN;
 - ``vehicle_imu``: integrated ``delta_angle`` / ``delta_angle_dt`` and ``delta_velocity`` /
   ``delta_velocity_dt`` (rad/s, m/s^2): averages over the integration interval.
 
@@ -30,7 +31,8 @@ from companion.errors import CompanionError
 from companion.samples import StreamKey
 from companion.sources.decode import RawStream
 
-TOPICS = ("sensor_combined", "sensor_gyro", "sensor_accel", "sensor_gyro_fifo", "vehicle_imu", "vehicle_status")
+TOPICS = ("sensor_combined", "sensor_gyro", "sensor_accel", "sensor_gyro_fifo", "sensor_accel_fifo", "vehicle_imu",
+          "vehicle_status")
 ARMING_STATE_ARMED = 2
 
 
@@ -111,17 +113,22 @@ def raw_streams(ulog) -> tuple[list[RawStream], dict]:
             if temp is not None and not np.all(np.isfinite(temp)):
                 temp = None
             out.append(RawStream(key, t, gyro, acc, temp, True, None, None, 1e-6))
-        elif name == "sensor_gyro_fifo":
+        elif name in ("sensor_gyro_fifo", "sensor_accel_fifo"):
             t_last = _time(d)
             cnt = d.data["samples"].astype(np.int64)
             dt = d.data["dt"].astype(np.float64) * 1e-6
             scale = d.data["scale"].astype(np.float64)
-            k = np.arange(32)
+            width = sum(1 for k in d.data if k.startswith("x["))
+            k = np.arange(width)
             valid = k[None, :] < cnt[:, None]
             tt = t_last[:, None] - (cnt[:, None] - 1 - k[None, :]) * dt[:, None]
-            vals = np.stack([_vec(d, [f"{ax}[{i}]" for i in range(32)]) * scale[:, None] for ax in "xyz"], axis=2)
+            vals = np.stack([_vec(d, [f"{ax}[{i}]" for i in range(width)]) * scale[:, None] for ax in "xyz"], axis=2)
             lsb = float(np.median(scale)) if n else None
-            out.append(RawStream(key, tt[valid], vals[valid], _nan3(int(valid.sum())), None, True, lsb, None, 1e-6))
+            v, nan = vals[valid], _nan3(int(valid.sum()))
+            if name == "sensor_gyro_fifo":
+                out.append(RawStream(key, tt[valid], v, nan, None, True, lsb, None, 1e-6))
+            else:
+                out.append(RawStream(key, tt[valid], nan, v, None, True, None, lsb, 1e-6))
         elif name == "vehicle_imu":
             dta = d.data["delta_angle_dt"].astype(np.float64) * 1e-6
             dtv = d.data["delta_velocity_dt"].astype(np.float64) * 1e-6
