@@ -79,10 +79,9 @@ def sim_against_run(tmp_path, model_text, sim_args, duration, speedup, run_args=
     """Run ``companion run`` on a free UDP port, wait until it listens, play ``sim-autopilot SIM_ARGS`` into
     it for ``duration`` simulated seconds at ``speedup`` (the simulation starts when run asks for data),
     stop run (SIGTERM); returns (nvf, texts) as sim-autopilot recorded them (``t_sim`` = time since boot,
-    the simulation starts at 1 s). Fails with a clear message when the link lost more than ``max_loss`` (default 25 %: the pipeline
-    stays within 5 % at 20 % random or bursty loss, tests/test_link_health.py, and a busy machine's UDP receiver
-    drops what it cannot take, so a loaded CI run must stay green)
-    of the IMU messages (UDP drops what a busy receiver cannot take: lower the speedup)."""
+    the simulation starts at 1 s). Fails with a clear message when the link lost more than ``max_loss`` of the IMU messages (default
+    25 %: a busy machine's UDP receiver drops what it cannot take, and the pipeline is shown within 5 % at 20 %
+    random or bursty loss in tests/test_link_health.py, so a loaded CI run stays green)."""
     (tmp_path / "model.yaml").write_text(model_text)
     port = free_udp_port()
     wall = duration / speedup
