@@ -24,7 +24,7 @@ width / 3.92. Coverage is measured in benchmarks/bench_online.py (``coverage``).
 
 Speed. The selection costs 0.2-1 s. :class:`Structure` keeps the chosen model and the covariance of
 the Allan estimates at the time of the selection; until the data have grown by ``RESELECT`` (x1.5, or
-by 30 min of samples) the
+by 30 min of samples; never before 5 min of new samples) the
 coefficients are re-solved with that structure (covariance rescaled by the model ratio per level and by
 the number of samples; a few ms), which is what ``companion run`` does between selections.
 """
@@ -46,6 +46,8 @@ Z_UPPER = 1.6448536269514722
 #: seconds of samples (so that a long run with forgetting still re-selects now and then)
 RESELECT = 1.5
 RESELECT_MAX_S = 1800.0
+#: ... but never before this many seconds of new samples (a selection costs 0.2-1 s: `run` at 30x replay speed)
+RESELECT_MIN_S = 300.0
 NL_PARAMS = {"gauss_markov": ("sigma", "tau_c"), "sinusoid": ("amplitude", "freq_hz")}
 
 
@@ -128,7 +130,7 @@ def _marginal_var(prob, A, theta, i):
 def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95):
     """Resolved terms and bounds (see the module docstring) from the levels ``tau, avar`` (restricted to the
     structure's levels) and the covariance ``cov`` of the Allan estimates (default: the structure's)."""
-    from companion.allan.fit import _columns, _scaled_chi2_ci
+    from companion.allan.fit import _columns, _scaled_chi2_ci  # scipy.stats: not at start-up
 
     tau = np.asarray(tau, float)
     avar = np.asarray(avar, float)
@@ -226,7 +228,9 @@ def estimator_report(est, candidates=None, full=False):
     n_eff = est.n_effective()
     st = getattr(est, "_structure", None)
     m_now = np.round(tau * est.rate_hz).astype(np.int64)
-    due = st is None or est.n_samples >= RESELECT * st.n_raw or est.n_samples - st.n_raw >= RESELECT_MAX_S * est.rate_hz
+    grown = est.n_samples - st.n_raw if st is not None else 0
+    due = st is None or (grown >= RESELECT_MIN_S * est.rate_hz and
+                         (est.n_samples >= RESELECT * st.n_raw or grown >= RESELECT_MAX_S * est.rate_hz))
     if full or due or not np.all(np.isin(st.m, m_now)):
         _, st = select(tau, avar, edf, n_eff, est.rate_hz, candidates, n_raw=est.n_samples)
         est._structure = st
@@ -237,7 +241,16 @@ def estimator_report(est, candidates=None, full=False):
     tau, avar = tau[keep], avar[keep]
     if cov is None and st.n_raw != est.n_samples:
         cov = rescaled_cov(st, tau, avar, n_eff)
-    return report(tau, avar, st, candidates, cov=cov)
+    out = report(tau, avar, st, candidates, cov=cov)
+    # between selections: a selected term the current data no longer resolve leaves the structure for this
+    # refit (kept in, an unsupported column lets the correlated GLS trade it against N: N 10 % low measured)
+    gone = [t["effect"] for t in out if t.get("bound") and t["effect"] in st.linear]
+    if gone and len(gone) < len(st.linear):
+        from dataclasses import replace
+
+        st2 = replace(st, linear=[e for e in st.linear if e not in gone])
+        out = report(tau, avar, st2, candidates, cov=cov)
+    return out
 
 
 # ---------------------------------------------------------------- presentation (tables, summaries)
