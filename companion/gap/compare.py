@@ -29,8 +29,12 @@ from scipy import special, stats
 from companion.allan.adev import oavar
 from companion.gap._edf import local_slope, oavar_edf
 from companion.gap.candidates import fit_terms
-from companion.gap.likelihood import (MODEL_FLOOR, Measured, deviance, deviance_points,  # noqa: F401 (re-exported)
-                                      expected_deviance, gap_metric, model_avar, term_avar)
+from companion.gap.likelihood import (MODEL_FLOOR, Measured, deviance, deviance_points, expected_deviance,
+                                      gap_metric, model_avar, term_avar)
+
+# the likelihood names moved to companion.gap.likelihood (no import cycle); re-exported here for callers
+__all__ = ["MODEL_FLOOR", "Measured", "Region", "deviance", "deviance_points", "disagreements", "expected_deviance",
+           "gap_metric", "gap_vs_simulation", "measure", "model_avar", "reference_curve", "term_avar", "z_scores"]
 
 
 def measure(y, rate_hz: float, spec="octave", min_terms: int = 1, model_floor: float = MODEL_FLOOR) -> Measured:
