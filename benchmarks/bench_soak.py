@@ -10,7 +10,7 @@ Every simulated hour it prints the process RSS (``/proc/self/status`` VmRSS) and
 Python heap in use (tracemalloc, with --heap), and the size of the saved state (JSON, written atomically);
 at the end the ratio of the final RSS to the 100 MB target.
 
-    python benchmarks/bench_soak.py                          # 24 h, 3 IMUs at 400 Hz (about 20-40 min)
+    python benchmarks/bench_soak.py                          # 24 h, 3 IMUs at 400 Hz (about 50 min on a free core)
     python benchmarks/bench_soak.py --hours 2 --imus 1 --rate 100   # quick look
 """
 

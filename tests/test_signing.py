@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from readiness import DEADLINE_S, READY, wait_for_text
+from readiness import DEADLINE_S, READY, wait_for_text, wait_until_read
 
 from companion.cli.main import main
 
@@ -56,6 +56,7 @@ def session(tmp_path, run_key=None, sim_key=None, wait_request=False):
         sim = subprocess.Popen(sim_cmd, cwd=tmp_path, env=env(), stdout=open(tmp_path / "sim.out", "w"),
                                stderr=subprocess.STDOUT)
         sim.wait(DEADLINE_S)
+        wait_until_read(port, run)  # run has read all the vehicle sent (a condition, not a fixed wait)
         run.send_signal(signal.SIGTERM)
         run.wait(DEADLINE_S)
     finally:
@@ -88,10 +89,13 @@ def keys(tmp_path):
 def test_signed_link_end_to_end(tmp_path, keys):
     good, _ = keys
     out, sim_out = session(tmp_path, run_key=good, sim_key=good, wait_request=True)
-    # the vehicle ignores unsigned frames, so our requests and reports reached it only because they are signed
-    m = re.search(r"received (\d+) NAMED_VALUE_FLOAT, \d+ STATUSTEXT, (\d+) requests", sim_out)
-    assert m and int(m.group(1)) > 20 and int(m.group(2)) >= 1, sim_out
+    # the vehicle ignores unsigned frames and sends nothing until asked (--wait-request): it took our
+    # signed requests, and we took its signed data
+    m = re.search(r"sent (\d+) RAW_IMU .* (\d+) requests", sim_out)
+    assert m and int(m.group(1)) > 1000 and int(m.group(2)) >= 1, sim_out
     assert "IMU0 (RAW_IMU, 100.0 Hz)" in out and rejected(out) == 0
+    r = re.search(r"link from 1/1: (\d+) frames received, 0 lost", out)
+    assert r and int(r.group(1)) >= int(m.group(1)), out
     assert "signing on" in out
 
 

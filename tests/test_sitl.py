@@ -107,7 +107,12 @@ def check_loop(tmp_path, nvf, texts, degrade_at, duration):
     assert len(deg) == 1, texts
     assert deg[0]["severity"] == 4
     assert re.match(r"^IMU0 gyro X degrading: N \d\.\dx baseline$", deg[0]["text"])
-    assert degrade_at < deg[0]["t_sim"] - 1.0 < degrade_at + 300.0  # within 5 minutes at 100 Hz
+    assert degrade_at < deg[0]["t_sim"] - 1.0  # never before the degradation
+    # within 5 minutes of the degradation in message time (the run's own transition time; on a busy machine
+    # the STATUSTEXT reaches the vehicle later in its simulated time, which says nothing about the detector)
+    m = re.search(r"at (\d+) s: IMU0 gyro X degrading", (Path(tmp_path) / "run.out").read_text())
+    assert m, (Path(tmp_path) / "run.out").read_text()
+    assert degrade_at < int(m.group(1)) - 1.0 < degrade_at + 300.0
     assert any(d["text"] == "IMU0 gyro baseline learned" for d in texts)
 
 
@@ -159,6 +164,7 @@ def test_sim_autopilot_against_run_direct(tmp_path):
     out = (tmp_path / "run.out").read_text()
     # the same messages replayed from the recording as fast as possible: the same estimates
     live = out[out.index("IMU0 (RAW_IMU"):]
+    live = "".join(line for line in live.splitlines(True) if not line.startswith("link"))  # live-link health lines
     rep = subprocess.run([sys.executable, "-m", "companion", "run", "--source", str(tmp_path / "rx.tlog"),
                           "--baseline-s", "120", "--quiet"], cwd=tmp_path, env=env(), capture_output=True,
                          text=True, timeout=120)

@@ -56,9 +56,9 @@ def test_random_file_is_a_clean_error(tmp_path):
 
 def test_sawtooth_time_base_is_linear():
     t = np.tile(np.arange(100) / 10.0, 3000)  # 2,999 reboots
-    t0 = time.perf_counter()
+    t0 = time.process_time()  # CPU time of this process: a busy machine does not inflate it
     keep, seg, rep = analyse(t, 1e-6)
-    assert time.perf_counter() - t0 < 5.0
+    assert time.process_time() - t0 < 5.0  # a quadratic walk over 3,000 segments would take minutes
     assert rep.resets == 2999 and len(seg) == 3000 and rep.rate_hz == pytest.approx(10.0)
 
 

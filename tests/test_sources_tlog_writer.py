@@ -81,12 +81,14 @@ def test_tlog_writer_any_message_and_crc(tmp_path):
     assert types == ["NAMED_VALUE_FLOAT", "HEARTBEAT"]
 
 
-def test_large_file_is_fast(tmp_path):
-    import time
+def test_large_file_is_complete(tmp_path):
+    """200,000 messages written in one vectorised call are all there, in order (speed: a benchmark's job,
+    benchmarks/bench_ingest.py; a wall-clock limit here would fail on a busy machine)."""
+    from companion.sources import tlog
 
     n = 200_000
     t = np.arange(n) / 400.0
     z = np.zeros((n, 3))
-    t0 = time.perf_counter()
-    write_imu_tlog(tmp_path / "big.tlog", t, z, z)
-    assert time.perf_counter() - t0 < 5.0  # about 0.5 s here; 720,000 messages in about 2 s
+    assert write_imu_tlog(tmp_path / "big.tlog", t, z, z) == n
+    index = tlog.scan(tlog.read_file(tmp_path / "big.tlog"))
+    assert index.bad_frames == 0 and int((index.msgid == M.RAW_IMU.msgid).sum()) == n

@@ -56,13 +56,23 @@ class SourceStats:
         self.window_rx = 0
         self.window_lost = 0
 
-    def on_seq(self, seq: int) -> None:
+    def on_seq(self, seq: int, gap_hint: float | None = None) -> None:
+        """``gap_hint``: for a frame newer (in message time) than everything of its IMU stream, how many
+        frames of this sender the time gap suggests were lost. Only used to resolve what 8 bits cannot: a
+        run of 128 or more lost frames (else read as reordering) or of 256 and more (else invisible)."""
         self.received += 1
         self.window_rx += 1
         if self.last_seq is None:
             self.last_seq = seq
             return
         d = (seq - self.last_seq) & 0xFF
+        if gap_hint is not None and gap_hint > 64:
+            base = (d - 1) & 0xFF
+            lost = base + 256 * max(0, int(round((gap_hint - base) / 256.0)))
+            self.lost += lost
+            self.window_lost += lost
+            self.last_seq = seq
+            return
         if d == 1:
             self.last_seq = seq
         elif d == 0:
@@ -98,7 +108,8 @@ class LinkStats:
         self.sources: dict[tuple[int, int], SourceStats] = {}
         self.bad_frames = 0
         self.rejected_signature = 0
-        self._imu_time: dict[tuple, float] = {}
+        self._imu: dict[tuple, list] = {}  # per IMU stream: newest message time (s), sample period, frames
+        self._last_imu_t: dict[tuple, float] = {}  # per sender: message time of its newest IMU frame
 
     def on_message(self, msg) -> None:
         mtype = msg.get_type()
@@ -112,17 +123,43 @@ class LinkStats:
         st = self.sources.get(key)
         if st is None:
             st = self.sources[key] = SourceStats()
-        st.on_seq(msg.get_seq())
         field = IMU_TIME_FIELDS.get(mtype)
-        if field is not None:
-            t = getattr(msg, field, None)
-            k = (key, mtype, getattr(msg, "id", 0))
-            if t is not None:
-                newest = self._imu_time.get(k)
-                if newest is not None and t < newest and newest - t < (1e6 if field == "time_usec" else 1e3):
-                    st.late += 1  # older than one already received (a step back of >= 1 s is a reboot)
-                else:
-                    self._imu_time[k] = t
+        t = getattr(msg, field, None) if field is not None else None
+        if t is None:
+            st.on_seq(msg.get_seq())
+            return
+        t = float(t) * (1e-6 if field == "time_usec" else 1e-3)
+        k = (key, mtype, getattr(msg, "id", 0))
+        s = self._imu.get(k)
+        if s is None:
+            s = self._imu[k] = [t, None, 0]  # newest time, sample period (EMA), frames received
+            st.on_seq(msg.get_seq())
+            s[2] += 1
+            self._last_imu_t[key] = max(t, self._last_imu_t.get(key, t))
+            return
+        newest, period, count = s
+        s[2] = count + 1
+        dt = t - newest
+        if dt < 0 and -dt < 1.0:
+            st.late += 1  # older than one already received (a step back of >= 1 s is a reboot)
+            st.on_seq(msg.get_seq())
+            return
+        hint = None
+        last_any = self._last_imu_t.get(key)
+        if dt > 0 and period is not None and last_any is not None and t > last_any:
+            # frames this sender sends per second of message time: per sample of this stream (several
+            # IMUs and heartbeats interleave) times the stream's rate; the gap since its last IMU frame
+            per_sample = max(1.0, st.received / max(count, 1))
+            hint = max(0.0, (t - last_any) / period * per_sample - 1.0)
+        st.on_seq(msg.get_seq(), hint)
+        if last_any is None or t > last_any or last_any - t > 1.0:
+            self._last_imu_t[key] = t
+        if dt > 0:
+            if period is None:
+                s[1] = dt
+            elif dt < 1.5 * period:
+                s[1] = 0.95 * period + 0.05 * dt
+        s[0] = t
 
     def window(self) -> tuple[int, int]:
         """(received, lost) since the last call, summed over sources; restarts the window."""
