@@ -128,12 +128,18 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
 
 
 def _record(store, stats: RunStats, w: Work, result: dict) -> None:
-    store.record(w.hash, result, w.log.size, w.log.mtime)
-    if result["status"] == "ok":
-        stats.done += 1
-    else:
-        stats.failed += 1
-        stats.failures.append((w.log.path, result.get("error") or "failed"))
+    _record_many(store, stats, [(w, result)])
+
+
+def _record_many(store, stats: RunStats, pairs) -> None:
+    """Write the results of one task (one log, or a --batch of logs) in one transaction, then count them."""
+    store.record_many([(w.hash, r, w.log.size, w.log.mtime) for w, r in pairs])
+    for w, result in pairs:
+        if result["status"] == "ok":
+            stats.done += 1
+        else:
+            stats.failed += 1
+            stats.failures.append((w.log.path, result.get("error") or "failed"))
 
 
 def _failed(w: Work, reason: str) -> dict:
@@ -250,8 +256,7 @@ def run_dask(store, work: list[Work], progress: Progress, client, axes=GYRO_AXES
                     results = [results] if isinstance(results, dict) else results
                 except Exception as exc:  # noqa: BLE001 - KilledWorker, lost connection: recorded, run goes on
                     results = [_failed(w, f"worker: {one_line(exc)}"[:500]) for w in ws]
-                for w, result in zip(ws, results):
-                    _record(store, stats, w, result)
+                _record_many(store, stats, list(zip(ws, results)))
             progress.update(stats.done, stats.failed)
             fill()
     except KeyboardInterrupt:
