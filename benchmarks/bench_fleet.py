@@ -50,7 +50,7 @@ def _analyze(store_path, folder, workers, quiet=True):
     from companion.fleet.store import FleetStore
 
     with FleetStore(store_path) as store:
-        work, _ = plan(store, discover([folder]))
+        work, _, _ = plan(store, discover([folder]))
         prog = Progress(len(work), enabled=not quiet)
         if workers == 0:
             _warm()

@@ -99,8 +99,27 @@ class Progress:
                 self.stream.flush()
 
 
-def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 4) -> tuple[list[Work], int]:
-    """(work to do, number skipped) for ``logs`` against what ``store`` holds."""
+def hash_on_cluster(client, chunk: int = 100):
+    """A ``hasher`` for :func:`plan` that hashes files on the Dask workers (where the storage is)."""
+    from companion.fleet.discover import hash_chunk
+
+    def hasher(paths):
+        futs = client.map(hash_chunk, [paths[i:i + chunk] for i in range(0, len(paths), chunk)], pure=False)
+        out = {}
+        for f in futs:
+            out.update(f.result())
+        return out
+
+    return hasher
+
+
+def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 4,
+         hasher=None) -> tuple[list[Work], int, list[tuple[str, str]]]:
+    """(work to do, number skipped, unreadable [(path, reason)]) for ``logs`` against ``store``.
+
+    Content hashes come from the ``paths`` table when a path's size and mtime are unchanged, else from
+    ``hasher(paths) -> {path: hex or "error: reason"}`` (default: threads in this process).
+    """
     hashes: dict[str, str] = {}
     unknown = []
     for lf in logs:
@@ -109,13 +128,23 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
             hashes[lf.path] = h
         else:
             unknown.append(lf.path)
-    for p, h in hash_files(unknown, threads).items():
-        if isinstance(h, Exception):
-            raise CompanionError(f"{p}: cannot read ({getattr(h, 'strerror', None) or h})")
-        hashes[p] = h
+    if hasher is None:
+        found = {p: (h if isinstance(h, str) else f"error: {getattr(h, 'strerror', None) or h}")
+                 for p, h in hash_files(unknown, threads).items()}
+    else:
+        found = hasher(unknown) if unknown else {}
+    unreadable = []
+    for p in unknown:
+        h = found.get(p, "error: not hashed")
+        if h.startswith("error: "):
+            unreadable.append((p, "cannot read (" + h[7:] + ")"))
+        else:
+            hashes[p] = h
     work, seen, skipped = [], set(), 0
     for lf in logs:
-        h = hashes[lf.path]
+        h = hashes.get(lf.path)
+        if h is None:
+            continue
         st = store.status(h)
         if h in seen or st == "ok" or (st == "failed" and not retry_failed):
             skipped += 1
@@ -124,7 +153,7 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
             continue
         seen.add(h)
         work.append(Work(lf, h))
-    return work, skipped
+    return work, skipped, unreadable
 
 
 def _record(store, stats: RunStats, w: Work, result: dict) -> None:
@@ -294,5 +323,5 @@ def describe(stats: RunStats) -> str:
     return s
 
 
-__all__ = ["plan", "run_serial", "run_dask", "open_client", "close_client", "Progress", "RunStats", "describe",
+__all__ = ["plan", "hash_on_cluster", "run_serial", "run_dask", "open_client", "close_client", "Progress", "RunStats", "describe",
            "hash_file", "DASK_MISSING", "math"]
