@@ -152,7 +152,7 @@ def _term_as_interrupt():
 
 def run_analyze(args) -> int:
     from companion.fleet.discover import discover
-    from companion.fleet.runner import (Progress, close_client, describe, open_client, plan, run_dask,
+    from companion.fleet.runner import (Progress, close_client, hash_on_cluster, open_client, plan, run_dask,
                                         run_serial)
     from companion.fleet.store import FleetStore
     from companion.samples import AXES
@@ -167,43 +167,55 @@ def run_analyze(args) -> int:
     if args.time_limit is not None and not (args.time_limit > 0 and math.isfinite(args.time_limit)):
         raise CompanionError("--time-limit must be a positive number of seconds")
     logs = discover(args.logs)
-    with FleetStore(args.db) as store:
-        work, skipped = plan(store, logs, retry_failed=args.retry_failed)
-        print(f"{len(logs)} log(s): {len(work)} to analyse, {skipped} already in {args.db}", file=sys.stderr)
-        progress = Progress(len(work), skipped, enabled=not args.quiet)
-        if not work:
+    client = cluster = None
+    old_term = _term_as_interrupt()
+    try:
+        with FleetStore(args.db) as store:
+            hasher = None
+            if args.scheduler:  # a cluster: hash the files on the workers, next to the storage
+                client, cluster = open_client(None, args.scheduler)
+                hasher = hash_on_cluster(client)
+            work, skipped, unreadable = plan(store, logs, retry_failed=args.retry_failed, hasher=hasher)
+            for path, reason in unreadable[:10]:
+                print(f"warning: {path}: {reason}; skipped", file=sys.stderr)
+            print(f"{len(logs)} log(s): {len(work)} to analyse, {skipped} already in {args.db}"
+                  + (f", {len(unreadable)} unreadable" if unreadable else ""), file=sys.stderr)
+            progress = Progress(len(work), skipped, enabled=not args.quiet)
             stats = None
-        else:
-            old_term = _term_as_interrupt()
-            try:
-                if args.workers == 0 and not args.scheduler:
-                    stats = run_serial(store, work, progress, axes, args.vehicle, args.time_limit)
-                else:
-                    workers = args.workers or os.cpu_count() or 1
-                    client, cluster = open_client(workers, args.scheduler)
-                    try:
-                        stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit,
-                                         batch=args.batch)
-                    finally:
-                        close_client(client, cluster)
-            finally:
-                if old_term is not None:
-                    signal.signal(signal.SIGTERM, old_term)
-        if stats is not None:
-            progress.close()
-            stats.skipped = skipped
-            for path, reason in stats.failures[:10]:
-                print(f"failed: {path}: {reason}", file=sys.stderr)
-            if len(stats.failures) > 10:
-                print(f"... and {len(stats.failures) - 10} more failed (fleet report --html lists them)",
-                      file=sys.stderr)
-            print(describe(stats))
-            if stats.stopped == "interrupted":
-                return 130
-            if stats.stopped == "deadline":
-                return 3
-        c = store.counts()
-        print(f"{args.db}: {c['ok']} log(s) analysed, {c['failed']} failed")
+            if work and args.workers == 0 and not args.scheduler:
+                stats = run_serial(store, work, progress, axes, args.vehicle, args.time_limit)
+            elif work:
+                if client is None:
+                    client, cluster = open_client(args.workers or os.cpu_count() or 1, None)
+                stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit,
+                                 batch=args.batch)
+            rc = _finish(args, store, stats, progress, skipped)
+    finally:
+        if client is not None:
+            close_client(client, cluster)
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+    return rc
+
+
+def _finish(args, store, stats, progress, skipped) -> int:
+    from companion.fleet.runner import describe
+
+    if stats is not None:
+        progress.close()
+        stats.skipped = skipped
+        for path, reason in stats.failures[:10]:
+            print(f"failed: {path}: {reason}", file=sys.stderr)
+        if len(stats.failures) > 10:
+            print(f"... and {len(stats.failures) - 10} more failed (fleet report --html lists them)",
+                  file=sys.stderr)
+        print(describe(stats))
+        if stats.stopped == "interrupted":
+            return 130
+        if stats.stopped == "deadline":
+            return 3
+    c = store.counts()
+    print(f"{args.db}: {c['ok']} log(s) analysed, {c['failed']} failed")
     return 0
 
 

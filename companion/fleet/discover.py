@@ -125,3 +125,11 @@ def hash_files(paths, threads: int = 4) -> dict[str, str | Exception]:
         return dict(one(p) for p in paths)
     with ThreadPoolExecutor(max_workers=threads) as ex:
         return dict(ex.map(one, paths))
+
+
+def hash_chunk(paths) -> dict[str, str]:
+    """``{path: hex digest or "error: reason"}``: a Dask task hashing files where they are stored."""
+    out = {}
+    for p, h in hash_files(paths, threads=2).items():
+        out[p] = h if isinstance(h, str) else f"error: {getattr(h, 'strerror', None) or h}"
+    return out

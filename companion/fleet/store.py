@@ -152,29 +152,38 @@ class FleetStore:
     # ---- the one writer ------------------------------------------------------------------------
     def record(self, h: str, result: dict, size: int | None = None, mtime: float | None = None) -> None:
         """Store one analysed log (a :func:`companion.fleet.task.analyze_log` result) in one transaction."""
+        with self.con:
+            self._write(h, result, size, mtime)
+
+    def record_many(self, items) -> None:
+        """Store several ``(hash, result, size, mtime)`` in one transaction (a ``--batch`` task's logs)."""
+        with self.con:
+            for h, result, size, mtime in items:
+                self._write(h, result, size, mtime)
+
+    def _write(self, h: str, result: dict, size, mtime) -> None:
         from companion import __version__
 
         log = result.get("log") or {}
         start, source = log.get("start_time"), "log"
         if start is None:
             start, source = mtime, "mtime"
-        with self.con:
-            self.con.execute("DELETE FROM results WHERE hash = ?", (h,))
-            self.con.execute(
-                "INSERT OR REPLACE INTO logs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (h, result["path"], size, mtime, result.get("format"), log.get("sysid"), log.get("vehicle"),
-                 log.get("board_id"), json.dumps({str(k): v for k, v in (log.get("imu_ids") or {}).items()}),
-                 start, source if start is not None else None, log.get("duration_s"), log.get("streams"),
-                 result["status"], result.get("error"), time.time(), result.get("elapsed_s"), __version__))
-            rows = []
-            for r in result.get("rows", []):
-                vals = [h] + [r.get(c) for c in RESULT_COLUMNS[1:]]
-                vals[-1] = json.dumps(r["extra"]) if r.get("extra") else None
-                rows.append(vals)
-            if rows:
-                self.con.executemany(f"INSERT INTO results VALUES ({', '.join('?' * len(RESULT_COLUMNS))})", rows)
-            if size is not None:
-                self.con.execute("INSERT OR REPLACE INTO paths VALUES (?, ?, ?, ?)", (result["path"], h, size, mtime))
+        self.con.execute("DELETE FROM results WHERE hash = ?", (h,))
+        self.con.execute(
+            "INSERT OR REPLACE INTO logs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (h, result["path"], size, mtime, result.get("format"), log.get("sysid"), log.get("vehicle"),
+             log.get("board_id"), json.dumps({str(k): v for k, v in (log.get("imu_ids") or {}).items()}),
+             start, source if start is not None else None, log.get("duration_s"), log.get("streams"),
+             result["status"], result.get("error"), time.time(), result.get("elapsed_s"), __version__))
+        rows = []
+        for r in result.get("rows", []):
+            vals = [h] + [r.get(c) for c in RESULT_COLUMNS[1:]]
+            vals[-1] = json.dumps(r["extra"]) if r.get("extra") else None
+            rows.append(vals)
+        if rows:
+            self.con.executemany(f"INSERT INTO results VALUES ({', '.join('?' * len(RESULT_COLUMNS))})", rows)
+        if size is not None:
+            self.con.execute("INSERT OR REPLACE INTO paths VALUES (?, ?, ?, ?)", (result["path"], h, size, mtime))
 
     # ---- queries -------------------------------------------------------------------------------
     def imus(self) -> list[tuple]:
