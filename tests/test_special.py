@@ -91,6 +91,13 @@ def test_chi2_ppf_matches_scipy(nu):
         assert chi2_ppf(p, nu) == pytest.approx(scipy_stats.chi2.ppf(p, nu), rel=1e-10)
 
 
+def test_chi2_ppf_dense_grid():
+    """A dense nu grid (a Newton step at rounding level once sent the iteration off the bracket)."""
+    for nu in np.geomspace(0.1, 1e6, 301):
+        for p in (1e-10, 1e-3, 0.025, 0.16, 0.5, 0.84, 0.975, 1 - 1e-10):
+            assert chi2_ppf(p, nu) == pytest.approx(scipy_stats.chi2.ppf(p, nu), rel=1e-10), (p, nu)
+
+
 @pytest.mark.parametrize("nu", [1e6, 1.9e6, 2.1e6, 1e7, 1e9])
 def test_chi2_ppf_large_nu(nu):
     """The upper tail against scipy; the lower tail, where scipy's incomplete gamma loses ~1e-5 relative at

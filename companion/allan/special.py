@@ -306,6 +306,8 @@ def chi2_ppf(p: float, nu: float) -> float:
             y_new = y - step
         except (OverflowError, ZeroDivisionError):
             y_new = math.nan
+        if abs(y_new - y) <= 4.0 * _EPS * y:  # the residual is at rounding level: converged
+            return 2.0 * y_new
         if not lo < y_new < hi:  # outside the bracket: bisect (geometrically over wide ranges)
             if math.isinf(hi):
                 y_new = 2.0 * y if y > 0 else 1.0
@@ -313,7 +315,7 @@ def chi2_ppf(p: float, nu: float) -> float:
                 y_new = math.sqrt(lo * hi)
             else:
                 y_new = 0.5 * (lo + hi)
-        if abs(y_new - y) <= 4.0 * _EPS * abs(y_new) or (hi - lo) <= 4.0 * _EPS * hi < math.inf:
+        if (hi - lo) <= 4.0 * _EPS * hi < math.inf:
             return 2.0 * y_new
         y = y_new
     return 2.0 * y
