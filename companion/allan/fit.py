@@ -51,10 +51,10 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar, nnls
-from scipy.stats import chi2 as chi2_dist
 
 from companion.allan.confidence import oavar_covariance
+from companion.allan.lsq import nnls
+from companion.allan.special import brentq, chi2_ppf, minimize_scalar_bounded
 from companion.allan.terms import BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term, linear_basis
 
 NONLINEAR_EFFECTS = ("gauss_markov", "sinusoid")
@@ -131,7 +131,7 @@ class _Problem:
     def solve(self, A):
         Aw = self._w(A)
         scale = np.maximum(np.sqrt((Aw**2).sum(axis=0)), 1e-300)
-        theta, _ = nnls(Aw / scale, self.vw, maxiter=50 * A.shape[1] + 50)
+        theta, _ = nnls(Aw / scale, self.vw, max_iter=50 * A.shape[1] + 50)
         theta = theta / scale
         r = self.vw - Aw @ theta
         return theta, float(r @ r)
@@ -161,11 +161,11 @@ def _best_shape(prob, effect, linear, others, tau):
     vals = np.array([chi(g) for g in grid])
     i = int(np.argmin(vals))
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    res = minimize_scalar(chi, bounds=(a, b), method="bounded", options={"xatol": 1e-3})
-    best = float(res.x) if res.fun < vals[i] else float(grid[i])
+    res_x, res_fun = minimize_scalar_bounded(chi, a, b, xatol=1e-3)
+    best = float(res_x) if res_fun < vals[i] else float(grid[i])
     span = grid[-1] - grid[0]
     interior = grid[0] + 0.02 * span < best < grid[-1] - 0.02 * span
-    return math.exp(best), min(float(res.fun), float(vals[i])), grid, vals, interior
+    return math.exp(best), min(float(res_fun), float(vals[i])), grid, vals, interior
 
 
 def _select(prob, tau, effects, n_pts, auto):
@@ -257,10 +257,10 @@ def _scaled_chi2_ci(theta, var, level):
     if nu < 4.0:
         # barely identified (sd > theta / sqrt 2): the chi-square pivot's upper end explodes; use the
         # normal interval on theta, truncated at 0
-        z = float(chi2_dist.ppf(level, 1)) ** 0.5
+        z = chi2_ppf(level, 1) ** 0.5
         sd = math.sqrt(var)
         return max(theta - z * sd, 0.0), theta + z * sd
-    return theta * nu / chi2_dist.ppf(1.0 - a, nu), theta * nu / chi2_dist.ppf(a, nu)
+    return theta * nu / chi2_ppf(1.0 - a, nu), theta * nu / chi2_ppf(a, nu)
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
@@ -412,7 +412,7 @@ def _profile_ci(prob, effect, shape, linear, others, tau, c2min, level):
     lo, hi = _shape_range(effect, tau)
     lo, hi = min(lo, shape), max(hi, shape)
     grid = np.exp(np.linspace(math.log(lo) - 1.0, math.log(hi) + 1.0, 121))
-    thr = c2min + chi2_dist.ppf(level, 1)
+    thr = c2min + chi2_ppf(level, 1)
     chis = np.array([prob.solve(_columns(linear, others + [(effect, g)], tau))[1] for g in grid])
     idx = np.flatnonzero(chis <= thr)
     if idx.size == 0:

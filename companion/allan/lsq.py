@@ -7,7 +7,9 @@
   what ``scipy.signal.lfilter([1], [1, -lam], x, zi=[lam S_0])[0][-1]`` returns.
 
 Importing scipy costs 50-80 MB of resident memory and 0.3-1.4 s of CPU on a small board; these two
-replace the only scipy calls the live pipeline makes (tests/test_startup.py compares them with scipy).
+(with :mod:`companion.allan.special` for the root finder, bounded minimiser and chi-square quantiles of
+the fit) replace the scipy calls the live pipeline would make (tests/test_startup.py and
+tests/test_special.py compare them with scipy).
 """
 
 from __future__ import annotations

@@ -130,7 +130,7 @@ def _marginal_var(prob, A, theta, i):
 def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95):
     """Resolved terms and bounds (see the module docstring) from the levels ``tau, avar`` (restricted to the
     structure's levels) and the covariance ``cov`` of the Allan estimates (default: the structure's)."""
-    from companion.allan.fit import _columns, _scaled_chi2_ci  # scipy.stats: not at start-up
+    from companion.allan.fit import _columns, _scaled_chi2_ci  # scipy-free; loaded at first report
 
     tau = np.asarray(tau, float)
     avar = np.asarray(avar, float)
