@@ -474,8 +474,9 @@ class Pipeline:
             gj = np.column_stack([np.interp(t[ok], tj, gj_all[:, a]) for a in range(3)])
             self.pair_done[key] = t_end
             nv = [ci.faults.noise_ref(ax) for ax in ("gx", "gy", "gz")] + [cj.faults.noise_ref(ax) for ax in ("gx", "gy", "gz")]
-            noise_var = (max(nv[:3]) + max(nv[3:])) if all(v is not None for v in nv) else None
-            if pair.update(gi, gj, noise_var):
+            ready = all(v is not None for v in nv)
+            noise_var = (max(nv[:3]) + max(nv[3:])) if ready else None
+            if pair.update(gi, gj, noise_var, max(nv[3:]) if ready else None):
                 self._name_disagreement(float(t[-1]))
 
     def _name_disagreement(self, t: float) -> None:
