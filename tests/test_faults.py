@@ -199,7 +199,11 @@ def test_timing_rate_drop_and_jitter():
         t = t0 + np.arange(100) / 100.0
         assert not d.update(t)
         t0 = t[-1] + 0.01
-    for k in range(5):  # every second sample lost: 50 Hz
+    for k in range(10):  # 40 % of the messages lost on the link: not a sensor fault
+        t = t0 + np.flatnonzero(rng.random(100) > 0.4) / 100.0
+        assert not d.update(t)
+        t0 += 1.0
+    for k in range(5):  # the sensor now samples at 50 Hz
         t = t0 + np.arange(50) / 50.0
         ch = d.update(t)
         t0 = t[-1] + 0.02

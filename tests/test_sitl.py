@@ -108,6 +108,10 @@ def check_loop(tmp_path, nvf, texts, degrade_at, duration):
     assert re.match(r"^IMU0 gyro X degrading: N \d\.\dx baseline$", deg[0]["text"])
     assert degrade_at < deg[0]["t_sim"] - 1.0 < degrade_at + 300.0  # within 5 minutes at 100 Hz
     assert any(d["text"] == "IMU0 gyro baseline learned" for d in texts)
+    # the noise detector (companion/health/noise.py) names the 2x step long before the Allan test
+    noise = [d for d in texts if re.match(r"^IMU0 gyro X noise \d+\.\dx baseline$", d["text"])]
+    assert noise and degrade_at < noise[0]["t_sim"] - 1.0 < degrade_at + 30.0, texts
+    assert not any(re.match(r"^IMU0 gyro [YZ]", d["text"]) for d in texts), texts
 
 
 def run_loop(tmp_path, via_mavproxy=False, speedup=30.0, duration=900.0, degrade_at=500.0, baseline_s=120.0):
