@@ -114,6 +114,10 @@ def check_loop(tmp_path, nvf, texts, degrade_at, duration):
     assert m, (Path(tmp_path) / "run.out").read_text()
     assert degrade_at < int(m.group(1)) - 1.0 < degrade_at + 300.0
     assert any(d["text"] == "IMU0 gyro baseline learned" for d in texts)
+    # the noise detector (companion/health/noise.py) names the 2x step long before the Allan test
+    noise = [d for d in texts if re.match(r"^IMU0 gyro X noise \d+\.\dx baseline$", d["text"])]
+    assert noise and degrade_at < noise[0]["t_sim"] - 1.0 < degrade_at + 30.0, texts
+    assert not any(re.match(r"^IMU0 gyro [YZ]", d["text"]) for d in texts), texts
 
 
 def run_loop(tmp_path, via_mavproxy=False, speedup=12.0, duration=900.0, degrade_at=500.0, baseline_s=120.0):

@@ -33,8 +33,6 @@ SPEEDUP = {1: 10.0, 2: 5.0, 3: 4.0}
 #: words of a fault report; a healthy run must show none of them (recoveries excluded: RECOVERY)
 FAULT_WORDS = re.compile(r"degrad|stuck|noise|bias|spike|drift|saturat|clip|disagree", re.I)
 RECOVERY = re.compile(r"cleared|back to normal|recovered", re.I)
-NEEDS_DETECTORS = pytest.mark.xfail(strict=False, reason="needs the fault detectors of issue 11 (branch i11); "
-                                    "remove this mark once they are merged")
 WARNING = 4  # MAV_SEVERITY_WARNING; CRITICAL is 2
 
 
@@ -76,7 +74,6 @@ FAULT_CASES = {
 }
 
 
-@NEEDS_DETECTORS
 @pytest.mark.parametrize("kind", sorted(FAULT_CASES))
 def test_each_fault_kind_is_named_in_a_statustext(tmp_path, kind):
     """One IMU at rest, the baseline learned, then the fault on gyro Y at 100 s: a STATUSTEXT names IMU0,
@@ -96,7 +93,6 @@ def test_each_fault_kind_is_named_in_a_statustext(tmp_path, kind):
     assert any(v == 1.0 for t, v in health_values(nvf, 0) if t >= at)
 
 
-@NEEDS_DETECTORS
 def test_saturation_in_flight_is_named(tmp_path):
     """Two IMUs in flight; IMU1's gyro X clips at +-0.8 rad/s from 120 s (manoeuvres reach ~1.5 rad/s)."""
     at = 120.0
@@ -109,7 +105,6 @@ def test_saturation_in_flight_is_named(tmp_path):
     assert hits and at <= hits[0]["t_sim"] - 1.0 <= at + 60.0, [d["text"] for d in texts]
 
 
-@NEEDS_DETECTORS
 @pytest.mark.parametrize("kind, imus", [("stuck", 3), ("bias", 2)])
 def test_in_flight_disagreement_names_the_faulty_imu(tmp_path, kind, imus):
     """Armed and flying (the single-IMU tests cannot run): IMU1's gyro X freezes (three IMUs: the odd one out

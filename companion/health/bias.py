@@ -73,7 +73,7 @@ class BiasDetector:
         if math.isnan(self.r):
             self.r = ref.mu
         if math.isnan(self.e):
-            self.e = x
+            self.e = ref.mu  # the reference period's mean (30 blocks), not one noisy block
         var_m = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + extra_var
         sig = math.sqrt(max(var_m, 1e-18))
         d = x - self.r

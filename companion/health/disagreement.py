@@ -2,7 +2,9 @@
 
 For a pair (i, j) the model is y_i = (I + E)^T-free form  y_i = y_j + y_j E + c + noise: E (3x3) the small
 scale-factor and misalignment difference, c the bias difference. E is fitted by ridge regression on the
-block-demeaned samples of blocks with motion (Bayesian prior E ~ N(0, 0.03^2) per entry, exponential
+block-demeaned samples of blocks with motion (rms above 5x IMU j's noise; the regressor's noise, which
+would shrink E towards -1 on still data, is corrected for: errors in variables), a Bayesian prior
+E ~ N(0, 0.03^2) per entry, exponential
 memory ``FIT_TAU_BLOCKS``; entries clipped to +-0.1 so that a frozen gyro can never be "explained" as a
 scale factor of -1); blocks with evidence of a fault are not fitted. c is a slowly tracking reference
 (EWMA over ``REF_TAU_BLOCKS`` blocks, frozen while evidence builds and during a fault).
@@ -52,6 +54,7 @@ class PairDisagreement:
         self.S = np.zeros((3, 3))
         self.T = np.zeros((3, 3))
         self.E = np.zeros((3, 3))
+        self.n_fit = 0.0  # samples in S and T (with the same forgetting)
         self.c = np.full(3, np.nan)
         self.blocks = 0
         self.up = [Cusum(H_ON, H_OFF) for _ in range(3)]
@@ -65,8 +68,11 @@ class PairDisagreement:
     def state(self) -> int:
         return FAULT if any(self.axis_state(a) == FAULT for a in range(3)) else OK
 
-    def update(self, yi: np.ndarray, yj: np.ndarray, noise_var: float | None = None) -> list[int]:
-        """Aligned samples (m, 3) of both IMUs; returns the axes (0..2) whose state changed."""
+    def update(self, yi: np.ndarray, yj: np.ndarray, noise_var: float | None = None,
+               noise_j: float | None = None) -> list[int]:
+        """Aligned samples (m, 3) of both IMUs; returns the axes (0..2) whose state changed. ``noise_var``:
+        the white variance expected of the residual (both IMUs' still references summed), ``noise_j``: IMU
+        j's own (the regressor's noise, corrected for in the fit)."""
         m = yi.shape[0]
         if m < 10:
             return []
@@ -107,15 +113,22 @@ class PairDisagreement:
                 evidence = True
         if not evidence:
             self.c += (d0 - self.c) / (REF_TAU_BLOCKS if self.blocks > WARM_BLOCKS else self.blocks)
-            if np.sqrt(np.mean(xj * xj, axis=0)).max() > MOTION_RMS:
+            # fit only on real motion (the regressor well above its own noise), with the errors-in-variables
+            # correction: S = S_true + n sigma_j^2 I and T = S_true E - n sigma_j^2 I
+            if noise_j is not None and np.sqrt(np.mean(xj * xj, axis=0)).max() > max(MOTION_RMS, 5.0 * math.sqrt(noise_j)):
                 g = math.exp(-1.0 / FIT_TAU_BLOCKS)
                 self.S = g * self.S + xj.T @ xj
                 self.T = g * self.T + xj.T @ (xi - xj)
-                self.E = np.clip(np.linalg.solve(self.S + lam * np.eye(3), self.T), -E_CLIP, E_CLIP)
+                self.n_fit = g * self.n_fit + m
+                corr = self.n_fit * noise_j * np.eye(3)
+                A = self.S - corr + lam * np.eye(3)
+                if np.all(np.linalg.eigvalsh(A) > 0):
+                    self.E = np.clip(np.linalg.solve(A, self.T + corr), -E_CLIP, E_CLIP)
         return changed
 
     def state_dict(self) -> dict:
         return {"i": self.i, "j": self.j, "S": self.S.tolist(), "T": self.T.tolist(), "E": self.E.tolist(),
+                "n_fit": self.n_fit,
                 "c": [None if np.isnan(v) else float(v) for v in self.c], "blocks": self.blocks,
                 "up": [c.state_dict() for c in self.up], "down": [c.state_dict() for c in self.down]}
 
@@ -123,6 +136,7 @@ class PairDisagreement:
         self.S, self.T, self.E = (np.asarray(d[k], dtype=float).reshape(3, 3) for k in ("S", "T", "E"))
         self.c = np.array([np.nan if v is None else float(v) for v in d["c"]])
         self.blocks = int(d.get("blocks", 0))
+        self.n_fit = float(d.get("n_fit", 0.0))
         for c, s in zip(self.up, d.get("up", [])):
             c.load_state_dict(s)
         for c, s in zip(self.down, d.get("down", [])):

@@ -206,11 +206,10 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     scale = np.maximum(scale, floor if dd_scale_ref is None else np.maximum(dd_scale_ref, 1e-12))
     # local scale: the MAD of each quarter and its neighbours (vibration that starts mid-block is not a spike)
     m = a.shape[0]
-    q = max(m // 4, 1)
-    edges = list(range(0, m, q))
-    qs = np.array([np.median(a[e:e + q], axis=0) / 0.6745 for e in edges])
+    parts = np.array_split(np.arange(m), min(4, m))  # four near-equal quarters (no short remainder)
+    qs = np.array([np.median(a[p], axis=0) / 0.6745 for p in parts])
     qmax = np.maximum(qs, np.maximum(np.vstack([qs[:1], qs[:-1]]), np.vstack([qs[1:], qs[-1:]])))
-    local = np.repeat(qmax, q, axis=0)[:m]
+    local = np.repeat(qmax, [p.size for p in parts], axis=0)
     scale = np.maximum(scale, local)
     out = a > k * scale
     prev = np.vstack([np.zeros((1, a.shape[1])), a[:-1]])

@@ -84,7 +84,7 @@ class ImuFaults:
             count = int(st.spikes[j] if still else st.spikes_solo[j])
             if af.stuck.state == OK and af.spikes.update(af.ref, count, st.n):
                 ev.append(FaultEvent(self.imu, ax, "spikes", af.spikes.state, af.spikes.value))
-            if af.saturation.update(af.ref, float(st.top[j]), int(st.top_run[j])):
+            if af.stuck.state == OK and af.saturation.update(af.ref, float(st.top[j]), int(st.top_run[j])):
                 ev.append(FaultEvent(self.imu, ax, "saturation", af.saturation.state, af.saturation.value))
         return ev
 

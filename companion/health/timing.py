@@ -1,10 +1,12 @@
 """Rate drop and irregular timing of one IMU stream (message time).
 
-Per block: the rate (n - 1) / (t_last - t_first) and the jitter std(dt) / mean(dt). The reference is
-the median rate of the first ``REF_BLOCKS`` blocks. FAULT when, in ``HOLD`` consecutive blocks, the rate
-is below ``DROP`` x the reference (a stream that lost 30 % of its samples) or the jitter is above
-``JITTER`` (intervals scattered by 30 % of the period; ArduPilot's streams at 100 Hz show a few %).
-Cleared after ``HOLD`` good blocks. A stream that stops altogether is the link's "stale" (HLTH 3).
+Per block: the rate 1 / median(dt) and the jitter: the rms of each interval's distance to the nearest
+whole number of periods, over the period (a lost message leaves an interval of exactly two periods and
+no jitter: losses on the link are not a sensor fault). The reference is the median rate of the first
+``REF_BLOCKS`` blocks. FAULT when, in ``HOLD`` consecutive blocks, the rate is below ``DROP`` x the
+reference (the sensor itself slowed by 30 %) or the jitter is above ``JITTER`` (intervals scattered by
+20 % of the period; ArduPilot's streams at 100 Hz show a few %). Cleared after ``HOLD`` good blocks. A
+stream that stops altogether is the link's "stale" (HLTH 3).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from companion.health.faults import FAULT, OK
 REF_BLOCKS = 10
 HOLD = 5
 DROP = 0.7
-JITTER = 0.3
+JITTER = 0.2
 
 
 class TimingDetector:
@@ -37,8 +39,12 @@ class TimingDetector:
         if t.size < 5 or t[-1] <= t[0]:
             return False
         dt = np.diff(t)
-        rate = (t.size - 1) / float(t[-1] - t[0])
-        jitter = float(dt.std() / dt.mean())
+        period = float(np.median(dt))
+        if not period > 0:
+            return False
+        rate = 1.0 / period
+        k = np.maximum(np.round(dt / period), 1.0)
+        jitter = float(np.sqrt(np.mean(((dt - k * period) / period) ** 2)))
         if math.isnan(self.ref_rate):
             self._rates.append(rate)
             if len(self._rates) >= REF_BLOCKS:

@@ -5,11 +5,14 @@ carrying the same IMU are ignored) and per gyro axis (accel axes optional):
 
 1. Samples are cut into blocks of ``block_s`` seconds of message time. Each block is *still* when
    the vehicle is disarmed (its autopilot's HEARTBEAT ``base_mode`` bit 128 clear; no HEARTBEAT at all
-   counts as disarmed) AND the motion detector agrees: |block mean of each gyro axis| <= ``gyro_mean``,
-   the block mean of the accel vector within ``accel_shift`` of the still reference, the block std of
-   |accel| <= ``accel_std`` and each gyro axis' block std <= ``gyro_std_factor`` x its still reference.
+   counts as disarmed) AND the motion gate (:meth:`Pipeline._still`) agrees; it decides from the
+   accelerometer and from the agreement of IMUs and axes, never from one gyro axis' own noise level.
    A block is fed only if the next block is still too (one block of look-ahead, so the start of a
    handling never leaks in) and the vehicle has been still for ``settle_s`` before it.
+1b. Every block, still or not, goes through the fault detectors (companion.health.monitor: stuck,
+   spikes, saturation, timing; on still fed blocks also noise, bias jump/drift, resolution) and, with two
+   or more IMUs, the pairwise disagreement test (companion.health.disagreement) on the time both cover;
+   each transition is a STATUSTEXT and sets ``IMU{i}G_HLTH`` / ``IMU{i}G_FLT`` at once.
 2. Fed blocks go to two online estimators per axis (companion.estimators.make_estimator): a *fast*
    one (exponential memory ``forgetting_fast_s``) for Q and N, a *slow* one (``forgetting_slow_s``) for
    B, K and R, and during learning a third one without forgetting whose terms become the baseline after
@@ -111,7 +114,6 @@ class Channel:
         self.pending = None  # still block waiting for the look-ahead
         self.still_run_s = 0.0
         self.ref_accel = None
-        self.ref_gyro_std = None
         self.fast: dict = {}
         self.slow: dict = {}
         self.learn: dict = {}
@@ -482,8 +484,9 @@ class Pipeline:
             gj = np.column_stack([np.interp(t[ok], tj, gj_all[:, a]) for a in range(3)])
             self.pair_done[key] = t_end
             nv = [ci.faults.noise_ref(ax) for ax in ("gx", "gy", "gz")] + [cj.faults.noise_ref(ax) for ax in ("gx", "gy", "gz")]
-            noise_var = (max(nv[:3]) + max(nv[3:])) if all(v is not None for v in nv) else None
-            if pair.update(gi, gj, noise_var):
+            ready = all(v is not None for v in nv)
+            noise_var = (max(nv[:3]) + max(nv[3:])) if ready else None
+            if pair.update(gi, gj, noise_var, max(nv[3:]) if ready else None):
                 self._name_disagreement(float(t[-1]))
 
     def _name_disagreement(self, t: float) -> None:
