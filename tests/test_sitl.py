@@ -8,13 +8,10 @@ variance LSB^2/12 per sample, so N_true = sqrt(N^2 + LSB^2 / (12 rate)) (+0.005 
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -22,7 +19,7 @@ from pathlib import Path
 import pytest
 from readiness import READY, wait_for_text
 
-from loopback import link_losses
+from loopback import env, free_udp_port, link_losses, read_record, start, stop
 
 pytestmark = pytest.mark.network
 
@@ -38,46 +35,6 @@ axes:
   gy: [{{effect: white_noise, N: {N_SI}}}]
   gz: [{{effect: white_noise, N: {N_SI}}}]
 """
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def env():
-    e = dict(os.environ)
-    e["PYTHONPATH"] = str(ROOT) + os.pathsep + e.get("PYTHONPATH", "")
-    return e
-
-
-def start(args, cwd, out_name):
-    out = open(Path(cwd) / out_name, "w")
-    return subprocess.Popen([sys.executable, "-m", "companion", *args], cwd=cwd, env=env(), stdout=out,
-                            stderr=subprocess.STDOUT, start_new_session=True), out
-
-
-def stop(proc, sig=signal.SIGTERM, timeout=10.0):
-    if proc.poll() is None:
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            pass
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(5)
-    return proc.returncode
-
-
-def read_record(path):
-    nvf, texts = [], []
-    for line in Path(path).read_text().splitlines():
-        d = json.loads(line)
-        (nvf if d["type"] == "NAMED_VALUE_FLOAT" else texts).append(d)
-    return nvf, texts
 
 
 def last_before(nvf, name, t_sim):
@@ -138,12 +95,12 @@ def run_loop(tmp_path, via_mavproxy=False, speedup=12.0, duration=900.0, degrade
         else:
             sim_target = p_run
         wall = duration / speedup
-        run, _ = start(["run", "--source", f"udpin:127.0.0.1:{p_run}", "--state", str(tmp_path / "state.json"),
+        run = start(["run", "--source", f"udpin:127.0.0.1:{p_run}", "--state", str(tmp_path / "state.json"),
                         "--baseline-s", str(baseline_s), "--duration", str(4 * wall + 120), "--out-tlog",
                         str(tmp_path / "rx.tlog")], tmp_path, "run.out")
         procs.append(run)
         wait_for_text(tmp_path / "run.out", READY, run)
-        sim, _ = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{sim_target}",
+        sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{sim_target}",
                         "--speedup", str(speedup), "--duration", str(duration), "--degrade-at", str(degrade_at),
                         "--degrade-factor", "2", "--degrade-axis", "gx", "--wait-request", "--wall-limit",
                         str(wall + 20), "--record", "rx.jsonl", "--quiet"], tmp_path, "sim.out")
@@ -186,11 +143,11 @@ def test_request_data_stream_fallback_when_interval_refused(tmp_path):
     """An autopilot that refuses SET_MESSAGE_INTERVAL and streams nothing until asked gets REQUEST_DATA_STREAM."""
     (tmp_path / "model.yaml").write_text(MODEL)
     port = free_udp_port()
-    run, _ = start(["run", "--source", f"udpin:127.0.0.1:{port}", "--no-state", "--duration", "300"], tmp_path, "run.out")
+    run = start(["run", "--source", f"udpin:127.0.0.1:{port}", "--no-state", "--duration", "300"], tmp_path, "run.out")
     sim = None
     try:
         wait_for_text(tmp_path / "run.out", READY, run)
-        sim, _ = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{port}",
+        sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{port}",
                         "--speedup", "10", "--duration", "80", "--wait-request", "--refuse-interval",
                         "--wall-limit", "30"], tmp_path, "sim.out")
         sim.wait(120)  # bounded by its --wall-limit

@@ -331,4 +331,4 @@ def describe(stats: RunStats) -> str:
 
 
 __all__ = ["plan", "hash_on_cluster", "run_serial", "run_dask", "open_client", "close_client", "Progress", "RunStats", "describe",
-           "hash_file", "DASK_MISSING", "math"]
+           "DASK_MISSING"]

@@ -133,7 +133,6 @@ class BiasDetector:
         c1, c2 = np.cumsum(x), np.cumsum(x * x)
         best_step = math.inf
         for k in range(2, n):
-            a, b = x[:k], x[k:]
             rss = (c2[k - 1] - c1[k - 1] ** 2 / k) + max((c2[-1] - c2[k - 1]) - (c1[-1] - c1[k - 1]) ** 2 / (n - k), 0.0)
             best_step = min(best_step, rss)
         i = np.arange(n, dtype=float)

@@ -65,7 +65,7 @@ def setup_signing(conn, key: bytes, accept_unsigned: bool = False) -> None:
     unsigned frames are let through too; wrongly signed ones never are). The connection must speak
     MAVLink 2 from the start (``open_connection(..., mavlink2=True)``): pymavlink would drop the signing
     state when it switches versions."""
-    callback = None
+    callback = None  # None: pymavlink refuses every unsigned frame
     if accept_unsigned:
         seen = {"bad": 0}
 

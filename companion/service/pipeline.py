@@ -371,7 +371,6 @@ class Pipeline:
         g, a = data[:, 1:4], data[:, 4:7]
         if st is None:
             st = block_stats(g, ch.faults.dd_scale_ref())
-        n = g.shape[0]
         a_mean = a.mean(axis=0)
         a_std = a.std(axis=0)
         if np.linalg.norm(a, axis=1).std() > cfg.accel_std:
