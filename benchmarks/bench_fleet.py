@@ -26,7 +26,14 @@ import tempfile
 import threading
 import time
 
-import numpy as np
+# One BLAS thread per process in both runs: Dask's nanny sets this for its workers, and a one-process run
+# with a multi-threaded BLAS would use both cores for part of its time (measured 0.64 CPU s per log with
+# threads vs 0.37 without), which makes "one process" a parallel run and the efficiency meaningless.
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_v] = "1"
+
+import numpy as np  # noqa: E402
+
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
@@ -205,7 +212,7 @@ def scale(args):
         s2, rss = _analyze(db, os.path.join(tmp, "logs"), 2)
         r2 = s2.rate
         print(f"Dask LocalCluster, 2 worker processes: {n} logs in {s2.elapsed_s:.1f} s = {r2:.3f} logs/s "
-              f"({s2.failed} failed)")
+              f"({s2.failed} failed; {s2.batch} log(s) per task, the default for {n} logs)")
         print(f"load average now {os.getloadavg()[0]:.1f}")
         print(f"parallel efficiency (rate on 2 workers) / (2 x rate in one process) = {r2 / (2 * r1):.2f} "
               "(wall clock; on a shared machine each run gets the CPU share its process count wins)")
@@ -218,6 +225,10 @@ def scale(args):
                 q = len(m) // 4
                 print(f"worker RSS [MB]: first quarter of the run {m[:q].mean(axis=0).round(0).tolist()}, "
                       f"last quarter {m[-q:].mean(axis=0).round(0).tolist()}, max {m.max(axis=0).round(0).tolist()}")
+                tenths = [m[int(i * len(m) / 10):max(int((i + 1) * len(m) / 10), int(i * len(m) / 10) + 1)]
+                          .mean() for i in range(10)]
+                print("worker RSS [MB] by tenth of the run (mean of both workers): "
+                      + " ".join(f"{x:.0f}" for x in tenths))
         print(f"this process' peak RSS: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3:.0f} MB")
         with FleetStore(db, create=False) as store:
             imus = store.imus()

@@ -195,3 +195,34 @@ def test_existing_scheduler_on_loopback(tmp_path, capsys):
         assert main(["fleet", "analyze", str(logs), "--db", db, "--scheduler", cluster.scheduler_address,
                      "--quiet"]) == 0
     assert "4 analysed, 0 failed" in capsys.readouterr().out
+
+
+def test_dataflash_fleet_board_ids_and_ranking(tmp_path, capsys):
+    """`fleet simulate --format bin` writes DataFlash logs that `fleet analyze` reads: vehicles by the MCU id
+    in the boot banner, flights ordered by the GPS start time, the degrading IMUs ranked first."""
+    logs = tmp_path / "bin"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "2", "--flights", "8", "--imus", "2",
+                 "--degrading", "2", "--rise", "2", "--duration", "30", "--rate", "50", "--seed", "5",
+                 "--format", "bin"]) == 0
+    assert len(list(logs.glob("*/*.bin"))) == 16
+    truth = json.loads((logs / "fleet_truth.json").read_text())
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--axes", "gx", "--quiet"]) == 0
+    con = sqlite3.connect(db)
+    rows = con.execute("SELECT vehicle, start_time, start_source, board_id FROM logs").fetchall()
+    con.close()
+    by_path = {e["path"]: e for e in truth["logs"]}
+    assert {r[0] for r in rows} == {v["board_id"] for v in truth["vehicles"]}
+    assert all(r[2] == "log" and r[3] == r[0] for r in rows)
+    assert sorted(round(r[1], 1) for r in rows) == sorted(round(e["start_time"], 1) for e in by_path.values())
+    out = tmp_path / "r.json"
+    assert main(["fleet", "report", "--db", db, "--json", str(out)]) == 0
+    imus = json.loads(out.read_text())["imus"]
+    assert {(e["vehicle"], e["imu"]) for e in imus[:2]} == _sick(truth)
+
+
+def test_simulate_format_errors_are_one_line(tmp_path, capsys):
+    assert main(["fleet", "simulate", str(tmp_path / "x"), "--vehicles", "1", "--flights", "2", "--format", "bin",
+                 "--message", "HIGHRES_IMU"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "DataFlash" in err[0]

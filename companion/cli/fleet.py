@@ -76,6 +76,7 @@ examples:
   companion fleet simulate demo/ --vehicles 20 --flights 30
   companion fleet simulate small/ --vehicles 4 --flights 8 --duration 60 --rate 50 --seed 3
   companion fleet simulate b/ --vehicles 10 --flights 20 --param B --rise 2 --message HIGHRES_IMU
+  companion fleet simulate df/ --vehicles 5 --flights 10 --format bin    # ArduPilot DataFlash logs
 """
 
 
@@ -97,8 +98,9 @@ def register(subparsers) -> None:
     a.add_argument("--vehicle", choices=("auto", "dir"), default="auto",
                    help="vehicle id: auto (board id, else sys<sysid>) or dir (the log's folder name)")
     a.add_argument("--axes", default="gx,gy,gz", help="axes to analyse (default gx,gy,gz)")
-    a.add_argument("--batch", type=int, default=1, metavar="K",
-                   help="logs per Dask task (default 1; tens on a large cluster, see docs/fleet.md)")
+    a.add_argument("--batch", type=int, default=None, metavar="K",
+                   help="logs per Dask task (default: 1 for up to 100 logs per worker, then more, at most 20 "
+                        "-- fewer tasks for the scheduler and fewer database transactions; see docs/fleet.md)")
     a.add_argument("--retry-failed", action="store_true", help="analyse logs recorded as failed again")
     a.add_argument("--time-limit", type=float, default=None, metavar="S",
                    help="stop submitting after S seconds (what is recorded stays; run again to resume)")
@@ -129,7 +131,11 @@ def register(subparsers) -> None:
     s.add_argument("--duration", type=float, default=600.0, metavar="S", help="seconds per flight (default 600)")
     s.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="sample rate (default 100)")
     s.add_argument("--message", choices=("ardupilot", "HIGHRES_IMU"), default="ardupilot",
-                   help="ardupilot: RAW_IMU/SCALED_IMU2/SCALED_IMU3 int16 (default); HIGHRES_IMU: float")
+                   help="ardupilot: RAW_IMU/SCALED_IMU2/SCALED_IMU3 int16 (default); HIGHRES_IMU: float "
+                        "(tlogs only)")
+    s.add_argument("--format", choices=("tlog", "bin"), default="tlog",
+                   help="tlog: telemetry logs (default); bin: ArduPilot DataFlash logs (IMU messages, float "
+                        "rad/s, board id in the boot banner, start time in a GPS record)")
     s.add_argument("--seed", type=int, default=0)
     s.set_defaults(func=run_simulate)
 
@@ -160,7 +166,7 @@ def run_analyze(args) -> int:
     axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
     if not axes or any(a not in AXES for a in axes):
         raise CompanionError(f"bad --axes {args.axes!r}: expected a comma list of {', '.join(AXES)}")
-    if args.batch < 1:
+    if args.batch is not None and args.batch < 1:
         raise CompanionError("--batch must be >= 1")
     if args.workers is not None and args.workers < 0:
         raise CompanionError("--workers must be >= 0")
@@ -265,6 +271,10 @@ def run_simulate(args) -> int:
         raise CompanionError(f"--duration {args.duration:g} s at {args.rate:g} Hz is fewer than 64 samples per flight")
     if not (args.rise > 0 and math.isfinite(args.rise)):
         raise CompanionError("--rise must be a positive ratio")
+    if args.format == "bin" and args.message != "ardupilot":
+        raise CompanionError("--message chooses the MAVLink message of tlogs; DataFlash logs hold IMU messages")
+    if args.format == "bin" and args.imus > 3:
+        raise CompanionError("--format bin writes at most 3 IMUs (ArduPilot's IMU instances 0-2)")
     tty = sys.stderr.isatty()
 
     def progress(done, total):
@@ -274,7 +284,8 @@ def run_simulate(args) -> int:
 
     try:
         truth = simulate_fleet(args.out_dir, args.vehicles, args.flights, args.imus, args.degrading, args.rise,
-                               args.param, args.duration, args.rate, args.seed, args.message, progress)
+                               args.param, args.duration, args.rate, args.seed, args.message, progress,
+                               args.format)
     except ValueError as exc:
         raise CompanionError(str(exc)) from None
     except OSError as exc:

@@ -152,6 +152,16 @@ def log_lines(res) -> list[str]:
     p = [f"{k} {params[k]:g}" for k in FILTER_PARAMS if k in params]
     out.append(f"log: {'ArduPilot DataFlash' if fmt == 'dataflash' else 'PX4 ULog'}, {len(params)} parameters"
                + (f" ({', '.join(p)})" if p else ""))
+    ident = meta.get("identity") or {}
+    who = [x for x in (ident.get("board"), ident.get("board_id")) if x]
+    if ident.get("imu_ids"):
+        who.append("gyro ids " + ", ".join(f"IMU{k} {v}" for k, v in sorted(ident["imu_ids"].items())))
+    if ident.get("start_time"):
+        import time
+
+        who.append("started " + time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(ident["start_time"])))
+    if who:
+        out.append("log: board " + ", ".join(who) if ident.get("board_id") else "log: " + ", ".join(who))
     if meta.get("has_armed_state"):
         arm = [f"{t:.1f} s {'armed' if a else 'disarmed'}" for t, a in meta.get("armed") or []]
         out.append("log: armed state: " + (", ".join(arm) if arm else "never armed"))

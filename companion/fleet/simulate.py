@@ -9,10 +9,15 @@ instability B and rate random walk K (log-uniform in ``B_RANGE``, ``K_RANGE``), 
 flight is a still, disarmed recording of ``duration_s`` seconds at ``rate_hz`` with a warming
 temperature.
 
+``fmt="bin"`` writes ArduPilot DataFlash logs instead (``flight_<f>.bin``, 4.x layout): the IMUs as ``IMU``
+instances 0-2 (float rad/s, no int16 rounding), the board's 96-bit id in the boot banner ``MSG``
+(``CubeOrange 0000ABCD ...``; the truth's ``board_id`` is then those 24 hex digits), the gyro ids as
+``INS_GYR*_ID`` parameters and the start time as one ``GPS`` record (week and ms of week).
+
 ``degrading`` IMUs, chosen at random, have their ``param`` (N, B or K) multiplied by
 ``rise ** (f / (F - 1))`` on all three gyro axes at flight f: a geometric rise to ``rise`` times the
 first flight's value at the last flight. The truth (every IMU's parameters and which ones degrade) is
-written to ``OUT_DIR/fleet_truth.json``; logs go to ``OUT_DIR/<vehicle>/flight_<f>.tlog``.
+written to ``OUT_DIR/fleet_truth.json``; logs go to ``OUT_DIR/<vehicle>/flight_<f>.tlog`` (or ``.bin``).
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ K_RANGE = (2.0e-7, 1.0e-6)  # rad/s^1.5
 ARDUPILOT_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
 DAY = 86400.0
 T0_UNIX = 1.75e9
+FORMATS = ("tlog", "bin")
+BIN_BOARD = "CubeOrange"  # the board name in a simulated DataFlash banner
 
 
 def _loguniform(rng, lo_hi, size=None):
@@ -46,8 +53,10 @@ def imu_message(k: int, message: str) -> str:
 
 
 def fleet_truth(vehicles: int, flights: int, imus: int = 3, degrading: int = 3, rise: float = 1.5,
-                param: str = "N", seed: int = 0) -> dict:
+                param: str = "N", seed: int = 0, fmt: str = "tlog") -> dict:
     """The fleet's parameters (no samples): vehicles, IMUs, their per-axis terms, the degrading IMUs."""
+    if fmt not in FORMATS:
+        raise ValueError(f"format must be one of {', '.join(FORMATS)}")
     if vehicles < 1 or flights < 1 or imus < 1:
         raise ValueError("vehicles, flights and imus must be >= 1")
     if not 0 <= degrading <= vehicles * imus:
@@ -60,7 +69,8 @@ def fleet_truth(vehicles: int, flights: int, imus: int = 3, degrading: int = 3, 
     out = {"vehicles": [], "flights": flights, "rise": rise, "param": param, "seed": seed}
     for v in range(vehicles):
         uid = int(rng.integers(1, 2**63))
-        veh = {"name": f"vehicle_{v:03d}", "sysid": v % 250 + 1, "board_id": f"{uid:016x}", "imus": []}
+        board = f"{uid:016x}" if fmt == "tlog" else f"{v + 1:08x}{uid:016x}"  # 64-bit uid / 96-bit MCU id
+        veh = {"name": f"vehicle_{v:03d}", "sysid": v % 250 + 1, "board_id": board, "imus": []}
         for k in range(imus):
             axes = {a: {"N": float(_loguniform(rng, N_RANGE)), "B": float(_loguniform(rng, B_RANGE)),
                         "K": float(_loguniform(rng, K_RANGE))} for a in ("gx", "gy", "gz")}
@@ -81,8 +91,9 @@ def _meta_payloads(board_id: str, gyro_ids: list[int]):
 
 
 def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: str, duration_s: float,
-                 rate_hz: float, message: str, seed) -> dict:
-    """Write one flight's tlog; returns what it holds (start time, per-IMU parameters used)."""
+                 rate_hz: float, message: str, seed, fmt: str = "tlog") -> dict:
+    """Write one flight's log (tlog or DataFlash .bin); returns what it holds (start time, per-IMU
+    parameters used)."""
     from companion.mavlink.tlog_writer import encode_frames, heartbeat_payload, imu_payloads, pack_records
     from companion.sim.synth import flicker, random_walk, white_noise
 
@@ -97,10 +108,12 @@ def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: 
     temperature = temp0 + 3.0 * (1.0 - np.exp(-(t - boot) / 300.0))
     factor = rise ** (f / (flights - 1)) if flights > 1 else 1.0
     rows, msgids, times, used = [], [], [], []
-    for payload, mid in _meta_payloads(vehicle["board_id"], [i["gyro_id"] for i in vehicle["imus"]]):
+    meta = _meta_payloads(vehicle["board_id"], [i["gyro_id"] for i in vehicle["imus"]]) if fmt == "tlog" else []
+    for payload, mid in meta:
         rows.append(np.frombuffer(payload, dtype=np.uint8).reshape(1, -1))  # first in the log (stable sort)
         msgids.append(np.array([mid]))
         times.append(np.array([boot]))
+    gyros, accels = [], []
     for imu in vehicle["imus"]:
         gyro = np.zeros((n, 3))
         par = {}
@@ -113,12 +126,29 @@ def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: 
                           + random_walk(p["K"], rate_hz, n, rng) + rng.normal(0.0, 0.01))  # + a constant bias
         accel = rng.normal(0.0, 0.02, (n, 3))
         accel[:, 2] -= 9.80665
+        if fmt == "bin":
+            gyros.append(gyro)
+            accels.append(accel)
+            used.append({"imu": imu["imu"], "message": "IMU", "axes": par})
+            continue
         msg = imu_message(imu["imu"], message)
         rec = imu_payloads(msg, t, gyro, accel, instance=imu["imu"], temperature=temperature + imu["imu"])
         rows.append(rec.view(np.uint8).reshape(n, -1))
         msgids.append(np.full(n, M.IMU_LAYOUTS[msg].msgid))
         times.append(t)
         used.append({"imu": imu["imu"], "message": msg, "axes": par})
+    if fmt == "bin":
+        from companion.sim.dataflash_writer import write_imu_log
+
+        b = vehicle["board_id"]
+        params = {("INS_GYR_ID" if i["imu"] == 0 else f"INS_GYR{i['imu'] + 1}_ID"): float(i["gyro_id"])
+                  for i in vehicle["imus"][:3]}
+        banner = f"{BIN_BOARD} {b[0:8].upper()} {b[8:16].upper()} {b[16:24].upper()}"
+        write_imu_log(path, t, np.stack(gyros), np.stack(accels), "4.x", params=params,
+                      temperature=float(temperature.mean()),
+                      messages=["ArduCopter V4.5.7 (companion fleet simulate)", banner],
+                      gps_utc=(boot, start))
+        return {"path": str(path), "start_time": start, "imus": used}
     hb_t = boot + np.arange(0.0, duration_s, 1.0)
     rows.append(np.repeat(heartbeat_payload().view(np.uint8).reshape(1, -1), hb_t.size, axis=0))
     msgids.append(np.full(hb_t.size, M.HEARTBEAT.msgid))
@@ -144,13 +174,14 @@ def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: 
 
 def simulate_fleet(out_dir, vehicles: int, flights: int, imus: int = 3, degrading: int = 3, rise: float = 1.5,
                    param: str = "N", duration_s: float = 600.0, rate_hz: float = 100.0, seed: int = 0,
-                   message: str = "ardupilot", progress=None) -> dict:
+                   message: str = "ardupilot", progress=None, fmt: str = "tlog") -> dict:
     """Write the fleet's logs and ``fleet_truth.json`` into ``out_dir``; returns the truth dict.
 
-    ``progress``: optional callable(done, total) after each log.
+    ``progress``: optional callable(done, total) after each log. ``fmt``: ``tlog`` or ``bin``.
     """
-    truth = fleet_truth(vehicles, flights, imus, degrading, rise, param, seed)
-    truth.update(duration_s=duration_s, rate_hz=rate_hz, message=message, logs=[])
+    truth = fleet_truth(vehicles, flights, imus, degrading, rise, param, seed, fmt)
+    truth.update(duration_s=duration_s, rate_hz=rate_hz, message=message if fmt == "tlog" else "IMU",
+                 format=fmt, logs=[])
     os.makedirs(out_dir, exist_ok=True)
     total = vehicles * flights
     done = 0
@@ -158,9 +189,9 @@ def simulate_fleet(out_dir, vehicles: int, flights: int, imus: int = 3, degradin
         vdir = os.path.join(out_dir, veh["name"])
         os.makedirs(vdir, exist_ok=True)
         for f in range(flights):
-            path = os.path.join(vdir, f"flight_{f:03d}.tlog")
+            path = os.path.join(vdir, f"flight_{f:03d}.{fmt}")
             info = write_flight(path, veh, f, flights, rise, param, duration_s, rate_hz, message,
-                                np.random.SeedSequence([seed, 16, v, f]))
+                                np.random.SeedSequence([seed, 16, v, f]), fmt)
             truth["logs"].append({"path": os.path.relpath(path, out_dir), "vehicle": veh["name"],
                                   "flight": f, "start_time": info["start_time"]})
             done += 1

@@ -102,7 +102,7 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
 
         res = load(path, config=config)
         sel = select_still(res.imu_streams(), getattr(res, "meta", {}) or {})
-        ident = log_identity(path, fmt)
+        ident = log_identity(getattr(res, "meta", None))
         streams = res.imu_streams()
         sysids = sorted({s.key.sysid for s in streams})
         sysid = sysids[0] if sysids else 0

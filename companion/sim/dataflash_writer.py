@@ -44,11 +44,13 @@ def _fmt_fmt() -> bytes:
 
 def write_imu_log(path, t_s, gyro, accel, layout: str = "4.x", params: dict | None = None,
                   armed: list[tuple[float, bool]] | None = None, modes: list[tuple[float, int]] | None = None,
-                  temperature: float = 40.0, messages: list[str] | None = None) -> int:
+                  temperature: float = 40.0, messages: list[str] | None = None,
+                  gps_utc: tuple[float, float] | None = None) -> int:
     """Write a DataFlash log: ``t_s`` (n,) seconds since boot; ``gyro``, ``accel`` (k, n, 3) per IMU.
 
     Returns the number of bytes written. Parameters, armed transitions and mode changes are placed at
-    their times (parameters and messages at the start).
+    their times (parameters and messages at the start). ``gps_utc`` = (t since boot, unix time then): one
+    ``GPS`` record with a 3D fix and that time as GPS week and ms of week (4.x layout only).
     """
     if layout not in IMU_LAYOUTS:
         raise ValueError(f"layout must be one of {IMU_LAYOUTS}")
@@ -64,6 +66,10 @@ def write_imu_log(path, t_s, gyro, accel, layout: str = "4.x", params: dict | No
              "EV": _Type(65, "EV", tch + "B", f"{tcol},Id"),
              "MODE": _Type(66, "MODE", tch + "MB", f"{tcol},Mode,ModeNum"),
              "MSG": _Type(67, "MSG", tch + "Z", f"{tcol},Message")}
+    if gps_utc is not None and ms:
+        raise ValueError("gps_utc is written in the 4.x layout only")
+    if gps_utc is not None:
+        types["GPS"] = _Type(68, "GPS", "QBBIH", "TimeUS,I,Status,GMS,GWk")
     if layout == "4.x":
         types["IMU"] = _Type(70, "IMU", "QBffffffIIfBB", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH")
         imu_names = ["IMU"] * k
@@ -110,6 +116,13 @@ def write_imu_log(path, t_s, gyro, accel, layout: str = "4.x", params: dict | No
         small.append((tt, 2, one("EV", tt, 10 if a else 11)))
     for tt, mnum in modes or []:
         small.append((tt, 3, one("MODE", tt, mnum, mnum)))
+    if gps_utc is not None:
+        from companion.sources.dataflash import GPS_EPOCH_UNIX, GPS_LEAP_S
+
+        tt, unix = gps_utc
+        gps = unix + next(v for t_from, v in GPS_LEAP_S if unix >= t_from) - GPS_EPOCH_UNIX
+        week, sow = divmod(gps, 604800.0)
+        small.append((tt, 4, one("GPS", tt, 0, 3, int(round(sow * 1e3)), int(week))))
     # merge everything by time (stable: small messages before IMU samples of the same tick)
     head = _fmt_fmt() + b"".join(ty.fmt_bytes() for ty in types.values())
     scale = 1e3 if ms else 1e6

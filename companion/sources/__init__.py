@@ -104,7 +104,7 @@ def load_tlog(path, config=None, split_periods: float = _timing.SPLIT_PERIODS) -
     streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
     totals = {"frames": index.frames, "bad_bytes": index.bad_bytes, "bad_frames": index.bad_frames,
               "imu_messages": int(sum(r.t.shape[0] for r in raws))}
-    return LoadResult(str(path), streams, totals, dict(index.counts))
+    return LoadResult(str(path), streams, totals, dict(index.counts), {"identity": tlog.identity(index)})
 
 
 def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
@@ -131,6 +131,7 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
               "imu_messages": imu_n}
     meta = df.log_metadata(log)
     meta["format"] = "dataflash"
+    meta["identity"] = df.log_identity(log, meta)
     meta["isb_bursts"] = bursts
     meta["imu_extras"] = {k.instance: {n: int(np.nansum(v)) if n.endswith("errors") else None
                                        for n, v in e.items()} for k, e in extras.items()}
@@ -152,6 +153,7 @@ def load_ulog(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
               "imu_messages": int(sum(r.t.shape[0] for r in raws))}
     meta = ul.metadata(u)
     meta["format"] = "ulog"
+    meta["identity"] = ul.identity(u, meta)
     return LoadResult(str(path), streams, totals, counts, meta)
 
 

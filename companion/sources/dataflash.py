@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import gzip
 import mmap
+import re
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -448,3 +449,72 @@ def gyro_filter_hz(params: dict, instance: int = 0) -> float | None:
     """The gyro low-pass cut-off of the logged IMU data (INS_GYRO_FILTER; 0 or absent: unknown)."""
     v = params.get("INS_GYRO_FILTER")
     return float(v) if v else None
+
+
+# --------------------------------------------------------------------------------------------------
+# identity: which board flew the log, and when
+
+#: ArduPilot's banner line with the MCU's unique id, sent at boot and logged as MSG, e.g.
+#: "Pixhawk4 0047002B 34385105 36363539" (board name, then 96 bits as three 32-bit hex words)
+BOARD_BANNER = re.compile(r"^(\S+) ([0-9A-Fa-f]{8}) ([0-9A-Fa-f]{8}) ([0-9A-Fa-f]{8})\s*$")
+GPS_EPOCH_UNIX = 315964800.0  # 1980-01-06 00:00:00 UTC
+#: GPS - UTC leap seconds from these unix times on (a fleet's start times need seconds, not better)
+GPS_LEAP_S = ((1483228800.0, 18.0), (1435708800.0, 17.0), (1341100800.0, 16.0), (1230768000.0, 15.0),
+              (0.0, 14.0))
+GPS_FIX_3D = 3
+
+
+def board_from_messages(messages) -> tuple[str | None, str | None]:
+    """(board id as 24 lowercase hex digits, board name) from the boot banner among MSG texts."""
+    for _, text in messages:
+        m = BOARD_BANNER.match(text.strip())
+        if m and m.group(1) not in ("Frame:", "PX4:", "ChibiOS:", "NuttX:"):
+            return "".join(m.group(i) for i in (2, 3, 4)).lower(), m.group(1)
+    return None, None
+
+
+def utc_at_boot(log: DataFlashLog) -> float | None:
+    """Unix time at the autopilot's boot from the first GPS record with a 3D fix (instance 0), or None.
+
+    New logs: ``GWk``/``GMS`` (GPS week, ms of week) with ``TimeUS`` since boot; old ones (3.3): ``Week``/
+    ``TimeMS`` (ms of week) with ``T`` (ms since boot)."""
+    if not log.has("GPS"):
+        return None
+    cols = log.columns("GPS")
+    rec = log.records("GPS")
+    if {"GWk", "GMS", "TimeUS"} <= set(cols):
+        wk, ms, boot = rec["GWk"], rec["GMS"], rec["TimeUS"].astype(np.float64) * 1e-6
+    elif {"Week", "TimeMS", "T"} <= set(cols):
+        wk, ms, boot = rec["Week"], rec["TimeMS"], rec["T"].astype(np.float64) * 1e-3
+    else:
+        return None
+    ok = (wk.astype(np.int64) > 0) & (boot > 0)
+    if "Status" in cols:
+        ok &= rec["Status"].astype(np.int64) >= GPS_FIX_3D
+    if "I" in cols:
+        ok &= rec["I"].astype(np.int64) == 0
+    i = np.flatnonzero(ok)
+    if not i.size:
+        return None
+    k = int(i[0])
+    gps = GPS_EPOCH_UNIX + float(wk[k]) * 604800.0 + float(ms[k]) * 1e-3
+    leap = next(v for t0, v in GPS_LEAP_S if gps >= t0)
+    return gps - leap - float(boot[k])
+
+
+def log_identity(log: DataFlashLog, meta: dict) -> dict:
+    """``{"board_id", "board", "imu_ids": {instance: INS_GYRn_ID}, "start_time": unix s of the first IMU
+    sample or None}`` (see :mod:`companion.fleet.identity`)."""
+    board_id, board = board_from_messages(meta.get("messages") or [])
+    params = meta.get("params") or {}
+    ids = {}
+    for name, inst in (("INS_GYR_ID", 0), ("INS_GYR2_ID", 1), ("INS_GYR3_ID", 2)):
+        v = params.get(name)
+        if v is not None and np.isfinite(v) and v != 0:
+            ids[inst] = int(round(v))
+    start = None
+    boot = utc_at_boot(log)
+    if boot is not None:
+        t0 = log.time_s("IMU")[:1] if log.has("IMU") else np.zeros(1)
+        start = boot + (float(t0[0]) if t0.size and np.isfinite(t0[0]) else 0.0)
+    return {"board_id": board_id, "board": board, "imu_ids": ids, "start_time": start}

@@ -211,3 +211,48 @@ def read_file(path) -> bytes:
         raise CompanionError(f"{path}: is a directory, expected a .tlog file") from None
     except OSError as exc:
         raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+
+
+# --------------------------------------------------------------------------------------------------
+# identity: which board sent the log, its gyro ids, and when it started
+
+AUTOPILOT_VERSION_ID = 148
+PARAM_VALUE_ID = 22
+#: ArduPilot gyro device-id parameters and the IMU instance each names
+GYRO_ID_PARAMS = {"INS_GYR_ID": 0, "INS_GYR2_ID": 1, "INS_GYR3_ID": 2}
+_UNIX_US = (1e15, 4.1e15)  # 2001..2099 in unix microseconds: a plausible tlog record stamp
+
+
+def identity(idx: FrameIndex) -> dict:
+    """``{"board_id": hex or None, "board": None, "imu_ids": {instance: int}, "start_time": unix s or None,
+    "board_by_sysid": {sysid: hex}}`` of an indexed tlog.
+
+    ``AUTOPILOT_VERSION.uid`` is the board's 64-bit unique id (0 = not provided); ``PARAM_VALUE`` of
+    ``INS_GYR_ID``/``INS_GYR2_ID``/``INS_GYR3_ID`` are ArduPilot's gyro device ids of IMU 0, 1, 2 (the
+    integer sent as a float, exact below 2^24); the start time is the first record's time stamp (unix
+    microseconds; its low 2 bits may hold a link number, irrelevant here)."""
+    out = {"board_id": None, "board": None, "imu_ids": {}, "start_time": None, "board_by_sysid": {}}
+    if idx.frames:
+        stamps = idx.stamp_us.astype(np.float64)
+        good = stamps[(stamps > _UNIX_US[0]) & (stamps < _UNIX_US[1])]
+        if good.size:
+            out["start_time"] = float(good.min()) / 1e6
+    sel = np.flatnonzero(idx.msgid == AUTOPILOT_VERSION_ID)
+    if sel.size:
+        pl = idx.payloads(sel, 16)
+        uids = pl[:, 8:16].copy().view("<u8").reshape(-1)
+        for s, uid in zip(idx.sysid[sel], uids):
+            if uid:
+                out["board_by_sysid"][int(s)] = f"{int(uid):016x}"
+        if out["board_by_sysid"]:
+            out["board_id"] = next(iter(out["board_by_sysid"].values()))
+    sel = np.flatnonzero(idx.msgid == PARAM_VALUE_ID)
+    if sel.size:
+        pl = idx.payloads(sel, 25)
+        names = [bytes(r[8:24]).split(b"\0", 1)[0].decode("ascii", "replace") for r in pl]
+        values = pl[:, 0:4].copy().view("<f4").reshape(-1)
+        for name, v in zip(names, values):
+            inst = GYRO_ID_PARAMS.get(name)
+            if inst is not None and np.isfinite(v) and v != 0:
+                out["imu_ids"][inst] = int(round(float(v)))
+    return out

@@ -32,7 +32,9 @@ from companion.samples import StreamKey
 from companion.sources.decode import RawStream
 
 TOPICS = ("sensor_combined", "sensor_gyro", "sensor_accel", "sensor_gyro_fifo", "sensor_accel_fifo", "vehicle_imu",
-          "vehicle_status")
+          "vehicle_status", "vehicle_gps_position", "sensor_gps")
+#: PX4 gyro device-id parameters (calibration slots) and the IMU instance each names
+GYRO_ID_PARAMS = {"CAL_GYRO0_ID": 0, "CAL_GYRO1_ID": 1, "CAL_GYRO2_ID": 2, "CAL_GYRO3_ID": 3}
 ARMING_STATE_ARMED = 2
 
 
@@ -162,3 +164,27 @@ def metadata(ulog) -> dict:
         v = float(np.median(sc.data["gyro_integral_dt"]))
         meta["gyro_integral_dt_s"] = v * 1e-6 if v > 1.0 else v  # uint32 us (new) or float s (old)
     return meta
+
+
+def identity(ulog, meta: dict) -> dict:
+    """``{"board_id", "board", "imu_ids", "start_time"}`` of a ULog (see :mod:`companion.fleet.identity`).
+
+    ``board_id``: the info field ``sys_uuid`` (the MCU's unique id, as PX4 writes it); ``board``: ``ver_hw``;
+    ``imu_ids``: ``CAL_GYROn_ID`` parameters (device ids of the calibrated gyros; 0 = empty slot);
+    ``start_time``: unix time of the log's start from the first GPS message with a UTC time
+    (``time_utc_usec`` minus its age against the log's start ``timestamp``)."""
+    info = getattr(ulog, "msg_info_dict", {}) or {}
+    uuid = str(info.get("sys_uuid") or "").strip().lower() or None
+    board = str(info.get("ver_hw") or "").strip() or None
+    params = meta.get("params") or {}
+    ids = {inst: int(params[n]) for n, inst in GYRO_ID_PARAMS.items() if params.get(n)}
+    start = None
+    for d in ulog.data_list:
+        if d.name in ("vehicle_gps_position", "sensor_gps") and "time_utc_usec" in d.data:
+            utc = d.data["time_utc_usec"].astype(np.float64)
+            ok = np.flatnonzero(utc > 1e15)
+            if ok.size:
+                k = int(ok[0])
+                start = float(utc[k] - (float(d.data["timestamp"][k]) - float(ulog.start_timestamp))) * 1e-6
+                break
+    return {"board_id": uuid, "board": board, "imu_ids": ids, "start_time": start}
