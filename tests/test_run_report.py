@@ -57,6 +57,21 @@ def test_healthy_white_noise_replay_invents_no_b_or_k(seed):
         assert set(p.current_params(ch, ax)) == {"N"}  # bounds are never compared with the baseline
 
 
+@pytest.fixture(scope="module")
+def short_sample(tmp_path_factory):
+    """The first 5 minutes of the sample tlog, cut at a record boundary: the same stream (RAW_IMU, 50 Hz,
+    1 mrad/s), a quarter of the replay time."""
+    from companion.sources import tlog
+
+    data = SAMPLE.read_bytes()
+    idx = tlog.scan(data)
+    t = idx.stamp_us.astype(np.float64) * 1e-6
+    cut = int(idx.pos[np.flatnonzero(t > t[0] + 300.0)[0]]) - 8  # the record's 8-byte time stamp
+    path = tmp_path_factory.mktemp("short") / "short.tlog"
+    path.write_bytes(data[:cut])
+    return path
+
+
 def baseline_file(tmp_path, message="RAW_IMU", rate=50.0, lsb=1e-3, scale=1.0):
     axes = {}
     for ax, n in (("gx", 3.5e-4), ("gy", 3.0e-4), ("gz", 4.0e-4)):
@@ -76,17 +91,18 @@ def baseline_file(tmp_path, message="RAW_IMU", rate=50.0, lsb=1e-3, scale=1.0):
     ({"lsb": 2e-3}, "gyro LSB 0.002 rad/s vs stream 0.001 rad/s"),
     ({"scale": 3437.75}, "not SI units"),  # N written in deg/sqrt(h) instead of rad/s/sqrt(Hz)
 ])
-def test_a_baseline_of_another_stream_is_one_error_line(tmp_path, capsys, kw, msg):
+def test_a_baseline_of_another_stream_is_one_error_line(tmp_path, capsys, kw, msg, short_sample):
     path = baseline_file(tmp_path, **kw)
-    rc = main(["run", "--source", str(SAMPLE), "--baseline", path, "--quiet", "--no-state"])
+    rc = main(["run", "--source", str(short_sample), "--baseline", path, "--quiet", "--no-state"])
     err = capsys.readouterr().err
     assert rc == 2 and msg in err and "--baseline-force" in err and len(err.strip().splitlines()) == 1
     if "scale" not in kw:
-        rc = main(["run", "--source", str(SAMPLE), "--baseline", path, "--baseline-force", "--quiet", "--no-state"])
+        rc = main(["run", "--source", str(short_sample), "--baseline", path, "--baseline-force", "--quiet",
+                   "--no-state"])
         assert rc == 0
 
 
-def test_a_matching_baseline_is_accepted(tmp_path, capsys):
-    rc = main(["run", "--source", str(SAMPLE), "--baseline", baseline_file(tmp_path), "--quiet", "--no-state"])
+def test_a_matching_baseline_is_accepted(tmp_path, capsys, short_sample):
+    rc = main(["run", "--source", str(short_sample), "--baseline", baseline_file(tmp_path), "--quiet", "--no-state"])
     out = capsys.readouterr().out
     assert rc == 0 and "healthy" in out and "degrading" not in out
