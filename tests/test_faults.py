@@ -287,3 +287,25 @@ def test_resolution_loss_and_float_data_untested():
         st = block_stats(rng.normal(0, 1e-3, (FS, 3)))
         assert not f.update(float(st.step[0]), int(st.changes[0]))
     assert f.lsb == 0.0
+
+
+@pytest.mark.parametrize("rate", [400.0, 300.0, 150.0])
+def test_millisecond_stamps_at_rates_off_the_ms_grid_are_regular(rate):
+    """SCALED_IMU2/3 carry time_boot_ms: at 400 Hz the stamps step 2, 3, 2, 3 ms. That is the stamp's
+    resolution, not a timing fault; at 150 Hz (6.7 ms) a jitter of 35 % of the period still is one."""
+    d = TimingDetector(stamp_res=1e-3)
+    rng = np.random.default_rng(2)
+    n = int(rate)
+    for k in range(40):
+        t = np.floor((10.0 + k + np.arange(n) / rate + rng.uniform(0, 1e-4, n)) * 1e3) / 1e3
+        assert not d.update(t), (k, d.detail)
+    assert d.ref_rate == pytest.approx(rate, rel=0.01)
+    if rate > 200.0:
+        return  # a 1-ms stamp cannot show jitter of a fraction of a 2.5-3.3 ms period
+    bad = None
+    for k in range(40, 46):
+        ideal = 10.0 + k + np.arange(n) / rate
+        t = np.floor((ideal + rng.normal(0, 0.35 / rate, n)) * 1e3) / 1e3
+        t = np.maximum.accumulate(t + 1e-9 * np.arange(n))
+        bad = d.update(t) or bad
+    assert bad and "irregular" in d.detail

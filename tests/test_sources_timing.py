@@ -67,3 +67,14 @@ def test_reboot_and_gap_in_a_tlog(tmp_path, message):
     assert s.segments == [(0, 499), (499, 799)]
     assert s.timing.rate_hz == pytest.approx(rate, rel=1e-6)
     assert s.samples == 799
+
+
+def test_period_of_ms_stamped_streams_and_lost_samples():
+    from companion.sources.timing import period_of
+
+    for rate in (400.0, 300.0, 250.0, 150.0, 100.0):
+        t = np.floor((5.0 + np.arange(4000) / rate) * 1e3) / 1e3
+        assert 1.0 / period_of(np.diff(t), 1e-3) == pytest.approx(rate, rel=2e-3)
+        keep = np.random.default_rng(0).random(t.size) > 0.2  # 20 % lost: intervals of 2, 3 periods left out
+        assert 1.0 / period_of(np.diff(t[keep]), 1e-3) == pytest.approx(rate, rel=0.01)
+    assert np.isnan(period_of([], 1e-3))

@@ -58,11 +58,11 @@ class AxisFaults:
 
 
 class ImuFaults:
-    def __init__(self, imu: int, abs_limit: float = math.inf, ref_blocks: int = REF_BLOCKS):
+    def __init__(self, imu: int, abs_limit: float = math.inf, ref_blocks: int = REF_BLOCKS, stamp_res: float = 0.0):
         self.imu = imu
         self.ref_blocks = int(ref_blocks)
         self.axes = {ax: AxisFaults(abs_limit) for ax in AXES}
-        self.timing = TimingDetector()
+        self.timing = TimingDetector(stamp_res)
         self.external: dict[tuple[str, str], int] = {}  # (kind, axis) -> state, e.g. ("disagree", "gx")
         self.quiet_blocks = 0
 

@@ -1,8 +1,11 @@
 """Rate drop and irregular timing of one IMU stream (message time).
 
-Per block: the rate 1 / median(dt) and the jitter: the rms of each interval's distance to the nearest
-whole number of periods, over the period (a lost message leaves an interval of exactly two periods and
-no jitter: losses on the link are not a sensor fault). The reference is the median rate of the first
+Per block: the rate 1 / period (:func:`companion.sources.timing.period_of`: the mean of the intervals up
+to 1.5x their median plus the timestamp resolution) and the jitter: the rms of each interval's distance to
+the nearest whole number of periods, less the timestamp resolution ``stamp_res`` (1 ms for
+``time_boot_ms``: a 400 Hz stream stamped in whole ms steps 2, 3, 2, 3 ms and is regular), over the
+period (a lost message leaves an interval of exactly two periods and no jitter: losses on the link are
+not a sensor fault). The reference is the median rate of the first
 ``REF_BLOCKS`` blocks. FAULT when, in ``HOLD`` consecutive blocks, the rate is below ``DROP`` x the
 reference (the sensor itself slowed by 30 %) or the jitter is above ``JITTER`` (intervals scattered by
 20 % of the period; ArduPilot's streams at 100 Hz show a few %). Cleared after ``HOLD`` good blocks. A
@@ -17,6 +20,7 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.faults import FAULT, OK
+from companion.sources.timing import period_of
 
 REF_BLOCKS = 10
 HOLD = 5
@@ -27,7 +31,8 @@ JITTER = 0.2
 class TimingDetector:
     kind = "rate"
 
-    def __init__(self):
+    def __init__(self, stamp_res: float = 0.0):
+        self.stamp_res = float(stamp_res)
         self.state = OK
         self.ref_rate = math.nan
         self._rates: list = []
@@ -39,12 +44,13 @@ class TimingDetector:
         if t.size < 5 or t[-1] <= t[0]:
             return False
         dt = np.diff(t)
-        period = float(np.median(dt))
+        period = period_of(dt, self.stamp_res)
         if not period > 0:
             return False
         rate = 1.0 / period
         k = np.maximum(np.round(dt / period), 1.0)
-        jitter = float(np.sqrt(np.mean(((dt - k * period) / period) ** 2)))
+        dev = np.maximum(np.abs(dt - k * period) - self.stamp_res, 0.0)
+        jitter = float(np.sqrt(np.mean((dev / period) ** 2)))
         if math.isnan(self.ref_rate):
             self._rates.append(rate)
             if len(self._rates) >= REF_BLOCKS:

@@ -45,6 +45,7 @@ from companion.health.monitor import ImuFaults
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter)
 from companion.samples import ACCEL_AXES, GYRO_AXES
+from companion.sources.timing import period_of, stamp_resolution
 
 FAST_PARAMS = ("Q", "N")
 SLOW_PARAMS = ("B", "K", "R")
@@ -103,6 +104,7 @@ class Channel:
 
     def __init__(self, imu: int, message: str, cfg: PipelineConfig):
         self.imu, self.message, self.cfg = imu, message, cfg
+        self.time_res = stamp_resolution(message)  # 1 ms for time_boot_ms: 400 Hz comes as 2 and 3 ms steps
         self.gyro_lsb = None if message in ("HIGHRES_IMU", "CSV") else 1e-3  # set from the scale table in on_sample
         self.axes = GYRO_AXES + (ACCEL_AXES if cfg.accel else ())
         self.last_t: float | None = None
@@ -123,7 +125,8 @@ class Channel:
         self.feed_buf_s = 0.0
         self.next_check_t: float | None = None
         self.detector = HealthDetector(imu, cfg.health)
-        self.faults = ImuFaults(imu, cfg.gyro_limit, max(1, int(round(cfg.fault_ref_s / cfg.block_s))))
+        self.faults = ImuFaults(imu, cfg.gyro_limit, max(1, int(round(cfg.fault_ref_s / cfg.block_s))),
+                                stamp_res=self.time_res)
         self.last_stats = None  # BlockStats of the last closed block (motion consensus between IMUs)
         self.pending_stats = None
         self.ref_accel_std = None
@@ -321,7 +324,7 @@ class Pipeline:
         self._report(ch.faults.on_block(st, data[:, 0], still), float(data[-1, 0]))
         self._pairs(ch)
         if len(ch.dts) >= 8:
-            rate = 1.0 / float(np.median(ch.dts))
+            rate = 1.0 / period_of(ch.dts, ch.time_res)
             if ch.rate_hz is None:
                 ch.rate_hz = rate
                 if self.baseline_fixed and self._has_baseline(ch):
