@@ -21,9 +21,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from companion.errors import CompanionError
+from companion.sources.kind import LOG_SUFFIXES as _LOG_SUFFIXES
+from companion.sources.kind import file_kind
 
-#: log suffixes taken from folders and globs (lower case)
-LOG_SUFFIXES = (".tlog", ".tlog.gz", ".tlog.bin", ".mavlink", ".csv", ".csv.gz", ".bin", ".bin.gz", ".ulg", ".ulg.gz")
+#: log suffixes taken from folders and globs (lower case): every kind companion.sources.kind_of names
+LOG_SUFFIXES = _LOG_SUFFIXES
+#: the short format names the fleet store keeps, per source kind
+FORMAT_NAMES = {"tlog": "tlog", "csv": "csv", "dataflash": "bin", "ulog": "ulg"}
 _GLOB_CHARS = set("*?[")
 
 
@@ -37,24 +41,18 @@ class LogFile:
 
 
 def is_log_name(name: str) -> bool:
-    low = name.lower()
-    return any(low.endswith(s) for s in LOG_SUFFIXES)
+    return file_kind(name) is not None
 
 
 def log_format(path: str) -> str:
     """Short format name from the file name: tlog, csv, bin, ulg (or the suffix)."""
+    kind = file_kind(path)
+    if kind is not None:
+        return FORMAT_NAMES[kind]
     low = path.lower()
-    if low.endswith(".gz") and not low.endswith(".csv.gz"):
+    if low.endswith(".gz"):
         low = low[:-3]
-    if low.endswith((".tlog", ".tlog.bin", ".mavlink")):
-        return "tlog"
-    if low.endswith((".csv", ".csv.gz")):
-        return "csv"
-    if low.endswith(".bin"):
-        return "bin"
-    if low.endswith(".ulg"):
-        return "ulg"
-    return Path(path).suffix.lstrip(".").lower() or "unknown"
+    return Path(low).suffix.lstrip(".") or "unknown"
 
 
 def _stat(path: str) -> LogFile:

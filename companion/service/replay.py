@@ -15,7 +15,7 @@ import numpy as np
 
 from companion.sources import messages as M
 from companion.sources import tlog
-from companion.sources.decode import ScaleTable, streams_from_records
+from companion.sources.decode import ScaleTable, split_by_imu
 
 
 def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: False) -> dict:
@@ -37,18 +37,13 @@ def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: F
         if sel.size == 0:
             continue
         rec = index.payloads(sel, layout.full_len).view(layout.dtype).reshape(-1)
-        inst = (np.full(sel.size, M.FIXED_INSTANCE[layout.name]) if layout.name in M.FIXED_INSTANCE
-                else rec["id"].astype(np.int64))
-        key3 = index.sysid[sel].astype(np.int64) * 65536 + index.compid[sel].astype(np.int64) * 256 + inst
-        for k in np.unique(key3):
-            m = key3 == k
-            (raw,) = streams_from_records(layout, rec[m], index.sysid[sel][m], index.compid[sel][m], scales)
+        for raw, pos in split_by_imu(layout, rec, index.sysid[sel], index.compid[sel], scales):
             if not raw.is_imu:
                 continue
             streams.append(raw)
-            order_parts.append(sel[m])
-            srcs.append(np.full(int(m.sum()), len(streams) - 1, dtype=np.int64))
-            rows.append(np.arange(int(m.sum())))
+            order_parts.append(sel[pos])
+            srcs.append(np.full(raw.t.shape[0], len(streams) - 1, dtype=np.int64))
+            rows.append(np.arange(raw.t.shape[0]))
     frame = np.concatenate(order_parts)
     src = np.concatenate(srcs)
     row = np.concatenate(rows)
@@ -68,15 +63,16 @@ def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: F
             "heartbeats": int(hb.size), "imu_samples": int(sum(s.t.shape[0] for s in streams)), "used": int(used)}
 
 
-REPLAY_LOG_SUFFIXES = (".bin", ".bin.gz", ".ulg", ".ulg.gz", ".csv", ".csv.gz")
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 _AUTOPILOT = {"dataflash": 3, "ulog": 12}  # MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4; else GENERIC (0)
 
 
 def is_replay_source(spec) -> bool:
-    """True for a file ``companion run --source`` replays (.tlog, .bin, .ulg, .csv; each optionally .gz)."""
-    low = str(spec).lower()
-    return low.endswith((".tlog", ".tlog.gz")) or low.endswith(REPLAY_LOG_SUFFIXES)
+    """True for a file ``companion run --source`` replays (every log kind :func:`companion.sources.kind_of`
+    names: .tlog/.tlog.bin/.mavlink, DataFlash .bin, .ulg, .csv; each optionally .gz)."""
+    from companion.sources.kind import file_kind
+
+    return file_kind(spec) is not None
 
 
 def replay_log(path, pipeline, stop=lambda: False) -> dict:

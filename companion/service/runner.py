@@ -84,7 +84,9 @@ def replay(src: str, pcfg, period: float, baseline, scales, writer, state: Path 
     reporter = Reporter(sink, period)
     pipeline = Pipeline(pcfg, reporter, baseline, log, scales)
     restore(pipeline, state, relearn, warn, log)
-    if src.lower().endswith((".tlog", ".tlog.gz")):
+    from companion.sources.kind import kind_of
+
+    if kind_of(src) == "tlog":  # frame order with its HEARTBEATs (armed state)
         totals = replay_tlog(src, pipeline, scales, stop=stop)
     else:
         totals = replay_log(src, pipeline, stop=stop)

@@ -24,10 +24,11 @@ import numpy as np
 from companion.errors import CompanionError
 from companion.samples import ImuStream
 from companion.sources import timing as _timing
+from companion.sources.kind import kind_of
 from companion.sources.decode import (COMPASS_ONLY_CAN, TIME_RESOLUTION, RawStream, ScaleTable,
                                       imu_sample_from_message)
 
-__all__ = ["load", "LoadResult", "ScaleTable", "build_stream", "imu_sample_from_message", "load_config"]
+__all__ = ["load", "kind_of", "LoadResult", "ScaleTable", "build_stream", "imu_sample_from_message", "load_config"]
 
 
 @dataclass
@@ -214,19 +215,19 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
     YAML path. ``require_imu``: raise :class:`CompanionError` when no stream is an IMU.
     Any user-caused problem raises :class:`CompanionError` (one line).
     """
-    from companion.sources.connection import is_connection_string, parse_connection
+    from companion.sources.connection import parse_connection
 
     s = str(spec)
-    low = s.lower()
-    if low.endswith(".csv") or low.endswith(".csv.gz"):
+    kind = kind_of(s)
+    if kind == "csv":
         res = load_csv(s, split_periods)
-    elif low.endswith((".tlog", ".tlog.bin", ".mavlink", ".tlog.gz")):
+    elif kind == "tlog":
         res = load_tlog(s, config, split_periods)
-    elif low.endswith((".bin", ".bin.gz")):
+    elif kind == "dataflash":
         res = load_dataflash(s, split_periods)
-    elif low.endswith((".ulg", ".ulg.gz")):
+    elif kind == "ulog":
         res = load_ulog(s, split_periods)
-    elif is_connection_string(s):
+    elif kind == "connection":
         parse_connection(s, baud)  # validate before anything else
         res = load_live(s, duration or 0.0, config, baud, split_periods)
     elif Path(s).is_file():

@@ -96,18 +96,26 @@ def _instance(layout: M.MessageLayout, rec: np.ndarray) -> np.ndarray:
     return rec["id"].astype(np.int64)
 
 
-def streams_from_records(layout: M.MessageLayout, rec: np.ndarray, sysid: np.ndarray, compid: np.ndarray,
-                         scales: ScaleTable) -> list[RawStream]:
-    """Split decoded payload records of one message type into streams (sysid, compid, instance) in SI."""
+def split_by_imu(layout: M.MessageLayout, rec: np.ndarray, sysid: np.ndarray, compid: np.ndarray,
+                 scales: ScaleTable) -> list[tuple[RawStream, np.ndarray | slice]]:
+    """The per-IMU split: decoded payload records of one message type as streams (sysid, compid, instance)
+    in SI, each with the positions of its records in ``rec`` (offline loading and the tlog replay, which
+    interleaves the streams again in frame order, both use it)."""
     inst = _instance(layout, rec)
     key3 = sysid.astype(np.int64) * 65536 + compid.astype(np.int64) * 256 + inst
     out = []
     keys = np.unique(key3)
     for k in keys:
-        r = rec if keys.shape[0] == 1 else rec[key3 == k]
+        pos = slice(None) if keys.shape[0] == 1 else np.flatnonzero(key3 == k)
         key = StreamKey(int(k >> 16), int((k >> 8) & 0xFF), layout.name, int(k & 0xFF))
-        out.append(_to_si(layout, key, r, scales))
+        out.append((_to_si(layout, key, rec[pos], scales), pos))
     return out
+
+
+def streams_from_records(layout: M.MessageLayout, rec: np.ndarray, sysid: np.ndarray, compid: np.ndarray,
+                         scales: ScaleTable) -> list[RawStream]:
+    """Split decoded payload records of one message type into streams (sysid, compid, instance) in SI."""
+    return [raw for raw, _ in split_by_imu(layout, rec, sysid, compid, scales)]
 
 
 def _to_si(layout: M.MessageLayout, key: StreamKey, r: np.ndarray, scales: ScaleTable) -> RawStream:
