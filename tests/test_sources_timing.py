@@ -78,3 +78,49 @@ def test_period_of_ms_stamped_streams_and_lost_samples():
         keep = np.random.default_rng(0).random(t.size) > 0.2  # 20 % lost: intervals of 2, 3 periods left out
         assert 1.0 / period_of(np.diff(t[keep]), 1e-3) == pytest.approx(rate, rel=0.01)
     assert np.isnan(period_of([], 1e-3))
+
+
+def _messy(rng, n, period, res):
+    """Timestamps with duplicates, small steps back, gaps, long gaps and a reboot, stamped at ``res``."""
+    t = 5.0 + np.arange(n) * period + rng.normal(0, 0.05 * period, n)
+    t[n // 3:] += 0.7  # a gap long enough to split
+    for i in rng.choice(np.arange(1, n), 12, replace=False):
+        t[i] = t[i - 1]  # duplicates
+    for i in rng.choice(np.arange(2, n), 6, replace=False):
+        t[i] = t[i - 1] - 0.3 * period  # small steps back
+    gaps = rng.choice(np.arange(1, n), 5, replace=False)
+    for i in gaps:
+        t[i:] += 2.2 * period  # short gaps
+    t[2 * n // 3:] -= t[2 * n // 3] - 0.5  # reboot: time starts again near 0
+    return np.round(t / res) * res if res else t
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_classify_steps_counts_equal_analyse(seed):
+    """The vectorised step rules (what a live block cutter calls, block by block or one sample at a time)
+    count what the offline analysis counts, and keep the same samples."""
+    from companion.sources.timing import (BACKWARD, DUPLICATE, GAP, RESET, SPLIT, analyse, classify_steps,
+                                          step_rules)
+
+    rng = np.random.default_rng(seed)
+    res = 1e-3 if seed % 2 else 0.0
+    period = 1 / 400.0 if seed % 2 else 0.01
+    t = _messy(rng, 3000, period, res)
+    keep, segments, rep = analyse(t, res, rate_hz=1 / period)
+    rules = step_rules(period, res)
+    kind = classify_steps(t, None, rules)
+    assert int((kind == DUPLICATE).sum()) == rep.duplicates
+    assert int((kind == BACKWARD).sum()) == rep.backwards
+    assert int((kind == RESET).sum()) == rep.resets >= 1
+    assert int(((kind == GAP) | (kind == SPLIT)).sum()) == rep.gaps >= 5
+    assert 1 + int(((kind == RESET) | (kind == SPLIT)).sum()) == len(segments) >= 3
+    assert np.array_equal(keep, (kind != DUPLICATE) & (kind != BACKWARD))
+    # in pieces, carrying the newest kept timestamp: the same kinds (a one-sample call is a one-row block)
+    parts, newest = [], None
+    for a, b in ((0, 1), (1, 700), (700, 701), (701, 3000)):
+        parts.append(classify_steps(t[a:b], newest, rules))
+        k = np.concatenate(parts)
+        resets = np.flatnonzero(k == RESET)
+        lo = int(resets[-1]) if resets.shape[0] else 0  # the newest kept timestamp since the last reset
+        newest = float(t[lo:b][((k != DUPLICATE) & (k != BACKWARD))[lo:b]].max())
+    assert np.array_equal(np.concatenate(parts), kind)

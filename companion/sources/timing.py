@@ -18,6 +18,8 @@ Rules (applied in arrival order, never resampling, never reordering):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from companion.samples import TimingReport
@@ -53,6 +55,60 @@ def period_of(intervals, resolution: float = 0.0) -> float:
     return p
 
 
+@dataclass(frozen=True)
+class StepRules:
+    """The thresholds of the rules above for a stream of period ``period`` s (see :func:`step_rules`)."""
+
+    period: float
+    resolution: float
+    reset_s: float  # a step back by more than this starts a new segment (reboot)
+    gap_s: float  # a step forward by more than this is a gap (counted)
+    split_s: float  # a step forward by more than this also splits the segment
+
+
+def step_rules(period: float, resolution: float = 0.0, split_periods: float = SPLIT_PERIODS) -> StepRules:
+    """The timestamp rules (reset, gap, split thresholds) for sampling period ``period`` and stamp resolution
+    ``resolution``: the one definition the offline analysis (:func:`analyse`) and a live block cutter share."""
+    return StepRules(period, resolution, max(1.0, 10.0 * period), 1.5 * period + resolution,
+                     split_periods * period + resolution)
+
+
+#: step kinds of :func:`classify_steps`
+OK, DUPLICATE, BACKWARD, RESET, GAP, SPLIT = range(6)
+
+
+def classify_steps(t, newest: float | None, rules: StepRules) -> np.ndarray:
+    """The kind of every timestamp of ``t`` (s, arrival order) under the rules above, vectorised: ``OK``,
+    ``DUPLICATE`` / ``BACKWARD`` (the sample is dropped), ``RESET`` (a new segment starts with it), ``GAP``
+    (kept, a gap before it), ``SPLIT`` (kept, a gap long enough to split the segment). Each is compared with
+    the newest kept timestamp before it; ``newest`` is that of the samples before ``t`` (None: ``t[0]`` is
+    the first of the stream, OK). A live caller passes one sample (a one-row call) or a block; the counts
+    over a whole stream equal :func:`analyse`'s with the same period."""
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    kind = np.zeros(t.shape[0], dtype=np.int8)
+    start = 0
+    prev = -np.inf if newest is None else float(newest)
+    while start < t.shape[0]:
+        seg = t[start:]
+        pm = np.maximum.accumulate(np.r_[prev, seg])[:-1]  # newest kept timestamp before each sample
+        jump = np.flatnonzero(seg < pm - rules.reset_s)
+        stop = int(jump[0]) if jump.shape[0] else seg.shape[0]
+        d = seg[:stop] - pm[:stop]
+        k = kind[start:start + stop]
+        k[d > rules.gap_s] = GAP
+        k[d > rules.split_s] = SPLIT
+        k[d < 0] = BACKWARD
+        k[d == 0] = DUPLICATE
+        if stop == seg.shape[0]:
+            break
+        kind[start + stop] = RESET
+        prev = float(seg[stop])
+        start += stop + 1
+    if newest is None and kind.shape[0]:
+        kind[0] = OK
+    return kind
+
+
 def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT_PERIODS,
             rate_hz: float | None = None) -> tuple[np.ndarray, list[tuple[int, int]], TimingReport]:
     """Timing of arrival-ordered timestamps ``t`` (s).
@@ -72,7 +128,7 @@ def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT
     p0 = float(np.median(pos)) if pos.shape[0] else 1.0
     if rate_hz:
         p0 = 1.0 / rate_hz
-    reset_s = max(1.0, 10.0 * p0)
+    reset_s = step_rules(p0, resolution, split_periods).reset_s
     starts = [0]
     s, w = 0, 1024
     while s < n - 1:  # search windows double in size, so the total work stays O(n)
@@ -120,8 +176,9 @@ def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT
     rep.rate_hz = 1.0 / period if period and np.isfinite(period) and period > 0 else float("nan")
     # 4. gaps and splits
     if np.isfinite(period):
-        gap = inside & (dk > 1.5 * period + resolution)
-        split = inside & (dk > split_periods * period + resolution)
+        rules = step_rules(period, resolution, split_periods)
+        gap = inside & (dk > rules.gap_s)
+        split = inside & (dk > rules.split_s)
         normal = inside & ~gap
         if normal.any():
             rep.jitter_rms = float(np.sqrt(np.mean((dk[normal] - period) ** 2)))
