@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from companion.analysis.axis import analyze_axis, filter_tau
 from companion.analysis.limits import FIT_MIN_RATE_HZ, FIT_MIN_SECONDS
 from companion.samples import GYRO_AXES
