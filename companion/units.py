@@ -78,3 +78,10 @@ def from_datasheet(param: str, value: float, axis: str = "gx") -> float:
 
 def datasheet_unit(param: str, axis: str = "gx") -> str:
     return (GYRO_UNITS if is_gyro_axis(axis) else ACCEL_UNITS)[param]
+
+
+def fmt_value(v: float) -> str:
+    """A value in a table: 3 significant digits, exponent form outside 1e-3 .. 1e5."""
+    if v == 0 or not math.isfinite(v):
+        return f"{v:g}"
+    return f"{v:.3g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.2e}"

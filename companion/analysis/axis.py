@@ -46,7 +46,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
         out["status"] = "constant"
         out["note"] = "all samples equal (" + ("all zero" if allv[0] == 0 else f"{allv[0]:g}") + "): no noise to analyse"
         return out
-    from companion.allan.fit import fit_avar  # scipy.optimize/stats: only where a fit runs (issue 14)
+    from companion.allan.fit import fit_avar  # scipy.optimize/stats: only where a fit runs (start-up time)
 
     lengths = [int(p.shape[0]) for p in pieces]
     pooled = len(pieces) > 1
@@ -67,7 +67,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
                    level=level, segments=lengths if pooled else None)
     from companion.estimators.report import bounds_for_fit
 
-    # effects the fit left out (N, B, K): their 95 % upper bound, as the online report gives it (issue 13)
+    # effects the fit left out (N, B, K): their 95 % upper bound, as the online report gives it (so offline and online reports compare)
     bounds = bounds_for_fit(fit, tau_f[keep], avar_f[keep], np.maximum(edf0, 0.5), rate_hz, n)
     m = parse_taus(taus, max(lengths), rate_hz) if isinstance(taus, str) else cluster_sizes(max(lengths), taus)
     tau, avar, m, _ = pooled_oavar(pieces, rate_hz, m=m)

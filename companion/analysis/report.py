@@ -2,17 +2,11 @@
 
 from __future__ import annotations
 
-import math
-
 from companion import units
 from companion.allan.terms import PARAMS
 from companion.samples import ACCEL_AXES, GYRO_AXES
+from companion.units import fmt_value as _fmt
 
-
-def _fmt(v: float) -> str:
-    if v == 0 or not math.isfinite(v):
-        return f"{v:g}"
-    return f"{v:.3g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.2e}"
 
 
 def format_term(t: dict, axis: str) -> str:

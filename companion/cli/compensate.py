@@ -9,6 +9,7 @@ import sys
 import numpy as np
 
 from companion.cli.output import to_json, write_text
+from companion.cli.progress import Progress
 from companion.errors import CompanionError
 from companion.samples import AXES, GYRO_AXES
 
@@ -94,21 +95,6 @@ def select_series(res, axis: str, stream_index: int, max_samples):
     return s.t[a:b], np.asarray(s.axis(axis)[a:b], dtype=float), rate, s.key.label()
 
 
-class Progress:
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
-
-    def __call__(self, name, done, total):
-        if self.enabled and total > 0:
-            sys.stderr.write(f"\rcompensate: {name:<8} {100.0 * done / total:5.1f} % of {total} samples ")
-            sys.stderr.flush()
-
-    def close(self):
-        if self.enabled:
-            sys.stderr.write("\r" + " " * 60 + "\r")
-            sys.stderr.flush()
-
-
 def _nearest(tau, value):
     return int(np.argmin(np.abs(np.log(tau) - np.log(value))))
 
@@ -145,7 +131,7 @@ def run(args) -> int:
     methods = parse_methods(args.method)
     res = load(args.source, args.config, duration=args.duration)
     t, z, rate, label = select_series(res, axis, args.stream, args.max_samples)
-    progress = Progress(not args.quiet and z.shape[0] > 50_000 and sys.stderr.isatty())
+    progress = Progress("compensate", enabled=not args.quiet and z.shape[0] > 50_000)
     from companion.compensation.pipeline import compensate
 
     try:

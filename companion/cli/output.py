@@ -33,7 +33,7 @@ def write_text(path, text: str, what: str = "file") -> None:
         raise CompanionError(f"{path}: cannot write {what} ({exc.strerror or exc})") from None
 
 
-# --- output paths, checked before any work (issue 14) -------------------------------------------------
+# --- output paths, checked before any work (a bad path must not cost an hour's analysis) -------------------------------------------------
 #: One rule for every file the CLI writes: the directory must already exist (nothing is created), the
 #: path must not be a directory, and it must be writable. Checked before the work starts, so a typo costs
 #: one line, not an analysis.

@@ -6,9 +6,11 @@ import sys
 
 
 class Progress:
-    """``NAME [#####.....] 3/6 label``, redrawn in place; ``close()`` clears the line."""
+    """``NAME [#####.....] 3/6 label`` per :meth:`step`, or ``NAME: part  42.0 % of N samples`` when called
+    as ``progress(part, done, total)`` (a long computation's callback); redrawn in place, ``close()`` clears
+    the line."""
 
-    def __init__(self, name: str, total: int, enabled: bool):
+    def __init__(self, name: str, total: int = 0, enabled: bool = True):
         self.name = name
         self.total, self.done = max(total, 1), 0
         self.enabled = enabled and sys.stderr.isatty()
@@ -18,6 +20,11 @@ class Progress:
         if self.enabled:
             k = int(30 * self.done / self.total)
             sys.stderr.write(f"\r{self.name} [{'#' * k}{'.' * (30 - k)}] {self.done}/{self.total} {label:<28}")
+            sys.stderr.flush()
+
+    def __call__(self, part: str, done: int, total: int):
+        if self.enabled and total > 0:
+            sys.stderr.write(f"\r{self.name}: {part:<8} {100.0 * done / total:5.1f} % of {total} samples ")
             sys.stderr.flush()
 
     def close(self):

@@ -134,7 +134,7 @@ def run(args) -> int:
     sim = build_simulator(args, model, args.rate)
     os.environ.setdefault("MAVLINK20", "1")  # speak MAVLink 2 like ArduPilot (pymavlink picks the dialect from it)
     conn = open_connection(args.connect, source_system=args.sysid, source_component=1)
-    if args.signing_key:  # i14: signing, as on an autopilot after SETUP_SIGNING
+    if args.signing_key:  # signing, as on an autopilot after SETUP_SIGNING
         from companion.mavlink.signing import load_signing_key, setup_signing
 
         setup_signing(conn, load_signing_key(args.signing_key))

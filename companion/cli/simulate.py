@@ -136,7 +136,7 @@ def run(args) -> int:
     from companion.sim.synth import check_model_rate
 
     try:
-        check_model_rate(model)  # i14: a sinusoid above Nyquist, an impossible f0: refused before the work
+        check_model_rate(model)  # a sinusoid above Nyquist, an impossible f0: refused before the work
     except ValueError as exc:
         raise CompanionError(f"{args.model}: {exc}") from None
     out = args.out

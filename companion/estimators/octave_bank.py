@@ -57,7 +57,7 @@ import math
 import numpy as np
 
 from companion.allan.confidence import edf_simple, oavar_covariance
-from companion.allan.lsq import exp_sum, nnls  # numpy-only: the live pipeline loads no scipy (issue 14)
+from companion.allan.lsq import exp_sum, nnls  # numpy-only: the live pipeline loads no scipy (seconds of start-up, tens of MB on a small board)
 from companion.allan.terms import EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, linear_basis
 
 #: every effect of the offline model (the candidates of the model selection, companion.estimators.report)

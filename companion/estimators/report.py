@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.allan.terms import BASE_EFFECTS, EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM
+from companion.units import fmt_value as _fmt
 
 #: every effect of the offline model is a candidate of the online model
 CANDIDATES = EFFECTS
@@ -272,10 +273,6 @@ def health_params(terms):
     return out
 
 
-def _fmt(v: float) -> str:
-    if v == 0 or not math.isfinite(v):
-        return f"{v:g}"
-    return f"{v:.3g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.2e}"
 
 
 def _digits(v: float, s: float | None) -> str:

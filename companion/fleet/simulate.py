@@ -85,7 +85,7 @@ def _meta_payloads(board_id: str, gyro_ids: list[int]):
     av = struct.pack("<QQIIIIHH8s8s8s18s", 0, int(board_id, 16), 0x04050000, 0, 0, 0, 0, 0, b"", b"", b"", b"")
     out = [(av, 148)]
     for k, gid in enumerate(gyro_ids[:3]):
-        name = "INS_GYR_ID" if k == 0 else f"INS_GYR{k + 1}_ID"
+        name = M.ARDUPILOT_GYRO_ID_NAMES[k]
         out.append((struct.pack("<fHH16sB", float(gid), 3, k, name.encode(), 6), 22))  # MAV_PARAM_TYPE_INT32
     return out
 
@@ -141,7 +141,7 @@ def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: 
         from companion.sim.dataflash_writer import write_imu_log
 
         b = vehicle["board_id"]
-        params = {("INS_GYR_ID" if i["imu"] == 0 else f"INS_GYR{i['imu'] + 1}_ID"): float(i["gyro_id"])
+        params = {M.ARDUPILOT_GYRO_ID_NAMES[i["imu"]]: float(i["gyro_id"])
                   for i in vehicle["imus"][:3]}
         banner = f"{BIN_BOARD} {b[0:8].upper()} {b[8:16].upper()} {b[16:24].upper()}"
         write_imu_log(path, t, np.stack(gyros), np.stack(accels), "4.x", params=params,

@@ -101,9 +101,9 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         from companion.sources.still import select_still
 
         res = load(path, config=config)
-        sel = select_still(res.imu_streams(), getattr(res, "meta", {}) or {})
-        ident = log_identity(getattr(res, "meta", None))
         streams = res.imu_streams()
+        sel = select_still(streams, getattr(res, "meta", {}) or {})
+        ident = log_identity(getattr(res, "meta", None))
         sysids = sorted({s.key.sysid for s in streams})
         sysid = sysids[0] if sysids else 0
         boards = ident.get("board_by_sysid", {})

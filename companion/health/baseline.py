@@ -56,7 +56,7 @@ class Baseline:
     def __init__(self, source: str = "learned"):
         self.source = source
         self.axes: dict[tuple[int, str], dict[str, tuple[float, float]]] = {}
-        # per IMU: the stream the baseline was measured on (message, rate_hz, gyro_lsb, units; issue 13),
+        # per IMU: the stream the baseline was measured on (message, rate_hz, gyro_lsb, units: a baseline of another stream would raise false alarms),
         # checked against the live stream by companion.service.baseline_match
         self.meta: dict[int, dict] = {}
 

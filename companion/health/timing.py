@@ -1,6 +1,6 @@
 """Rate drop and irregular timing of one IMU stream (message time).
 
-Per block: the rate 1 / period (:func:`companion.sources.timing.period_of`: the mean of the intervals up
+Per block: the rate 1 / period (:func:`companion.timebase.period_of`: the mean of the intervals up
 to 1.5x their median plus the timestamp resolution) and the jitter: the rms of each interval's distance to
 the nearest whole number of periods, less the timestamp resolution ``stamp_res`` (1 ms for
 ``time_boot_ms``: a 400 Hz stream stamped in whole ms steps 2, 3, 2, 3 ms and is regular), over the
@@ -20,7 +20,7 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.faults import FAULT, OK
-from companion.sources.timing import period_of
+from companion.timebase import period_of
 
 REF_BLOCKS = 10
 HOLD = 5

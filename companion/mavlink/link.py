@@ -32,7 +32,7 @@ MAV_SEVERITY_NOTICE = 5
 IMU_MESSAGE_IDS = {"RAW_IMU": 27, "SCALED_IMU": 26, "SCALED_IMU2": 116, "SCALED_IMU3": 129, "HIGHRES_IMU": 105}
 
 
-# --- link health (issue 14): loss, reordering and late packets per source, from MAVLink sequence numbers ---
+# --- link health: loss, reordering and late packets per source, from MAVLink sequence numbers ---
 
 IMU_TIME_FIELDS = {"RAW_IMU": "time_usec", "HIGHRES_IMU": "time_usec", "SCALED_IMU": "time_boot_ms",
                    "SCALED_IMU2": "time_boot_ms", "SCALED_IMU3": "time_boot_ms"}

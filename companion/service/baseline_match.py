@@ -1,4 +1,5 @@
-"""Does a loaded baseline describe the stream being watched? (issue 13)
+"""Does a loaded baseline describe the stream being watched? (A baseline of another message, rate or
+sensor scale would compare unlike noise and raise false alarms or hide real ones.)
 
 A baseline is only comparable with the stream it was measured on: the same IMU message (RAW_IMU values
 are filtered and int16-rounded, HIGHRES_IMU floats are not), the same rate (N, B, K of a low-passed,

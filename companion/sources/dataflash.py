@@ -508,7 +508,9 @@ def log_identity(log: DataFlashLog, meta: dict) -> dict:
     board_id, board = board_from_messages(meta.get("messages") or [])
     params = meta.get("params") or {}
     ids = {}
-    for name, inst in (("INS_GYR_ID", 0), ("INS_GYR2_ID", 1), ("INS_GYR3_ID", 2)):
+    from companion.sources.messages import ARDUPILOT_GYRO_ID_PARAMS
+
+    for name, inst in ARDUPILOT_GYRO_ID_PARAMS.items():
         v = params.get(name)
         if v is not None and np.isfinite(v) and v != 0:
             ids[inst] = int(round(v))

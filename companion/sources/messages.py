@@ -168,3 +168,8 @@ def crc_x25_rows(rows: np.ndarray, extra: np.ndarray | int) -> np.ndarray:
         crc = (crc >> 8) ^ table[(crc ^ rows[:, length - 1]) & 0xFF]
     crc = (crc >> 8) ^ table[(crc ^ np.asarray(extra, dtype=np.uint16)) & 0xFF]
     return crc
+
+
+#: ArduPilot's gyro device-id parameters, per IMU instance (PARAM_VALUE in a tlog, PARM in a DataFlash log)
+ARDUPILOT_GYRO_ID_PARAMS = {"INS_GYR_ID": 0, "INS_GYR2_ID": 1, "INS_GYR3_ID": 2}
+ARDUPILOT_GYRO_ID_NAMES = {inst: name for name, inst in ARDUPILOT_GYRO_ID_PARAMS.items()}

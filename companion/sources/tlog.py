@@ -219,7 +219,7 @@ def read_file(path) -> bytes:
 AUTOPILOT_VERSION_ID = 148
 PARAM_VALUE_ID = 22
 #: ArduPilot gyro device-id parameters and the IMU instance each names
-GYRO_ID_PARAMS = {"INS_GYR_ID": 0, "INS_GYR2_ID": 1, "INS_GYR3_ID": 2}
+GYRO_ID_PARAMS = M.ARDUPILOT_GYRO_ID_PARAMS
 _UNIX_US = (1e15, 4.1e15)  # 2001..2099 in unix microseconds: a plausible tlog record stamp
 
 

@@ -1,0 +1,35 @@
+"""The sampling period of a stream from its own timestamps (numpy only): the one period rule that the
+offline timing analysis (:mod:`companion.sources.timing`), the live pipeline and the health checks use."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: timestamp resolution of the IMU messages that carry ``time_boot_ms`` (the others: 1 us, taken as 0)
+MS_STAMPED = ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3")
+
+
+def stamp_resolution(message: str) -> float:
+    """The resolution of a message's timestamps in seconds (1 ms for ``time_boot_ms``, else 0)."""
+    return 1e-3 if message in MS_STAMPED else 0.0
+
+
+def period_of(intervals, resolution: float = 0.0) -> float:
+    """The sampling period from positive timestamp intervals: ``P0`` = their median, ``P1`` = the mean of
+    the intervals ``<= 1.5 P0 + r`` (``r`` = the stamps' resolution), then ``P`` = the mean of those
+    ``<= max(1.5 P1, P1 + r)``: longer intervals are lost samples or gaps. A 400 Hz stream stamped in whole
+    milliseconds (intervals of 2 and 3 ms, 5 ms where one was lost) gets 2.5 ms, where the median alone
+    says 2 or 3 ms (500 or 333 Hz) and one pass lets the 5-ms intervals in. NaN without intervals."""
+    d = np.asarray(intervals, dtype=np.float64)
+    d = d[d > 0]
+    if d.shape[0] == 0:
+        return float("nan")
+    p = float(np.median(d))
+    limit = 1.5 * p + resolution
+    for _ in range(2):
+        normal = d[d <= limit]
+        if normal.shape[0] == 0:
+            break
+        p = float(normal.mean())
+        limit = max(1.5 * p, p + resolution)
+    return p
