@@ -26,6 +26,7 @@ LAYERS = {
     "companion.analysis": CORE,
     "companion.analysis.source": ADAPTER,  # loads a source (sources.load) before the analysis
     "companion.sources": ADAPTER,
+    "companion.config": ADAPTER,  # the configuration schema and its YAML loader
     "companion.mavlink": ADAPTER,
     "companion.plots": ADAPTER,
     "companion.sim.model": ADAPTER,  # model YAML

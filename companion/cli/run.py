@@ -46,8 +46,6 @@ watch it in MAVProxy:   graph NAMED_VALUE_FLOAT[IMU0GX_N].value
 #: supervisors and tests wait for it instead of a fixed time.
 READY_LINE = "companion run: listening on"
 
-LINK_KEYS = ("rate_hz", "messages", "compid", "heartbeat_s", "stale_s", "retry_s", "loss_warn", "loss_window_s")
-RUN_KEYS = ("report_period_s", "state_file", "save_period_s")
 
 
 def register(subparsers) -> None:
@@ -107,6 +105,7 @@ def _load_yaml_or_json(path: str) -> dict:
 
 def build(args, log):
     """Configuration objects from the config file and the command line (user errors -> CompanionError)."""
+    from companion.config import LINK, RUNNER
     from companion.health.baseline import Baseline
     from companion.mavlink.link import IMU_MESSAGE_IDS, LinkConfig
     from companion.service.pipeline import PipelineConfig
@@ -118,14 +117,14 @@ def build(args, log):
     if not isinstance(config.get("run") or {}, dict):
         raise CompanionError("config: 'run' must be a mapping")
     link_cfg = LinkConfig()
-    for k in LINK_KEYS:
+    for k in LINK:
         if k in run_cfg:
             v = run_cfg.pop(k)
             setattr(link_cfg, k, tuple(v) if k == "messages" else type(getattr(link_cfg, k))(v))
     for m in link_cfg.messages:
         if m not in IMU_MESSAGE_IDS:
             raise CompanionError(f"config run.messages: unknown message {m!r} (one of {', '.join(IMU_MESSAGE_IDS)})")
-    extra = {k: run_cfg.pop(k) for k in RUN_KEYS if k in run_cfg}
+    extra = {k: run_cfg.pop(k) for k in RUNNER if k in run_cfg}
     if "estimator" not in run_cfg and isinstance(config.get("estimator"), dict):
         run_cfg["estimator"] = {k: v for k, v in config["estimator"].items() if v is not None}
     try:
@@ -144,7 +143,7 @@ def build(args, log):
         if not args.rate > 0:
             raise CompanionError("--rate must be > 0")
         link_cfg.rate_hz = args.rate
-    period = float(args.report_period if args.report_period is not None else extra.get("report_period_s", 1.0))
+    period = float(args.report_period if args.report_period is not None else extra.get("report_period_s", RUNNER["report_period_s"].default))
     if not period > 0:
         raise CompanionError("--report-period must be > 0")
     baseline = None
@@ -181,6 +180,7 @@ def run(args) -> int:
 
 
 def _run(args, stop) -> int:
+    from companion.config import RUNNER
     from companion.service import runner
 
     quiet = args.quiet
@@ -204,7 +204,7 @@ def _run(args, stop) -> int:
 
         parse_connection(src, args.baud)  # a clear error before anything else
     state_path = runner.state_path(args.state, extra.get("state_file"), args.no_state, live=not is_replay)
-    save_period = float(extra.get("save_period_s", 60.0))
+    save_period = float(extra.get("save_period_s", RUNNER["save_period_s"].default))
     _check_outputs(args, extra, state_path)  # every output path checked before the work starts
     args.signing = _signing_key(args, is_replay, warn)
 

@@ -48,27 +48,10 @@ class LoadResult:
 
 
 def load_config(config) -> dict:
-    """``config`` as a dict: None, a dict, or a path to a YAML file."""
-    if config is None:
-        return {}
-    if isinstance(config, dict):
-        return config
-    import yaml
+    """``config`` as a dict: None, a dict, or a path to a YAML file (checked: :func:`companion.config.load`)."""
+    from companion.config import load
 
-    path = Path(config)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise CompanionError(f"{path}: no such config file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CompanionError(f"{path}: cannot read config ({exc})") from None
-    except yaml.YAMLError as exc:
-        raise CompanionError(f"{path}: invalid YAML ({str(exc).splitlines()[0]})") from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise CompanionError(f"{path}: the configuration must be a YAML mapping")
-    return data
+    return load(config)
 
 
 def build_stream(raw: RawStream, split_periods: float = _timing.SPLIT_PERIODS) -> ImuStream:

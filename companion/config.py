@@ -1,0 +1,190 @@
+"""The configuration schema: every key of the YAML configuration, its default and its type, in one place.
+
+``config/default.yaml`` documents exactly these defaults (a test keeps them equal, and equal to the
+defaults of the dataclasses built from the sections: ``PipelineConfig``, ``LinkConfig``,
+``DetectorConfig``). :func:`load` reads a configuration file and checks it against the schema: an
+unknown key or a value of the wrong type is a one-line :class:`CompanionError` naming the key
+(``config: unknown key 'run.blok_s'``). Values are checked further (ranges) where they are used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from companion.errors import CompanionError
+
+
+@dataclass(frozen=True)
+class Key:
+    """One setting: its default and its type (number, int, bool, str, list, mapping; ``none``: null allowed)."""
+
+    default: object
+    type: str
+    none: bool = False
+    choices: tuple = ()
+
+
+_EFFECTS = ["quantization", "white_noise", "bias_instability", "random_walk", "ramp", "gauss_markov", "sinusoid"]
+
+ESTIMATOR = {
+    "kind": Key("octave", "str", choices=("octave", "miao")),
+    "effects": Key(_EFFECTS, "list"),
+    "phases": Key(16, "int"),
+    "max_tau_s": Key(20000.0, "number"),
+    "min_edf": Key(1.0, "number"),
+    "fit": Key("model", "str", choices=("model", "diag", "gls", "fit_avar")),
+    "gls_max_ratio": Key(256, "int"),
+    "miao": {
+        "b": Key(0.99, "number"),
+        "x0": Key({}, "mapping"),
+        "p0_rel": Key(1.0, "number"),
+        "q0_rel": Key(1.0e-4, "number"),
+        "r0": Key(None, "number", none=True),
+        "init_samples": Key(100, "int"),
+        "noise_mean": Key(True, "bool"),
+    },
+}
+
+HEALTH = {
+    "z": Key(3.0, "number"),
+    "ratio_on": Key(1.3, "number"),
+    "ratio_off": Key(1.15, "number"),
+    "hold_on": Key(3, "int"),
+    "hold_off": Key(6, "int"),
+    "params": Key(["N", "B", "K"], "list"),
+}
+
+#: keys of the run section that configure the link (companion.mavlink.link.LinkConfig)
+LINK = {
+    "rate_hz": Key(100.0, "number"),
+    "messages": Key(["RAW_IMU", "SCALED_IMU2", "SCALED_IMU3"], "list"),
+    "compid": Key(191, "int"),
+    "heartbeat_s": Key(1.0, "number"),
+    "stale_s": Key(3.0, "number"),
+    "retry_s": Key(5.0, "number"),
+    "loss_warn": Key(0.05, "number"),
+    "loss_window_s": Key(30.0, "number"),
+}
+
+#: keys of the run section that the command itself uses (reports, the state file)
+RUNNER = {
+    "report_period_s": Key(1.0, "number"),
+    "state_file": Key(None, "str", none=True),
+    "save_period_s": Key(60.0, "number"),
+}
+
+#: keys of the run section that configure the pipeline (companion.service.pipeline.PipelineConfig)
+PIPELINE = {
+    "sysid": Key(None, "int", none=True),
+    "baseline_s": Key(600.0, "number"),
+    "block_s": Key(1.0, "number"),
+    "settle_s": Key(10.0, "number"),
+    "check_s": Key(10.0, "number"),
+    "min_report_s": Key(30.0, "number"),
+    "forgetting_fast_s": Key(600.0, "number"),
+    "forgetting_slow_s": Key(7200.0, "number"),
+    "accel": Key(False, "bool"),
+    "baseline_force": Key(False, "bool"),
+    "gyro_mean": Key(0.1, "number"),
+    "gyro_std_factor": Key(5.0, "number"),
+    "accel_shift": Key(0.3, "number"),
+    "accel_std": Key(0.5, "number"),
+    "accel_std_factor": Key(3.0, "number"),
+    "accel_std_min": Key(0.05, "number"),
+    "gyro_limit": Key(32.767, "number"),
+    "fault_ref_s": Key(30.0, "number"),
+    "reset_s": Key(1.0, "number"),
+    "gap_s": Key(0.5, "number"),
+    "estimator": ESTIMATOR,  # optional: the top-level estimator section is used when absent
+    "health": HEALTH,
+}
+
+#: the whole configuration file
+SCHEMA = {
+    "streams": Key([], "list"),  # per-stream scale overrides, checked entry by entry by sources.decode.ScaleTable
+    "estimator": ESTIMATOR,
+    "run": {**LINK, **RUNNER, **PIPELINE},
+}
+
+
+def defaults(schema: dict = SCHEMA, documented: bool = True) -> dict:
+    """The default configuration as a plain dict (``documented``: without ``run.estimator``, which the
+    top-level ``estimator`` section stands for and config/default.yaml does not repeat)."""
+    out = {}
+    for k, v in schema.items():
+        if documented and schema is SCHEMA["run"] and k == "estimator":
+            continue
+        out[k] = defaults(v, documented) if isinstance(v, dict) else _copy(v.default)
+    return out
+
+
+def _copy(v):
+    return list(v) if isinstance(v, list) else dict(v) if isinstance(v, dict) else v
+
+
+_TYPES = {
+    "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+    "int": lambda v: isinstance(v, int) and not isinstance(v, bool),
+    "bool": lambda v: isinstance(v, bool),
+    "str": lambda v: isinstance(v, str),
+    "list": lambda v: isinstance(v, (list, tuple)),
+    "mapping": lambda v: isinstance(v, dict),
+}
+
+
+def check(cfg, schema: dict = SCHEMA, where: str = "") -> dict:
+    """Check a configuration mapping against the schema; returns it. Unknown keys and wrong types raise
+    :class:`CompanionError` naming the dotted key."""
+    if not isinstance(cfg, dict):
+        raise CompanionError(f"config: {where or 'the configuration'} must be a mapping, got {_kind(cfg)}")
+    for k, v in cfg.items():
+        name = f"{where}.{k}" if where else str(k)
+        spec = schema.get(k)
+        if spec is None:
+            raise CompanionError(f"config: unknown key {name!r} (allowed here: {', '.join(schema)})")
+        if isinstance(spec, dict):
+            if v is not None:
+                check(v, spec, name)
+            continue
+        if v is None:
+            if spec.none:
+                continue
+            raise CompanionError(f"config: {name} must be a {spec.type}, got null")
+        if not _TYPES[spec.type](v):
+            raise CompanionError(f"config: {name} must be a {spec.type}, got {_kind(v)} {v!r}"[:200])
+        if spec.choices and v not in spec.choices:
+            raise CompanionError(f"config: {name} must be one of {', '.join(spec.choices)}, got {v!r}")
+    return cfg
+
+
+def _kind(v) -> str:
+    return {dict: "mapping", list: "list", str: "string", bool: "bool"}.get(type(v), type(v).__name__)
+
+
+def load(config) -> dict:
+    """``config`` as a dict: None (empty), a dict (built in code, taken as it is), or a path to a YAML file
+    (checked against the schema)."""
+    if config is None:
+        return {}
+    if isinstance(config, dict):
+        return config
+    import yaml
+
+    path = Path(config)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise CompanionError(f"{path}: no such config file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CompanionError(f"{path}: cannot read config ({exc})") from None
+    except yaml.YAMLError as exc:
+        raise CompanionError(f"{path}: invalid YAML ({str(exc).splitlines()[0]})") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise CompanionError(f"{path}: the configuration must be a YAML mapping")
+    try:
+        return check(data)
+    except CompanionError as exc:
+        raise CompanionError(f"{path}: {exc}") from None
