@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-from pathlib import Path
 
 from companion.errors import CompanionError
 
@@ -82,33 +81,12 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _load_yaml_or_json(path: str) -> dict:
-    import json
-
-    import yaml
-
-    try:
-        text = Path(path).read_text()
-    except FileNotFoundError:
-        raise CompanionError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    try:
-        return json.loads(text)
-    except ValueError:
-        pass
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise CompanionError(f"{path}: neither JSON nor YAML ({str(exc).splitlines()[0]})") from None
-
-
 def build(args, log):
     """Configuration objects from the config file and the command line (user errors -> CompanionError)."""
     from companion.config import LINK, RUNNER
-    from companion.health.baseline import Baseline
     from companion.mavlink.link import IMU_MESSAGE_IDS, LinkConfig
     from companion.service.pipeline import PipelineConfig
+    from companion.service.runner import load_baseline
     from companion.sources import load_config
     from companion.sources.decode import ScaleTable
 
@@ -146,13 +124,7 @@ def build(args, log):
     period = float(args.report_period if args.report_period is not None else extra.get("report_period_s", RUNNER["report_period_s"].default))
     if not period > 0:
         raise CompanionError("--report-period must be > 0")
-    baseline = None
-    if args.baseline:
-        try:
-            baseline = Baseline.from_dict(_load_yaml_or_json(args.baseline))
-        except ValueError as exc:
-            raise CompanionError(f"{args.baseline}: {exc}") from None
-        baseline.source = args.baseline
+    baseline = load_baseline(args.baseline) if args.baseline else None
     scales = ScaleTable(config)
     return pcfg, link_cfg, period, extra, baseline, scales
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from companion.errors import CompanionError
+
 
 class ReplaySink:
     """Reporter sink for a replay: counts, keeps the latest values, optionally writes a tlog."""
@@ -115,3 +117,36 @@ def summary_lines(pipeline) -> list[str]:
     for t, text in pipeline.transitions:
         out.append(f"  at {t:.0f} s: {text}")
     return out
+
+
+def _load_yaml_or_json(path: str) -> dict:
+    import json
+
+    import yaml
+
+    try:
+        text = Path(path).read_text()
+    except FileNotFoundError:
+        raise CompanionError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    try:
+        return json.loads(text)
+    except ValueError:
+        pass
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise CompanionError(f"{path}: neither JSON nor YAML ({str(exc).splitlines()[0]})") from None
+
+
+def load_baseline(path: str):
+    """A baseline from a `companion analyze` JSON/YAML report or a saved baseline (user errors: one line)."""
+    from companion.health.baseline import Baseline
+
+    try:
+        baseline = Baseline.from_dict(_load_yaml_or_json(path))
+    except ValueError as exc:
+        raise CompanionError(f"{path}: {exc}") from None
+    baseline.source = path
+    return baseline
