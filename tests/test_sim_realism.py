@@ -125,7 +125,7 @@ def test_timing_skew_as_configured():
 def test_temperature_warmup_gives_the_configured_bias_slope():
     """Bias vs temperature over a warm-up: the regression slope of 1 s means on the logged temperature is the
     drawn per-axis slope (truth: sim.temp_slope), to within its standard error from the white noise."""
-    r = Realism(gyro_lpf_hz=20.0, rise_c=(20.0, 10.0, 5.0), temp_tau_s=200.0, temp_slope=2e-4)
+    r = Realism(gyro_lpf_hz=20.0, rise_c=(20.0, 10.0, 5.0), temp_tau_s=(200.0, 200.0, 200.0), temp_slope=2e-4)
     errs = []
     for seed in range(6):
         sim = _sim(_quiet(50.0, 3e-4), seed, r, 900.0, imus=3)

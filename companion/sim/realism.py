@@ -28,7 +28,7 @@ in the air -> ``flight``; between idle and flight the rotor frequency and amplit
 (the motors spool up). The rotor frequency wanders by ``wander`` (fraction) at 0.1-0.5 Hz.
 
 Bias beyond the Allan model: a temperature per IMU ``T_i(t) = ambient_c + temp_offset_c[i] + rise_c[i] (1 - exp(-t /
-temp_tau_s))`` (t since boot) with a bias ``slope_ij (T_i - ambient_c)`` per axis (slope normal with std
+temp_tau_s[i]))`` (t since boot) with a bias ``slope_ij (T_i - ambient_c)`` per axis (slope normal with std
 ``temp_slope`` rad/s/K; the drawn truth is ``VehicleSimulator.temp_slope``), and a first-order
 Gauss-Markov bias (``bias_gm_sigma`` rad/s, ``bias_gm_tau_s``) per IMU axis. The temperature is logged
 (``VehicleBlock.temperature``, degC) by the writers.
@@ -138,7 +138,7 @@ class Realism:
     stamp: str = "common"
     ambient_c: float = 25.0
     rise_c: tuple = (0.0, 0.0, 0.0)
-    temp_tau_s: float = 300.0
+    temp_tau_s: tuple = (300.0, 300.0, 300.0)
     temp_offset_c: tuple = (0.0, 0.0, 0.0)
     temp_slope: float = 0.0
     bias_gm_sigma: float = 0.0
@@ -173,7 +173,10 @@ class Realism:
         if len(rc) != 3:
             raise _err("rise_c needs 3 values (one per IMU) or one for all")
         object.__setattr__(self, "rise_c", tuple(_num("rise_c", x, lo=-50.0, hi=100.0) for x in rc))
-        _num("temp_tau_s", self.temp_tau_s, lo=0.0, lo_open=True)
+        tt = self.temp_tau_s if isinstance(self.temp_tau_s, (list, tuple)) else (self.temp_tau_s,) * 3
+        if len(tt) != 3:
+            raise _err("temp_tau_s needs 3 values (one per IMU) or one for all")
+        object.__setattr__(self, "temp_tau_s", tuple(_num("temp_tau_s", x, lo=0.0, lo_open=True) for x in tt))
         to = self.temp_offset_c if isinstance(self.temp_offset_c, (list, tuple)) else (self.temp_offset_c,) * 3
         object.__setattr__(self, "temp_offset_c", tuple(_num("temp_offset_c", x) for x in to))
         _num("temp_slope (rad/s/K)", self.temp_slope, lo=0.0)

@@ -401,8 +401,8 @@ class VehicleSimulator:
         r = self.realism
         if r is None:
             return np.full((self.imus, t.shape[0]), 25.0)
-        rise = 1.0 - np.exp(-t / r.temp_tau_s)
-        return np.array([r.ambient_c + r.temp_offset_c[i] + r.rise_c[i] * rise for i in range(self.imus)])
+        return np.array([r.ambient_c + r.temp_offset_c[i] + r.rise_c[i] * (1.0 - np.exp(-t / r.temp_tau_s[i]))
+                         for i in range(self.imus)])
 
     def _make_block(self) -> None:
         if self.realism is not None:
