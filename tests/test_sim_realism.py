@@ -191,9 +191,10 @@ def test_presets_load_and_run(name, tmp_path):
     write_tlog(str(path), sim, 80)
     from companion.sources import load
 
-    data = load(str(path))
-    streams = data.streams if hasattr(data, "streams") else data
-    assert path.stat().st_size > 0
+    streams = load(str(path)).streams
+    assert len(streams) == P["vehicle"]["imus"]
+    for s in streams:
+        assert s.rate_hz == pytest.approx(P["vehicle"]["rate_hz"], rel=0.01) and s.temperature is not None
 
 
 def test_realism_errors_are_one_line():
@@ -209,3 +210,30 @@ def test_realism_errors_are_one_line():
         load_preset("submarine")
     with pytest.raises(CompanionError, match="below the logged rate"):
         VehicleSimulator(WHITE, realism=Realism(sensor_rate_hz=20.0, gyro_lpf_hz=5.0))
+
+
+def test_writers_log_the_temperature(tmp_path):
+    """The simulated warm-up reaches the logs: tlog RAW_IMU/SCALED_IMU2/3 temperature (cdegC), DataFlash IMU
+    Temp (old 3-IMU layout, as log171) and T (4.x), ULog sensor_gyro temperature; read back by companion's
+    readers."""
+    from companion.sim.dataflash_writer import write_imu_log
+    from companion.sim.ulog_writer import write_ulog
+    from companion.sources import load
+
+    P = load_preset("copter")
+    sim = _sim(P["model"], 3, P["realism"], 120.0, imus=3, rate_hz=50.0)
+    blk = sim.run(120)
+    assert np.all(np.diff(blk.temperature, axis=1) >= -1e-9) and np.all(blk.temperature[:, -1] > blk.temperature[:, 0])
+    paths = {"tlog": tmp_path / "x.tlog", "2015": tmp_path / "x2015.bin", "4.x": tmp_path / "x4.bin",
+             "ulg": tmp_path / "x.ulg"}
+    write_tlog(str(paths["tlog"]), _sim(P["model"], 3, P["realism"], 120.0, imus=3, rate_hz=50.0), 120)
+    for layout in ("2015", "4.x"):
+        write_imu_log(paths[layout], blk.t, blk.gyro, blk.accel, layout=layout, temperature=blk.temperature)
+    write_ulog(paths["ulg"], blk.t, blk.gyro, blk.accel, temperature=blk.temperature)
+    for kind, path in paths.items():
+        streams = [s for s in load(str(path)).streams if s.key.message != "sensor_combined"]
+        assert len(streams) == 3, kind
+        for i, s in enumerate(sorted(streams, key=lambda s: s.key.instance)):
+            tol = 0.006 if kind == "tlog" else 1e-4
+            assert s.temperature is not None, kind
+            assert np.allclose(s.temperature, blk.temperature[i][:s.temperature.shape[0]], atol=tol), kind
