@@ -49,8 +49,8 @@ REAL = Path(os.environ.get("COMPANION_REALLOGS", "/work/reallogs/erle"))
 # (label, path, preset, message/instances to use, whole log is a flight)
 LOGS = [
     ("log171 (copter, 3 IMU, 50 Hz)", SHARED / "ardupilot" / "dronekit_log171.bin", "copter", False),
-    ("pyulog_sample (PX4, 248 Hz, flight)", SHARED / "px4" / "pyulog_sample.ulg", "copter", True),
-    ("pyulog_sample_log_small (PX4, 200 Hz)", SHARED / "px4" / "pyulog_sample_log_small.ulg", "copter", False),
+    ("pyulog_sample (PX4, 248 Hz, flight)", SHARED / "px4" / "pyulog_sample.ulg", "px4", True),
+    ("pyulog_sample_log_small (PX4, 200 Hz)", SHARED / "px4" / "pyulog_sample_log_small.ulg", "px4", False),
     ("plane_4-12-2014_329 (10 Hz)", REAL / "pxf_plane_4-12-2014_329.BIN", "plane", False),
     ("plane_5-12-2014_E (10 Hz)", REAL / "pxf_plane_5-12-2014_05_12_2014_E.BIN", "plane", False),
     ("rover_25-8-2014_61 (50 Hz)", REAL / "pxf_rover_25-8-2014_61.BIN", "rover", False),
@@ -314,7 +314,7 @@ def rows(label, res):
         for name, d in (("log", R), ("old", O), ("new", N)):
             d["adev_1"] = d["adev"][:, 0] * 1e3
             d["adev_64"] = d["adev"][:, -1] * 1e3
-        out.append(f"| {label} | ADEV sqrt(tau) at tau0 / 64 tau0, mrad/s/sqrt(Hz)x1e3 | "
+        out.append(f"| {label} | ADEV x sqrt(tau) at tau0 / 64 tau0, mrad/s/sqrt(Hz) per IMU | "
                    f"{_f(R['adev_1'])} / {_f(R['adev_64'])} | {_f(O['adev_1'])} / {_f(O['adev_64'])} | "
                    f"{_f(N['adev_1'])} / {_f(N['adev_64'])} | {_f(adev_gap(O['adev'], R['adev']))} -> "
                    f"{_f(adev_gap(N['adev'], R['adev']))} (rms ln over tau) |")
@@ -331,12 +331,14 @@ def rows(label, res):
     add("bias change over the still run, mrad/s", "bias", "{:.2f}", _lr)
     if np.any(np.isfinite(R["dT"])):
         add("temperature change over the still run, K", "dT", "{:.1f}", ad)
+    if not out:
+        out.append(f"| {label} | {res['dur']:.1f} s: no still run of 10 s and no flight of 20 s to measure | | | | |")
     return out
 
 
 def fit(preset, seeds):
     """Per-IMU noise gains and per-IMU per-axis vibration gains of ``preset`` that match its logs."""
-    logs = [x for x in LOGS if x[2] == preset and x[1].exists() and not x[3]]
+    logs = [x for x in LOGS if x[2] == preset and x[1].exists()]
     label, path, _, whole = logs[0]
     t, gyro, temp, fs, armed, params = load_log(path)
     armed = plane_rover_armed(t, gyro, fs, armed)

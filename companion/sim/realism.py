@@ -33,7 +33,7 @@ temp_tau_s[i]))`` (t since boot) with a bias ``slope_ij (T_i - ambient_c)`` per 
 Gauss-Markov bias (``bias_gm_sigma`` rad/s, ``bias_gm_tau_s``) per IMU axis. The temperature is logged
 (``VehicleBlock.temperature``, degC) by the writers.
 
-A preset (``copter``, ``plane``, ``rover``) is a YAML file in ``companion/sim/presets/`` with a noise
+A preset (``copter``, ``plane``, ``rover``, ``px4``) is a YAML file in ``companion/sim/presets/`` with a noise
 ``model`` (:mod:`companion.sim.model` format), ``vehicle`` defaults (imus, rate_hz) and a ``realism``
 section with the keys of :class:`Realism` (vibration phases as mappings of :class:`Vibration`'s keys).
 :func:`load_preset` reads a name or a path.
@@ -52,7 +52,7 @@ from companion.errors import CompanionError
 
 DECIMATIONS = ("latest", "average")
 PRESET_DIR = Path(__file__).with_name("presets")
-PRESETS = ("copter", "plane", "rover")
+PRESETS = ("copter", "plane", "rover", "px4")
 
 
 def _err(msg: str) -> CompanionError:
@@ -416,7 +416,7 @@ def psd_line_amplitude(y: np.ndarray, fs: float, f0: float, width_hz: float = 1.
 # ---------------------------------------------------------------------------------------------- presets
 def load_preset(name_or_path) -> dict:
     """A preset YAML as ``{"model": NoiseModel, "vehicle": {...}, "realism": Realism, "source": str}``;
-    ``name_or_path`` is ``copter``, ``plane``, ``rover`` or a path to a file of the same form."""
+    ``name_or_path`` is ``copter``, ``plane``, ``rover``, ``px4`` or a path to a file of the same form."""
     import yaml
 
     from companion.sim.model import model_from_dict
