@@ -237,3 +237,42 @@ def test_writers_log_the_temperature(tmp_path):
             tol = 0.006 if kind == "tlog" else 1e-4
             assert s.temperature is not None, kind
             assert np.allclose(s.temperature, blk.temperature[i][:s.temperature.shape[0]], atol=tol), kind
+
+
+def test_faults_on_the_realistic_path():
+    """A noise fault multiplies the faulty axis' filtered white noise (on a still vehicle its std grows by
+    about the factor); a stuck fault freezes the logged value; every other IMU and axis is bit-identical to
+    the run without the fault."""
+    from companion.sim.vehicle import Fault
+
+    r = Realism(gyro_lpf_hz=20.0, imu_noise_gain=(1.0, 2.0, 1.0))
+    model = {"rate_hz": 50.0, "axes": {a: [{"effect": "white_noise", "N": 1e-3}] for a in ("gx", "gy", "gz")}}
+    base = _sim(model, 7, r, 200.0, imus=3).run(200)
+    for kind, size in (("noise", 4.0), ("stuck", 0.0)):
+        blk = _sim(model, 7, r, 200.0, imus=3, fault=Fault(kind, at=100.0, size=size, imu=1, axis="gy")).run(200)
+        on = blk.t - 1.0 >= 100.0
+        assert np.array_equal(blk.gyro[[0, 2]], base.gyro[[0, 2]])
+        assert np.array_equal(blk.gyro[1, :, [0, 2]], base.gyro[1, :, [0, 2]])
+        assert np.array_equal(blk.gyro[1, ~on, 1], base.gyro[1, ~on, 1])
+        y, y0 = blk.gyro[1, on, 1], base.gyro[1, on, 1]
+        if kind == "noise":
+            assert np.std(y) / np.std(y0) == pytest.approx(4.0, rel=0.05)
+        else:
+            assert np.all(y == base.gyro[1, ~on, 1][-1])
+
+
+def test_cli_preset(tmp_path):
+    """`companion simulate --vehicle --preset copter` without a model: the preset's 3 IMUs at 50 Hz with a
+    rising temperature; a missing model without a preset is one error line."""
+    from companion.cli.main import main
+    from companion.sources import load
+
+    out = tmp_path / "c.tlog"
+    assert main(["simulate", "--vehicle", "--preset", "copter", "--duration", "60", "--arm-at", "20",
+                 "--out", str(out)]) == 0
+    streams = load(str(out)).streams
+    assert [s.key.message for s in streams] == ["RAW_IMU", "SCALED_IMU2", "SCALED_IMU3"]
+    for s in streams:
+        assert s.rate_hz == pytest.approx(50.0, rel=0.01) and s.temperature[-1] > s.temperature[0]
+    assert main(["simulate", "--vehicle", "--duration", "10", "--out", str(tmp_path / "x.tlog")]) != 0
+    assert main(["simulate", "--vehicle", "--preset", "boat", "--duration", "10", "--out", str(tmp_path / "x.tlog")]) != 0

@@ -155,9 +155,10 @@ def run(args) -> int:
     next_idle_hb = wall_start
     next_hb = 1.0
     mav = conn.mav
-    senders = (lambda ti, a, g: mav.raw_imu_send(int(round(ti * 1e6)), *a, *g, 0, 0, 0, 0, 4200),
-               lambda ti, a, g: mav.scaled_imu2_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, 4200),
-               lambda ti, a, g: mav.scaled_imu3_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, 4200))
+    # temperature in cdegC: the simulated IMU's (--preset) or a constant 42 C
+    senders = (lambda ti, a, g, c: mav.raw_imu_send(int(round(ti * 1e6)), *a, *g, 0, 0, 0, 0, c),
+               lambda ti, a, g, c: mav.scaled_imu2_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, c),
+               lambda ti, a, g, c: mav.scaled_imu3_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, c))
     count_keys = ("raw_imu", "scaled_imu2", "scaled_imu3")
 
     def heartbeat(armed: bool) -> None:
@@ -181,6 +182,9 @@ def run(args) -> int:
                 blk = sim.take_until(t_sim)
                 t = blk.t.tolist()
                 ints = [_imu_ints(blk, i) for i in range(sim.imus)]
+                temps = [[4200] * blk.n if blk.temperature is None else
+                         np.clip(np.rint(blk.temperature[i] * 100.0), -32768, 32767).astype(int).tolist()
+                         for i in range(sim.imus)]
                 hb_times = []
                 while next_hb <= t_sim:
                     hb_times.append(next_hb)
@@ -190,7 +194,7 @@ def run(args) -> int:
                     while k < len(t) and t[k] < th:
                         for i, mid in enumerate(IMU_MSG_IDS[:sim.imus]):
                             if sending[mid]:
-                                senders[i](t[k], ints[i][0][k], ints[i][1][k])
+                                senders[i](t[k], ints[i][0][k], ints[i][1][k], temps[i][k])
                                 counts[count_keys[i]] += 1
                         k += 1
                     if th != math.inf:
