@@ -276,3 +276,19 @@ def test_cli_preset(tmp_path):
         assert s.rate_hz == pytest.approx(50.0, rel=0.01) and s.temperature[-1] > s.temperature[0]
     assert main(["simulate", "--vehicle", "--duration", "10", "--out", str(tmp_path / "x.tlog")]) != 0
     assert main(["simulate", "--vehicle", "--preset", "boat", "--duration", "10", "--out", str(tmp_path / "x.tlog")]) != 0
+
+
+def test_rate_change_on_the_realistic_path():
+    """A SET_MESSAGE_INTERVAL (set_rate) mid-run: the samples continue at the new rate, one time grid, and the
+    filtered white noise keeps its per-sample level at the new rate (from the analytic curve)."""
+    r = Realism(gyro_lpf_hz=20.0)
+    sim = _sim(WHITE, 3, r, 100.0, imus=1)
+    a = sim.take_until(60.0)
+    sim.set_rate(100.0)
+    b = sim.take_until(400.0)
+    assert np.all(np.diff(np.r_[a.t, b.t]) > 0)
+    assert np.allclose(np.diff(b.t), 0.01)
+    expect = math.sqrt(filtered_white_avar(N, r, 100.0, np.array([0.01]))[0])
+    y = b.gyro[0, :, 0]
+    got = math.sqrt(_avar(y, 1))
+    assert got == pytest.approx(expect, rel=4 / math.sqrt(y.size / 3))

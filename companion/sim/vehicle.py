@@ -32,6 +32,11 @@ Stable API
     Schedule.random(36_000, seed=3)  # random non-overlapping flights and handlings (soak runs, benchmarks)
     sim.gyro_matrix[i], sim.gyro_bias[i], sim.warmup_amplitude[i]   # IMU i's drawn errors (truth for tests)
 
+    # realistic autopilot data (companion.sim.realism): sensor-rate noise and vibration, the gyro low-pass,
+    # decimation, per-IMU skew, temperature bias; blk.temperature (imus, n) degC, blk.t_imu (own stamps)
+    VehicleSimulator(model, imus=3, realism=load_preset("copter")["realism"])
+    sim.temp_slope[i]                # IMU i's drawn bias-vs-temperature slopes, rad/s per K
+
 Time: samples are stamped in seconds since the autopilot booted; the first sample is at ``t_start``
 (1.0 s). Every schedule and fault time (``Flight.arm_at``, ``Handling.at``, ``Fault.at`` ...) is in
 seconds since the simulation start, i.e. ``t - t_start``.
