@@ -224,11 +224,10 @@ class SensorStage:
         self.zi_white = None
         margin = max(abs(x) for x in realism.skew_s) + 3 * realism.jitter_s + 2.0 / self.fs
         self.k_next = int(math.floor((t_first - margin) * self.fs))  # next sensor sample index to make
-        self.rotor_phase = np.zeros(8)
+        self.rotor_phase = 0.0  # rad, of the fundamental at the last sensor sample made
         self.wander_phase = float(rng_timing.uniform(0, 2 * np.pi))
         self.rng_t = rng_timing
-        self.acc = None  # average decimation: running sum state (imus, 3) and count since last pick
-        self.last_pick = None
+        self.acc = None  # average decimation: {imu: (sum, count)} of the sensor samples since the last pick
 
     def sample_times(self, t: np.ndarray) -> np.ndarray:
         r = self.r
@@ -252,8 +251,8 @@ class SensorStage:
         if np.any(f_rot > 0):
             wt = self.wander_phase + 2 * np.pi * 0.23 * ts
             f_inst = f_rot * (1.0 + wander * (0.7 * np.sin(wt) + 0.3 * np.sin(2.3 * wt + 1.0)))
-            ph = self.rotor_phase[0] + 2 * np.pi * np.cumsum(f_inst) / self.fs
-            self.rotor_phase[0] = float(ph[-1]) % (2 * np.pi)
+            ph = self.rotor_phase + 2 * np.pi * np.cumsum(f_inst) / self.fs
+            self.rotor_phase = float(ph[-1]) % (2 * np.pi)
             nh = max(len(g.harmonics), len(i_.harmonics), len(f_.harmonics))
             for h in range(nh):
                 def amp(v):
