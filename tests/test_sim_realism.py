@@ -292,3 +292,35 @@ def test_rate_change_on_the_realistic_path():
     y = b.gyro[0, :, 0]
     got = math.sqrt(_avar(y, 1))
     assert got == pytest.approx(expect, rel=4 / math.sqrt(y.size / 3))
+
+
+@pytest.mark.shared
+def test_copter_preset_matches_log171(shared_data):
+    """The copter preset against the log it was fitted to (ArduCopter 3.3, 3 IMUs at 50 Hz, still 31-70 s
+    after boot, INS_GYRO_FILTER 20 Hz): per-IMU ground noise (median 2-s std) within 15 %, the IMU1/IMU0 ratio
+    (about 9) within 15 %, and the still-run temperatures rising as the log's do (IMU2 the fastest)."""
+    from companion.sources import load
+
+    d = load(str(shared_data / "ardupilot" / "dronekit_log171.bin"))
+    P = load_preset("copter")
+    assert d.meta["params"]["INS_GYRO_FILTER"] == P["realism"].gyro_lpf_hz
+    streams = sorted([s for s in d.streams if s.key.message == "IMU"], key=lambda s: s.key.instance)
+
+    def noise(t, g):
+        m = (t >= 31.0) & (t < 70.0)
+        k = int(m.sum()) // 100 * 100
+        return np.median(g[m][:k].reshape(-1, 100, 3).std(1).mean(1))
+
+    real = np.array([noise(s.t, s.gyro) for s in streams])
+    dT_real = np.array([np.interp(70.0, s.t, s.temperature) - np.interp(31.0, s.t, s.temperature) for s in streams])
+    sims = []
+    for seed in range(3):
+        sim = _sim(P["model"], seed, P["realism"], 70.0, imus=3, rate_hz=50.0, t_start=float(streams[0].t[0]))
+        blk = sim.run(60.0)
+        sims.append([noise(blk.t, blk.gyro[i]) for i in range(3)])
+        dT = blk.temperature[:, np.searchsorted(blk.t, 70.0) - 1] - blk.temperature[:, np.searchsorted(blk.t, 31.0)]
+    sim_noise = np.median(sims, axis=0)
+    assert np.allclose(sim_noise, real, rtol=0.15), (sim_noise, real)
+    assert sim_noise[1] / sim_noise[0] == pytest.approx(real[1] / real[0], rel=0.15)
+    assert np.argmax(dT) == np.argmax(dT_real) == 2 and np.allclose(dT, dT_real, atol=0.8), (dT, dT_real)
+
