@@ -79,7 +79,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("sim-autopilot", help="simulated ArduPilot vehicle with 1-3 IMUs, flights and faults (SITL loopback)",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", required=True, metavar="MODEL.yaml", help="noise model (companion.sim.model format)")
+    p.add_argument("--model", metavar="MODEL.yaml", help="noise model (companion.sim.model format; optional with --preset)")
     p.add_argument("--connect", required=True, metavar="CONN", help="where to send, e.g. udpout:127.0.0.1:14551")
     p.add_argument("--rate", type=float, metavar="HZ", help="IMU message rate before any request (default: the model's rate_hz)")
     p.add_argument("--speedup", type=float, default=1.0, metavar="X", help="simulated seconds per wall second (default 1)")
@@ -128,7 +128,9 @@ def run(args) -> int:
         v = getattr(args, name)
         if v is not None and not v > 0:
             raise CompanionError(f"--{name.replace('_', '-')} must be > 0")
-    model = load_model(args.model)
+    if args.model is None and args.preset is None:
+        raise CompanionError("give --model MODEL.yaml or --preset NAME")
+    model = load_model(args.model) if args.model is not None else None
     if args.rate is not None and not args.rate > 0:
         raise CompanionError("--rate must be > 0")
     sim = build_simulator(args, model, args.rate)
@@ -153,9 +155,10 @@ def run(args) -> int:
     next_idle_hb = wall_start
     next_hb = 1.0
     mav = conn.mav
-    senders = (lambda ti, a, g: mav.raw_imu_send(int(round(ti * 1e6)), *a, *g, 0, 0, 0, 0, 4200),
-               lambda ti, a, g: mav.scaled_imu2_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, 4200),
-               lambda ti, a, g: mav.scaled_imu3_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, 4200))
+    # temperature in cdegC: the simulated IMU's (--preset) or a constant 42 C
+    senders = (lambda ti, a, g, c: mav.raw_imu_send(int(round(ti * 1e6)), *a, *g, 0, 0, 0, 0, c),
+               lambda ti, a, g, c: mav.scaled_imu2_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, c),
+               lambda ti, a, g, c: mav.scaled_imu3_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, c))
     count_keys = ("raw_imu", "scaled_imu2", "scaled_imu3")
 
     def heartbeat(armed: bool) -> None:
@@ -179,6 +182,9 @@ def run(args) -> int:
                 blk = sim.take_until(t_sim)
                 t = blk.t.tolist()
                 ints = [_imu_ints(blk, i) for i in range(sim.imus)]
+                temps = [[4200] * blk.n if blk.temperature is None else
+                         np.clip(np.rint(blk.temperature[i] * 100.0), -32768, 32767).astype(int).tolist()
+                         for i in range(sim.imus)]
                 hb_times = []
                 while next_hb <= t_sim:
                     hb_times.append(next_hb)
@@ -188,7 +194,7 @@ def run(args) -> int:
                     while k < len(t) and t[k] < th:
                         for i, mid in enumerate(IMU_MSG_IDS[:sim.imus]):
                             if sending[mid]:
-                                senders[i](t[k], ints[i][0][k], ints[i][1][k])
+                                senders[i](t[k], ints[i][0][k], ints[i][1][k], temps[i][k])
                                 counts[count_keys[i]] += 1
                         k += 1
                     if th != math.inf:
