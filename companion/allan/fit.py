@@ -69,6 +69,8 @@ _NL_LINEAR = {"gauss_markov": "sigma", "sinusoid": "amplitude"}
 _NL_SHAPE = {"gauss_markov": "tau_c", "sinusoid": "freq_hz"}
 #: a Gauss-Markov correlation time shorter than this many sample periods is a filter's or the sampling's shape
 GM_MIN_SAMPLES = 3.0
+#: relative uncertainty of a modelled low-pass filter's shape, per unit of its bend 1 - AVAR tau / N^2
+FILTER_SHAPE_ERROR = 0.25
 
 
 @dataclass
@@ -338,6 +340,13 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         else:
             base = v_model if np.all(v_model > 0) else np.maximum(v_model, 1e-6 * np.max(v))
             c = np.diag(2.0 * base**2 / edf_v * (1.0 if full else inflate))
+        wt = next((t for t in terms_si if t["effect"] == "white_noise"), None) if white else None
+        if wt is not None:
+            # a real filter chain is no exact 2-pole Butterworth at exactly f_c: the modelled shape is uncertain
+            # in proportion to how far it bends the point (FILTER_SHAPE_ERROR of the bend), so the bent points
+            # count less as the record grows -- the soft form of leaving them out
+            bend = 1.0 - avar_white_noise(tau, 1.0, **white) * tau
+            c = c + np.diag((FILTER_SHAPE_ERROR * np.maximum(bend, 0.0) * avar_term(wt, tau) / scale) ** 2)
         return c + np.diag((floor * v_model) ** 2)
 
     def iterate(floor):
