@@ -390,7 +390,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
                      "sample_hz": rate_hz if detect_filter != "average" else None}
             filter_info["source"] = "data"
             cov, linear, nonlin, c2, v_sup = iterate(0.0)
-            notes.append(f"low-pass roll-off seen in the data: 2-pole cut-off {filter_info['filter_hz']:.3g} Hz "
+            notes.append(f"low-pass roll-off seen in the data: 2-pole {filter_info['filter_hz']:.3g} Hz "
                          f"[{filter_info['ci95'][0]:.3g}, {filter_info['ci95'][1]:.3g}] modelled in the white-noise term")
         elif white:
             filter_info["source"] = "log"

@@ -264,6 +264,14 @@ def estimator_report(est, candidates=None, full=False):
 
         st2 = replace(st, linear=[e for e in st.linear if e not in gone])
         out = report(tau, avar, st2, candidates, cov=cov)
+    # the offline analysis' rules on N: under misfit N from the white-noise region, and N resolved only where
+    # white noise dominates above the filter's corner (else its filter-aware bound)
+    from companion.allan.confidence import edf_simple
+    from companion.allan.white import apply_white_rules
+
+    m = np.round(tau * est.rate_hz).astype(np.int64)
+    edf0 = np.maximum(edf_simple(int(n_eff) + 1, m, 0), 0.5)
+    out, _ = apply_white_rules(out, tau, avar, edf0, 1.0 / est.rate_hz, st.model_error, st.white)
     return out
 
 
