@@ -174,7 +174,7 @@ def run_filtered(args):
 
 def run_draws(args):
     """Random N/B/K, each with a region where it dominates (N log-uniform 2e-4..3e-3 rad/s/sqrt(Hz), the AVAR
-    crossings N-B at 0.5-50 s and B-K at max(20 x that, 50)-600 s), 2 h at 50 Hz: terms found and coverage of
+    crossings N-B at 0.5-20 s and B-K at max(15 x that, 50)-600 s), 2 h at 50 Hz: terms found and coverage of
     the 95 % intervals (a missing term counts as not covered)."""
     from companion.sim.synth import synthesize_axis
 
@@ -188,12 +188,12 @@ def run_draws(args):
     inside = {p: 0 for p in names}
     missing = []
     for d in range(draws):
-        # every term visible in 2 h: white meets the flicker floor at tau_NB in 0.5-50 s, the floor meets the
-        # random walk at tau_BK in max(20 tau_NB, 50)-600 s (AVAR crossings)
+        # every term visible in 2 h: white meets the flicker floor at tau_NB in 0.5-20 s, the floor meets the
+        # random walk at tau_BK in max(15 tau_NB, 50)-600 s (AVAR crossings)
         Nv = 10 ** rng.uniform(math.log10(2e-4), math.log10(3e-3))
-        t_nb = 10 ** rng.uniform(math.log10(0.5), math.log10(50.0))
+        t_nb = 10 ** rng.uniform(math.log10(0.5), math.log10(20.0))
         Bv = Nv / math.sqrt(0.4413 * t_nb)
-        t_bk = 10 ** rng.uniform(math.log10(max(20 * t_nb, 50.0)), math.log10(600.0))
+        t_bk = 10 ** rng.uniform(math.log10(max(15 * t_nb, 50.0)), math.log10(600.0))
         truth = {"N": Nv, "B": Bv, "K": math.sqrt(3 * 0.4413) * Bv / math.sqrt(t_bk)}
         terms = [{"effect": names[p], p: v} for p, v in truth.items()]
         y = synthesize_axis(terms, fs, n, np.random.default_rng(10_000 + d))
