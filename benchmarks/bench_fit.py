@@ -5,6 +5,17 @@ weighted NNLS (weights from the measured points, N/B/K columns given, no selecti
 K = 6e-5 rad/s^1.5 (white meets the flicker floor near 10 s, the floor meets the random walk near 100 s).
 
     python benchmarks/bench_fit.py [seeds=40]
+
+Further modes (docs/analysis.md quotes them):
+
+    python benchmarks/bench_fit.py real        real still stretches: offline N against the white-noise plateau of
+                                               ADEV sqrt(tau) (computed here, no fit), online against offline
+    python benchmarks/bench_fit.py filtered [seeds=100]
+                                               coverage of N's 95 % interval on white noise through a 2-pole
+                                               low-pass, point-sampled (50 Hz, f_c 20 Hz) or averaged (250 Hz,
+                                               f_c 30 Hz): cut-off from the log, or found in the data
+    python benchmarks/bench_fit.py draws [draws=100]
+                                               random N/B/K (2 h at 50 Hz): every term found, coverage
 """
 
 import sys
@@ -77,4 +88,10 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    mode = sys.argv[1] if len(sys.argv) > 1 else ""
+    if mode in ("real", "filtered", "draws"):
+        from bench_fit_real import main_mode  # noqa: E402
+
+        main_mode(mode, sys.argv[2:])
+    else:
+        main()

@@ -55,7 +55,8 @@ import numpy as np
 from companion.allan.confidence import oavar_covariance
 from companion.allan.lsq import nnls
 from companion.allan.special import brentq, chi2_ppf, minimize_scalar_bounded
-from companion.allan.terms import BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term, linear_basis
+from companion.allan.terms import (BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term,
+                                   avar_white_noise, linear_basis)
 
 NONLINEAR_EFFECTS = ("gauss_markov", "sinusoid")
 #: quantization, ramp, gauss_markov and sinusoid enter only if they lower the BIC by more than this
@@ -66,6 +67,10 @@ EXTRA_BIC_MARGIN = 10.0
 AUTO_EFFECTS = LINEAR_EFFECTS + ("gauss_markov",)
 _NL_LINEAR = {"gauss_markov": "sigma", "sinusoid": "amplitude"}
 _NL_SHAPE = {"gauss_markov": "tau_c", "sinusoid": "freq_hz"}
+#: a Gauss-Markov correlation time shorter than this many sample periods is a filter's or the sampling's shape
+GM_MIN_SAMPLES = 3.0
+#: relative uncertainty of a modelled low-pass filter's shape, per unit of its bend 1 - AVAR tau / N^2
+FILTER_SHAPE_ERROR = 0.25
 
 
 @dataclass
@@ -83,6 +88,7 @@ class FitResult:
     avar_cov: np.ndarray | None = field(default=None, repr=False)
     notes: list[str] = field(default_factory=list)
     model_error: float = 0.0  # relative AVAR model error added per point when the model misfits (0: none)
+    filter: dict | None = None  # the low-pass filter modelled in the white-noise term (None: none)
 
     def term(self, effect: str) -> dict | None:
         for t in self.terms:
@@ -92,7 +98,7 @@ class FitResult:
 
     def to_dict(self) -> dict:
         return {"terms": self.terms, "chi2": self.chi2, "dof": self.dof, "criterion": self.criterion,
-                "model_error": self.model_error,
+                "model_error": self.model_error, "filter": self.filter,
                 "score": self.score, "covariance": self.covariance_mode, "notes": list(self.notes)}
 
 
@@ -103,19 +109,22 @@ def _shape_column(effect: str, shape: float, tau) -> np.ndarray:
     return avar_term({"effect": effect, "amplitude": 1.0, "freq_hz": shape}, tau)
 
 
-def _shape_range(effect: str, tau) -> tuple[float, float]:
-    """Shape parameters whose AVAR peak (1.89 tau_c; 0.371/f) lies inside [4 tau_min, tau_max / 4]."""
+def _shape_range(effect: str, tau, tau0=None) -> tuple[float, float]:
+    """Shape parameters whose AVAR peak (1.89 tau_c; 0.371/f) lies inside [4 tau_min, tau_max / 4]; a
+    Gauss-Markov tau_c of at least GM_MIN_SAMPLES sample periods ``tau0`` (shorter, it is the shape of a
+    low-pass filter or of the sampling, which the white-noise term's filter models)."""
     lo, hi = 4.0 * tau[0], tau[-1] / 4.0
     if effect == "gauss_markov":
-        return lo / 1.89, hi / 1.89
+        return max(lo / 1.89, GM_MIN_SAMPLES * (tau0 or 0.0)), hi / 1.89
     return 0.371 / hi, 0.371 / lo
 
 
 class _Problem:
     """Whitened GLS problem for a fixed covariance C (scaled so the data are O(1))."""
 
-    def __init__(self, tau, v, cov):
+    def __init__(self, tau, v, cov, white=None, tau0=None):
         self.tau, self.v = tau, v
+        self.white, self.tau0 = white, tau0  # the white-noise term's filter (dict or None), sample period
         cov = 0.5 * (cov + cov.T)
         d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
         corr = cov / np.outer(d, d)
@@ -141,20 +150,22 @@ class _Problem:
         return np.linalg.pinv(Aw.T @ Aw)
 
 
-def _columns(linear, nonlinear, tau):
-    cols = [linear_basis(tau, [e]) [:, 0] for e in linear]
+def _columns(linear, nonlinear, tau, white=None):
+    """Design matrix; ``white``: {"filter_hz", "sample_hz"} of a low-pass filter seen by the white noise."""
+    cols = [avar_white_noise(tau, 1.0, **white) if (e == "white_noise" and white) else linear_basis(tau, [e])[:, 0]
+            for e in linear]
     cols += [_shape_column(e, s, tau) for e, s in nonlinear]
     return np.column_stack(cols) if cols else np.zeros((len(tau), 0))
 
 
 def _best_shape(prob, effect, linear, others, tau):
     """Grid + bounded refinement of the shape parameter of ``effect``; returns (shape, chi2, theta)."""
-    lo, hi = _shape_range(effect, tau)
+    lo, hi = _shape_range(effect, tau, prob.tau0)
     if not hi > lo > 0:
         return None
 
     def chi(log_s):
-        A = _columns(linear, others + [(effect, math.exp(log_s))], tau)
+        A = _columns(linear, others + [(effect, math.exp(log_s))], tau, prob.white)
         return prob.solve(A)[1]
 
     grid = np.linspace(math.log(lo), math.log(hi), 25 if effect == "gauss_markov" else 61)
@@ -178,14 +189,14 @@ def _select(prob, tau, effects, n_pts, auto):
             r = _best_shape(prob, e, lin_cand, nonlin, tau)
             if r:
                 nonlin.append((e, r[0]))
-        theta, c2 = prob.solve(_columns(lin_cand, nonlin, tau))
+        theta, c2 = prob.solve(_columns(lin_cand, nonlin, tau, prob.white))
         return lin_cand, nonlin, c2
     base = [e for e in lin_cand if e in BASE_EFFECTS]
     extra_lin = [e for e in lin_cand if e not in BASE_EFFECTS]
     best = None
     for k in range(1, len(base) + 1):
         for subset in itertools.combinations(base, k):
-            theta, c2 = prob.solve(_columns(list(subset), [], tau))
+            theta, c2 = prob.solve(_columns(list(subset), [], tau, prob.white))
             kk = int(np.count_nonzero(theta > 0))
             bic = c2 + kk * math.log(n_pts)
             if best is None or bic < best[0] - 1e-9:
@@ -205,7 +216,7 @@ def _select(prob, tau, effects, n_pts, auto):
                 continue  # no interior optimum of the shape parameter: the term is not identified
             cand_lin, cand_nl = linear, nonlin + [(e, r[0])]
 
-        theta, c2n = prob.solve(_columns(cand_lin, cand_nl, tau))
+        theta, c2n = prob.solve(_columns(cand_lin, cand_nl, tau, prob.white))
         if theta[len(cand_lin) - 1 if e in LINEAR_EFFECTS else -1] <= 0:
             continue
         kk = int(np.count_nonzero(theta > 0)) + len(cand_nl)
@@ -225,7 +236,7 @@ def _select(prob, tau, effects, n_pts, auto):
             lin2 = [e for j, e in enumerate(linear) if j != i]
             nl2 = [x for j, x in enumerate(nonlin) if j + len(linear) != i]
             name = linear[i] if i < len(linear) else nonlin[i - len(linear)][0]
-            th2, c2d = prob.solve(_columns(lin2, nl2, tau))
+            th2, c2d = prob.solve(_columns(lin2, nl2, tau, prob.white))
             k_params = (1 if name in LINEAR_EFFECTS else 2)
             margin = 0.0 if name in BASE_EFFECTS else EXTRA_BIC_MARGIN
             gain = (c2 - c2d) + k_params * math.log(n_pts) + margin  # > 0: better without it
@@ -237,10 +248,12 @@ def _select(prob, tau, effects, n_pts, auto):
     return linear, nonlin, c2
 
 
-def _terms_from(linear, nonlinear, theta, scale):
+def _terms_from(linear, nonlinear, theta, scale, white=None):
     terms = []
     for e, t in zip(linear, theta[: len(linear)]):
         terms.append({"effect": e, LINEAR_PARAM[e]: math.sqrt(max(t, 0.0) * scale)})
+        if e == "white_noise" and white:
+            terms[-1].update({k: float(v) for k, v in white.items() if v})
     for (e, s), t in zip(nonlinear, theta[len(linear):]):
         terms.append({"effect": e, _NL_LINEAR[e]: math.sqrt(max(t, 0.0) * scale), _NL_SHAPE[e]: s})
     return [t for t in terms if any(v > 0 for k, v in t.items() if k in ("Q", "N", "B", "K", "R", "sigma", "amplitude"))]
@@ -264,7 +277,8 @@ def _scaled_chi2_ci(theta, var, level):
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
-             max_iter=4, max_ratio=256, segments=None, select=None) -> FitResult:
+             max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
+             detect_filter=None) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring.
 
     ``edf``: EDF of each point (used for the first weights, and for the diagonal covariance when ``n`` or
@@ -275,6 +289,14 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     covariance is then the pooled one and ``n`` may be their sum.
     ``select``: True runs the automatic selection over the candidates ``effects`` (e.g. with a sinusoid,
     which the default candidate set leaves out); default: selection only when ``effects`` is None.
+    ``white_filter``: {"filter_hz": f_c, "sample_hz": fs or None} of a 2-pole low-pass filter the white noise
+    went through before logging (:func:`companion.allan.terms.avar_white_noise`): the white-noise column is the
+    filtered shape, so N comes from every cluster time, the roll-off included; the fitted white_noise term
+    carries the filter. None: plain white noise.
+    ``detect_filter``: "point" or "average" (how the logged samples were taken from the filtered signal):
+    look for a roll-off in the data (:func:`_profile_filter`); it is modelled only when it lowers chi^2 by more
+    than ln(points) + EXTRA_BIC_MARGIN against no filter (or against ``white_filter``'s cut-off, the log's).
+    The result's ``filter`` says what was used: {"filter_hz", "sample_hz", "source": "log" | "data", "ci95"}.
     """
     tau = np.asarray(tau, dtype=float)
     avar = np.asarray(avar, dtype=float)
@@ -284,6 +306,10 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     ok &= np.isfinite(edf_all) & (edf_all > 0)
     tau, avar, edf_v = tau[ok], avar[ok], edf_all[ok]
     full = n is not None and rate_hz is not None
+    white = {k: v for k, v in dict(white_filter or {}).items() if k in ("filter_hz", "sample_hz")} or None
+    if white is not None and not white.get("filter_hz"):
+        white = None
+    tau0 = 1.0 / rate_hz if rate_hz else None
     if full:
         m = np.round(tau * rate_hz).astype(np.int64) if m is None else np.asarray(m, dtype=np.int64)[ok]
     if tau.size == 0 or not np.any(avar > 0):
@@ -314,6 +340,13 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         else:
             base = v_model if np.all(v_model > 0) else np.maximum(v_model, 1e-6 * np.max(v))
             c = np.diag(2.0 * base**2 / edf_v * (1.0 if full else inflate))
+        wt = next((t for t in terms_si if t["effect"] == "white_noise"), None) if white else None
+        if wt is not None:
+            # a real filter chain is no exact 2-pole Butterworth at exactly f_c: the modelled shape is uncertain
+            # in proportion to how far it bends the point (FILTER_SHAPE_ERROR of the bend), so the bent points
+            # count less as the record grows -- the soft form of leaving them out
+            bend = 1.0 - avar_white_noise(tau, 1.0, **white) * tau
+            c = c + np.diag((FILTER_SHAPE_ERROR * np.maximum(bend, 0.0) * avar_term(wt, tau) / scale) ** 2)
         return c + np.diag((floor * v_model) ** 2)
 
     def iterate(floor):
@@ -326,15 +359,15 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         linear, nonlin, c2 = list(base), [], 0.0
         prev, v_sup = None, v
         for it in range(max_iter):
-            prob = _Problem(tau, v, cov)
+            prob = _Problem(tau, v, cov, white, tau0)
             sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
-            A_sup = _columns(sup_lin, nonlin, tau)
+            A_sup = _columns(sup_lin, nonlin, tau, white)
             th_sup, _ = prob.solve(A_sup)
             v_sup = A_sup @ th_sup
-            cov = covariance(_terms_from(sup_lin, nonlin, th_sup, scale), v_sup, floor)
-            prob = _Problem(tau, v, cov)
+            cov = covariance(_terms_from(sup_lin, nonlin, th_sup, scale, white), v_sup, floor)
+            prob = _Problem(tau, v, cov, white, tau0)
             linear, nonlin, c2 = _select(prob, tau, effects, n_pts, auto)
-            theta, c2 = prob.solve(_columns(linear, nonlin, tau))
+            theta, c2 = prob.solve(_columns(linear, nonlin, tau, white))
             key = (tuple(linear), tuple(e for e, _ in nonlin))
             if prev is not None and key == prev[0] and np.allclose(theta, prev[1], rtol=1e-3, atol=1e-12):
                 break
@@ -342,16 +375,37 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         return cov, linear, nonlin, c2, v_sup
 
     cov, linear, nonlin, c2, v_sup = iterate(0.0)
+    filter_info = None
+    if detect_filter and "white_noise" in effects and tau0 and n_pts >= 5:
+        # a low-pass roll-off: claimed only when the data show one (the filtered white-noise shape lowers
+        # chi^2 by more than one parameter's BIC penalty + EXTRA_BIC_MARGIN); the log's cut-off, when given,
+        # stands unless the data contradict it by the same margin
+        lin_f = linear if "white_noise" in linear else ["white_noise"] + list(linear)
+        filter_info = _profile_filter(_Problem(tau, v, cov, None, tau0), lin_f, nonlin, tau0,
+                                      "point" if detect_filter != "average" else "average", white)
+        thr = math.log(n_pts) + EXTRA_BIC_MARGIN
+        base_c2 = filter_info["chi2_given"] if white else filter_info["chi2_plain"]
+        if filter_info["interior"] and filter_info["chi2"] < base_c2 - thr:
+            white = {"filter_hz": filter_info["filter_hz"],
+                     "sample_hz": rate_hz if detect_filter != "average" else None}
+            filter_info["source"] = "data"
+            cov, linear, nonlin, c2, v_sup = iterate(0.0)
+            notes.append(f"low-pass roll-off seen in the data: 2-pole {filter_info['filter_hz']:.3g} Hz "
+                         f"[{filter_info['ci95'][0]:.3g}, {filter_info['ci95'][1]:.3g}] modelled in the white-noise term")
+        elif white:
+            filter_info["source"] = "log"
+        else:
+            filter_info["source"] = None
     floor = 0.0
     dof0 = n_pts - len(linear) - 2 * len(nonlin)
     if dof0 >= 2 and c2 > dof0 + 3.0 * math.sqrt(2.0 * dof0):
         # Model misfit (real sensors: internal filters at short tau, temperature, ...): add a relative
         # model error `floor` to every point, chosen so that chi^2 = dof (as a Birge ratio / random-effects
         # term does), then select and fit again. Simulated data consistent with the model never get here.
-        A = _columns(linear, nonlin, tau)
+        A = _columns(linear, nonlin, tau, white)
 
         def excess(lf):
-            return _Problem(tau, v, cov + np.diag((math.exp(lf) * v_sup) ** 2)).solve(A)[1] - dof0
+            return _Problem(tau, v, cov + np.diag((math.exp(lf) * v_sup) ** 2), white, tau0).solve(A)[1] - dof0
 
         lo_f, hi_f = math.log(1e-4), math.log(3.0)
         if excess(hi_f) < 0:
@@ -365,8 +419,8 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         cov, linear, nonlin, c2, v_sup = iterate(floor)
         notes.append(f"model misfit (chi2 {chi_before:.0f} for {dof0} dof): a model error of {100 * floor:.1f} % "
                      "of AVAR per point was added to the covariance")
-    prob = _Problem(tau, v, cov)
-    A = _columns(linear, nonlin, tau)
+    prob = _Problem(tau, v, cov, white, tau0)
+    A = _columns(linear, nonlin, tau, white)
     theta, c2 = prob.solve(A)
     active = theta > 0
     cov_t = np.zeros((len(theta), len(theta)))
@@ -380,6 +434,8 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         if e in LINEAR_EFFECTS:
             p = LINEAR_PARAM[e]
             t = {"effect": e, p: math.sqrt(theta[j] * scale), "ci95": {p: [math.sqrt(lo * scale), math.sqrt(hi * scale)]}}
+            if e == "white_noise" and white:
+                t.update({k: float(x) for k, x in white.items() if x})
         else:
             shape = dict(nonlin)[e]
             p, s = _NL_LINEAR[e], _NL_SHAPE[e]
@@ -388,7 +444,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
             # sigma (amplitude) and the shape parameter are correlated: the interval of the linear parameter
             # is the envelope of its conditional intervals over the shape interval (a projection interval)
             for sh in np.exp(np.linspace(math.log(s_lo), math.log(s_hi), 7)):
-                A2 = _columns(linear, others + [(e, float(sh))], tau)
+                A2 = _columns(linear, others + [(e, float(sh))], tau, white)
                 th2, _ = prob.solve(A2)
                 k2 = A2.shape[1] - 1
                 if th2[k2] > 0:
@@ -399,27 +455,92 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
             t = {"effect": e, p: math.sqrt(theta[j] * scale), s: shape,
                  "ci95": {p: [math.sqrt(lo * scale), math.sqrt(hi * scale)], s: [s_lo, s_hi]}}
         terms.append(t)
+    if filter_info and filter_info.get("source") == "data":
+        # N and the cut-off found in the data are correlated: N's interval is the envelope of its conditional
+        # intervals over the cut-off's interval (a projection interval, as for a Gauss-Markov sigma)
+        wt = next((t for t in terms if t["effect"] == "white_noise"), None)
+        if wt is not None:
+            j = linear.index("white_noise")
+            lo_n, hi_n = wt["ci95"]["N"]
+            for fc in np.exp(np.linspace(*np.log(filter_info["ci95"]), 7)):
+                A2 = _columns(linear, nonlin, tau, dict(white, filter_hz=float(fc)))
+                th2, _ = prob.solve(A2)
+                if th2[j] > 0:
+                    act = th2 > 0
+                    ct = prob.cov_theta(A2[:, act])
+                    l2, h2 = _scaled_chi2_ci(th2[j], ct[int(np.count_nonzero(act[:j]))][int(np.count_nonzero(act[:j]))], level)
+                    lo_n, hi_n = min(lo_n, math.sqrt(l2 * scale)), max(hi_n, math.sqrt(h2 * scale))
+            wt["ci95"]["N"] = [lo_n, hi_n]
     kk = int(np.count_nonzero(active)) + len(nonlin)
     avar_fit = avar_model([{k: v_ for k, v_ in t.items() if k != "ci95"} for t in terms], tau)
     return FitResult(terms=terms, tau=tau, avar_fit=avar_fit, chi2=c2, dof=max(n_pts - kk, 0),
                      criterion="bic", score=c2 + kk * math.log(n_pts),
                      covariance_mode="full" if full else "diagonal", avar_cov=cov * scale**2, notes=notes,
-                     model_error=floor)
+                     model_error=floor, filter=_filter_summary(white, filter_info))
+
+
+def _filter_summary(white, info):
+    if not white:
+        return None
+    out = {"filter_hz": float(white["filter_hz"]), "sample_hz": white.get("sample_hz"),
+           "source": (info or {}).get("source") or "log"}
+    if info and info.get("source") == "data":
+        out["ci95"] = list(info["ci95"])
+    return out
+
+
+def _profile_filter(prob, linear, nonlin, tau0, sampling, given=None, level=0.95):
+    """Profile chi^2 of the white-noise term's low-pass cut-off f_c over a log grid from 30 / tau_max to
+    3 / tau0 (a filter above that bends no cluster time), refined by a bounded 1-D minimisation. ``interior``:
+    the optimum is not at the grid's upper end (there the data look unfiltered)."""
+    tau = prob.tau
+    sample_hz = 1.0 / tau0 if sampling == "point" else None
+    lo, hi = 30.0 / tau[-1], 3.0 / tau0
+
+    def chi(lf):
+        w = {"filter_hz": math.exp(lf), "sample_hz": sample_hz}
+        return prob.solve(_columns(linear, nonlin, tau, w))[1]
+
+    plain = prob.solve(_columns(linear, nonlin, tau, None))[1]
+    out = {"chi2_plain": plain, "filter_hz": None, "chi2": plain, "interior": False, "ci95": [None, None],
+           "chi2_given": chi(math.log(given["filter_hz"])) if given else None}
+    if not hi > lo:
+        return out
+    grid = np.linspace(math.log(lo), math.log(hi), 41)
+    vals = np.array([chi(g) for g in grid])
+    i = int(np.argmin(vals))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    x, fx = minimize_scalar_bounded(chi, a, b, xatol=1e-3)
+    best, c2 = (x, fx) if fx < vals[i] else (grid[i], float(vals[i]))
+    thr = c2 + chi2_ppf(level, 1)
+    inside = np.flatnonzero(vals <= thr)
+    if inside.size == 0:
+        inside = np.array([i])
+    i0, i1 = int(inside.min()), int(inside.max())
+
+    def g(lf):
+        return chi(lf) - thr
+
+    ci = [math.exp(brentq(g, grid[i0 - 1], min(grid[i0], best), xtol=1e-3)) if i0 > 0 and g(grid[i0 - 1]) > 0 > g(min(grid[i0], best)) else math.exp(grid[max(i0 - 1, 0)]),
+          math.exp(brentq(g, max(grid[i1], best), grid[i1 + 1], xtol=1e-3)) if i1 < len(grid) - 1 and g(grid[i1 + 1]) > 0 > g(max(grid[i1], best)) else math.exp(grid[min(i1 + 1, len(grid) - 1)])]
+    out.update(filter_hz=math.exp(best), chi2=float(c2), interior=bool(best < grid[-3]),
+               ci95=[min(ci[0], math.exp(best)), max(ci[1], math.exp(best))])
+    return out
 
 
 def _profile_ci(prob, effect, shape, linear, others, tau, c2min, level):
     """Profile-likelihood interval of a shape parameter (tau_c or freq_hz) on a log grid."""
-    lo, hi = _shape_range(effect, tau)
+    lo, hi = _shape_range(effect, tau, prob.tau0)
     lo, hi = min(lo, shape), max(hi, shape)
     grid = np.exp(np.linspace(math.log(lo) - 1.0, math.log(hi) + 1.0, 121))
     thr = c2min + chi2_ppf(level, 1)
-    chis = np.array([prob.solve(_columns(linear, others + [(effect, g)], tau))[1] for g in grid])
+    chis = np.array([prob.solve(_columns(linear, others + [(effect, g)], tau, prob.white))[1] for g in grid])
     idx = np.flatnonzero(chis <= thr)
     if idx.size == 0:
         return shape, shape
 
     def f(lg):
-        return prob.solve(_columns(linear, others + [(effect, math.exp(lg))], tau))[1] - thr
+        return prob.solve(_columns(linear, others + [(effect, math.exp(lg))], tau, prob.white))[1] - thr
 
     lg = np.log(grid)
     i0, i1 = int(idx.min()), int(idx.max())

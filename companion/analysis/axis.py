@@ -1,5 +1,6 @@
 """Allan analysis of one axis: pooled overlapping AVAR over the still segments, the weighted fit of the
-IEEE 952 terms with a low-pass roll-off kept out, intervals, bounds and the LSB contribution."""
+IEEE 952 terms with a low-pass filter modelled in the white-noise term, intervals, bounds and the LSB
+contribution."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from companion.analysis.taus import parse_taus
 
 
 def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, effects=None, level: float = 0.95,
-                 segments=None, tau_min: float = 0.0) -> dict:
+                 segments=None, tau_min: float = 0.0, white_filter=None, sampling: str = "point") -> dict:
     """Allan analysis of one axis (SI rate samples): the JSON ``axes`` entry.
 
     Keys: ``tau``, ``adev``, ``adev_lo``, ``adev_hi`` (``level`` interval, EDF from the fitted model),
@@ -24,8 +25,12 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     (chi2, dof, criterion, ``tau_min``), ``quantization`` (LSB contribution, or None when the format has none).
     ``taus``: a --taus string or an array of cluster sizes m. ``segments``: a list of contiguous pieces
     (still segments) analysed with the pooled AVAR (:mod:`companion.allan.pooled`) instead of ``y``.
-    ``tau_min``: cluster times below it are left out of the fit (a known low-pass filter's roll-off;
-    a roll-off is also detected from the data, :func:`rolloff_tau`).
+    ``tau_min``: cluster times below it are left out of the fit (by hand; a low-pass filter is modelled, not
+    cut). ``white_filter``: {"filter_hz", "sample_hz"} of the log's low-pass filter (the log's parameter), and
+    ``sampling`` ("point" or "average") how the samples were taken from the filtered signal: the fit models
+    the filter in the white-noise term and also looks for a roll-off in the data
+    (:func:`companion.allan.fit.fit_avar`). N is resolved only where white noise dominates an octave above the
+    filter's corner (:mod:`companion.allan.white`); otherwise it is reported as a filter-aware bound.
     """
     pieces = [np.asarray(y, dtype=float)] if segments is None else [np.asarray(p, dtype=float) for p in segments]
     out = {"tau": [], "adev": [], "adev_lo": [], "adev_hi": [], "terms": [], "status": "ok",
@@ -52,9 +57,8 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     pooled = len(pieces) > 1
     m_fit = pooled_cluster_sizes(lengths, "octave")
     tau_f, avar_f, m_fit, counts = pooled_oavar(pieces, rate_hz, m=m_fit)
-    detected = rolloff_tau(tau_f, avar_f) if rate_hz >= FIT_MIN_RATE_HZ else 0.0
-    cut = max(float(tau_min or 0.0), detected)
-    why = "from the log's filter parameter" if (tau_min or 0.0) >= detected else "detected in the data"
+    cut = float(tau_min or 0.0)
+    why = "by hand"
     keep = tau_f >= cut * (1 - 1e-9)
     short_note = None
     if keep.sum() < 3:  # too short a record to leave the roll-off out: fit everything, and say so
@@ -64,7 +68,8 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
         keep = np.ones_like(keep)
     edf0 = np.array([edf_simple(int(c) + 2 * int(mm), mm, 0) for c, mm in zip(counts[keep], m_fit[keep])])
     fit = fit_avar(tau_f[keep], avar_f[keep], edf0, effects=effects, n=n, rate_hz=rate_hz, m=m_fit[keep],
-                   level=level, segments=lengths if pooled else None)
+                   level=level, segments=lengths if pooled else None, white_filter=white_filter,
+                   detect_filter=sampling if rate_hz >= FIT_MIN_RATE_HZ and keep.sum() >= 5 else None)
     from companion.estimators.report import bounds_for_fit
 
     # effects the fit left out (N, B, K): their 95 % upper bound, as the online report gives it (so offline and online reports compare)
@@ -82,20 +87,29 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     lo, hi = adev_ci(adev, edf, level)
     notes = list(fit.notes)
     terms = fit.terms
-    if fit.model_error:
-        terms, note = local_white_noise(terms, tau_f[keep], avar_f[keep], edf0, 1.0 / rate_hz)
-        if note:
-            notes.append(note)
+    from companion.allan.white import apply_white_rules
+
+    # the rules on N shared with the online report: local refit under misfit, resolved or a filter-aware bound
+    terms, more = apply_white_rules(terms, tau_f[keep], avar_f[keep], edf0, 1.0 / rate_hz, fit.model_error,
+                                    {k: v for k, v in (fit.filter or {}).items() if k in ("filter_hz", "sample_hz")})
+    notes += more
+    if any(t.get("bound") for t in terms):
+        bounds = [x for x in bounds if x["effect"] != "white_noise"] + [t for t in terms if t.get("bound")]
+        terms = [t for t in terms if not t.get("bound")]
     out.update(tau=tau.tolist(), adev=adev.tolist(), adev_lo=lo.tolist(), adev_hi=hi.tolist(),
                terms=terms, bounds=bounds, edf=edf.tolist(),
                fit={"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
                     "model_error": fit.model_error, "tau_min": float(tau_f[keep][0]) if keep.any() else None,
+                    "filter": fit.filter,
                     "points": int(keep.sum()), "notes": notes, "segments": len(pieces)})
     if short_note:
         out["fit"]["notes"].append(short_note)
     if cut > 0 and (~keep).any():
-        out["fit"]["notes"].append(f"cluster times below {tau_f[keep][0]:.3g} s left out of the fit (low-pass "
-                                   f"roll-off, {why})")
+        out["fit"]["notes"].append(f"cluster times below {tau_f[keep][0]:.3g} s left out of the fit ({why})")
+    if fit.filter and fit.filter.get("source") == "log":
+        out["fit"]["notes"].append(f"low-pass {fit.filter['filter_hz']:.3g} Hz (the log's, 2-pole, "
+                                   f"{'point-sampled' if fit.filter.get('sample_hz') else 'averaged'}) modelled "
+                                   "in the white-noise term, no cluster time left out")
     N = next((t["N"] for t in terms if t["effect"] == "white_noise"), None)
     out["quantization"] = lsb_report(pieces[int(np.argmax(lengths))], rate_hz, lsb, N)
     return out
@@ -135,54 +149,8 @@ def filter_tau(cutoff_hz: float | None, rate_hz: float) -> float:
 
 
 def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0.5):
-    """N from a local weighted fit of the white-noise region, for a fit with model misfit.
+    """N from a local weighted fit of the white-noise region under model misfit: the core's
+    :func:`companion.allan.white.local_white_noise` (the online report applies the same rule)."""
+    from companion.allan.white import local_white_noise as core
 
-    Under misfit the global fit trades the short-tau points, where the data are most precise, for a bump
-    elsewhere. The white-noise region is the run of cluster times from 10 tau0 (clear of a sensor's internal
-    filter, output lines and quantisation at the first few samples) on which white noise makes at least
-    ``share`` of the fitted model. On it N^2 is refitted with the other fitted terms held fixed (weighted
-    least squares of a - other = N^2 / tau, weights w = EDF / (2 a^2)):
-
-        N^2 = sum w (a - other) / tau / sum w / tau^2.
-
-    Its interval is the global one scaled by the ratio. Returns (terms, note or None).
-    """
-    from companion.allan.terms import avar_term
-
-    wn = next((t for t in terms if t["effect"] == "white_noise"), None)
-    if wn is None:
-        return terms, None
-    plain = [{k: v for k, v in t.items() if k != "ci95"} for t in terms]
-    tau = np.asarray(tau, dtype=float)
-    white = avar_term({"effect": "white_noise", "N": wn["N"]}, tau)
-    total = sum(avar_term(t, tau) for t in plain)
-    frac = white / np.where(total > 0, total, 1.0)
-    ok = (frac >= share) & (tau >= 10.0 * tau0 * (1 - 1e-9))
-    idx = np.flatnonzero(ok)
-    if idx.shape[0] < 2:
-        return terms, None
-    stop = idx[0]
-    while stop + 1 < tau.shape[0] and ok[stop + 1]:
-        stop += 1
-    sel = np.arange(idx[0], stop + 1)
-    if sel.shape[0] < 2:
-        return terms, None
-    a, tt, e = np.asarray(avar)[sel], tau[sel], np.asarray(edf)[sel]
-    other = (total - white)[sel]
-    w = e / (2.0 * a**2)
-    n2 = float(np.sum(w * (a - other) / tt) / np.sum(w / tt**2))
-    if not n2 > 0:
-        return terms, None
-    N = math.sqrt(n2)
-    ratio = N / wn["N"]
-    if abs(ratio - 1) < 1e-4:
-        return terms, None
-    new = []
-    for t in terms:
-        if t is wn:
-            t = dict(t)
-            t["N"] = N
-            t["ci95"] = {"N": [c * ratio for c in wn["ci95"]["N"]]}
-        new.append(t)
-    return new, (f"N from a local weighted fit of the white-noise region ({tt[0]:.3g}-{tt[-1]:.3g} s) because "
-                 f"the model misfits: the global fit gave {100 * (1 / ratio - 1):+.1f} %")
+    return core(terms, tau, avar, edf, tau0, share)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from companion.analysis.axis import analyze_axis, filter_tau
+from companion.analysis.axis import analyze_axis
 from companion.analysis.limits import FIT_MIN_RATE_HZ, FIT_MIN_SECONDS
 from companion.samples import GYRO_AXES
 
@@ -15,8 +15,8 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
     """The JSON ``streams`` entry of one :class:`companion.samples.ImuStream`.
 
     ``ranges``: index ranges to analyse (the still segments, pooled); None: the longest segment.
-    ``filters``: {"gyro": Hz, "accel": Hz} low-pass cut-offs of the logged data (their roll-off is kept out
-    of the fit). The entry carries ``warnings`` (rate < 10 Hz, < 60 s analysed) and the stream's timing.
+    ``filters``: {"gyro": Hz, "accel": Hz} low-pass cut-offs of the logged data (modelled in the white-noise
+    term of the offline fit and of the online report). The entry carries ``warnings`` (rate < 10 Hz, < 60 s analysed) and the stream's timing.
     """
     if ranges is None:
         ranges = [stream.longest_segment()] if stream.samples else []
@@ -43,17 +43,27 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
                                    "status": "too_short", "note": "no sample rate"}
         else:
             col = stream.axis(axis)
+            samp = stream_sampling(stream)
+            wf = {"filter_hz": float(fc), "sample_hz": rate if samp == "point" else None} if fc else None
             entry["axes"][axis] = analyze_axis(None, rate, taus, lsb=lsb, segments=[col[a:b] for a, b in ranges],
-                                               tau_min=filter_tau(fc, rate))
+                                               white_filter=wf, sampling=samp)
             if online and entry["axes"][axis]["status"] == "ok":
                 from companion.estimators import online_terms
 
                 a, b = max(ranges, key=lambda r: r[1] - r[0])
                 y = col[a:b]
-                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate)
+                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate,
+                                                             filter_hz=float(fc) if fc else None, sampling=samp)
         if progress:
             progress.step(f"{stream.key.message}[{stream.key.instance}] {axis}")
     return entry
+
+
+def stream_sampling(stream) -> str:
+    """How a stream's samples were taken from its filtered signal: "average" for PX4's sensor_combined and
+    vehicle_imu (delta angle / dt over the publication interval), "point" (the latest filtered value) for
+    the rest (DataFlash IMU, sensor_gyro, MAVLink RAW_IMU/SCALED_IMU, CSV)."""
+    return "average" if stream.key.message in ("sensor_combined", "vehicle_imu") else "point"
 
 
 def stream_filters(stream, meta: dict) -> dict:

@@ -85,14 +85,25 @@ class OctaveBankEstimator:
     Parameters: ``rate_hz`` sample rate; ``effects`` subset of the five linear effects; ``forgetting_s``
     exponential memory in seconds (None: infinite memory); ``phases`` staggered phases per level (power of
     2); ``max_tau_s`` largest cluster time kept (fixes the number of levels, hence the state size);
-    ``min_edf`` smallest degrees of freedom for a level to enter the fit.
+    ``min_edf`` smallest degrees of freedom for a level to enter the fit; ``filter_hz`` the 2-pole low-pass
+    cut-off of the logged data (INS_GYRO_FILTER, IMU_GYRO_CUTOFF) and ``sampling`` ("point": latest filtered
+    value logged; "average": delta angle / dt) for the report's white-noise term (``fit="model"``).
     """
 
     kind = "octave"
 
     def __init__(self, rate_hz, effects=DEFAULT_EFFECTS, forgetting_s=None, phases=16, max_tau_s=20000.0,
-                 min_edf=1.0, fit="model", gls_max_ratio=256):
+                 min_edf=1.0, fit="model", gls_max_ratio=256, filter_hz=None, sampling="point"):
         rate_hz = float(rate_hz)
+        if filter_hz is not None and not (float(filter_hz) > 0 and math.isfinite(float(filter_hz))):
+            raise ValueError(f"filter_hz must be a positive number (or null), got {filter_hz!r}")
+        if sampling not in ("point", "average"):
+            raise ValueError(f"sampling must be 'point' or 'average', got {sampling!r}")
+        # the low-pass filter of the logged data (as the offline fit models it): its cut-off when the log
+        # gives it, and how the samples were taken from the filtered signal; a roll-off is also looked for
+        # in the data (companion.allan.fit.fit_avar detect_filter)
+        self.filter_hz = None if filter_hz is None else float(filter_hz)
+        self.sampling = sampling
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
         phases = int(phases)
@@ -302,7 +313,8 @@ class OctaveBankEstimator:
             "version": 1,
             "config": {"rate_hz": self.rate_hz, "effects": list(self.effects), "forgetting_s": self.forgetting_s,
                        "phases": self.phases, "max_tau_s": self.max_tau_s, "min_edf": self.min_edf,
-                       "fit": self.fit, "gls_max_ratio": self.gls_max_ratio},
+                       "fit": self.fit, "gls_max_ratio": self.gls_max_ratio, "filter_hz": self.filter_hz,
+                       "sampling": self.sampling},
             "n": self._n,
             "n_rejected": self.n_rejected,
             "y_ref": self._y_ref,

@@ -18,7 +18,10 @@ Report. For every linear candidate (Q, N, B, K, R):
   information of the GLS; at theta = 0 the marginal with theta freed):
   ``{"effect", p: ub, "std": {p: ...}, "ci95": {p: [0, ub]}, "bound": True}``.
 
-Gauss-Markov and sinusoid terms are reported only when selected (their bound would depend on the
+The white-noise term carries the low-pass filter of the logged data as the offline fit models it (the
+estimator's ``filter_hz`` from the log, or a roll-off the data show; ``filter_hz`` in the reported term),
+so a filter never becomes a Gauss-Markov term (whose tau_c is at least 3 sample periods) nor pulls N's
+bound down. Gauss-Markov and sinusoid terms are reported only when selected (their bound would depend on the
 unknown shape parameter). Intervals: fit_avar's (scaled chi-square, Satterthwaite); 1-sigma = 95 %
 width / 3.92. Coverage is measured in benchmarks/bench_online.py (``coverage``).
 
@@ -65,11 +68,14 @@ class Structure:
     n_raw: int  # samples seen at selection time (for the re-selection rule)
     model_error: float = 0.0
     nl_ci: dict | None = None  # profile intervals of the nonlinear terms from the selection fit
+    white: dict | None = None  # low-pass filter of the white-noise term ({"filter_hz", "sample_hz"}), as fitted
 
 
-def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ratio=256):
+def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ratio=256, white_filter=None,
+           detect_filter="point"):
     """Select the model from the levels with :func:`companion.allan.fit.fit_avar` (automatic selection over
-    ``candidates``). Returns ``(FitResult, Structure)``."""
+    ``candidates``; the white-noise term's low-pass filter from ``white_filter`` (the log's cut-off) or the data,
+    as the offline fit does). Returns ``(FitResult, Structure)``."""
     from companion.allan.confidence import edf_simple
     from companion.allan.fit import fit_avar
 
@@ -78,7 +84,7 @@ def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ra
     n = max(int(n), int(2 * m.max() + 2)) if m.size else int(n)
     edf0 = np.maximum(edf_simple(n + 1, m, 0), 0.5)
     fr = fit_avar(tau, avar, edf0, effects=list(candidates), n=n, rate_hz=rate_hz, m=m, max_ratio=max_ratio,
-                  select=True)
+                  select=True, white_filter=white_filter, detect_filter=detect_filter)
     return fr, structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw)
 
 
@@ -93,8 +99,10 @@ def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure
     cov = fr.avar_cov if fr.avar_cov is not None else np.diag(2.0 * np.asarray(avar)[keep] ** 2 / edf0[keep])
     model = np.maximum(np.asarray(fr.avar_fit, float), 1e-300) if len(fr.avar_fit) else np.asarray(avar)[keep]
     nl_ci = {t["effect"]: t.get("ci95", {}) for t in fr.terms if t["effect"] in NL_PARAMS}
+    white = ({"filter_hz": fr.filter["filter_hz"], "sample_hz": fr.filter.get("sample_hz")}
+             if getattr(fr, "filter", None) else None)
     return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
-                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci)
+                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci, white)
 
 
 def bounds_for_fit(fr, tau, avar, edf0, rate_hz, n, effects=("white_noise", "bias_instability", "random_walk")):
@@ -140,7 +148,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     if tau.size == 0 or not np.any(avar > 0):
         return out
     prob, scale = _problem(tau, avar, cov)
-    A = _columns(st.linear, st.nonlin, tau)
+    A = _columns(st.linear, st.nonlin, tau, st.white)
     theta, _ = prob.solve(A) if A.shape[1] else (np.zeros(0), 0.0)
     cov_t = np.zeros((len(theta), len(theta)))
     act = theta > 0
@@ -150,7 +158,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     # model and in the model with every base effect (N, B, K) forced in -- a base effect the selection left
     # out (e.g. a bias instability hidden under a Gauss-Markov hump) can otherwise shift N beyond its interval
     sup = [x for x in LINEAR_EFFECTS if x in st.linear or (x in BASE_EFFECTS and x in candidates)]
-    A_s = _columns(sup, st.nonlin, tau)
+    A_s = _columns(sup, st.nonlin, tau, st.white)
     th_s, _ = prob.solve(A_s)
     cov_s = np.zeros((len(th_s), len(th_s)))
     act_s = th_s > 0
@@ -170,6 +178,8 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
             resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
                            "bound": False}
+            if e == "white_noise" and st.white:
+                resolved[e]["filter_hz"] = float(st.white["filter_hz"])
     for e in LINEAR_EFFECTS:
         if e not in candidates:
             continue
@@ -178,7 +188,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
             continue
         p = LINEAR_PARAM[e]
         lin = [x for x in LINEAR_EFFECTS if x == e or (x in st.linear and x != e)]
-        A2 = _columns(lin, st.nonlin, tau)
+        A2 = _columns(lin, st.nonlin, tau, st.white)
         th2, _ = prob.solve(A2)
         i = lin.index(e)
         var = _marginal_var(prob, A2, th2, i)
@@ -207,7 +217,7 @@ def rescaled_cov(st: Structure, tau, avar, n):
     from companion.allan.fit import _columns
 
     prob, scale = _problem(tau, avar, st.cov * (st.n / max(float(n), 1.0)))
-    A = _columns(st.linear, st.nonlin, tau)
+    A = _columns(st.linear, st.nonlin, tau, st.white)
     if A.shape[1] == 0:
         return st.cov
     theta, _ = prob.solve(A)
@@ -233,7 +243,11 @@ def estimator_report(est, candidates=None, full=False):
     due = st is None or (grown >= RESELECT_MIN_S * est.rate_hz and
                          (est.n_samples >= RESELECT * st.n_raw or grown >= RESELECT_MAX_S * est.rate_hz))
     if full or due or not np.all(np.isin(st.m, m_now)):
-        _, st = select(tau, avar, edf, n_eff, est.rate_hz, candidates, n_raw=est.n_samples)
+        fh = getattr(est, "filter_hz", None)
+        samp = getattr(est, "sampling", "point")
+        wf = {"filter_hz": fh, "sample_hz": est.rate_hz if samp == "point" else None} if fh else None
+        _, st = select(tau, avar, edf, n_eff, est.rate_hz, candidates, n_raw=est.n_samples, white_filter=wf,
+                       detect_filter=samp)
         est._structure = st
         cov = None
     else:
@@ -251,6 +265,14 @@ def estimator_report(est, candidates=None, full=False):
 
         st2 = replace(st, linear=[e for e in st.linear if e not in gone])
         out = report(tau, avar, st2, candidates, cov=cov)
+    # the offline analysis' rules on N: under misfit N from the white-noise region, and N resolved only where
+    # white noise dominates above the filter's corner (else its filter-aware bound)
+    from companion.allan.confidence import edf_simple
+    from companion.allan.white import apply_white_rules
+
+    m = np.round(tau * est.rate_hz).astype(np.int64)
+    edf0 = np.maximum(edf_simple(int(n_eff) + 1, m, 0), 0.5)
+    out, _ = apply_white_rules(out, tau, avar, edf0, 1.0 / est.rate_hz, st.model_error, st.white)
     return out
 
 

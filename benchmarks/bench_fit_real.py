@@ -1,0 +1,219 @@
+"""Modes of benchmarks/bench_fit.py for filtered and real data (run through bench_fit.py: `real`, `filtered`,
+`draws`).
+
+real: every gyro axis of the real still stretches in ../shared/data through `companion analyze --online --json`
+(the user's path), against an independent reference: the white-noise plateau of ADEV sqrt(tau), i.e. the
+EDF-weighted mean of AVAR x tau over the run of octave points where it is flat, from the first point that is
+no longer below the following ones (above the filter's corner). "Flat": every point within 2.5 standard
+deviations (white-noise EDF of NIST SP 1065 Table 5) of the run's mean; at least 3 points, else "no plateau".
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+from companion.allan.adev import cluster_sizes, oavar  # noqa: E402
+from companion.allan.confidence import edf_simple  # noqa: E402
+from companion.allan.fit import fit_avar  # noqa: E402
+
+DATA = ROOT.parent / "shared" / "data"
+RAD2DEG_SQRTH = 180.0 / math.pi * 60.0  # rad/s/sqrt(Hz) -> deg/sqrt(h)
+RAD2DEG_H = 180.0 / math.pi * 3600.0
+
+REAL = [
+    ("ardupilot/dronekit_log171.bin", []),
+    ("px4/pyulog_sample.ulg", []),
+    ("px4/pyulog_sample_appended_multiple.ulg", []),
+    ("px4/pyulog_sample_px4_events.ulg", []),
+    ("adis16405/adis16405_imu1.csv.gz", []),
+    ("adis16405/adis16405_imu2.csv.gz", []),
+    ("adis16405/adis16405_imu3.csv.gz", []),
+]
+
+
+def plateau(tau, avar, n, rate_hz, k=2.5):
+    """(N_ref, (tau_first, tau_last)) of the white-noise plateau, or (None, None). See the module docstring."""
+    tau, avar = np.asarray(tau, float), np.asarray(avar, float)
+    m = np.maximum(np.round(tau * rate_hz), 1)
+    edf = np.maximum(np.array([edf_simple(n + 1, mm, 0) for mm in m]), 1.0)
+    r = avar * tau
+    rel = np.sqrt(2.0 / edf)
+    # corner: first point not significantly below the median of the next three
+    i0 = 0
+    while i0 + 3 < len(r) and r[i0] < np.median(r[i0 + 1:i0 + 4]) * (1 - 2.0 * rel[i0]):
+        i0 += 1
+    best = None
+    j = i0 + 1
+    while j < len(r):
+        w = edf[i0:j + 1]
+        mean = float(np.sum(w * r[i0:j + 1]) / np.sum(w))
+        if np.any(np.abs(r[i0:j + 1] - mean) > k * rel[i0:j + 1] * mean):
+            break
+        best = (mean, j)
+        j += 1
+    if best is None or best[1] - i0 + 1 < 3:
+        return None, None
+    return math.sqrt(best[0]), (float(tau[i0]), float(tau[best[1]]))
+
+
+def _val(terms, effect, p):
+    for t in terms or ():
+        if t["effect"] == effect:
+            return t[p], t.get("ci95", {}).get(p), bool(t.get("bound"))
+    return None, None, None
+
+
+def run_real(args):
+    rows = []
+    for rel_path, extra in REAL:
+        path = DATA / rel_path
+        if not path.exists():
+            continue
+        with tempfile.TemporaryDirectory() as d:
+            out = Path(d) / "r.json"
+            t0 = time.time()
+            p = subprocess.run([sys.executable, "-m", "companion", "analyze", str(path), "--axes", "gx,gy,gz",
+                                "--online", "--json", str(out), "--quiet"] + extra,
+                               capture_output=True, text=True, cwd=ROOT, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+            if not out.exists():
+                print(f"{rel_path}: rc {p.returncode}: {(p.stderr or p.stdout).strip().splitlines()[-1:]}")
+                continue
+            rep = json.loads(out.read_text())
+        for st in rep["streams"]:
+            for ax in ("gx", "gy", "gz"):
+                a = st["axes"].get(ax) or {}
+                if a.get("status") != "ok":
+                    continue
+                n, rate = int(st["samples"]), float(st["rate_hz"])
+                tau, adev = np.array(a["tau"]), np.array(a["adev"])
+                Nref, span = plateau(tau, adev**2, n, rate)
+                N, ci, _ = _val(a["terms"], "white_noise", "N")
+                Nb = next((b["N"] for b in a.get("bounds", []) if b["effect"] == "white_noise"), None)
+                B, _, _ = _val(a["terms"], "bias_instability", "B")
+                Bb = next((b["B"] for b in a.get("bounds", []) if b["effect"] == "bias_instability"), None)
+                oN, _, oNb = _val(a.get("online"), "white_noise", "N")
+                oB, _, oBb = _val(a.get("online"), "bias_instability", "B")
+                rows.append(dict(src=f"{Path(rel_path).name} {st['message']}[{st['instance']}]", ax=ax,
+                                 secs=st["duration_s"], Nref=Nref, span=span, N=N, ci=ci, Nbound=Nb, B=B, Bbound=Bb,
+                                 oN=oN, oNb=oNb, oB=oB, oBb=oBb, filt=(a.get("fit") or {}).get("filter"),
+                                 notes=(a.get("fit") or {}).get("notes", [])))
+        print(f"# {rel_path}: {time.time() - t0:.0f} s", flush=True)
+    hdr = (f"{'stream':<44}{'ax':>3}{'s':>6}  {'plateau':>8} {'span s':>13}  {'offline N [95 %]':>24} {'vs plat.':>8} "
+           f"{'covers':>6}  {'online N':>9} {'vs off.':>8}  {'B off.':>8} {'B onl.':>8} {'vs off.':>8}  filter")
+    print(hdr)
+    for r in rows:
+        c = RAD2DEG_SQRTH
+        plat = f"{r['Nref'] * c:8.3f}" if r["Nref"] else "    none"
+        span = f"{r['span'][0]:.3g}-{r['span'][1]:.3g}" if r["span"] else "-"
+        if r["N"] is not None:
+            off = f"{r['N'] * c:.3f} [{r['ci'][0] * c:.3f}, {r['ci'][1] * c:.3f}]"
+            d = f"{100 * (r['N'] / r['Nref'] - 1):+7.1f}%" if r["Nref"] else "       -"
+            cov = ("yes" if r["ci"][0] <= r["Nref"] <= r["ci"][1] else "NO") if r["Nref"] else "-"
+        else:
+            off = f"< {r['Nbound'] * c:.3f} (bound)" if r["Nbound"] else "-"
+            d, cov = "       -", "-"
+        if r["oN"] is not None:
+            on = ("<" if r["oNb"] else " ") + f"{r['oN'] * c:.3f}"
+            base = r["N"] if r["N"] is not None else r["Nbound"]
+            do = f"{100 * (r['oN'] / base - 1):+7.1f}%" if base else "       -"
+        else:
+            on, do = "-", "-"
+        bo = (f"{r['B'] * RAD2DEG_H:8.2f}" if r["B"] else (f"<{r['Bbound'] * RAD2DEG_H:7.2f}" if r["Bbound"] else "       -"))
+        bn = (("<" if r["oBb"] else " ") + f"{r['oB'] * RAD2DEG_H:7.2f}") if r["oB"] else "       -"
+        bref = r["B"] or r["Bbound"]
+        db = f"{100 * (r['oB'] / bref - 1):+7.1f}%" if (r["oB"] and bref and bool(r["oBb"]) == (r["B"] is None)) else "       -"
+        f = r["filt"]
+        fs = f"{f['filter_hz']:.3g} Hz ({f['source']})" if f else "none"
+        print(f"{r['src']:<44}{r['ax']:>3}{r['secs']:6.0f}  {plat} {span:>13}  {off:>24} {d:>8} {cov:>6}  {on:>9} {do:>8}  "
+              f"{bo} {bn} {db:>8}  {fs}")
+    return rows
+
+
+def run_filtered(args):
+    """Coverage of N's 95 % interval on simulated filtered + decimated white noise (10 min records)."""
+    from companion.sim.filtered import filtered_white_noise, logged_white_level
+
+    seeds = int(args[0]) if args else 100
+    for fs, fc, samp in ((50.0, 20.0, "point"), (250.0, 30.0, "average"), (100.0, 20.0, "point")):
+        n = int(fs * 600)
+        m = cluster_sizes(n, "octave")
+        edf = edf_simple(n + 1, m, 0)
+        level = logged_white_level(1e-3, fs, fc, samp)
+        res = {"log": [], "data": [], "none": []}
+        found = 0
+        t0 = time.time()
+        for s in range(seeds):
+            y = filtered_white_noise(n, 1e-3, fs, fc, samp, 5000 + s)
+            tau, av = oavar(y, fs, m=m)[:2]
+            for key, kw in (("log", dict(white_filter={"filter_hz": fc, "sample_hz": fs if samp == "point" else None},
+                                         detect_filter=samp)),
+                            ("data", dict(detect_filter=samp)), ("none", {})):
+                fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m, **kw)
+                t = fr.term("white_noise")
+                lo, hi = t["ci95"]["N"]
+                res[key].append((t["N"] / level - 1, lo <= level <= hi, len(fr.terms) - 1))
+                if key == "data":
+                    found += fr.filter is not None
+        print(f"{samp} {fs:g} Hz, f_c {fc:g} Hz, {seeds} seeds x {n / fs:.0f} s ({time.time() - t0:.0f} s): "
+              f"roll-off found in the data in {found}/{seeds}")
+        for key, v in res.items():
+            e = np.array([x[0] for x in v]) * 100
+            print(f"   filter {key:<5} N error median {np.median(e):+.2f} %, max |.| {np.abs(e).max():.2f} %, "
+                  f"coverage {100 * np.mean([x[1] for x in v]):.0f} %, extra terms in {sum(x[2] > 0 for x in v)}")
+
+
+def run_draws(args):
+    """Random N/B/K, each with a region where it dominates (N log-uniform 2e-4..3e-3 rad/s/sqrt(Hz), the AVAR
+    crossings N-B at 0.5-20 s and B-K at max(15 x that, 50)-600 s), 2 h at 50 Hz: terms found and coverage of
+    the 95 % intervals (a missing term counts as not covered)."""
+    from companion.sim.synth import synthesize_axis
+
+    draws = int(args[0]) if args else 100
+    fs, n = 50.0, int(2 * 3600 * 50)
+    m = cluster_sizes(n, "octave")
+    edf = edf_simple(n + 1, m, 0)
+    rng = np.random.default_rng(22)
+    names = {"N": "white_noise", "B": "bias_instability", "K": "random_walk"}
+    found = {p: 0 for p in names}
+    inside = {p: 0 for p in names}
+    missing = []
+    for d in range(draws):
+        # every term visible in 2 h: white meets the flicker floor at tau_NB in 0.5-20 s, the floor meets the
+        # random walk at tau_BK in max(15 tau_NB, 50)-600 s (AVAR crossings)
+        Nv = 10 ** rng.uniform(math.log10(2e-4), math.log10(3e-3))
+        t_nb = 10 ** rng.uniform(math.log10(0.5), math.log10(20.0))
+        Bv = Nv / math.sqrt(0.4413 * t_nb)
+        t_bk = 10 ** rng.uniform(math.log10(max(15 * t_nb, 50.0)), math.log10(600.0))
+        truth = {"N": Nv, "B": Bv, "K": math.sqrt(3 * 0.4413) * Bv / math.sqrt(t_bk)}
+        terms = [{"effect": names[p], p: v} for p, v in truth.items()]
+        y = synthesize_axis(terms, fs, n, np.random.default_rng(10_000 + d))
+        tau, av = oavar(y, fs, m=m)[:2]
+        fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m)
+        for p, e in names.items():
+            t = fr.term(e)
+            if t is None:
+                missing.append((d, p, {k: f"{v:.2g}" for k, v in truth.items()}))
+                continue
+            found[p] += 1
+            lo, hi = t["ci95"][p]
+            inside[p] += lo <= truth[p] <= hi
+    print(f"{draws} random N/B/K draws, 2 h at 50 Hz")
+    for p in names:
+        print(f"  {p}: found {found[p]}/{draws}, 95 % interval covers the truth in {inside[p]}/{draws} "
+              f"({100 * inside[p] / draws:.0f} %)")
+    for x in missing[:20]:
+        print("  missing:", x)
+
+
+def main_mode(mode, args):
+    {"real": run_real, "filtered": run_filtered, "draws": run_draws}[mode](args)

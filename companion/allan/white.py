@@ -1,0 +1,162 @@
+"""Where a record carries its white noise, and what it says about N where it does not.
+
+A fitted N is *resolved* only when white noise dominates the fitted model at cluster times above the low-pass
+filter's corner (:func:`white_region`): a heavy filter followed by drift (ADEV sqrt(tau) rising from the first
+point on) leaves no such region, and N fitted there is a trade between the filter's shape and the drift terms,
+with intervals that do not cover. There the honest answer is a bound (:func:`white_bound`): white noise alone
+makes AVAR(tau) = N^2 s(tau) / tau (s the filter's shape, :func:`companion.allan.terms.avar_white_noise` with
+N = 1, times tau), and every other independent term adds to it, so at every cluster time
+N^2 <= AVAR(tau) tau / s(tau); with the estimate's chi-square spread (EDF) the one-sided 95 % upper bound at
+each point is AVAR tau / s EDF / chi2_{0.05}(EDF), and the least over the points is the bound.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from companion.allan.special import chi2_ppf
+from companion.allan.terms import avar_term, avar_white_noise
+
+#: white noise must make at least this share of the fitted AVAR ...
+WHITE_SHARE = 0.5
+#: ... at cluster times where the filter leaves at least this share of the white level
+FILTER_PASS = 0.9
+#: ... on at least this many octave points
+MIN_POINTS = 2
+
+
+def _shape(white_term, tau):
+    f = {k: white_term.get(k) for k in ("filter_hz", "sample_hz") if white_term.get(k)}
+    return avar_white_noise(tau, 1.0, **f) * tau if f.get("filter_hz") else np.ones_like(tau)
+
+
+def white_region(terms, tau) -> np.ndarray:
+    """Boolean mask of the cluster times ``tau`` where the white-noise term of ``terms`` makes at least
+    WHITE_SHARE of the model and its filter passes at least FILTER_PASS of the white level."""
+    tau = np.asarray(tau, dtype=float)
+    plain = [{k: v for k, v in t.items() if k not in ("ci95", "std", "bound")} for t in terms if not t.get("bound")]
+    wn = next((t for t in plain if t["effect"] == "white_noise"), None)
+    if wn is None:
+        return np.zeros(tau.shape, dtype=bool)
+    white = avar_term(wn, tau)
+    total = sum(avar_term(t, tau) for t in plain)
+    return (white >= WHITE_SHARE * np.where(total > 0, total, np.inf)) & (_shape(wn, tau) >= FILTER_PASS)
+
+
+def white_resolved(terms, tau) -> bool:
+    return int(np.count_nonzero(white_region(terms, tau))) >= MIN_POINTS
+
+
+def white_bound(tau, avar, edf, white_filter=None, level=0.95) -> tuple[float, float]:
+    """(one-sided ``level`` upper bound of N, cluster time where it is reached), see the module docstring."""
+    tau = np.asarray(tau, dtype=float)
+    avar = np.asarray(avar, dtype=float)
+    edf = np.maximum(np.asarray(edf, dtype=float), 0.5)
+    s = _shape(dict(white_filter or {}), tau)
+    q = np.array([chi2_ppf(1.0 - level, float(e)) for e in edf])
+    ub = avar * tau / s * edf / q
+    ok = np.isfinite(ub) & (ub > 0)
+    if not ok.any():
+        return float("nan"), float("nan")
+    i = int(np.flatnonzero(ok)[np.argmin(ub[ok])])
+    return math.sqrt(float(ub[i])), float(tau[i])
+
+
+def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0.5):
+    """N from a local weighted fit of the white-noise region, for a fit with model misfit (offline: companion
+    analyze; online: the estimator's report -- one rule). Terms reported as bounds are not part of the model.
+
+    Under misfit the global fit trades the short-tau points, where the data are most precise, for a bump
+    elsewhere. The white-noise region is the run of cluster times from 10 tau0 (clear of a sensor's internal
+    filter, output lines and quantisation at the first few samples) on which white noise makes at least
+    ``share`` of the fitted model. On it N^2 is refitted with the other fitted terms held fixed (weighted
+    least squares of a - other = N^2 g, g = s / tau with s the modelled filter's shape (1 without one),
+    weights w = EDF / (2 a^2)):
+
+        N^2 = sum w (a - other) g / sum w g^2.
+
+    Its interval is the global one scaled by the ratio. Returns (terms, note or None).
+    """
+    wn = next((t for t in terms if t["effect"] == "white_noise"), None)
+    if wn is None:
+        return terms, None
+    plain = [{k: v for k, v in t.items() if k not in ("ci95", "std", "bound")} for t in terms if not t.get("bound")]
+    tau = np.asarray(tau, dtype=float)
+    white = avar_term({k: v for k, v in wn.items() if k not in ("ci95", "std", "bound")}, tau)
+    shape = white * tau / wn["N"] ** 2  # a modelled low-pass filter's shape (1 without one)
+    total = sum(avar_term(t, tau) for t in plain)
+    frac = white / np.where(total > 0, total, 1.0)
+    # from 10 tau0 (clear of an unmodelled internal filter), or, when the fit models the low-pass filter,
+    # from where the filter passes 90 % of the white level
+    start = (shape >= 0.9) if wn.get("filter_hz") else (tau >= 10.0 * tau0 * (1 - 1e-9))
+    # ... and not before the data's own corner: a real filter chain rolls off more slowly than the modelled
+    # 2-pole shape when the model misfits; points still significantly below the next three (filter-corrected
+    # AVAR x tau, 2 standard deviations from their EDF) are left to the global fit
+    r = (np.asarray(avar, dtype=float) - (total - white)) * tau / np.where(shape > 0, shape, 1.0)
+    rel = np.sqrt(2.0 / np.maximum(np.asarray(edf, dtype=float), 1.0))
+    c = 0
+    while c + 3 < r.shape[0] and r[c] < np.median(r[c + 1:c + 4]) * (1.0 - 2.0 * rel[c]):
+        c += 1
+    start &= np.arange(tau.shape[0]) >= c
+    ok = (frac >= share) & start
+    idx = np.flatnonzero(ok)
+    if idx.shape[0] < 2:
+        return terms, None
+    stop = idx[0]
+    while stop + 1 < tau.shape[0] and ok[stop + 1]:
+        stop += 1
+    sel = np.arange(idx[0], stop + 1)
+    if sel.shape[0] < 2:
+        return terms, None
+    a, tt, e = np.asarray(avar)[sel], tau[sel], np.asarray(edf)[sel]
+    other = (total - white)[sel]
+    w = e / (2.0 * a**2)
+    g = shape[sel] / tt
+    n2 = float(np.sum(w * (a - other) * g) / np.sum(w * g**2))
+    if not n2 > 0:
+        return terms, None
+    N = math.sqrt(n2)
+    ratio = N / wn["N"]
+    if abs(ratio - 1) < 1e-4:
+        return terms, None
+    new = []
+    for t in terms:
+        if t is wn:
+            t = dict(t)
+            t["N"] = N
+            t["ci95"] = dict(wn["ci95"], N=[c * ratio for c in wn["ci95"]["N"]])
+            if "std" in wn:
+                t["std"] = dict(wn["std"], N=wn["std"]["N"] * ratio)
+        new.append(t)
+    return new, (f"N from a local weighted fit of the white-noise region ({tt[0]:.3g}-{tt[-1]:.3g} s) because "
+                 f"the model misfits: the global fit gave {100 * (1 / ratio - 1):+.1f} %")
+
+
+def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: float, white_filter=None):
+    """The rules on N shared by the offline analysis and the online report, on report-format terms (resolved
+    ones, and bounds with ``"bound": True``): under model misfit N from :func:`local_white_noise`; N resolved
+    only where :func:`white_resolved`, else its filter-aware bound (:func:`white_bound`). Returns
+    (terms, notes)."""
+    notes = []
+    if model_error:
+        terms, note = local_white_noise(terms, tau, avar, edf, tau0)
+        if note:
+            notes.append(note)
+    wn = next((t for t in terms if t["effect"] == "white_noise" and not t.get("bound")), None)
+    if wn is None or white_resolved(terms, tau):
+        return terms, notes
+    filt = {k: wn[k] for k in ("filter_hz", "sample_hz") if wn.get(k)} or dict(white_filter or {})
+    ub, at = white_bound(tau, avar, edf, filt)
+    if not math.isfinite(ub):
+        return terms, notes
+    b = {"effect": "white_noise", "N": ub, "std": {"N": ub / 1.645}, "ci95": {"N": [0.0, ub]}, "bound": True}
+    b.update(filt)
+    r = np.asarray(avar, dtype=float) * np.asarray(tau, dtype=float)
+    rising = bool(np.all(np.diff(r[: max(3, r.shape[0] // 2)]) > 0))
+    why = ("ADEV sqrt(tau) rises from the first cluster time on (a heavy low-pass filter, then drift)" if rising
+           else "white noise dominates no octave point above the low-pass corner")
+    notes.append(f"N not resolved: {why}; N < {ub:.3g} (SI), the least filter-corrected AVAR x tau, at {at:.3g} s "
+                 f"(a fitted N, {wn['N']:.3g}, would be a trade between the filter and the drift terms)")
+    return [b if t is wn else t for t in terms if not (t["effect"] == "white_noise" and t is not wn)], notes
