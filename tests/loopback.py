@@ -19,6 +19,21 @@ from readiness import READY, wait_for_text  # noqa: F401 (re-exported for the lo
 
 ROOT = Path(__file__).resolve().parent.parent
 
+#: Linux shows each UDP socket's unread bytes (/proc/net/udp): sim-autopilot --flow-control then sends as fast
+#: as the receiver reads (simulated time waits for it, nothing is lost by overrunning it), capped at FAST x;
+#: elsewhere, or with COMPANION_TEST_WALL_PACING=1, a test's own --speedup paces by the wall clock.
+FLOW_CONTROL = Path("/proc/net/udp").is_file() and not os.environ.get("COMPANION_TEST_WALL_PACING")
+FAST = 1000.0
+
+
+def pacing(speedup: float, *ports: int) -> list[str]:
+    """sim-autopilot's pacing options: flow-controlled where possible (``ports``: further UDP queues to wait
+    on, e.g. the next hop of a relay), else ``speedup`` simulated seconds per wall second. A test's deadlines
+    stay those of ``speedup`` (the slowest pace the test allows for)."""
+    if not FLOW_CONTROL:
+        return ["--speedup", str(speedup)]
+    return ["--speedup", str(FAST), "--flow-control", *(a for p in ports for a in ("--flow-port", str(p)))]
+
 
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -77,7 +92,8 @@ def link_losses(tmp_path) -> dict:
 
 def sim_against_run(tmp_path, model_text, sim_args, duration, speedup, run_args=(), slack_s=60.0, max_loss=0.25):
     """Run ``companion run`` on a free UDP port, wait until it listens, play ``sim-autopilot SIM_ARGS`` into
-    it for ``duration`` simulated seconds at ``speedup`` (the simulation starts when run asks for data),
+    it for ``duration`` simulated seconds (the simulation starts when run asks for data) as fast as run reads
+    (``pacing``; deadlines from ``speedup``),
     stop run (SIGTERM); returns (nvf, texts) as sim-autopilot recorded them (``t_sim`` = time since boot,
     the simulation starts at 1 s). Fails with a clear message when the link lost more than ``max_loss`` of the IMU messages (default
     25 %: a busy machine's UDP receiver drops what it cannot take, and the pipeline is shown within 5 % at 20 %
@@ -91,7 +107,7 @@ def sim_against_run(tmp_path, model_text, sim_args, duration, speedup, run_args=
     try:
         wait_for_text(tmp_path / "run.out", READY, run)
         sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{port}",
-                     "--speedup", str(speedup), "--duration", str(duration), "--wait-request",
+                     *pacing(speedup), "--duration", str(duration), "--wait-request",
                      "--wall-limit", str(wall + slack_s), "--record", "rx.jsonl", "--quiet", *sim_args],
                     tmp_path, "sim.out")
         sim.wait(wall + 2 * slack_s)

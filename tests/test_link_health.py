@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from loopback import pacing
 from readiness import DEADLINE_S, READY, udp_rx_queue, wait_for_text
 
 from companion.mavlink.link import LinkStats, SourceStats
@@ -189,7 +190,7 @@ def loop_through_relay(tmp_path, **relay_kw):
     try:
         wait_for_text(tmp_path / "run.out", READY, run)
         sim = subprocess.Popen([sys.executable, "-m", "companion", "sim-autopilot", "--model", "model.yaml",
-                                "--connect", f"udpout:127.0.0.1:{relay.port}", "--speedup", "10", "--duration", "150",
+                                "--connect", f"udpout:127.0.0.1:{relay.port}", *pacing(10.0, p_run), "--duration", "150",
                                 "--wall-limit", "60", "--quiet"], cwd=tmp_path, env=env(),
                                stdout=open(tmp_path / "sim.out", "w"), stderr=subprocess.STDOUT)
         sim.wait(DEADLINE_S)  # bounded by its --wall-limit

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from loopback import pacing
 from readiness import DEADLINE_S, READY, wait_for_text, wait_until_read
 
 from companion.cli.main import main
@@ -48,7 +49,7 @@ def session(tmp_path, run_key=None, sim_key=None, wait_request=False):
     try:
         wait_for_text(tmp_path / "run.out", READY, run)
         sim_cmd = [sys.executable, "-m", "companion", "sim-autopilot", "--model", "model.yaml", "--connect",
-                   f"udpout:127.0.0.1:{port}", "--speedup", "10", "--duration", "100", "--wall-limit", "60", "--quiet"]
+                   f"udpout:127.0.0.1:{port}", *pacing(10.0), "--duration", "100", "--wall-limit", "60", "--quiet"]
         if sim_key:
             sim_cmd += ["--signing-key", str(sim_key)]
         if wait_request:

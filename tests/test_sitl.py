@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from readiness import READY, wait_for_text
 
-from loopback import env, free_udp_port, link_losses, read_record, start, stop
+from loopback import env, free_udp_port, link_losses, pacing, read_record, start, stop
 
 pytestmark = pytest.mark.network
 
@@ -101,7 +101,7 @@ def run_loop(tmp_path, via_mavproxy=False, speedup=12.0, duration=900.0, degrade
         procs.append(run)
         wait_for_text(tmp_path / "run.out", READY, run)
         sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{sim_target}",
-                        "--speedup", str(speedup), "--duration", str(duration), "--degrade-at", str(degrade_at),
+                        *pacing(speedup, p_run), "--duration", str(duration), "--degrade-at", str(degrade_at),
                         "--degrade-factor", "2", "--degrade-axis", "gx", "--wait-request", "--wall-limit",
                         str(wall + 20), "--record", "rx.jsonl", "--quiet"], tmp_path, "sim.out")
         procs.append(sim)
@@ -148,7 +148,7 @@ def test_request_data_stream_fallback_when_interval_refused(tmp_path):
     try:
         wait_for_text(tmp_path / "run.out", READY, run)
         sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{port}",
-                        "--speedup", "10", "--duration", "80", "--wait-request", "--refuse-interval",
+                        *pacing(10.0), "--duration", "80", "--wait-request", "--refuse-interval",
                         "--wall-limit", "30"], tmp_path, "sim.out")
         sim.wait(120)  # bounded by its --wall-limit
         assert stop(run) == 0

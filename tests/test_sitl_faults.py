@@ -28,7 +28,8 @@ axes:
   gz: [{{effect: white_noise, N: {N_SI}}}]
 """
 BASELINE_S = 60.0
-#: speedups that keep the receiver lossless on a busy 2-core machine (about 1000 IMU messages/s)
+#: wall-clock speedups that keep the receiver lossless on a busy 2-core machine (about 1000 IMU messages/s):
+#: the pace without flow control (tests/loopback.py), else only the deadlines
 SPEEDUP = {1: 10.0, 2: 5.0, 3: 4.0}
 #: words of a fault report; a healthy run must show none of them (recoveries excluded: RECOVERY)
 FAULT_WORDS = re.compile(r"degrad|stuck|noise|bias|spike|drift|saturat|clip|disagree", re.I)

@@ -28,7 +28,10 @@ values at the end).
 
 Time is simulated: --speedup X sends X simulated seconds per wall second, message timestamps in simulated
 time since boot (the first sample at 1 s). Every time option (--arm-at, --handle-at, --fault-at, ...) is
-in seconds since the simulation start.
+in seconds since the simulation start. --flow-control (a receiver on this machine, Linux): simulated time
+also waits for the receiver: no more IMU messages are sent while more than a quarter of a socket receive
+buffer waits unread at the receiving UDP port (and every --flow-port), as the kernel's /proc/net/udp shows;
+with a large --speedup the link then runs as fast as the receiver reads, with no loss from overrunning it.
 
 The vehicle: all IMUs see the same body rotation and vibration, each through its own scale-factor error
 (--scale-spread) and misalignment (--misalign-deg), with its own bias and its own model noise. A flight
@@ -84,6 +87,10 @@ def register(subparsers) -> None:
     p.add_argument("--rate", type=float, metavar="HZ", help="IMU message rate before any request (default: the model's rate_hz)")
     p.add_argument("--speedup", type=float, default=1.0, metavar="X", help="simulated seconds per wall second (default 1)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S simulated seconds (default: until Ctrl-C)")
+    p.add_argument("--flow-control", action="store_true", help="loopback (Linux): send only while the receiver's UDP "
+                   "queue is short (at most --speedup X); simulated time waits for a slow receiver")
+    p.add_argument("--flow-port", type=int, action="append", default=[], metavar="PORT",
+                   help="with --flow-control: also wait on this local UDP port's queue (a relay's next hop; repeatable)")
     p.add_argument("--wall-limit", type=float, metavar="S", help="stop after S wall-clock seconds in any case")
     p.add_argument("--sysid", type=int, default=1, help="system id of the simulated vehicle (default 1)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the simulator (default 0)")
@@ -118,6 +125,46 @@ def _describe(sim) -> str:
     return "sim-autopilot: " + "; ".join(parts)
 
 
+def _udp_queue_bytes(ports) -> int | None:
+    """Bytes queued unread at the local UDP sockets bound to ``ports`` (the largest over the ports; sockets
+    sharing a port are summed), from /proc/net/udp; None where the kernel does not show them."""
+    queued = {}
+    for name in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(name) as f:
+                lines = f.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            f = line.split()
+            if len(f) > 4:
+                port = int(f[1].rsplit(":", 1)[1], 16)
+                if port in ports:
+                    queued[port] = queued.get(port, 0) + int(f[4].split(":")[1], 16)
+    return max(queued.values()) if queued else None
+
+
+def _flow_ports(args) -> list[int]:
+    """The local UDP ports whose queues pace the simulation: --connect udpout:HOST:PORT's and every --flow-port."""
+    ports = list(args.flow_port)
+    kind, _, rest = args.connect.partition(":")
+    if kind in ("udpout", "udp") and rest.rpartition(":")[2].isdigit():
+        ports.append(int(rest.rpartition(":")[2]))
+    if not ports:
+        raise CompanionError("--flow-control needs --connect udpout:HOST:PORT or --flow-port PORT")
+    return ports
+
+
+def _flow_limit() -> int:
+    """Queued bytes above which sending waits: a quarter of the default socket receive buffer (kernel
+    accounting per datagram includes its buffer overhead, so this is some tens of datagrams)."""
+    try:
+        with open("/proc/sys/net/core/rmem_default") as f:
+            return max(int(f.read()) // 4, 16384)
+    except (OSError, ValueError):
+        return 49152
+
+
 def run(args) -> int:
     from companion.sim.model import load_model
     from companion.sources.connection import open_connection
@@ -134,6 +181,8 @@ def run(args) -> int:
     if args.rate is not None and not args.rate > 0:
         raise CompanionError("--rate must be > 0")
     sim = build_simulator(args, model, args.rate)
+    flow_ports = _flow_ports(args) if args.flow_control else None
+    flow_limit = _flow_limit()
     os.environ.setdefault("MAVLINK20", "1")  # speak MAVLink 2 like ArduPilot (pymavlink picks the dialect from it)
     conn = open_connection(args.connect, source_system=args.sysid, source_component=1)
     if args.signing_key:  # signing, as on an autopilot after SETUP_SIGNING
@@ -154,6 +203,7 @@ def run(args) -> int:
     wall0 = None if args.wait_request else wall_start  # simulated time runs from wall0 (the first request)
     next_idle_hb = wall_start
     next_hb = 1.0
+    t_flow = 1.0  # --flow-control: simulated time sent so far
     mav = conn.mav
     # temperature in cdegC: the simulated IMU's (--preset) or a constant 42 C
     senders = (lambda ti, a, g, c: mav.raw_imu_send(int(round(ti * 1e6)), *a, *g, 0, 0, 0, 0, c),
@@ -177,6 +227,15 @@ def run(args) -> int:
                     next_idle_hb += 1.0
             else:
                 t_sim = 1.0 + (now - wall0) * args.speedup
+                if flow_ports is not None:
+                    # at most a burst that fits well in the receiver's buffer, and only when its queue is short
+                    burst_s = 24.0 / (sim.rate_hz * max(1, sum(sending.values())))
+                    queued = _udp_queue_bytes(flow_ports)
+                    if queued is None:  # not observable (not Linux, not bound yet): --speedup alone paces
+                        t_flow = max(t_flow, t_sim)
+                    elif queued <= flow_limit:
+                        t_flow = min(t_sim, t_flow + burst_s)
+                    t_sim = t_flow
                 if args.duration is not None:
                     t_sim = min(t_sim, 1.0 + args.duration)
                 blk = sim.take_until(t_sim)
@@ -210,7 +269,7 @@ def run(args) -> int:
                 break
             if args.wall_limit is not None and now - wall_start >= args.wall_limit:
                 break
-            time.sleep(0.005)
+            time.sleep(0.002 if flow_ports is not None else 0.005)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
