@@ -121,4 +121,4 @@ def test_fault_state_survives_a_restart():
     p2.load_state_dict(state)
     ch = p2.channels[0]
     assert ch.faults.active()[0] == ("stuck", "gx")  # the most severe first
-    assert ch.faults.axes["gy"].ref.ready and p2.health(ch) == 1
+    assert ch.faults.noise_ref("gy") is not None and p2.health(ch) == 1  # the still references kept

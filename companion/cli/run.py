@@ -398,6 +398,8 @@ def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_
                     writer.write_raw(msg.get_msgbuf(), time.time())
                 if msg.get_type() != "BAD_DATA":
                     used = pipeline.handle(msg)
+                    if pipeline.failed:
+                        raise CompanionError(pipeline.failed)
                     link.on_message(msg, is_vehicle_imu=used)
                     if used and stale:
                         stale = False

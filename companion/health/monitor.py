@@ -135,6 +135,22 @@ class ImuFaults:
         """``IMU{i}G_FLM``: every active fault kind as a bit (bit k: code k), e.g. stuck and noise -> 0b110."""
         return fault_mask(k for k, _ in self.active())
 
+    def still_sigma2(self) -> list[float] | None:
+        """The white-noise variance of every axis' still reference; None until all are learned (and > 0)."""
+        refs = [a.ref for a in self.axes.values()]
+        if not all(r.ready and r.sigma2 > 0 for r in refs):
+            return None
+        return [r.sigma2 for r in refs]
+
+    def value_of(self, kind: str, axis: str) -> float:
+        """The figure quoted for an active fault (ratio, offset, percentage, level; rate for ``rate``)."""
+        if kind == "rate":
+            return self.timing.value
+        af = self.axes[axis]
+        return {"stuck": math.nan, "noise": af.noise.value, "bias_jump": af.bias.value,
+                "bias_drift": af.bias.drift_value, "spikes": af.spikes.value,
+                "saturation": af.saturation.value, "resolution": af.resolution.value}[kind]
+
     def noise_ref(self, axis: str) -> float | None:
         r = self.axes[axis].ref
         return r.sigma2 if r.ready else None

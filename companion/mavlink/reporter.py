@@ -44,6 +44,8 @@ import math
 import re
 from typing import Mapping, Protocol
 
+import numpy as np
+
 from companion import units
 
 NAME_RE = re.compile(r"^[A-Z0-9_]{1,10}$")
@@ -186,6 +188,29 @@ class Reporter:
             self._next_t += step
             sent += 1
         self.sent += sent
+        return sent
+
+    def tick_times(self, ts) -> int:
+        """:meth:`tick` at every time of ``ts`` in order, skipping the calls that would do nothing (those
+        within the current period, before the next send): the same messages, vectorised."""
+        ts = np.asarray(ts, dtype=float)
+        n = ts.shape[0]
+        i = sent = 0
+        while i < n:
+            if self._next_t is None:
+                sent += self.tick(float(ts[i]))
+                i += 1
+                continue
+            lo = self._next_t - self.period_s
+            hi = self._next_t if self.values else math.inf
+            seg = ts[i:i + 256]
+            hit = np.flatnonzero((seg >= hi) | (seg < lo))
+            if hit.size == 0:
+                i += seg.shape[0]
+                continue
+            i += int(hit[0])
+            sent += self.tick(float(ts[i]))
+            i += 1
         return sent
 
     def statustext(self, text: str, severity: int = MAV_SEVERITY_WARNING) -> None:
