@@ -21,7 +21,7 @@ bias of one IMU: about 10 nats per block once E is fitted; a gyro frozen in flig
 rate shows in d (and stuck.py flags it anyway).
 
 With three IMUs the odd one out is the IMU whose two pairs disagree while the third pair agrees
-(service/pipeline.py names it: ``IMU1 gyro X disagrees with IMU0/IMU2``).
+(service/imu_group.py names it: ``IMU1 gyro X disagrees with IMU0/IMU2``).
 """
 
 from __future__ import annotations

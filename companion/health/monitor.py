@@ -3,7 +3,7 @@
 ``ImuFaults.on_block`` runs the checks valid on every block (stuck, spikes, saturation, timing: still or
 moving, armed or not); ``ImuFaults.on_quiet`` the ones valid only on still, settled blocks (noise, bias
 jump/drift, resolution) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them.
-Disagreement lives with the pairs of IMUs (disagreement.py, driven by service/pipeline.py) and the Allan
+Disagreement lives with the pairs of IMUs (disagreement.py, driven by service/imu_group.py) and the Allan
 rise with detector.py; both feed ``set_external`` so that one code per IMU is reported.
 """
 

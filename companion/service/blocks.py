@@ -20,7 +20,7 @@ from typing import Iterator
 
 import numpy as np
 
-from companion.sources.timing import GAP, OK_STEP, RESET, classify_intervals, period_of
+from companion.sources.timing import GAP, OK_STEP, RESET, classify_interval, classify_intervals, period_of
 
 RATE_CHANGE = 0.2  # relative change of the rate that restarts the estimators
 MIN_INTERVALS = 8  # intervals before the rate is taken
@@ -59,7 +59,7 @@ class BlockCutter:
         i = 0
         while i < n:
             if self.last_t is not None:
-                kind = int(classify_intervals(np.array([t[i] - self.last_t]), self.reset_s, self.gap_s)[0])
+                kind = classify_interval(float(t[i]) - self.last_t, self.reset_s, self.gap_s)
                 if kind == RESET:
                     self.counts["resets"] += 1
                     self.drop()
@@ -76,7 +76,7 @@ class BlockCutter:
                     continue
             # the clean stretch from i: every interval within (0, gap_s]; while the rate is unknown the period
             # (the median of the intervals so far) changes with every sample: one row at a time
-            if self.rate_hz is None:
+            if self.rate_hz is None or n - i == 1:
                 end = i + 1
             else:
                 bad = np.flatnonzero(classify_intervals(np.diff(t[i:]), self.reset_s, self.gap_s) != OK_STEP)
@@ -95,8 +95,10 @@ class BlockCutter:
             if self._t0 is None:
                 self._t0 = float(t[k])
             x = self.block_s - 0.5 * self.period()
-            # first sample with t - t0 >= x (the same float operation the one-row path does)
-            j = int(np.searchsorted(t[k:end], self._t0 + x, side="left")) + k
+            if end - k == 1:  # one row (the live path): the comparison itself
+                j = k if float(t[k]) - self._t0 >= x else end
+            else:  # first sample with t - t0 >= x (the same float operation as one row)
+                j = int(np.searchsorted(t[k:end], self._t0 + x, side="left")) + k
             while j > k and t[j - 1] - self._t0 >= x:
                 j -= 1
             while j < end and not (t[j] - self._t0 >= x):
@@ -119,7 +121,7 @@ class BlockCutter:
         n = t.shape[0]
         if n == 0 or self.rate_hz is None or self.last_t is None:
             return 0
-        if int(classify_intervals(np.array([t[0] - self.last_t]), self.reset_s, self.gap_s)[0]) != OK_STEP:
+        if classify_interval(float(t[0]) - self.last_t, self.reset_s, self.gap_s) != OK_STEP:
             return 0
         t0 = float(t[0]) if self._t0 is None else self._t0
         x = self.block_s - 0.5 * self.period()

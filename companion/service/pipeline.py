@@ -105,15 +105,18 @@ class Pipeline:
 
     def on_sample(self, key, t: float, gyro, accel) -> bool:
         """One sample: a one-row :meth:`on_samples`."""
-        return self.on_samples(key, (t,), (gyro,), (accel,)) > 0
+        return self.on_samples(key, np.array([(t, *gyro, *accel)], dtype=float), None, None) > 0
 
     def on_samples(self, key, t, gyro, accel, tick: bool = True) -> int:
         """Samples of one IMU in arrival order (arrays (n,), (n, 3), (n, 3)); returns the number used.
         ``tick=False``: the reporter's clock is left to the caller (:meth:`tick`; a replay interleaving
         streams), allowed only for samples that close no block (:meth:`quiet_run`)."""
         self._tick = tick
-        rows = np.column_stack([np.asarray(t, dtype=float).reshape(-1), np.asarray(gyro, dtype=float).reshape(-1, 3),
-                                np.asarray(accel, dtype=float).reshape(-1, 3)])
+        if gyro is None:  # already rows (t, gyro, accel): the one-row call of on_sample
+            rows = t
+        else:
+            rows = np.column_stack([np.asarray(t, dtype=float).reshape(-1), np.asarray(gyro, dtype=float).reshape(-1, 3),
+                                    np.asarray(accel, dtype=float).reshape(-1, 3)])
         ch = self._route(key, rows.shape[0])
         if ch is None:
             return 0
@@ -178,8 +181,15 @@ class Pipeline:
     def _advance(self, ch: Channel, tt: np.ndarray) -> None:
         """Samples that close no block: the Allan check when due (at the first sample at or after its time)
         and the reporter's clock (every few samples: it sends by message time, the same either way)."""
-        i = 0
         m = tt.shape[0]
+        if m == 1:  # one row (the live path)
+            t = float(tt[0])
+            if ch.check_due(t):
+                self._check(ch, t)
+            if self._tick:
+                self.reporter.tick(t)
+            return
+        i = 0
         while i < m:
             k = m if ch.next_check_t is None else int(np.searchsorted(tt, ch.next_check_t, side="left"))
             k = max(k, i)

@@ -139,6 +139,17 @@ def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT
 OK_STEP, GAP, RESET, DUPLICATE, BACKWARDS = 0, 1, 2, 3, 4
 
 
+def classify_interval(dt: float, reset_s: float, gap_s: float) -> int:
+    """:func:`classify_intervals` of one interval, in plain floats (the live path, one message at a time)."""
+    if dt == 0.0:
+        return DUPLICATE
+    if dt <= -reset_s:
+        return RESET
+    if dt < 0.0:
+        return BACKWARDS
+    return GAP if dt > gap_s else OK_STEP
+
+
 def classify_intervals(dt, reset_s: float, gap_s: float) -> np.ndarray:
     """Kind of each interval ``dt`` between a timestamp and the newest one before it, by the rules above:
     RESET when ``dt <= -reset_s``, DUPLICATE when 0, BACKWARDS when in (-reset_s, 0), GAP when above
