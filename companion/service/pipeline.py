@@ -130,7 +130,8 @@ class Pipeline:
                 t_end = float(ev[1][-1, 0])
                 if ch.check_due(t_end):
                     self._check(ch, t_end)
-                self.reporter.tick(t_end)
+                if self._tick:
+                    self.reporter.tick(t_end)
             elif kind == "reset":
                 self.log(f"IMU{ch.imu}: timestamps reset ({ev[1]:.3f} s -> {ev[2]:.3f} s): autopilot reboot")
                 ch.on_break()
@@ -198,7 +199,8 @@ class Pipeline:
             if k >= m:
                 return
             self._check(ch, float(tt[k]))
-            self.reporter.tick(float(tt[k]))
+            if self._tick:
+                self.reporter.tick(float(tt[k]))
             if self.failed:
                 return
             i = k + 1
