@@ -129,14 +129,15 @@ class Channel:
         self.recent.append((data[:, 0].copy(), data[:, 1:4].copy()))
         return self.faults.on_block(st, data[:, 0], still)
 
-    def settle(self, data: np.ndarray, st: BlockStats, still: bool) -> np.ndarray | None:
-        """The look-ahead: returns the pending still block to feed (the block before this still one), if any,
-        and keeps this one pending once settled. A moving block drops the pending one."""
+    def settle(self, data: np.ndarray, st: BlockStats, still: bool) -> tuple[np.ndarray | None, BlockStats | None]:
+        """The look-ahead, for every block once the rate is known: returns the pending still block (and its
+        statistics) to test and feed now that the block after it is still too, or (None, None); keeps this
+        block pending once the vehicle has been still for ``settle_s``. A moving block drops the pending one."""
         self._blocks["blocks_still" if still else "blocks_moving"] += 1
         if not still:
             self.restart_settling()
-            return None
-        out = self.pending
+            return None, None
+        out = (self.pending, self.pending_stats)
         settled = self.still_run_s >= self.cfg.settle_s
         self.pending = data if settled else None
         self.pending_stats = st if settled else None

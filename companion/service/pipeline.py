@@ -230,12 +230,11 @@ class Pipeline:
             return
         if ch.rate_hz is None:
             return
-        pending, pending_stats = ch.pending, ch.pending_stats
-        if still and pending is not None:
+        pending, pending_stats = ch.settle(data, st, still)
+        if pending is not None:
             self._report(ch.on_quiet(pending_stats, self._bias_extra_var(ch)), float(pending[-1, 0]))
             if ch.feed(pending):
                 self._learn_done(ch)
-        ch.settle(data, st, still)
 
     def _peers(self, ch: Channel) -> list:
         """The other IMUs' latest blocks, when close in time (the motion consensus)."""
