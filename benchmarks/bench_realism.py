@@ -39,7 +39,7 @@ from scipy import signal
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from companion.sim.realism import load_preset  # noqa: E402
+from companion.sim.preset import load_preset  # noqa: E402
 from companion.sim.vehicle import Flight, Schedule, VehicleSimulator  # noqa: E402
 
 HERE = Path(__file__).resolve().parents[1]

@@ -63,7 +63,7 @@ def main() -> int:
           f"({100 * armed:.1f} % armed), {len(sch.handlings)} handlings; peak body rate {peak:.2f} rad/s")
     print(f"simulate  vehicle {t_vehicle:6.2f} s ({dur / t_vehicle:,.0f}x real time) | noise only "
           f"{t_synth:6.2f} s | ratio {t_vehicle / t_synth:.2f}")
-    from companion.sim.realism import load_preset
+    from companion.sim.preset import load_preset
 
     real = load_preset(args.preset)["realism"]
     t0 = time.process_time()

@@ -30,6 +30,7 @@ LAYERS = {
     "companion.mavlink": ADAPTER,
     "companion.plots": ADAPTER,
     "companion.sim.model": ADAPTER,  # model YAML
+    "companion.sim.preset": ADAPTER,  # preset YAML
     "companion.sim.vehicle": ADAPTER,  # write_tlog encodes MAVLink (mavlink.tlog_writer)
     "companion.sim.dataflash_writer": ADAPTER,
     "companion.sim.ulog_writer": ADAPTER,

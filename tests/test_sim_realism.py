@@ -8,7 +8,8 @@ import pytest
 from scipy import signal
 
 from companion.errors import CompanionError
-from companion.sim.realism import (PRESETS, Realism, Vibration, filtered_white_avar, load_preset,
+from companion.sim.preset import load_preset
+from companion.sim.realism import (PRESETS, Realism, Vibration, filtered_white_avar,
                                    psd_line_amplitude)
 from companion.sim.vehicle import Flight, Schedule, VehicleSimulator, write_tlog
 

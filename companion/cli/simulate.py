@@ -122,7 +122,7 @@ def run(args) -> int:
         raise CompanionError("give a noise model MODEL.yaml (or --vehicle --preset NAME)")
     model = load_model(args.model) if args.model is not None else None
     if model is None:
-        from companion.sim.realism import load_preset
+        from companion.sim.preset import load_preset
 
         model = load_preset(args.preset)["model"]
     if not (args.duration > 0 and math.isfinite(args.duration)):

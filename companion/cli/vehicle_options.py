@@ -67,7 +67,7 @@ def build_simulator(args, model, rate_hz: float | None = None):
     realism = None
     preset = getattr(args, "preset", None)
     if preset is not None:
-        from companion.sim.realism import load_preset
+        from companion.sim.preset import load_preset
 
         P = load_preset(preset)
         realism = P["realism"]
