@@ -136,9 +136,16 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
     meta["imu_extras"] = {k.instance: {n: int(np.nansum(v)) if n.endswith("errors") else None
                                        for n, v in e.items()} for k, e in extras.items()}
     meta["notes"] = []
-    if log.bad_bytes:
-        meta["notes"].append(f"{Path(str(path)).name}: {log.bad_bytes} bytes outside valid messages skipped "
+    name = Path(str(path)).name
+    if log.truncated:
+        meta["notes"].append(f"{name}: the file ends inside a message (truncated log: its last "
+                             f"{log.truncated} bytes are an incomplete message, skipped)")
+    if log.bad_bytes - log.truncated > 0:
+        meta["notes"].append(f"{name}: {log.bad_bytes - log.truncated} bytes outside valid messages skipped "
                              "(corrupt blocks or headers of undefined message types)")
+    for mname, why in sorted(log.damaged.items()):
+        meta["notes"].append(f"{name}: message {mname} not read, its FMT record is damaged: {why}")
+    totals["damaged_types"] = len(log.damaged)
     return LoadResult(str(path), streams, totals, counts, meta)
 
 
@@ -154,6 +161,18 @@ def load_ulog(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
     meta = ul.metadata(u)
     meta["format"] = "ulog"
     meta["identity"] = ul.identity(u, meta)
+    name = Path(str(path)).name
+    notes = []
+    if getattr(u, "companion_truncated", 0):
+        notes.append(f"{name}: the file ends inside a message (truncated log: its last "
+                     f"{u.companion_truncated} bytes are an incomplete message, skipped)")
+    warned = getattr(u, "companion_warnings", [])
+    if warned:
+        notes.append(f"{name}: pyulog reported {len(warned)} problem(s) with the file, e.g. \"{warned[0][:120]}\" "
+                     "(damaged data skipped)")
+    notes += [f"{name}: {d}" for d in getattr(u, "companion_damaged", [])]
+    totals["reader_warnings"] = len(warned)
+    meta["notes"] = notes
     return LoadResult(str(path), streams, totals, counts, meta)
 
 
