@@ -70,6 +70,8 @@ def register(subparsers) -> None:
     p.add_argument("--axes", default=",".join(AXES), help="axes to analyse (default gx,gy,gz,ax,ay,az)")
     p.add_argument("--duration", type=float, default=None, help="seconds to listen on a live link")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
+    p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
+                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--start", type=float, default=None, metavar="S",
                    help="analyse only from this time (seconds, the log's own clock as inspect shows it)")
@@ -510,7 +512,8 @@ def analyze_source(spec, args, axes, progress_enabled=True) -> tuple[list[dict],
     from companion.sources import load
     from companion.sources.still import select_still
 
-    res = load(spec, config=getattr(args, "config", None), duration=getattr(args, "duration", None))
+    res = load(spec, config=getattr(args, "config", None), duration=getattr(args, "duration", None),
+               time_unit=getattr(args, "time_unit", None))
     streams = res.imu_streams()
     if isinstance(getattr(args, "taus", None), str):
         _report_taus_beyond(args.taus, streams)
@@ -529,7 +532,9 @@ def analyze_source(spec, args, axes, progress_enabled=True) -> tuple[list[dict],
     try:
         for s in streams:
             ranges = sel.ranges(s)
-            if not ranges:
+            if not ranges:  # say so: a stream must never vanish from the table silently
+                summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples, no still stretch of "
+                                        "at least 16 samples in it (too short for any Allan estimate)")
                 continue
             e = analyze_stream(s, axes, args.taus, progress, online=getattr(args, "online", False), ranges=ranges,
                                filters=stream_filters(s, res.meta))

@@ -107,10 +107,10 @@ def load_tlog(path, config=None, split_periods: float = _timing.SPLIT_PERIODS) -
     return LoadResult(str(path), streams, totals, dict(index.counts), {"identity": tlog.identity(index)})
 
 
-def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS, time_unit: str | None = None) -> LoadResult:
     from companion.sources.csvfile import read_csv
 
-    raw = read_csv(path)
+    raw = read_csv(path, time_unit)
     n = raw.t.shape[0]
     return LoadResult(str(path), [build_stream(raw, split_periods)],
                       {"frames": n, "bad_bytes": 0, "bad_frames": 0, "imu_messages": n}, {"CSV": n},
@@ -224,13 +224,15 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
 
 
 def load(spec, config=None, *, duration: float | None = None, baud: int | None = None,
-         require_imu: bool = True, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+         require_imu: bool = True, split_periods: float = _timing.SPLIT_PERIODS,
+         time_unit: str | None = None) -> LoadResult:
     """Load IMU streams from ``spec``: a ``.tlog``, an ArduPilot DataFlash ``.bin``, a PX4 ``.ulg``, a
     ``.csv`` file (each may be gzip-compressed, ``.gz``), or a connection string (listened to for
     ``duration`` seconds). Log metadata (parameters, armed state, modes) is in ``LoadResult.meta``.
 
     ``config``: None, a dict (the whole configuration; its ``streams:`` list overrides scales) or a
-    YAML path. ``require_imu``: raise :class:`CompanionError` when no stream is an IMU.
+    YAML path. ``require_imu``: raise :class:`CompanionError` when no stream is an IMU. ``time_unit``
+    ("s", "ms", "us"): the unit of a CSV's time column (default: seconds, ms/us refused).
     Any user-caused problem raises :class:`CompanionError` (one line).
     """
     from companion.sources.connection import is_connection_string, parse_connection
@@ -238,7 +240,7 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
     s = str(spec)
     low = s.lower()
     if low.endswith(".csv") or low.endswith(".csv.gz"):
-        res = load_csv(s, split_periods)
+        res = load_csv(s, split_periods, time_unit)
     elif low.endswith((".tlog", ".tlog.bin", ".mavlink", ".tlog.gz")):
         res = load_tlog(s, config, split_periods)
     elif low.endswith((".bin", ".bin.gz")):
