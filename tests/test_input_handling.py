@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 import fuzz  # noqa: E402
 from test_adev import nbs14_1000  # noqa: E402
 
-MUTATIONS = 150  # per reader: a few seconds in all
+MUTATIONS = 120  # per reader: a few seconds in all
 
 
 def _data(n=200, rate=100.0, seed=0):
@@ -215,3 +215,27 @@ def test_stream_too_short_is_named(tmp_path, capsys):
     assert long  # the long log is analysed with no such note
     entries, summary = an.analyze_source(str(p), A(), ["gx"], progress_enabled=False)
     assert entries and not any("not analysed" in n for n in summary["notes"])
+
+
+def _n_k(seed, seconds, rate=20.0, N=1e-3, K=8e-4):
+    rng = np.random.default_rng(seed)
+    n = int(seconds * rate)
+    return rng.normal(0, N * np.sqrt(rate), n) + np.cumsum(rng.normal(0, K / np.sqrt(rate), n))
+
+
+def test_random_walk_resolved_only_from_a_long_enough_record():
+    """N 1e-3, K 8e-4 (SI): K dominates the AVAR from tau = sqrt(3) N / K = 2.2 s, so it needs 20 x 2.2 = 43 s
+    of record: a 33 s record gives a bound and says how long it would need, 20 minutes resolve it."""
+    from companion.allan.fit import record_needed
+    from companion.cli.analyze import analyze_axis
+
+    need = record_needed([{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 8e-4}], 0.05)
+    assert need["random_walk"] == pytest.approx(20 * np.sqrt(3) * 1e-3 / 8e-4, rel=0.01)
+    for seed in range(3):
+        short = analyze_axis(_n_k(seed, 33.0), 20.0)
+        assert "random_walk" not in [t["effect"] for t in short["terms"]]
+        assert "random_walk" in [t["effect"] for t in short["bounds"]]
+    for seed in range(2):
+        long = analyze_axis(_n_k(seed, 1200.0), 20.0)
+        k = [t for t in long["terms"] if t["effect"] == "random_walk"]
+        assert k and k[0]["K"] == pytest.approx(8e-4, rel=0.3)
