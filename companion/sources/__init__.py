@@ -171,6 +171,8 @@ def load_ulog(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
         notes.append(f"{name}: pyulog reported {len(warned)} problem(s) with the file, e.g. \"{warned[0][:120]}\" "
                      "(damaged data skipped)")
     notes += [f"{name}: {d}" for d in getattr(u, "companion_damaged", [])]
+    if meta.get("damaged_params"):
+        notes.append(f"{name}: {meta['damaged_params']} parameter(s) of a non-numeric type skipped (damaged definition)")
     totals["reader_warnings"] = len(warned)
     meta["notes"] = notes
     return LoadResult(str(path), streams, totals, counts, meta)

@@ -222,8 +222,11 @@ def raw_streams(ulog) -> tuple[list[RawStream], dict]:
 
 
 def metadata(ulog) -> dict:
-    meta: dict = {"params": dict(ulog.initial_parameters), "armed": [], "modes": [], "messages": [],
-                  "has_armed_state": False}
+    # PX4 parameters are int32 or float; one of another type comes from a damaged definition: skipped, counted
+    params = {k: v for k, v in ulog.initial_parameters.items()
+              if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)}
+    meta: dict = {"params": params, "armed": [], "modes": [], "messages": [], "has_armed_state": False,
+                  "damaged_params": len(ulog.initial_parameters) - len(params)}
     for d in ulog.data_list:
         if d.name == "vehicle_status" and "arming_state" in d.data and "timestamp" in d.data:
             meta["has_armed_state"] = True
