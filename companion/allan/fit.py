@@ -276,9 +276,66 @@ def _scaled_chi2_ci(theta, var, level):
     return theta * nu / chi2_ppf(1.0 - a, nu), theta * nu / chi2_ppf(a, nu)
 
 
+#: A long-tau term (bias instability, rate random walk) is "resolved" only when the record shows it: it must
+#: dominate the fitted AVAR (at least half of it) at two octave-spaced cluster times tau_d and 2 tau_d that
+#: are both no longer than a tenth of the record, where a single-segment Allan variance still has an EDF of
+#: about 5 or more (rate random walk: EDF ~ N/m at tau = T/10). A record therefore needs to be at least
+#: RESOLVE_RECORD_FACTOR x tau_d long, tau_d being the shortest tau from which the term dominates.
+RESOLVE_RECORD_FACTOR = 20.0
+RESOLVE_EFFECTS = ("bias_instability", "random_walk")
+
+
+def record_needed(terms, tau0: float) -> dict[str, float]:
+    """For each of ``RESOLVE_EFFECTS`` in ``terms`` (fitted, SI): the record length (s) it needs to be
+    resolved, RESOLVE_RECORD_FACTOR x the shortest tau (>= tau0) from which it is at least half of the model
+    AVAR (inf if it never is)."""
+    plain = [{k: v for k, v in t.items() if k != "ci95"} for t in terms]
+    grid = np.exp(np.linspace(math.log(tau0), math.log(tau0) + math.log(1e9), 2000))
+    total = avar_model(plain, grid)
+    out = {}
+    for t in plain:
+        if t["effect"] not in RESOLVE_EFFECTS:
+            continue
+        dom = np.flatnonzero(avar_term(t, grid) >= 0.5 * total)
+        out[t["effect"]] = RESOLVE_RECORD_FACTOR * float(grid[dom[0]]) if dom.size else math.inf
+    return out
+
+
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
              max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
              detect_filter=None) -> FitResult:
+    """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring (and :func:`_fit_avar`
+    for the arguments). With ``n`` and ``rate_hz`` (the record is known), a bias-instability or rate
+    random-walk term the record is too short to resolve (:func:`record_needed`) is left out and the fit
+    repeated without it, with a note giving the record length it would need; the caller reports a bound."""
+    res = _fit_avar(tau, avar, edf, effects, n=n, rate_hz=rate_hz, m=m, level=level, max_iter=max_iter,
+                    max_ratio=max_ratio, segments=segments, select=select, white_filter=white_filter,
+                    detect_filter=detect_filter)
+    if n is None or not rate_hz or not res.terms:
+        return res
+    record = (max(segments) if segments else n) / float(rate_hz)
+    needs = record_needed(res.terms, 1.0 / float(rate_hz))
+    drop = {e: need for e, need in needs.items() if need > record}
+    if not drop:
+        return res
+    keep = [t["effect"] for t in res.terms if t["effect"] not in drop]
+    if not keep:
+        return res
+    res2 = _fit_avar(tau, avar, edf, keep, n=n, rate_hz=rate_hz, m=m, level=level, max_iter=max_iter,
+                     max_ratio=max_ratio, segments=segments, select=False, white_filter=white_filter,
+                     detect_filter=detect_filter)
+    for e, need in drop.items():
+        res2.notes.append(f"{e} not resolved: the record ({record:.3g} s) is shorter than the "
+                          + (f"{need:.3g} s it needs (it dominates the Allan variance only from tau {need / RESOLVE_RECORD_FACTOR:.3g} s, "
+                             f"and needs that tau and twice it within a tenth of the record)" if math.isfinite(need)
+                             else "record it needs (it dominates the Allan variance at no tau)")
+                          + "; given as an upper bound")
+    return res2
+
+
+def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
+              max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
+              detect_filter=None) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring.
 
     ``edf``: EDF of each point (used for the first weights, and for the diagonal covariance when ``n`` or

@@ -12,19 +12,20 @@ SUMMARY_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_FAST_SAMPLE", "INS
 
 
 def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, start=None, end=None,
-                   use_all=False, min_still=10.0, online=False, progress=None, warn=None) -> tuple[list[dict], dict]:
+                   use_all=False, min_still=10.0, online=False, progress=None, warn=None,
+                   time_unit=None) -> tuple[list[dict], dict]:
     """Load one source, select its still segments and analyse every IMU stream: (stream entries, summary).
 
     The summary holds the source, the inspect notes (the same sentences ``companion inspect`` prints) and
     the still selection (:func:`companion.sources.still.select_still`). ``progress(steps, values)``, if
     given, makes an object with ``step(label)`` and ``close()``; ``warn(text)`` receives the --taus cluster
-    times beyond the record."""
+    times beyond the record. ``time_unit``: of a CSV's time column ("s", "ms", "us")."""
     from companion.analysis.notes import notes as inspect_notes
     from companion.analysis.stream import analyze_stream, stream_filters
     from companion.sources import load
     from companion.sources.still import select_still
 
-    res = load(spec, config=config, duration=duration)
+    res = load(spec, config=config, duration=duration, time_unit=time_unit)
     streams = res.imu_streams()
     if isinstance(taus, str):
         check_taus_reachable(taus, streams, warn)
@@ -40,7 +41,9 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     try:
         for s in streams:
             ranges = sel.ranges(s)
-            if not ranges:
+            if not ranges:  # say so: a stream must never vanish from the table silently
+                summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples, no still stretch of "
+                                        "at least 16 samples in it (too short for any Allan estimate)")
                 continue
             e = analyze_stream(s, axes, taus, bar, online=online, ranges=ranges, filters=stream_filters(s, res.meta))
             e["source"] = str(spec)

@@ -62,6 +62,8 @@ def register(subparsers) -> None:
     p.add_argument("--axes", default=",".join(AXES), help="axes to analyse (default gx,gy,gz,ax,ay,az)")
     p.add_argument("--duration", type=float, default=None, help="seconds to listen on a live link")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
+    p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
+                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--start", type=float, default=None, metavar="S",
                    help="analyse only from this time (seconds, the log's own clock as inspect shows it)")
@@ -91,6 +93,7 @@ def analyze_source(spec, args, axes, progress_enabled=True) -> tuple[list[dict],
                    start=getattr(args, "start", None), end=getattr(args, "end", None),
                    use_all=getattr(args, "use_all", False), min_still=getattr(args, "min_still", 10.0),
                    online=getattr(args, "online", False), progress=progress,
+                   time_unit=getattr(args, "time_unit", None),
                    warn=lambda text: print(f"companion analyze: warning: {text}", file=sys.stderr))
 
 

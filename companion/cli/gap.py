@@ -56,13 +56,15 @@ def register(subparsers) -> None:
                         "detected from the values)")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulations (default 0)")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
+    p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
+                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
     p.set_defaults(func=run)
 
 
-def _load_axis(spec, axis, config):
+def _load_axis(spec, axis, config, time_unit=None):
     from companion.sources import load
 
-    res = load(spec, config=config)
+    res = load(spec, config=config, time_unit=time_unit)
     streams = res.imu_streams() if hasattr(res, "imu_streams") else [s for s in res.streams if s.is_imu]
     if not streams:
         raise CompanionError(f"{spec}: no IMU stream")
@@ -152,7 +154,7 @@ def run(args) -> int:
     model = load_model(args.model)
     if args.axis not in model.axes:
         raise CompanionError(f"{args.model}: no terms for axis {args.axis} (has: {', '.join(model.axes) or 'none'})")
-    y, rate, lsb, label = _load_axis(args.measured, args.axis, args.config)
+    y, rate, lsb, label = _load_axis(args.measured, args.axis, args.config, getattr(args, "time_unit", None))
     if args.lsb is not None:
         if not (args.lsb > 0 and math.isfinite(args.lsb)):
             raise CompanionError(f"--lsb must be a positive number, got {args.lsb}")

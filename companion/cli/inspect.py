@@ -51,6 +51,8 @@ def register(subparsers) -> None:
                    help="seconds to listen on a live connection (required for links)")
     p.add_argument("--baud", type=int, default=None, help="serial baud rate (default 115200)")
     p.add_argument("--config", metavar="YAML", help="configuration file (its streams: section sets scales)")
+    p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
+                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
     p.set_defaults(func=run)
 
 
@@ -131,7 +133,8 @@ def run(args) -> int:
 
     if args.json:
         check_output_path(args.json, "--json")
-    res = load(args.source, config=args.config, duration=args.duration, baud=args.baud, require_imu=False)
+    res = load(args.source, config=args.config, duration=args.duration, baud=args.baud, require_imu=False,
+               time_unit=getattr(args, "time_unit", None))
     print(render(res), flush=True)
     if args.json:
         try:

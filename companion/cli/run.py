@@ -56,6 +56,8 @@ def register(subparsers) -> None:
                         "(.tlog, DataFlash .bin, PX4 .ulg, .csv; each optionally .gz)")
     p.add_argument("--baud", type=int, default=None, help="serial baud rate (default 115200)")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (sections run:, estimator:, streams:)")
+    p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
+                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--baseline-s", type=float, metavar="S", help="learn the baseline from the first S s of still data (default 600)")
     g.add_argument("--baseline", metavar="FILE", help="baseline from a `companion analyze` JSON/YAML report or a saved baseline")
@@ -191,7 +193,8 @@ def _run(args, stop) -> int:
                 raise CompanionError(f"{args.out_tlog}: cannot write ({exc.strerror or exc})") from None
         if is_replay:
             pipeline, sink, totals = runner.replay(src, pcfg, period, baseline, scales, writer, state_path, args.relearn,
-                                                   lambda: stop["flag"], log, warn, echo=None if quiet else print)
+                                                   lambda: stop["flag"], log, warn, echo=None if quiet else print,
+                                                   time_unit=getattr(args, "time_unit", None))
             log(f"replayed {totals['frames']} frames ({totals['imu_samples']} IMU samples, {totals['bad_frames']} bad frames), "
                 f"{sink.sent} NAMED_VALUE_FLOAT, {len(sink.texts)} STATUSTEXT")
             if not pipeline.channels:

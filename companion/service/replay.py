@@ -161,7 +161,7 @@ def is_replay_source(spec) -> bool:
     return file_kind(spec) is not None
 
 
-def replay_log(path, pipeline, stop=lambda: False) -> dict:
+def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None) -> dict:
     """Feed a DataFlash .bin, a ULog .ulg or a CSV file to ``pipeline`` in message-time order.
 
     Per IMU instance the stream with the most samples is replayed (a ULog holds sensor_combined,
@@ -171,7 +171,7 @@ def replay_log(path, pipeline, stop=lambda: False) -> dict:
     """
     from companion.sources import load
 
-    res = load(path)
+    res = load(path, time_unit=time_unit)  # time_unit: of a CSV's time column
     best: dict = {}
     for s in res.imu_streams():
         if not np.all(np.isfinite(s.gyro[:1])):

@@ -76,7 +76,7 @@ def save(pipeline, path, warn) -> None:
 
 
 def replay(src: str, pcfg, period: float, baseline, scales, writer, state: Path | None, relearn: bool, stop,
-           log, warn, echo=None):
+           log, warn, echo=None, time_unit=None):
     """Replay a log through a new pipeline (its reports go to a :class:`ReplaySink`): (pipeline, sink, totals)."""
     from companion.mavlink.reporter import Reporter
     from companion.service.pipeline import Pipeline
@@ -91,7 +91,7 @@ def replay(src: str, pcfg, period: float, baseline, scales, writer, state: Path 
     if kind_of(src) == "tlog":  # frame order with its HEARTBEATs (armed state)
         totals = replay_tlog(src, pipeline, scales, stop=stop)
     else:
-        totals = replay_log(src, pipeline, stop=stop)
+        totals = replay_log(src, pipeline, stop=stop, time_unit=time_unit)
     return pipeline, sink, totals
 
 

@@ -91,10 +91,10 @@ def load_tlog(path, config=None, split_periods: float = _timing.SPLIT_PERIODS) -
     return LoadResult(str(path), streams, totals, dict(index.counts), {"identity": tlog.identity(index)})
 
 
-def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS, time_unit: str | None = None) -> LoadResult:
     from companion.sources.csvfile import read_csv
 
-    raw = read_csv(path)
+    raw = read_csv(path, time_unit)
     n = raw.t.shape[0]
     return LoadResult(str(path), [build_stream(raw, split_periods)],
                       {"frames": n, "bad_bytes": 0, "bad_frames": 0, "imu_messages": n}, {"CSV": n},
@@ -120,9 +120,16 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
     meta["imu_extras"] = {k.instance: {n: int(np.nansum(v)) if n.endswith("errors") else None
                                        for n, v in e.items()} for k, e in extras.items()}
     meta["notes"] = []
-    if log.bad_bytes:
-        meta["notes"].append(f"{Path(str(path)).name}: {log.bad_bytes} bytes outside valid messages skipped "
+    name = Path(str(path)).name
+    if log.truncated:
+        meta["notes"].append(f"{name}: the file ends inside a message (truncated log: its last "
+                             f"{log.truncated} bytes are an incomplete message, skipped)")
+    if log.bad_bytes - log.truncated > 0:
+        meta["notes"].append(f"{name}: {log.bad_bytes - log.truncated} bytes outside valid messages skipped "
                              "(corrupt blocks or headers of undefined message types)")
+    for mname, why in sorted(log.damaged.items()):
+        meta["notes"].append(f"{name}: message {mname} not read, its FMT record is damaged: {why}")
+    totals["damaged_types"] = len(log.damaged)
     return LoadResult(str(path), streams, totals, counts, meta)
 
 
@@ -138,6 +145,20 @@ def load_ulog(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
     meta = ul.metadata(u)
     meta["format"] = "ulog"
     meta["identity"] = ul.identity(u, meta)
+    name = Path(str(path)).name
+    notes = []
+    if getattr(u, "companion_truncated", 0):
+        notes.append(f"{name}: the file ends inside a message (truncated log: its last "
+                     f"{u.companion_truncated} bytes are an incomplete message, skipped)")
+    warned = getattr(u, "companion_warnings", [])
+    if warned:
+        notes.append(f"{name}: pyulog reported {len(warned)} problem(s) with the file, e.g. \"{warned[0][:120]}\" "
+                     "(damaged data skipped)")
+    notes += [f"{name}: {d}" for d in getattr(u, "companion_damaged", [])]
+    if meta.get("damaged_params"):
+        notes.append(f"{name}: {meta['damaged_params']} parameter(s) of a non-numeric type skipped (damaged definition)")
+    totals["reader_warnings"] = len(warned)
+    meta["notes"] = notes
     return LoadResult(str(path), streams, totals, counts, meta)
 
 
@@ -189,13 +210,15 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
 
 
 def load(spec, config=None, *, duration: float | None = None, baud: int | None = None,
-         require_imu: bool = True, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
+         require_imu: bool = True, split_periods: float = _timing.SPLIT_PERIODS,
+         time_unit: str | None = None) -> LoadResult:
     """Load IMU streams from ``spec``: a ``.tlog``, an ArduPilot DataFlash ``.bin``, a PX4 ``.ulg``, a
     ``.csv`` file (each may be gzip-compressed, ``.gz``), or a connection string (listened to for
     ``duration`` seconds). Log metadata (parameters, armed state, modes) is in ``LoadResult.meta``.
 
     ``config``: None, a dict (the whole configuration; its ``streams:`` list overrides scales) or a
-    YAML path. ``require_imu``: raise :class:`CompanionError` when no stream is an IMU.
+    YAML path. ``require_imu``: raise :class:`CompanionError` when no stream is an IMU. ``time_unit``
+    ("s", "ms", "us"): the unit of a CSV's time column (default: seconds, ms/us refused).
     Any user-caused problem raises :class:`CompanionError` (one line).
     """
     from companion.sources.connection import parse_connection
@@ -203,7 +226,7 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
     s = str(spec)
     kind = kind_of(s)
     if kind == "csv":
-        res = load_csv(s, split_periods)
+        res = load_csv(s, split_periods, time_unit)
     elif kind == "tlog":
         res = load_tlog(s, config, split_periods)
     elif kind == "dataflash":

@@ -21,6 +21,13 @@ from companion.samples import AXES, StreamKey
 from companion.sources.decode import RawStream
 
 COLUMNS = ("time_s",) + AXES
+#: ``--time-unit`` choices: seconds per unit of the time column
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+#: plausible sample rates of a gyro log: MEMS and tactical gyros are read at 1 Hz (lab stills such as the NBS
+#: test series, slow telemetry) up to 32 kHz (the fastest MEMS output data rates); 0.01 Hz - 100 kHz leaves a
+#: margin each side. Outside it the time column is in another unit or broken, and the Allan numbers would be
+#: off by the same factor's square root (a 1 kHz log read as 1 GHz gives N 1000x too small).
+MIN_RATE_HZ, MAX_RATE_HZ = 0.01, 1e5
 CSV_KEY = StreamKey(0, 0, "CSV", 0)
 
 
@@ -40,9 +47,14 @@ def _read_bytes(path: Path) -> bytes:
         raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
-def read_csv(path) -> RawStream:
-    """Read an IMU CSV file into a :class:`RawStream` (arrival order; timing is analysed by the caller)."""
+def read_csv(path, time_unit: str | None = None) -> RawStream:
+    """Read an IMU CSV file into a :class:`RawStream` (arrival order; timing is analysed by the caller).
+
+    ``time_unit``: "s", "ms" or "us", the unit of the ``time_s`` column; None: seconds, and a column that
+    evidently is in ms or us is refused (:func:`check_time_unit`)."""
     path = Path(path)
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise CompanionError(f"time unit {time_unit!r}: expected one of {', '.join(TIME_UNITS)}")
     data = _read_bytes(path)
     head, _, body = data.partition(b"\n")
     try:
@@ -72,7 +84,12 @@ def read_csv(path) -> RawStream:
         row = int(np.flatnonzero(~np.all(np.isfinite(arr), axis=1))[0])
         raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {row + 1}")
     t = arr[:, 0].copy()
-    check_time_unit(path, t)
+    if time_unit is None:
+        check_time_unit(path, t)
+    else:
+        t = t * TIME_UNITS[time_unit]
+        arr[:, 0] = t
+    check_rate(path, t)
     notes = []
     back = int(np.count_nonzero(np.diff(t) < 0))
     if back:
@@ -102,7 +119,22 @@ def check_time_unit(path, t: np.ndarray) -> None:
         unit, div = ("microseconds", 1e6) if step >= 100.0 else ("milliseconds", 1e3)
         raise CompanionError(f"{path}: time_s looks like {unit} (median step {step:g}, "
                              f"{'whole numbers' if integral else 'values up to %g' % float(np.max(t))}): "
-                             f"divide the column by {div:g} to get seconds")
+                             f"pass --time-unit {'us' if div == 1e6 else 'ms'} (or divide the column by {div:g}); "
+                             "--time-unit s if the times really are whole seconds")
+
+
+def check_rate(path, t: np.ndarray) -> None:
+    """Refuse a sample rate no gyro log has (see ``MIN_RATE_HZ``, ``MAX_RATE_HZ``), with the reason."""
+    d = np.diff(np.sort(t))
+    d = d[d > 0]
+    if d.shape[0] == 0:
+        return
+    step = float(np.median(d))
+    rate = 1.0 / step
+    if not (MIN_RATE_HZ <= rate <= MAX_RATE_HZ):
+        raise CompanionError(f"{path}: time_s gives {rate:.3g} Hz (median step {step:.3g} s), outside the "
+                             f"{MIN_RATE_HZ:g} Hz - {MAX_RATE_HZ:.0f} Hz of any gyro log: a wrong time unit "
+                             "(--time-unit s|ms|us) or a broken time column")
 
 
 def _to_file_lines(msg: str) -> str:

@@ -88,13 +88,34 @@ class DataFlashLog:
     offsets: dict[int, np.ndarray]  # type -> int64 offsets of the headers, file order
     bad_bytes: int = 0
     names: dict[str, int] = field(default_factory=dict)
+    #: message types whose FMT record is damaged (columns missing, format undecodable): name -> reason;
+    #: their messages are skipped and reported, never decoded with a wrong layout
+    damaged: dict[str, str] = field(default_factory=dict)
+    truncated: int = 0  # bytes of a last message cut short by the end of the file
 
     def counts(self) -> dict[str, int]:
         return {self.formats[t].name: int(o.shape[0]) for t, o in self.offsets.items() if t in self.formats}
 
-    def has(self, name: str) -> bool:
+    def has(self, name: str, *cols: str) -> bool:
+        """True if the log holds ``name`` messages that can be decoded with columns ``cols``; a type whose
+        FMT lacks them (a damaged FMT record) is remembered in ``damaged`` and treated as absent."""
         t = self.names.get(name)
-        return t is not None and t in self.offsets and self.offsets[t].shape[0] > 0
+        if t is None or t not in self.offsets or self.offsets[t].shape[0] == 0:
+            return False
+        f = self.formats[t]
+        why = None
+        if f.dtype is None:
+            why = f"format {f.format!r} does not match its {len(f.columns)} columns"
+        elif f.dtype.itemsize > f.length - 3:
+            why = f"FMT gives {f.length} bytes, its format {f.format!r} needs {f.dtype.itemsize + 3}"
+        else:
+            missing = [c for c in cols if c not in f.dtype.names]
+            if missing:
+                why = f"no column {', '.join(missing)}"
+        if why:
+            self.damaged.setdefault(name, f"{why} ({self.offsets[t].shape[0]} messages skipped)")
+            return False
+        return True
 
     def columns(self, name: str) -> list[str]:
         return list(self.formats[self.names[name]].columns) if name in self.names else []
@@ -113,6 +134,8 @@ class DataFlashLog:
         if off.shape[0] == 0 or body <= 0:
             return np.zeros(0, dtype=f.dtype)
         need = f.dtype.itemsize
+        if need > self.buf.shape[0]:
+            return np.zeros(0, dtype=f.dtype)
         if need > body:
             raise CompanionError(f"{self.source}: FMT of {name} gives {f.length} bytes but its format "
                                  f"{f.format!r} needs {need + 3}: a corrupt or foreign log")
@@ -124,13 +147,18 @@ class DataFlashLog:
         f = self.formats[self.names[name]]
         rec = self.records(name) if rec is None else rec
         ch = f.format[f.columns.index(column)]
-        v = rec[column].astype(np.float64)
+        if rec.dtype[column].kind not in "iuf" or rec.dtype[column].shape:  # a damaged FMT made it text
+            return np.full(rec.shape[0], np.nan)
+        with np.errstate(invalid="ignore", over="ignore"):
+            v = rec[column].astype(np.float64)
         if ch in _DIVISOR:
             v = v / _DIVISOR[ch]
         return v
 
     def strings(self, name: str, column: str, rec: np.ndarray | None = None) -> list[str]:
         rec = self.records(name) if rec is None else rec
+        if rec.dtype[column].kind != "S" or rec.dtype[column].shape:  # a damaged FMT made it a number
+            return [""] * rec.shape[0]
         return [_text(b) for b in rec[column]]
 
     def time_s(self, name: str, rec: np.ndarray | None = None) -> np.ndarray:
@@ -140,9 +168,9 @@ class DataFlashLog:
         rec = self.records(name) if rec is None else rec
         cols = self.columns(name)
         if "TimeUS" in cols:
-            return rec["TimeUS"].astype(np.float64) * 1e-6
+            return self.values(name, "TimeUS", rec) * 1e-6
         if "TimeMS" in cols:
-            return rec["TimeMS"].astype(np.float64) * 1e-3
+            return self.values(name, "TimeMS", rec) * 1e-3
         off = self.offsets[self.names[name]][:rec.shape[0]]
         return self._time_before(off)
 
@@ -158,6 +186,12 @@ class DataFlashLog:
             return np.full(off.shape[0], np.nan)
         j = np.searchsorted(best_pos, off) - 1
         return np.where(j >= 0, best_t[np.maximum(j, 0)], best_t[0] if best_t.shape[0] else np.nan)
+
+
+def _ints(v: np.ndarray) -> np.ndarray:
+    """Integer codes from a float column; a value a damaged layout made NaN or huge becomes -1."""
+    ok = np.isfinite(v) & (np.abs(v) < 2**62)
+    return np.where(ok, v, -1).astype(np.int64)
 
 
 def _text(b: bytes) -> str:
@@ -219,6 +253,8 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     # formats: every FMT candidate whose body decodes; the chain decides which are real
     fmt_dt = _dtype("BBnNZ", ["Type", "Length", "Name", "Format", "Columns"])
     fc = h[(types == FMT_TYPE) & (h + FMT_LEN <= n)]
+    if fc.shape[0] == 0:
+        raise CompanionError(f"{source}: not a DataFlash log (no complete FMT message)")
     frec = np.ascontiguousarray(sliding_window_view(buf, FMT_LEN - 3)[fc + 3]).view(fmt_dt).reshape(-1)
     length = np.full(257, -1, dtype=np.int64)  # index 256: never used
     length[FMT_TYPE] = FMT_LEN
@@ -261,6 +297,8 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     for grp in np.split(order, bounds) if order.shape[0] else []:
         offsets[int(typ[grp[0]])] = pos[grp]
     log = DataFlashLog(source, buf, formats, offsets, bad_bytes=bad_bytes)
+    if pos.shape[0] and pos[-1] + length[typ[-1]] > n:  # the file ends inside its last message
+        log.truncated = int(n - pos[-1])
     log.names = {f.name: t for t, f in formats.items()}
     return log
 
@@ -317,7 +355,7 @@ def _imu_arrays(log: DataFlashLog, name: str):
     accel = np.column_stack([log.values(name, c, rec) for c in ("AccX", "AccY", "AccZ")])
     tcol = "T" if "T" in cols else ("Temp" if "Temp" in cols else None)
     temp = log.values(name, tcol, rec) if tcol else None
-    inst = rec["I"].astype(np.int64) if "I" in cols else None
+    inst = _ints(log.values(name, "I", rec)) if "I" in cols else None
     res = 1e-6 if "TimeUS" in cols else 1e-3
     extra = {}
     for short, names in (("gyro_errors", ("EG", "ErrG")), ("accel_errors", ("EA", "ErrA")),
@@ -336,9 +374,10 @@ def imu_raw_streams(log: DataFlashLog):
 
     out, extras = [], {}
     for name, default_inst in (("IMU", 0), ("IMU2", 1), ("IMU3", 2)):
-        if not log.has(name):
+        if not log.has(name, "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"):
             continue
-        if not {"GyrX", "AccX"} <= set(log.columns(name)):
+        if not {"TimeUS", "TimeMS"} & set(log.columns(name)):
+            log.damaged.setdefault(name, "no TimeUS/TimeMS column")
             continue
         t, gyro, accel, temp, inst, res, extra = _imu_arrays(log, name)
         if inst is None:
@@ -357,11 +396,18 @@ def isb_raw_streams(log: DataFlashLog):
     from companion.samples import StreamKey
     from companion.sources.decode import RawStream
 
-    if not (log.has("ISBH") and log.has("ISBD")):
+    if not (log.has("ISBH", "N", "type", "instance", "mul", "smp_cnt", "SampleUS", "smp_rate")
+            and log.has("ISBD", "N", "seqno", "x", "y", "z")):
         return [], []
     hdr = log.records("ISBH")
     dat = log.records("ISBD")
-    hN = hdr["N"].astype(np.int64)
+    if any(dat.dtype[c].shape != (32,) for c in "xyz"):
+        log.damaged.setdefault("ISBD", f"x/y/z are not int16[32] ({dat.shape[0]} messages skipped)")
+        return [], []
+    hv = {c: log.values("ISBH", c, hdr) for c in ("N", "type", "instance", "mul", "smp_cnt", "SampleUS",
+                                                  "smp_rate")}
+    hN = _ints(hv["N"])
+    dN, dseq = _ints(log.values("ISBD", "N", dat)), _ints(log.values("ISBD", "seqno", dat))
     # the most recent header with that sequence number (N wraps at 65536)
     hpos = log.offsets[log.names["ISBH"]][:hdr.shape[0]]
     dpos = log.offsets[log.names["ISBD"]][:dat.shape[0]]
@@ -369,23 +415,26 @@ def isb_raw_streams(log: DataFlashLog):
     per: dict = {}
     for j in range(hdr.shape[0]):
         nxt_h = hpos[j + 1] if j + 1 < hdr.shape[0] else np.iinfo(np.int64).max
-        sel = (dpos > hpos[j]) & (dpos < nxt_h) & (dat["N"].astype(np.int64) == hN[j])
+        sel = (dpos > hpos[j]) & (dpos < nxt_h) & (dN == hN[j])
         d = dat[sel]
         if d.shape[0] == 0:
             continue
-        d = d[np.argsort(d["seqno"], kind="stable")]
+        o = np.argsort(dseq[sel], kind="stable")
+        d, seq = d[o], dseq[sel][o]
         vals = np.stack([d["x"].reshape(-1), d["y"].reshape(-1), d["z"].reshape(-1)], axis=1).astype(np.float64)
-        idx = (d["seqno"].astype(np.int64)[:, None] * 32 + np.arange(32)).reshape(-1)
-        cnt = int(hdr["smp_cnt"][j])
+        idx = (seq[:, None] * 32 + np.arange(32)).reshape(-1)
+        cnt = int(_ints(hv["smp_cnt"][j:j + 1])[0])
         keep = idx < cnt if cnt > 0 else np.ones(idx.shape[0], bool)
         vals, idx = vals[keep], idx[keep]
-        mul = float(hdr["mul"][j]) or 1.0
-        rate = float(hdr["smp_rate"][j])
-        t = float(hdr["SampleUS"][j]) * 1e-6 + idx / rate if rate > 0 else np.full(idx.shape[0], np.nan)
-        key = (int(hdr["type"][j]), int(hdr["instance"][j]))
+        mul = float(hv["mul"][j])
+        mul = mul if np.isfinite(mul) and mul != 0 else 1.0
+        rate = float(hv["smp_rate"][j])
+        t0 = float(hv["SampleUS"][j]) * 1e-6
+        t = t0 + idx / rate if rate > 0 and np.isfinite(rate) else np.full(idx.shape[0], np.nan)
+        key = (int(_ints(hv["type"][j:j + 1])[0]), int(_ints(hv["instance"][j:j + 1])[0]))
         per.setdefault(key, []).append((t, vals / mul, mul))
         bursts.append({"type": key[0], "instance": key[1], "samples": int(idx.shape[0]), "expected": cnt,
-                       "rate_hz": rate, "t0": float(hdr["SampleUS"][j]) * 1e-6, "mul": mul})
+                       "rate_hz": rate, "t0": t0, "mul": mul})
     for (typ, inst), parts in sorted(per.items()):
         t = np.concatenate([p[0] for p in parts])
         v = np.concatenate([p[1] for p in parts])
@@ -404,21 +453,21 @@ def isb_raw_streams(log: DataFlashLog):
 def log_metadata(log: DataFlashLog) -> dict:
     """Parameters, armed transitions, modes, texts and errors of the log (times in s since boot)."""
     meta: dict = {"params": {}, "armed": [], "modes": [], "messages": [], "errors": []}
-    if log.has("PARM"):
+    if log.has("PARM", "Name", "Value"):
         rec = log.records("PARM")
         for nm, v in zip(log.strings("PARM", "Name", rec), log.values("PARM", "Value", rec)):
             meta["params"][nm] = float(v)
     trans = []
-    if log.has("EV"):
+    if log.has("EV", "Id"):
         rec = log.records("EV")
         t = log.time_s("EV", rec)
-        for ti, i in zip(t, rec["Id"].astype(int)):
+        for ti, i in zip(t, _ints(log.values("EV", "Id", rec))):
             if i in (EV_ARMED, EV_DISARMED):
                 trans.append((float(ti), bool(i == EV_ARMED)))
-    if log.has("ARM") and "ArmState" in log.columns("ARM"):
+    if log.has("ARM", "ArmState"):
         rec = log.records("ARM")
         t = log.time_s("ARM", rec)
-        for ti, s in zip(t, rec["ArmState"].astype(int)):
+        for ti, s in zip(t, _ints(log.values("ARM", "ArmState", rec))):
             trans.append((float(ti), bool(s)))
     trans.sort()
     dedup = []
@@ -427,21 +476,21 @@ def log_metadata(log: DataFlashLog) -> dict:
             dedup.append((ti, s))
     meta["armed"] = dedup
     meta["has_armed_state"] = bool(log.has("EV") or log.has("ARM"))
-    if log.has("MODE"):
+    mode_col = next((c for c in ("ModeNum", "Mode") if c in log.columns("MODE")), None)
+    if mode_col and log.has("MODE", mode_col):
         rec = log.records("MODE")
         t = log.time_s("MODE", rec)
-        num = rec["ModeNum"].astype(int) if "ModeNum" in rec.dtype.names else rec["Mode"].astype(int)
+        num = _ints(log.values("MODE", mode_col, rec))
         meta["modes"] = [(float(a), int(b)) for a, b in zip(t, num)]
-    if log.has("MSG"):
+    if log.has("MSG", "Message"):
         rec = log.records("MSG")
         t = log.time_s("MSG", rec)
         meta["messages"] = [(float(a), s) for a, s in zip(t, log.strings("MSG", "Message", rec))]
-    if log.has("ERR"):
+    if log.has("ERR", "Subsys", "ECode"):
         rec = log.records("ERR")
         t = log.time_s("ERR", rec)
-        cols = log.columns("ERR")
-        if {"Subsys", "ECode"} <= set(cols):
-            meta["errors"] = [(float(a), int(b), int(c)) for a, b, c in zip(t, rec["Subsys"], rec["ECode"])]
+        meta["errors"] = [(float(a), int(b), int(c)) for a, b, c in
+                          zip(t, _ints(log.values("ERR", "Subsys", rec)), _ints(log.values("ERR", "ECode", rec)))]
     return meta
 
 
@@ -482,22 +531,28 @@ def utc_at_boot(log: DataFlashLog) -> float | None:
         return None
     cols = log.columns("GPS")
     rec = log.records("GPS")
+
+    def v(c):
+        return log.values("GPS", c, rec)
+
     if {"GWk", "GMS", "TimeUS"} <= set(cols):
-        wk, ms, boot = rec["GWk"], rec["GMS"], rec["TimeUS"].astype(np.float64) * 1e-6
+        wk, ms, boot = v("GWk"), v("GMS"), v("TimeUS") * 1e-6
     elif {"Week", "TimeMS", "T"} <= set(cols):
-        wk, ms, boot = rec["Week"], rec["TimeMS"], rec["T"].astype(np.float64) * 1e-3
+        wk, ms, boot = v("Week"), v("TimeMS"), v("T") * 1e-3
     else:
         return None
-    ok = (wk.astype(np.int64) > 0) & (boot > 0)
+    ok = (wk > 0) & (boot > 0) & np.isfinite(ms)
     if "Status" in cols:
-        ok &= rec["Status"].astype(np.int64) >= GPS_FIX_3D
+        ok &= v("Status") >= GPS_FIX_3D
     if "I" in cols:
-        ok &= rec["I"].astype(np.int64) == 0
+        ok &= v("I") == 0
     i = np.flatnonzero(ok)
     if not i.size:
         return None
     k = int(i[0])
     gps = GPS_EPOCH_UNIX + float(wk[k]) * 604800.0 + float(ms[k]) * 1e-3
+    if not gps >= 0.0:
+        return None
     leap = next(v for t0, v in GPS_LEAP_S if gps >= t0)
     return gps - leap - float(boot[k])
 

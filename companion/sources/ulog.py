@@ -21,7 +21,10 @@ from ``vehicle_status.arming_state`` (2 = armed) as transitions, ``messages`` (l
 
 from __future__ import annotations
 
+import contextlib
 import gzip
+import io
+import logging
 import zlib
 from pathlib import Path
 
@@ -31,6 +34,8 @@ from companion.errors import CompanionError
 from companion.samples import StreamKey
 from companion.sources.decode import RawStream
 
+_log = logging.getLogger(__name__)
+
 TOPICS = ("sensor_combined", "sensor_gyro", "sensor_accel", "sensor_gyro_fifo", "sensor_accel_fifo", "vehicle_imu",
           "vehicle_status", "vehicle_gps_position", "sensor_gps")
 #: PX4 gyro device-id parameters (calibration slots) and the IMU instance each names
@@ -38,8 +43,47 @@ GYRO_ID_PARAMS = {"CAL_GYRO0_ID": 0, "CAL_GYRO1_ID": 1, "CAL_GYRO2_ID": 2, "CAL_
 ARMING_STATE_ARMED = 2
 
 
+class _GuardedFile(io.BytesIO):
+    """The log's bytes for pyulog, with two guards against its handling of damaged files.
+
+    pyulog skips a corrupt message by seeking back ``2 + msg_size`` bytes from where its read ended; when the
+    read was cut short by the end of the file, that lands before the header it just read and it loops for
+    ever. A relative seek never goes back before the last 3-byte header read + 1 here (what pyulog means:
+    advance one byte), and reading more than ``MAX_PASSES`` times the file raises instead of looping."""
+
+    MAX_PASSES = 20
+
+    def __init__(self, data: bytes):
+        super().__init__(data)
+        self._last_header = 0
+        self.cut = 0  # bytes of a last message cut short by the end of the file (0: none)
+        self._budget = self.MAX_PASSES * max(len(data), 1 << 16)
+
+    def read(self, n=-1):
+        if n == 3:
+            self._last_header = self.tell()
+        out = super().read(n)
+        if n is not None and n > 0 and len(out) < n and (n != 3 or len(out) > 0):
+            self.cut = len(self.getbuffer()) - self._last_header
+        self._budget -= len(out) + 1
+        if self._budget < 0:
+            raise _NoProgress("the parser made no progress through damaged data")
+        return out
+
+    def seek(self, offset, whence=0):
+        if whence == 1 and offset < 0 and self.tell() + offset < self._last_header:
+            return super().seek(self._last_header + 1)
+        return super().seek(offset, whence)
+
+
+class _NoProgress(Exception):
+    pass
+
+
 def open_ulog(path):
-    """A ``pyulog.ULog`` of ``path`` (.ulg or .ulg.gz) holding only the IMU and status topics."""
+    """A ``pyulog.ULog`` of ``path`` (.ulg or .ulg.gz) holding only the IMU and status topics; what pyulog
+    prints about a damaged file (``Warning: no subscription found ...``) is counted in ``ulog.companion_warnings``
+    and logged, never written to stdout."""
     try:
         from pyulog import ULog
     except ImportError:  # pragma: no cover - pyulog is a dependency
@@ -48,14 +92,26 @@ def open_ulog(path):
     try:
         if path.name.lower().endswith(".gz"):
             with gzip.open(path, "rb") as fh:
-                import io
-
-                return ULog(io.BytesIO(fh.read()), list(TOPICS))
-        if not path.exists():
-            raise FileNotFoundError
-        if path.is_dir():
-            raise IsADirectoryError
-        return ULog(str(path), list(TOPICS))
+                data = fh.read()
+        else:
+            if not path.exists():
+                raise FileNotFoundError
+            if path.is_dir():
+                raise IsADirectoryError
+            data = path.read_bytes()
+        printed = io.StringIO()
+        fh = _GuardedFile(data)
+        with contextlib.redirect_stdout(printed):
+            u = ULog(fh, list(TOPICS))
+        u.companion_truncated = fh.cut
+        lines = [ln.strip() for ln in printed.getvalue().splitlines() if ln.strip()]
+        u.companion_warnings = lines
+        u.companion_size = len(data)
+        for ln in lines[:5]:
+            _log.warning("%s: pyulog: %s", path, ln)
+        if len(lines) > 5:
+            _log.warning("%s: pyulog: %d more warnings", path, len(lines) - 5)
+        return u
     except FileNotFoundError:
         raise CompanionError(f"{path}: no such file") from None
     except IsADirectoryError:
@@ -66,6 +122,21 @@ def open_ulog(path):
         raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except Exception as exc:  # pyulog raises plain exceptions on a bad header or a corrupt file
         raise CompanionError(f"{path}: not a readable ULog file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+
+
+def _needed(d) -> list[str]:
+    """Fields a topic must have to be read (absent ones mean a damaged format definition)."""
+    name = d.name
+    if name == "sensor_combined":
+        return ["timestamp"] + [f"gyro_rad[{i}]" for i in range(3)]
+    if name in ("sensor_gyro", "sensor_accel"):
+        return ["timestamp", "x", "y", "z"]
+    if name in ("sensor_gyro_fifo", "sensor_accel_fifo"):
+        return ["timestamp", "samples", "dt", "scale", "x[0]", "y[0]", "z[0]"]
+    if name == "vehicle_imu":
+        return (["timestamp", "delta_angle_dt", "delta_velocity_dt"] + [f"delta_angle[{i}]" for i in range(3)]
+                + [f"delta_velocity[{i}]" for i in range(3)])
+    return ["timestamp"]
 
 
 def _time(d) -> np.ndarray:
@@ -88,16 +159,25 @@ def raw_streams(ulog) -> tuple[list[RawStream], dict]:
     out: list[RawStream] = []
     counts: dict = {}
     by = {}
+    damaged = getattr(ulog, "companion_damaged", None)
+    if damaged is None:
+        damaged = ulog.companion_damaged = []
     for d in ulog.data_list:
+        label = f"{d.name}[{d.multi_id}]"
+        lacking = [f for f in _needed(d) if f not in d.data]
+        if lacking:  # a damaged format definition: the topic cannot be read as that topic
+            n = next((int(v.shape[0]) for v in d.data.values()), 0)
+            damaged.append(f"{label}: no field {', '.join(lacking[:3])} (damaged definition; {n} messages skipped)")
+            continue
         by[(d.name, d.multi_id)] = d
-        counts[f"{d.name}[{d.multi_id}]"] = int(d.data["timestamp"].shape[0])
+        counts[label] = int(d.data["timestamp"].shape[0])
     for (name, mid), d in sorted(by.items()):
         n = int(d.data["timestamp"].shape[0])
         key = StreamKey(0, 0, name, int(mid))
         if name == "sensor_combined":
             gyro = _vec(d, [f"gyro_rad[{i}]" for i in range(3)])
             acc = (_vec(d, [f"accelerometer_m_s2[{i}]" for i in range(3)])
-                   if "accelerometer_m_s2[0]" in d.data else _nan3(n))
+                   if all(f"accelerometer_m_s2[{i}]" in d.data for i in range(3)) else _nan3(n))
             out.append(RawStream(key, _time(d), gyro, acc, None, True, None, None, 1e-6))
         elif name == "sensor_gyro":
             t = _time(d)
@@ -120,7 +200,7 @@ def raw_streams(ulog) -> tuple[list[RawStream], dict]:
             cnt = d.data["samples"].astype(np.int64)
             dt = d.data["dt"].astype(np.float64) * 1e-6
             scale = d.data["scale"].astype(np.float64)
-            width = sum(1 for k in d.data if k.startswith("x["))
+            width = next(i for i in range(10**6) if not all(f"{ax}[{i}]" in d.data for ax in "xyz"))
             k = np.arange(width)
             valid = k[None, :] < cnt[:, None]
             tt = t_last[:, None] - (cnt[:, None] - 1 - k[None, :]) * dt[:, None]
@@ -142,10 +222,13 @@ def raw_streams(ulog) -> tuple[list[RawStream], dict]:
 
 
 def metadata(ulog) -> dict:
-    meta: dict = {"params": dict(ulog.initial_parameters), "armed": [], "modes": [], "messages": [],
-                  "has_armed_state": False}
+    # PX4 parameters are int32 or float; one of another type comes from a damaged definition: skipped, counted
+    params = {k: v for k, v in ulog.initial_parameters.items()
+              if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)}
+    meta: dict = {"params": params, "armed": [], "modes": [], "messages": [], "has_armed_state": False,
+                  "damaged_params": len(ulog.initial_parameters) - len(params)}
     for d in ulog.data_list:
-        if d.name == "vehicle_status" and "arming_state" in d.data:
+        if d.name == "vehicle_status" and "arming_state" in d.data and "timestamp" in d.data:
             meta["has_armed_state"] = True
             t = d.data["timestamp"].astype(np.float64) * 1e-6
             armed = d.data["arming_state"].astype(int) == ARMING_STATE_ARMED
@@ -180,7 +263,7 @@ def identity(ulog, meta: dict) -> dict:
     ids = {inst: int(params[n]) for n, inst in GYRO_ID_PARAMS.items() if params.get(n)}
     start = None
     for d in ulog.data_list:
-        if d.name in ("vehicle_gps_position", "sensor_gps") and "time_utc_usec" in d.data:
+        if d.name in ("vehicle_gps_position", "sensor_gps") and {"time_utc_usec", "timestamp"} <= set(d.data):
             utc = d.data["time_utc_usec"].astype(np.float64)
             ok = np.flatnonzero(utc > 1e15)
             if ok.size:

@@ -1,0 +1,241 @@
+"""Honest input handling: damaged logs never end in a traceback, truncation and dropped streams are said,
+the CSV time unit can be given, absurd rates are refused, NBS14 read as a 1 Hz CSV is exact."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.cli.main import main
+from companion.errors import CompanionError
+from companion.mavlink.tlog_writer import write_imu_tlog
+from companion.sim.dataflash_writer import write_imu_log
+from companion.sim.ulog_writer import write_ulog
+from companion.sources import load
+
+sys.path.insert(0, str(Path(__file__).parent))
+import fuzz  # noqa: E402
+from test_adev import nbs14_1000  # noqa: E402
+
+MUTATIONS = 120  # per reader: a few seconds in all
+
+
+def _data(n=200, rate=100.0, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / rate
+    return t, rng.normal(0, 0.01, (n, 3)), rng.normal(0, 0.05, (n, 3)) + [0, 0, -9.8]
+
+
+def small_logs(tmp_path) -> dict[str, bytes]:
+    """One small simulator-written log per reader: name -> bytes."""
+    t, g, a = _data()
+    write_imu_tlog(tmp_path / "s.tlog", t, g, a)
+    write_imu_log(tmp_path / "s.bin", t, g[None], a[None], params={"INS_GYRO_FILTER": 20.0},
+                  armed=[(0.5, True)], messages=["ArduCopter V4.5.0"])
+    write_ulog(tmp_path / "s.ulg", t, g, a, params={"IMU_GYRO_CUTOFF": 30.0}, armed=[(0.5, True)])
+    rows = "\n".join(",".join(f"{v:.6g}" for v in (ti, *gi, *ai)) for ti, gi, ai in zip(t, g, a))
+    (tmp_path / "s.csv").write_text("time_s,gx,gy,gz,ax,ay,az\n" + rows + "\n")
+    return {n: (tmp_path / n).read_bytes() for n in ("s.tlog", "s.bin", "s.ulg", "s.csv")}
+
+
+@pytest.mark.parametrize("name,seed", [("s.tlog", 1), ("s.bin", 2), ("s.ulg", 3), ("s.csv", 4)])
+def test_mutated_logs_never_traceback(tmp_path, name, seed):
+    data = small_logs(tmp_path)[name]
+    work = tmp_path / "w"
+    work.mkdir()
+    seen = {"ok": 0, "refused": 0, "traceback": 0}
+    bad = []
+    for i, m in fuzz.seeds_of(data, MUTATIONS, seed):
+        kind, detail = fuzz.check(name, m, work)
+        seen[kind] += 1
+        if kind == "traceback":
+            bad.append((i, detail.strip().splitlines()[-1]))
+    assert not bad, bad[:3]
+    # the fuzzer really damages: some inputs are refused, most are still read (damage counted)
+    assert seen["ok"] > 0 and seen["refused"] + seen["ok"] == MUTATIONS
+
+
+def test_mutated_logs_through_the_cli(tmp_path, capsys):
+    """``inspect`` on damaged logs: exit 0 with the table, or exit 2 with exactly one error line."""
+    logs = small_logs(tmp_path)
+    rng = np.random.default_rng(5)
+    for name, data in logs.items():
+        for _ in range(8):
+            p = tmp_path / ("m_" + name)
+            p.write_bytes(fuzz.mutate(data, rng))
+            capsys.readouterr()
+            try:
+                rc = main(["inspect", str(p)])
+            except SystemExit as exc:
+                rc = exc.code
+            out, err = capsys.readouterr()
+            assert "Traceback" not in out + err
+            if rc == 0:
+                assert "source:" in out
+            else:
+                assert rc == 2 and len(err.strip().splitlines()) == 1 and err.startswith("companion: error:")
+
+
+def test_shared_logs_mutated(shared_data, tmp_path):
+    """The shared .bin and .ulg (their first 64 KiB: formats, definitions, parameters, first records)."""
+    work = tmp_path / "w"
+    work.mkdir()
+    for rel, name, seed in (("ardupilot/methodic_backend_log_80k.bin", "x.bin", 7),
+                            ("px4/pyulog_sample_appended_multiple.ulg", "x.ulg", 8)):
+        data = (shared_data / rel).read_bytes()[:65536]
+        for i, m in fuzz.seeds_of(data, 60, seed):
+            kind, detail = fuzz.check(name, m, work)
+            assert kind != "traceback", (rel, i, detail)
+
+
+def test_damaged_fmt_is_skipped_and_said(tmp_path):
+    t, g, a = _data(n=500)
+    p = tmp_path / "d.bin"
+    write_imu_log(p, t, g[None], a[None], messages=["hello"])
+    data = bytearray(p.read_bytes())
+    # the FMT of MSG: rename its column so the reader cannot find "Message"
+    i = data.find(b"MSG\0")
+    assert i > 0
+    j = data.find(b"Message", i)
+    data[j:j + 7] = b"Mxssage"
+    p.write_bytes(bytes(data))
+    res = load(p)
+    assert res.imu_streams()[0].samples == 500
+    assert any("MSG not read" in n and "FMT record is damaged" in n for n in res.meta["notes"])
+    assert res.totals["damaged_types"] == 1
+
+
+@pytest.mark.parametrize("ext", ["bin", "ulg"])
+def test_truncated_log_is_said(tmp_path, ext):
+    t, g, a = _data(n=500)
+    p = tmp_path / f"t.{ext}"
+    if ext == "bin":
+        write_imu_log(p, t, g[None], a[None])
+    else:
+        write_ulog(p, t, g, a)
+    whole = load(p)
+    assert not any("truncated" in n for n in whole.meta["notes"])
+    p.write_bytes(p.read_bytes()[:-7])  # cut inside the last message
+    res = load(p)
+    assert any("truncated log" in n for n in res.meta["notes"]), res.meta["notes"]
+
+
+def test_pyulog_warnings_do_not_reach_stdout(tmp_path, capsys):
+    t, g, a = _data(n=500)
+    p = tmp_path / "w.ulg"
+    write_ulog(p, t, g, a)
+    data = bytearray(p.read_bytes())
+    rng = np.random.default_rng(3)
+    # damage message ids in the data section until pyulog complains
+    for k in range(200):
+        b = bytearray(data)
+        for i in rng.integers(len(b) // 2, len(b), 6):
+            b[int(i)] = int(rng.integers(256))
+        p.write_bytes(bytes(b))
+        capsys.readouterr()
+        try:
+            res = load(p)
+        except CompanionError:
+            continue
+        out, _ = capsys.readouterr()
+        assert out == ""
+        if res.totals.get("reader_warnings"):
+            assert any("pyulog reported" in n for n in res.meta["notes"])
+            return
+    pytest.fail("no mutation made pyulog warn")
+
+
+def _nbs14_csv(path):
+    y = nbs14_1000()
+    rows = "\n".join(f"{i},{float(v)!r},{float(v)!r},{float(v)!r},0,0,9.8" for i, v in enumerate(y))
+    path.write_text("time_s,gx,gy,gz,ax,ay,az\n" + rows + "\n")
+
+
+def test_nbs14_as_a_1hz_csv(tmp_path, capsys):
+    p = tmp_path / "nbs14.csv"
+    _nbs14_csv(p)
+    with pytest.raises(CompanionError, match="--time-unit"):
+        load(p)
+    out = tmp_path / "r.json"
+    rc = main(["analyze", str(p), "--time-unit", "s", "--all", "--taus", "1,10,100", "--axes", "gx",
+               "--quiet", "--json", str(out)])
+    assert rc == 0
+    ax = json.loads(out.read_text())["streams"][0]["axes"]["gx"]
+    assert ax["tau"] == [1.0, 10.0, 100.0]
+    # NBS14 published OADEV (Stable32 / allantools) at tau 1, 10, 100
+    assert ax["adev"] == pytest.approx([0.2922319, 0.09159953, 0.03241343], rel=1e-6)
+
+
+def test_time_unit_ms_and_us(tmp_path):
+    t, g, a = _data(n=300)
+    for unit, k in (("ms", 1e3), ("us", 1e6)):
+        p = tmp_path / f"{unit}.csv"
+        rows = "\n".join(",".join(f"{v:.9g}" for v in (ti * k, *gi, *ai)) for ti, gi, ai in zip(t, g, a))
+        p.write_text("time_s,gx,gy,gz,ax,ay,az\n" + rows + "\n")
+        with pytest.raises(CompanionError, match=f"--time-unit {unit}"):
+            load(p)
+        s = load(p, time_unit=unit).imu_streams()[0]
+        assert s.rate_hz == pytest.approx(100.0, rel=1e-6)
+
+
+def test_absurd_rate_refused_with_reason(tmp_path, capsys):
+    t, g, a = _data(n=300)
+    p = tmp_path / "ghz.csv"
+    rows = "\n".join(",".join(f"{v:.9g}" for v in (ti * 1e-7, *gi, *ai)) for ti, gi, ai in zip(t, g, a))
+    p.write_text("time_s,gx,gy,gz,ax,ay,az\n" + rows + "\n")  # 1 GHz
+    rc = main(["analyze", str(p), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "1e+09 Hz" in err[0] and "outside" in err[0]
+
+
+def test_stream_too_short_is_named(tmp_path, capsys):
+    """Two IMU instances of 10 samples next to a long one: the table says why they are missing."""
+    rate = 50.0
+    t, g, a = _data(n=3000, rate=rate)
+    p = tmp_path / "three.bin"
+    write_imu_log(p, t, g[None], a[None])
+    long = p.read_bytes()
+    q = tmp_path / "short.bin"
+    write_imu_log(q, t[:10], np.stack([g[:10]] * 3), np.stack([a[:10]] * 3))
+    res_long, res_short = load(p), load(q)
+    assert res_short.imu_streams()[1].samples == 10
+    from companion.cli import analyze as an
+
+    class A:
+        taus, axes, config, duration, start, end, use_all, min_still, online, time_unit = (
+            "octave", "gx", None, None, None, None, True, 0.0, False, None)
+
+    entries, summary = an.analyze_source(str(q), A(), ["gx"], progress_enabled=False)
+    dropped = [n for n in summary["notes"] if "not analysed" in n]
+    assert len(dropped) == 3 and all("10 samples" in n for n in dropped), summary["notes"]
+    assert long  # the long log is analysed with no such note
+    entries, summary = an.analyze_source(str(p), A(), ["gx"], progress_enabled=False)
+    assert entries and not any("not analysed" in n for n in summary["notes"])
+
+
+def _n_k(seed, seconds, rate=20.0, N=1e-3, K=8e-4):
+    rng = np.random.default_rng(seed)
+    n = int(seconds * rate)
+    return rng.normal(0, N * np.sqrt(rate), n) + np.cumsum(rng.normal(0, K / np.sqrt(rate), n))
+
+
+def test_random_walk_resolved_only_from_a_long_enough_record():
+    """N 1e-3, K 8e-4 (SI): K dominates the AVAR from tau = sqrt(3) N / K = 2.2 s, so it needs 20 x 2.2 = 43 s
+    of record: a 33 s record gives a bound and says how long it would need, 20 minutes resolve it."""
+    from companion.allan.fit import record_needed
+    from companion.cli.analyze import analyze_axis
+
+    need = record_needed([{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 8e-4}], 0.05)
+    assert need["random_walk"] == pytest.approx(20 * np.sqrt(3) * 1e-3 / 8e-4, rel=0.01)
+    for seed in range(3):
+        short = analyze_axis(_n_k(seed, 33.0), 20.0)
+        assert "random_walk" not in [t["effect"] for t in short["terms"]]
+        assert "random_walk" in [t["effect"] for t in short["bounds"]]
+    for seed in range(2):
+        long = analyze_axis(_n_k(seed, 1200.0), 20.0)
+        k = [t for t in long["terms"] if t["effect"] == "random_walk"]
+        assert k and k[0]["K"] == pytest.approx(8e-4, rel=0.3)
