@@ -317,10 +317,14 @@ def refine_shapes(meas: Measured, terms, fixed, indices, steps: int = 3) -> Fit:
             trial[i][q] = float(math.exp(u))
             return fit_terms(meas, trial, fixed, intervals=False).dev
 
-        us = [u0 + k * step for k in range(-steps, steps + 1)]
+        u_lo = math.log(float(shape_grid(t["effect"], meas)[0]))
+        us = [max(u0 + k * step, u_lo) for k in range(-steps, steps + 1)]
         ds = [dev(u) for u in us]
         k = int(np.argmin(ds))
         res = minimize_scalar(dev, bounds=(us[max(k - 1, 0)], us[min(k + 1, len(us) - 1)]), method="bounded",
                               options={"xatol": 1e-4})
         terms[i][q] = float(math.exp(res.x if res.fun < ds[k] else us[k]))
+        lo_q = float(shape_grid(t["effect"], meas)[0])
+        if terms[i][q] < lo_q:  # the candidates' bounds hold after a refinement too (tau_c >= 3 tau0)
+            terms[i][q] = lo_q
     return fit_terms(meas, terms, fixed, intervals=False)

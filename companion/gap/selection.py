@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 from scipy import stats
 
 from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
@@ -59,6 +60,12 @@ ALPHA_RECAL = 1e-3
 #: one-parameter limits of two-parameter effects (Gauss-Markov: tau_c >> T is a rate random walk,
 #: tau_c << tau0 white noise; IEEE 952 C.6)
 NESTED = {"gauss_markov": ("random_walk", "white_noise")}
+
+
+#: the autopilot's low-pass filter (and the aliasing of the logger's decimation) on the white noise
+LOWPASS = "lowpass"
+#: cut-offs tried when the log does not give one, as fractions of the log's rate (8 per decade)
+LOWPASS_GRID = 10.0 ** np.arange(math.log10(0.02), math.log10(0.6) + 1e-9, 1.0 / 8.0)
 
 
 def add_penalty(k: int) -> float:
@@ -79,6 +86,8 @@ class Explanation:
     delta_dev: float
     inflation: float
     penalty: float
+    #: for "lowpass": the index of the white_noise term the filter is put on (no term is appended)
+    modifies: int | None = None
 
     @property
     def lr(self) -> float:
@@ -90,7 +99,13 @@ class Explanation:
 
     @property
     def k(self) -> int:
-        return (N_PARAMS[self.effect] if self.effect else 0) + len(self.recal)
+        return (N_PARAMS.get(self.effect, 1) if self.effect else 0) + len(self.recal)
+
+    def added_term(self) -> dict | None:
+        """The term the explanation adds (for "lowpass": the filtered white-noise term)."""
+        if not self.effect:
+            return None
+        return self.fit.terms[self.modifies] if self.modifies is not None else self.fit.terms[-1]
 
     def changes(self) -> set:
         return ({("add", self.effect)} if self.effect else set()) | {("recal", j) for j in self.recal}
@@ -107,7 +122,10 @@ class Explanation:
              "recalibrate": [f"{model_terms[j]['effect']}.{MAGNITUDE[model_terms[j]['effect']]}" for j in self.recal],
              "k": self.k, "delta_dev": self.delta_dev, "inflation": self.inflation, "lr": self.lr,
              "penalty": self.penalty, "score": self.score, "gap": self.fit.gap}
-        if self.effect:
+        if self.effect == LOWPASS:
+            t = self.added_term()
+            d["params"] = {"cutoff_hz": t["cutoff_hz"], "order": t.get("order", 2), "N": t["N"]}
+        elif self.effect:
             d["params"] = {p: v for p, v in self.fit.terms[-1].items() if p != "effect"}
         if self.recal:
             d["recalibrated"] = {f"{model_terms[j]['effect']}.{MAGNITUDE[model_terms[j]['effect']]}":
@@ -134,8 +152,49 @@ def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Expl
     return Explanation(effect, tuple(recal), fit, state.dev - fit.dev, phi, pen)
 
 
+def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpass, shaped=(), sigma=None) -> list:
+    """The low-pass filter on the state's white-noise term (:mod:`companion.gap.filtered`): alone (N held
+    as it stands) and with N recalibrated. ``lowpass`` = (cut-off Hz or None, order): a cut-off from the
+    log's parameters is used as it is (a known property of the data: the level of a recalibration,
+    chi^2_1(1 - ALPHA_RECAL) = 10.8), else it is fitted by profile likelihood over LOWPASS_GRID x rate (the
+    level of a one-parameter added effect, 15.1). Its overdispersion is taken
+    in the direction the filter changes the curve (filtered minus unfiltered white column)."""
+    if lowpass is None:
+        return []
+    fc0, order = lowpass
+    whites = [j for j, t in enumerate(state.terms) if t["effect"] == "white_noise" and not t.get("cutoff_hz")
+              and t["N"] > 0]
+    if not whites:
+        return []
+    j = whites[0]
+    grid = [fc0] if fc0 else list(LOWPASS_GRID * meas.rate_hz)
+    out = []
+    for recal in ((), (j,)):
+        if recal and j not in recalibratable:
+            continue
+        fixed = [i for i in held if i not in recal]
+        best = None
+        for fc in grid:
+            trial = [dict(t) for t in state.terms]
+            trial[j].update(cutoff_hz=float(fc), order=int(order))
+            f = fit_terms(meas, trial, fixed, intervals=False)
+            if best is None or f.dev < best.dev:
+                best = f
+        if shaped:
+            best = refine_shapes(meas, best.terms, fixed, shaped)
+        t0 = state.terms[j]
+        col = unit_column(best.terms[j], meas.tau, meas.rate_hz) - unit_column(t0, meas.tau, meas.rate_hz)
+        dirs = [col * t0["N"] ** 2] + [unit_column(t0, meas.tau, meas.rate_hz) for _ in recal]
+        phi = lr_inflation(meas, state, None, direction=dirs, sigma=sigma)
+        # a cut-off read from the log is a known property of the data, not a searched shape: it is tested at
+        # the level of a recalibration (chi^2_1(1 - ALPHA_RECAL)); a fitted cut-off at that of an added effect
+        pen = (RECAL_PENALTY if fc0 else add_penalty(1)) + RECAL_PENALTY * len(recal)
+        out.append(Explanation(LOWPASS, tuple(recal), best, state.dev - best.dev, phi, pen, modifies=j))
+    return out
+
+
 def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None,
-                 shaped=()) -> list:
+                 shaped=(), lowpass=None) -> list:
     """Fit every explanation from ``state`` (terms with the indices ``held`` fixed): each candidate effect
     added; each term of ``recalibratable`` (held model terms) freed; each effect added with one term freed.
     ``combine_top`` limits the combinations to the best-scoring effects alone (None: all). A recalibration
@@ -156,7 +215,8 @@ def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: 
     for j in recalibratable:
         f = refine_shapes(meas, terms, [i for i in held if i != j], shaped)
         out.append(_explanation(meas, state, held, None, (j,), f, sigma))
-    effects = [x.effect for x in sorted((x for x in out if x.effect), key=lambda x: -x.score)]
+    out += lowpass_explanations(meas, state, held, recalibratable, lowpass, shaped, sigma)
+    effects = [x.effect for x in sorted((x for x in out if x.effect and x.effect != LOWPASS), key=lambda x: -x.score)]
     if combine_top is not None:
         effects = effects[:combine_top]
     for e in effects:
@@ -233,11 +293,12 @@ def runner_up(ranked, chosen: Explanation):
     return None
 
 
-def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None, shaped=()) -> dict:
+def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None, shaped=(),
+           lowpass=None) -> dict:
     """One step: rank all explanations, apply the nested rule, return
     {ranked, chosen (Explanation or None), best (top of the ranking, chosen or not), nested, alternative
     (Gauss-Markov fit the limit won over), runner_up}."""
-    ranked = explanations(meas, state, held, recalibratable, combine_top, shaped)
+    ranked = explanations(meas, state, held, recalibratable, combine_top, shaped, lowpass)
     out = {"ranked": ranked, "chosen": None, "best": ranked[0] if ranked else None, "nested": None,
            "alternative": None, "runner_up": None}
     if not ranked:

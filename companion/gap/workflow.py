@@ -42,8 +42,9 @@ from companion.gap import explain, selection
 from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation, refine_shapes,
                                      unit_column)
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
-                                   model_avar)
+                                   measure_pooled, model_avar)
 from companion.gap._edf import local_slope, oavar_edf
+from companion.gap.filtered import synthesize_filtered_white
 from companion.gap.spectral import line_evidence
 from companion.sim.synth import synthesize_axis
 
@@ -133,7 +134,12 @@ def _simulate(terms, meas: Measured, seed: int):
     n = min(meas.n, SIM_MAX_SAMPLES)
     if not terms:
         return None, None
-    y = synthesize_axis(terms, meas.rate_hz, n, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)
+    plain = [t for t in terms if not t.get("cutoff_hz")]
+    y = synthesize_axis(plain, meas.rate_hz, n, rng) if plain else np.zeros(n)
+    for t in terms:
+        if t.get("cutoff_hz"):  # the autopilot's filter and decimation, simulated at 8x the log's rate
+            y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)))
     m = meas.m[meas.m <= n // 2]
     if m.shape[0] < meas.m.shape[0]:
         return None, None
@@ -167,6 +173,21 @@ def _strongest_left(res: GapResult) -> str:
             "suggestive, not significant at the documented level")
 
 
+def lowpass_entry(t, cutoff_param, rate_hz, axis, index, terms0) -> dict:
+    """The JSON/report entry of a low-pass filter put on the white-noise term ``t``."""
+    from companion.gap.filtered import aliasing_gain
+
+    fc, order = float(t["cutoff_hz"]), int(t.get("order", 2))
+    gain = aliasing_gain(fc, rate_hz, order)
+    src = "the log's parameter" if cutoff_param else "fitted"
+    entry = {"effect": selection.LOWPASS, "cutoff_hz": fc, "order": order, "source": src, "N": t["N"],
+             "on_model_term": index < len(terms0), "aliasing_gain": gain,
+             "explanation": explain.explain_lowpass(fc, order, rate_hz, gain, src, axis)}
+    if cutoff_param:
+        entry["cutoff_param_hz"] = float(cutoff_param)
+    return entry
+
+
 def _refit(meas: Measured, terms, held, n_model: int) -> Fit:
     """Refit the free magnitudes; intervals for them and for the shapes of added Gauss-Markov/sinusoid terms."""
     fit = fit_terms(meas, terms, fixed=sorted(held))
@@ -195,9 +216,25 @@ def _params(term) -> dict:
 
 
 def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None, seed: int = 0,
-            simulate: bool = True, max_iter: int = MAX_ITER) -> GapResult:
-    """Run the whole workflow on rate samples ``y`` (SI) against the model ``terms`` of one axis."""
-    meas = measure(y, rate_hz)
+            simulate: bool = True, max_iter: int = MAX_ITER, cutoff_hz: float | None = None, filter_order: int = 2,
+            lowpass: bool = True, segments=None) -> GapResult:
+    """Run the whole workflow on rate samples ``y`` (SI) against the model ``terms`` of one axis.
+
+    ``segments``: several still segments of one record (rate arrays); the Allan variance is then pooled
+    over them (:func:`companion.gap.compare.measure_pooled`) and ``y`` may be None. ``cutoff_hz``: the
+    low-pass cut-off of the logged data from the log's parameters (the filter candidate then uses it; None:
+    fitted); ``lowpass`` False leaves the filter out of the candidates (data known to be unfiltered)."""
+    if segments is not None and len(segments) > 1:
+        segments = [np.asarray(s_, dtype=float) for s_ in segments]
+        meas = measure_pooled(segments, rate_hz)
+        y = max(segments, key=len) if y is None else y
+        y_all = np.concatenate(segments)
+    else:
+        if segments is not None:
+            y = np.asarray(segments[0], dtype=float)
+        meas = measure(y, rate_hz)
+        y_all = y
+    lp = (cutoff_hz, int(filter_order)) if lowpass else None
     terms0 = [dict(t) for t in terms]
     s0 = model_avar(terms0, meas.tau, rate_hz) if terms0 else np.full_like(meas.tau, 1e-300)
     res = GapResult(axis=axis, measured=meas, terms_before=terms0, terms_after=terms0,
@@ -211,10 +248,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
 
     # 7. known LSB: rate rounding as a fixed white term
     if lsb is None:
-        lsb = detect_lsb(y)
+        lsb = detect_lsb(y_all)
     if lsb and not any(t["effect"] == "quantization" for t in terms0):
         N_q = lsb * math.sqrt(1.0 / (12.0 * rate_hz))
-        sigma = float(np.std(np.diff(np.asarray(y, dtype=float))) / math.sqrt(2.0))
+        sigma = float(np.std(np.diff(np.asarray(y_all, dtype=float))) / math.sqrt(2.0))
         q = {"lsb": lsb, "N_q": N_q, "sigma_sample_lsb": sigma / lsb, "dithered": sigma >= DITHER_RATIO * lsb,
              "added": False}
         qterm = {"effect": "white_noise", "N": N_q}
@@ -246,11 +283,11 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     for it in range(max_iter):
         recalibratable = [j for j in range(len(terms0)) if j in held]
         shaped = [i for i in range(len(terms0), len(current)) if current[i]["effect"] in SHAPE and i not in held]
-        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped)
+        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp)
         ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
         record = {"iteration": it + 1, "gap_base": base.gap,
                   "candidates": [{"effect": x.effect, "delta_dev": x.delta_dev, "k": x.k, "gap": x.fit.gap,
-                                  "params": _params(x.fit.terms[-1])} for x in ranked if x.effect and not x.recal],
+                                  "params": _params(x.added_term())} for x in ranked if x.effect and not x.recal],
                   "explanations": [x.as_dict(terms0) for x in ranked[:8]],
                   "threshold": {k: selection.add_penalty(k) for k in (1, 2)},
                   "recal_threshold": selection.RECAL_PENALTY}
@@ -274,7 +311,9 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                                                    ru.label(terms0) if ru is not None else None,
                                                                    ru.score if ru is not None else None)})
         if step["alternative"] is not None:
-            if chosen.effect:
+            if chosen.effect == selection.LOWPASS:
+                pass
+            elif chosen.effect:
                 alternatives[len(current)] = step["alternative"]
             else:
                 alternatives[[j for j in chosen.recal if current[j]["effect"] == step["nested"]["limit"]][0]] = \
@@ -310,7 +349,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         _, lr_raw, phi, hf = _hold_test(meas, base, held, j, terms0[j])
         value = lr_raw - phi * selection.RECAL_PENALTY
         shaped = [i for i in range(len(terms0), len(hf.terms)) if hf.terms[i]["effect"] in SHAPE and i not in held]
-        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped)
+        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped, lowpass=lp)
         x = step["chosen"]
         if x is None or x.score <= value:
             continue
@@ -389,10 +428,14 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             entry["alternative"] = alt
             entry["explanation"] += " " + explain.explain_alternative(alt, meas.n / rate_hz, rate_hz)
         res.added.append(entry)
+    for i, t in enumerate(final):
+        if t["effect"] == "white_noise" and t.get("cutoff_hz") and not (i < len(terms0) and terms0[i].get("cutoff_hz")):
+            res.added.append(lowpass_entry(t, cutoff_hz, rate_hz, axis, i, terms0))
     final = [t for i, t in enumerate(final) if i < len(terms0) or i in held or t[MAGNITUDE[t["effect"]]] > 0]
     s_final = model_avar(final, meas.tau, rate_hz)
     g_final = gap_metric(meas, s_final)
-    changed = any(e["verdict"] != "consistent" for e in res.recalibrated) or len(final) > len(terms0)
+    changed = any(e["verdict"] != "consistent" for e in res.recalibrated) or len(final) > len(terms0) or \
+        any(a["effect"] == selection.LOWPASS for a in res.added)
     if not changed:
         res.terms_after = terms0
         res.gap_after = res.gap_before
