@@ -216,18 +216,20 @@ def run(args) -> int:
         v = getattr(args, opt)
         if v is not None and not (v > 0 and math.isfinite(v)):
             raise CompanionError(f"--{opt} must be a positive number, got {v}")
-    st, ranges, sel, meta = load_measured(args.measured, args)
-    rate = float(st.rate_hz)
     sheet = None
     if args.datasheet:
         from companion.datasheets import model_terms
 
         terms, sheet = model_terms(args.datasheet)
+    else:
+        model = load_model(args.model)  # before the data: a wrong model path fails fast
+    st, ranges, sel, meta = load_measured(args.measured, args)
+    rate = float(st.rate_hz)
+    if sheet is not None:
         model = NoiseModel(rate_hz=rate, axes={a: [dict(t) for t in terms] for a in GYRO_AXES})
         source_model = f"datasheet {sheet['name']} ({sheet['source']}; N from {sheet['si']['N_from']}" + \
             (f", B from {sheet['si']['B_from']}" if sheet["si"]["B"] else ", no bias stability given") + ")"
     else:
-        model = load_model(args.model)
         source_model = args.model
     axes = [args.axis] if args.axis else [a for a in GYRO_AXES if a in model.axes]
     for a in axes:

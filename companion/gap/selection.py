@@ -64,8 +64,9 @@ NESTED = {"gauss_markov": ("random_walk", "white_noise")}
 
 #: the autopilot's low-pass filter (and the aliasing of the logger's decimation) on the white noise
 LOWPASS = "lowpass"
-#: cut-offs tried when the log does not give one, as fractions of the log's rate (8 per decade)
-LOWPASS_GRID = 10.0 ** np.arange(math.log10(0.02), math.log10(0.6) + 1e-9, 1.0 / 8.0)
+#: cut-offs tried when the log does not give one, as fractions of the log's rate (8 per decade), at most
+#: 0.4: above it the aliasing of a free cut-off would mimic a larger N (white level x1.05 at 0.4, x1.25 at 0.6)
+LOWPASS_GRID = 10.0 ** np.arange(math.log10(0.02), math.log10(0.4) + 1e-9, 1.0 / 8.0)
 
 
 def add_penalty(k: int) -> float:
