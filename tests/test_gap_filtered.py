@@ -61,3 +61,26 @@ def test_no_filter_named_on_white_data():
     y = np.random.default_rng(5).standard_normal(200_000) * 1e-3 * math.sqrt(rate)
     r = run_gap(y, rate, [{"effect": "white_noise", "N": 1e-3}], cutoff_hz=45.0, simulate=False)
     assert r.added == [] and r.fits_within_noise
+
+
+def test_temperature_drift_named_and_checked_against_the_channel():
+    """A rate of 3e-4 rad/s per K following a warm-up curve (+4 K, time constant 15 min) plus slow
+    wiggles of the temperature is named "temperature" (not a ramp or random walk) and the direct
+    regression on the channel confirms the coefficient."""
+    rate, T = 20.0, 7200.0
+    n = int(rate * T)
+    t = np.arange(n) / rate
+    rng = np.random.default_rng(21)
+    temp = 30 + 4 * (1 - np.exp(-t / 900.0)) + 0.4 * np.sin(2 * np.pi * t / 1300.0)
+    temp_meas = np.round(temp + 0.02 * rng.standard_normal(n), 2)  # the channel's own noise and LSB
+    model = [{"effect": "white_noise", "N": 1e-3}, {"effect": "bias_instability", "B": 5e-5}]
+    from companion.sim.synth import synthesize_axis
+
+    y = synthesize_axis(model, rate, n, rng) + 3e-4 * temp
+    r = run_gap(y, rate, model, simulate=False, temperature=temp_meas, lowpass=False)
+    assert [a["effect"] for a in r.added] == ["temperature"]
+    assert r.added[0]["check"]["confirmed"]
+    assert abs(r.added[0]["coef"] / 3e-4 - 1) < 0.3
+    assert r.gap_after <= NOISE_FLOOR_G
+    r0 = run_gap(y - 3e-4 * temp, rate, model, simulate=False, temperature=temp_meas, lowpass=False)
+    assert r0.added == []  # no drift: the channel alone adds nothing

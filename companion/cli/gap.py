@@ -243,14 +243,20 @@ def run(args) -> int:
     several = len(axes) > 1
     for axis in axes:
         col = st.axis(axis)
-        segs = [col[a:b] for a, b in ranges]
-        segs = [y[np.isfinite(y)] for y in segs]
+        temp = getattr(st, "temperature", None)
+        segs, tsegs = [], []
+        for a, b in ranges:
+            y = col[a:b]
+            ok = np.isfinite(y)
+            segs.append(y[ok])
+            if temp is not None:
+                tsegs.append(np.asarray(temp[a:b], dtype=float)[ok])
         if sum(y.shape[0] for y in segs) < 64 or max(y.shape[0] for y in segs) < 16:
             raise CompanionError(f"{args.measured}: only {sum(y.shape[0] for y in segs)} still samples on {axis}; "
                                  "need at least 64")
         lsb = args.lsb if args.lsb is not None else (st.gyro_lsb if axis in GYRO_AXES else st.accel_lsb)
         r = run_gap(None, rate, model.axes[axis], axis=axis, lsb=lsb, seed=args.seed, cutoff_hz=cutoff,
-                    segments=segs)
+                    segments=segs, temperature=tsegs or None)
         text = format_report(r, args.measured, label)
         if sheet is not None:
             from companion.gap.explain import datasheet_verdict

@@ -18,6 +18,8 @@ WHAT = {
     "ramp": "rate ramp (drift): ADEV rising with slope +1 at the longest cluster times (IEEE 952 C.5)",
     "gauss_markov": "first-order Gauss-Markov (exponentially correlated) noise: an ADEV bump peaking at "
                     "0.617 sigma near tau = 1.89 tau_c (IEEE 952 C.6)",
+    "temperature": "a rate that follows the log's temperature channel: coef x T(t), its ADEV that of the "
+                   "temperature record",
     "sinusoid": "a sinusoidal rate: an ADEV bump peaking at 0.725 A near tau = 0.371 / f0, then falling "
                 "as 1/tau with notches (IEEE 952 C.7)",
 }
@@ -33,6 +35,7 @@ CAUSES = {
             "rotation (e.g. Earth rate on a tilting mount)",
     "gauss_markov": "a correlated bias with a finite memory such as a thermal effect of the board or of the "
                     "heater/fan cycle, or a mount or vibration-isolator effect",
+    "temperature": "the temperature sensitivity of the gyro bias (warm-up, heater, airflow)",
     "sinusoid": "a periodic disturbance: thermostat or heater cycling, a fan, a pump, building or vehicle "
                 "oscillation, or a beat between the sample clock and a vibration",
 }
@@ -43,6 +46,8 @@ def fmt_param(param: str, value: float, axis: str) -> str:
     if param in ("tau_c", "freq_hz", "f0", "cutoff_hz"):
         unit = "s" if param == "tau_c" else "Hz"
         return f"{param} = {value:.4g} {unit}"
+    if param == "coef":
+        return f"coef = {value * 180 / 3.141592653589793 * 3600:.4g} deg/h per K ({value:.3g} rad/s/K)"
     if param == "order":
         return f"filter order {int(value)}"
     return f"{param} = {to_datasheet(param, value, axis):.4g} {datasheet_unit(param, axis)} ({value:.3g} SI)"
@@ -178,3 +183,15 @@ def datasheet_verdict(recalibrated, name: str, axis: str, added=()) -> str:
     if eff:
         head += "; missing from the datasheet model: " + ", ".join(eff)
     return head
+
+
+def explain_temperature(coef: float, check: dict, axis: str) -> str:
+    """A temperature-driven rate, with its check against the temperature channel."""
+    k = 180.0 / 3.141592653589793 * 3600.0
+    verdict = ("confirmed by the temperature channel" if check.get("confirmed") else
+               "NOT confirmed by the temperature channel (the Allan curve's drift has the temperature's shape "
+               "but the direct regression disagrees: treat it as a drift of unknown cause)")
+    return (f"temperature-driven rate on {axis}: |coef| = {abs(coef) * k:.3g} deg/h per K ({abs(coef):.3g} rad/s/K): "
+            f"{WHAT['temperature']}. Regression of the rate on the temperature: slope {check['slope'] * k:.3g} "
+            f"+- {check['se'] * k:.2g} deg/h per K (t = {check['t']:.1f}); {verdict}. Commonly caused by "
+            f"{CAUSES['temperature']}.")

@@ -54,6 +54,12 @@ def term_avar(term, tau, rate_hz: float) -> np.ndarray:
     (:mod:`companion.gap.filtered`); every other term as in :mod:`companion.allan.terms`."""
     if term["effect"] == "bias_instability" and term.get("f0") is None:
         term = dict(term, f0=rate_hz / 2.0)
+    if term["effect"] == "temperature":
+        # coef (rad/s per K) times the measured temperature record: its AVAR is coef^2 x the AVAR of the
+        # temperature series itself, carried by the term on its own cluster times (companion.gap.thermal)
+        t_tau, t_avar = np.asarray(term["unit_tau"], dtype=float), np.asarray(term["unit_avar"], dtype=float)
+        ln = np.interp(np.log(np.asarray(tau, dtype=float)), np.log(t_tau), np.log(np.maximum(t_avar, 1e-300)))
+        return term["coef"] ** 2 * np.exp(ln)
     if term["effect"] == "white_noise" and term.get("cutoff_hz"):
         # the logged white noise behind an autopilot's low-pass filter, sampled (companion.gap.filtered)
         return avar_filtered_white(tau, term["N"], term["cutoff_hz"], rate_hz, int(term.get("order", 2)))

@@ -123,7 +123,10 @@ class Explanation:
              "recalibrate": [f"{model_terms[j]['effect']}.{MAGNITUDE[model_terms[j]['effect']]}" for j in self.recal],
              "k": self.k, "delta_dev": self.delta_dev, "inflation": self.inflation, "lr": self.lr,
              "penalty": self.penalty, "score": self.score, "gap": self.fit.gap}
-        if self.effect == LOWPASS:
+        if self.effect == "temperature":
+            t = self.added_term()
+            d["params"] = {"coef": t["coef"]}
+        elif self.effect == LOWPASS:
             t = self.added_term()
             d["params"] = {"cutoff_hz": t["cutoff_hz"], "order": t.get("order", 2), "N": t["N"]}
         elif self.effect:
@@ -139,7 +142,7 @@ class Explanation:
 def candidate_effects(terms) -> list[str]:
     """Effects that can be added: those the model lacks, and Gauss-Markov / sinusoid also a second time."""
     present = {t["effect"] for t in terms}
-    return [e for e in MAGNITUDE if e not in present or e in SHAPE]
+    return [e for e in MAGNITUDE if (e not in present or e in SHAPE) and e != "temperature"]
 
 
 def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Explanation:
@@ -195,7 +198,7 @@ def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpa
 
 
 def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None,
-                 shaped=(), lowpass=None) -> list:
+                 shaped=(), lowpass=None, thermal=None) -> list:
     """Fit every explanation from ``state`` (terms with the indices ``held`` fixed): each candidate effect
     added; each term of ``recalibratable`` (held model terms) freed; each effect added with one term freed.
     ``combine_top`` limits the combinations to the best-scoring effects alone (None: all). A recalibration
@@ -217,7 +220,14 @@ def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: 
         f = refine_shapes(meas, terms, [i for i in held if i != j], shaped)
         out.append(_explanation(meas, state, held, None, (j,), f, sigma))
     out += lowpass_explanations(meas, state, held, recalibratable, lowpass, shaped, sigma)
-    effects = [x.effect for x in sorted((x for x in out if x.effect and x.effect != LOWPASS), key=lambda x: -x.score)]
+    if thermal is not None and not any(t["effect"] == "temperature" for t in terms):
+        f = fit_terms(meas, list(terms) + [dict(thermal)], held, intervals=False)
+        if shaped:
+            f = refine_shapes(meas, f.terms, held, shaped)
+        if f.terms[-1]["coef"] > 0:
+            out.append(_explanation(meas, state, held, "temperature", (), f, sigma))
+    effects = [x.effect for x in sorted((x for x in out if x.effect and x.effect not in (LOWPASS, "temperature")),
+                                        key=lambda x: -x.score)]
     if combine_top is not None:
         effects = effects[:combine_top]
     for e in effects:
@@ -295,11 +305,11 @@ def runner_up(ranked, chosen: Explanation):
 
 
 def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None, shaped=(),
-           lowpass=None) -> dict:
+           lowpass=None, thermal=None) -> dict:
     """One step: rank all explanations, apply the nested rule, return
     {ranked, chosen (Explanation or None), best (top of the ranking, chosen or not), nested, alternative
     (Gauss-Markov fit the limit won over), runner_up}."""
-    ranked = explanations(meas, state, held, recalibratable, combine_top, shaped, lowpass)
+    ranked = explanations(meas, state, held, recalibratable, combine_top, shaped, lowpass, thermal)
     out = {"ranked": ranked, "chosen": None, "best": ranked[0] if ranked else None, "nested": None,
            "alternative": None, "runner_up": None}
     if not ranked:

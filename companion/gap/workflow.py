@@ -46,6 +46,7 @@ from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_s
 from companion.gap._edf import local_slope, oavar_edf
 from companion.gap.filtered import synthesize_filtered_white
 from companion.gap.spectral import line_evidence
+from companion.gap.thermal import regression_check, thermal_term
 from companion.sim.synth import synthesize_axis
 
 ALPHA = selection.ALPHA
@@ -129,17 +130,19 @@ def detect_lsb(y, rel_tol: float = 1e-3) -> float | None:
     return step
 
 
-def _simulate(terms, meas: Measured, seed: int):
+def _simulate(terms, meas: Measured, seed: int, t_series=None):
     """Simulate the model at the measurement's rate and length; its AVAR at the same m, with EDF."""
     n = min(meas.n, SIM_MAX_SAMPLES)
     if not terms:
         return None, None
     rng = np.random.default_rng(seed)
-    plain = [t for t in terms if not t.get("cutoff_hz")]
+    plain = [t for t in terms if not t.get("cutoff_hz") and t["effect"] != "temperature"]
     y = synthesize_axis(plain, meas.rate_hz, n, rng) if plain else np.zeros(n)
     for t in terms:
         if t.get("cutoff_hz"):  # the autopilot's filter and decimation, simulated at 8x the log's rate
             y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)))
+        if t["effect"] == "temperature" and t_series is not None and t_series.shape[0] >= n:
+            y = y + t["coef"] * t_series[:n]
     m = meas.m[meas.m <= n // 2]
     if m.shape[0] < meas.m.shape[0]:
         return None, None
@@ -149,8 +152,8 @@ def _simulate(terms, meas: Measured, seed: int):
     return avar, nu
 
 
-def _sim_checks(terms, meas: Measured, seed: int):
-    avar, nu = _simulate(terms, meas, seed)
+def _sim_checks(terms, meas: Measured, seed: int, t_series=None):
+    avar, nu = _simulate(terms, meas, seed, t_series)
     if avar is None:
         return None, None, None
     g_meas_sim = gap_vs_simulation(meas, avar, nu)
@@ -188,6 +191,34 @@ def lowpass_entry(t, cutoff_param, rate_hz, axis, index, terms0) -> dict:
     return entry
 
 
+#: drift-like effects a temperature-driven rate is a look-alike of on the Allan curve
+_DRIFTS = ("ramp", "random_walk", "gauss_markov", "sinusoid", "bias_instability")
+
+
+def _thermal_arbitration(ranked, chosen, y_segs, t_smooth):
+    """The temperature channel as independent evidence between look-alikes the Allan curve cannot
+    separate: a drift-like winner gives way to the temperature explanation when that one also passes its
+    level on the Allan curve (score > 0) and the direct regression of the rate on the channel confirms its
+    coefficient; a temperature winner that the regression does not confirm gives way to the best other
+    explanation. Returns (explanation to take or None, note)."""
+    temp = next((x for x in ranked if x.effect == "temperature" and not x.recal), None)
+    if chosen.effect == "temperature":
+        chk = regression_check(y_segs, t_smooth, chosen.added_term()["coef"])
+        if chk["confirmed"]:
+            return chosen, ""
+        other = next((x for x in ranked if x.effect != "temperature" and x.score > 0), None)
+        return other, ("a temperature-shaped drift fits the Allan curve but the regression on the temperature "
+                       f"channel does not confirm it (slope t = {chk['t']:.1f}, ratio {chk.get('ratio', 0):.2g}): "
+                       "not named")
+    if chosen.effect in _DRIFTS and temp is not None and temp.score > 0:
+        chk = regression_check(y_segs, t_smooth, temp.added_term()["coef"])
+        if chk["confirmed"]:
+            return temp, (f"{chosen.effect} and a temperature-driven rate both explain the Allan curve (scores "
+                          f"{chosen.score:.1f}, {temp.score:.1f}); the temperature channel decides: regression "
+                          f"slope t = {chk['t']:.1f}, coefficient ratio {chk['ratio']:.2f}")
+    return chosen, ""
+
+
 def _refit(meas: Measured, terms, held, n_model: int) -> Fit:
     """Refit the free magnitudes; intervals for them and for the shapes of added Gauss-Markov/sinusoid terms."""
     fit = fit_terms(meas, terms, fixed=sorted(held))
@@ -217,7 +248,7 @@ def _params(term) -> dict:
 
 def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None, seed: int = 0,
             simulate: bool = True, max_iter: int = MAX_ITER, cutoff_hz: float | None = None, filter_order: int = 2,
-            lowpass: bool = True, segments=None) -> GapResult:
+            lowpass: bool = True, segments=None, temperature=None) -> GapResult:
     """Run the whole workflow on rate samples ``y`` (SI) against the model ``terms`` of one axis.
 
     ``segments``: several still segments of one record (rate arrays); the Allan variance is then pooled
@@ -235,6 +266,13 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         meas = measure(y, rate_hz)
         y_all = y
     lp = (cutoff_hz, int(filter_order)) if lowpass else None
+    # the log's temperature channel (aligned with ``segments``, or with ``y``): a temperature-driven rate
+    y_segs = segments if segments is not None else [y]
+    t_segs = None
+    if temperature is not None:
+        t_segs = temperature if segments is not None else [temperature]
+    thermal, t_smooth = thermal_term(t_segs, rate_hz, meas.tau)
+    t_series = np.concatenate(t_smooth) if t_smooth else None
     terms0 = [dict(t) for t in terms]
     s0 = model_avar(terms0, meas.tau, rate_hz) if terms0 else np.full_like(meas.tau, 1e-300)
     res = GapResult(axis=axis, measured=meas, terms_before=terms0, terms_after=terms0,
@@ -283,8 +321,14 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     for it in range(max_iter):
         recalibratable = [j for j in range(len(terms0)) if j in held]
         shaped = [i for i in range(len(terms0), len(current)) if current[i]["effect"] in SHAPE and i not in held]
-        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp)
+        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp, thermal=thermal)
         ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
+        if thermal is not None and chosen is not None:
+            chosen, note = _thermal_arbitration(ranked, chosen, y_segs, t_smooth)
+            if note:
+                res.notes.append(note)
+                top = chosen if chosen is not None else top
+                ru = selection.runner_up(ranked, chosen) if chosen is not None else ru
         record = {"iteration": it + 1, "gap_base": base.gap,
                   "candidates": [{"effect": x.effect, "delta_dev": x.delta_dev, "k": x.k, "gap": x.fit.gap,
                                   "params": _params(x.added_term())} for x in ranked if x.effect and not x.recal],
@@ -311,7 +355,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                                                    ru.label(terms0) if ru is not None else None,
                                                                    ru.score if ru is not None else None)})
         if step["alternative"] is not None:
-            if chosen.effect == selection.LOWPASS:
+            if chosen.effect in (selection.LOWPASS, "temperature"):
                 pass
             elif chosen.effect:
                 alternatives[len(current)] = step["alternative"]
@@ -349,7 +393,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         _, lr_raw, phi, hf = _hold_test(meas, base, held, j, terms0[j])
         value = lr_raw - phi * selection.RECAL_PENALTY
         shaped = [i for i in range(len(terms0), len(hf.terms)) if hf.terms[i]["effect"] in SHAPE and i not in held]
-        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped, lowpass=lp)
+        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped, lowpass=lp, thermal=thermal)
         x = step["chosen"]
         if x is None or x.score <= value:
             continue
@@ -420,6 +464,12 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         ev = None
         if t["effect"] == "sinusoid" and t["amplitude"] > 0:
             ev = line_evidence(y, rate_hz, t["freq_hz"], t["amplitude"])
+        if t["effect"] == "temperature":
+            chk = regression_check(y_segs, t_smooth, t["coef"])
+            entry = {"effect": "temperature", "coef": t["coef"], "ci95": ci, "check": chk,
+                     "explanation": explain.explain_temperature(t["coef"], chk, axis)}
+            res.added.append(entry)
+            continue
         entry = {**t, "ci95": ci, "explanation": explain.explain_added(t, axis, rate_hz, spectral=ev)}
         if ev is not None:
             entry["spectral"] = ev
@@ -456,7 +506,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                                                           res.sim_check_before)
         else:
             res.sim_avar_after, res.gap_sim_after, res.sim_check_after = _sim_checks(res.terms_after, meas,
-                                                                                     seed + 1)
+                                                                                     seed + 1, t_series)
     if changed and res.gap_after > NOISE_FLOOR_G:
         res.notes.append(f"a gap remains above the noise floor (G = {res.gap_after:.2f} > {NOISE_FLOOR_G}): "
                          "the data hold something none of the seven effects describes well" + _strongest_left(res))
