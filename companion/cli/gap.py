@@ -238,6 +238,8 @@ def run(args) -> int:
     if not axes:
         raise CompanionError(f"{args.model}: no gyro axis; give --axis")
     cutoff = args.cutoff if args.cutoff is not None else log_cutoff(st, meta)
+    # PX4 sensor_combined carries gyro_rad = integral / integral_dt: each value is a mean over its interval
+    integrated = meta.get("format") == "ulog" and st.key.message == "sensor_combined"
     label = st.key.label()
     docs, new_axes = [], {a: [dict(t) for t in ts] for a, ts in model.axes.items()}
     several = len(axes) > 1
@@ -256,7 +258,7 @@ def run(args) -> int:
                                  "need at least 64")
         lsb = args.lsb if args.lsb is not None else (st.gyro_lsb if axis in GYRO_AXES else st.accel_lsb)
         r = run_gap(None, rate, model.axes[axis], axis=axis, lsb=lsb, seed=args.seed, cutoff_hz=cutoff,
-                    segments=segs, temperature=tsegs or None)
+                    segments=segs, temperature=tsegs or None, integrated=integrated)
         text = format_report(r, args.measured, label)
         if sheet is not None:
             from companion.gap.explain import datasheet_verdict
@@ -282,8 +284,9 @@ def run(args) -> int:
             doc["verdict"] = text.splitlines()[0]
         docs.append(doc)
         # the model schema has no filter keys: the filter is a property of the log, not of the sensor
-        new_axes[axis] = [{k: v for k, v in t.items() if k not in ("ci95", "cutoff_hz", "order")}
-                          for t in r.terms_after]
+        # a temperature-driven rate needs the log's temperature record: it stays in the report, not in the model
+        new_axes[axis] = [{k: v for k, v in t.items() if k not in ("ci95", "cutoff_hz", "order", "integrate")}
+                          for t in r.terms_after if t["effect"] != "temperature"]
         if args.plot:
             from companion.plots.gap_plot import plot_gap
 

@@ -48,6 +48,8 @@ def fmt_param(param: str, value: float, axis: str) -> str:
         return f"{param} = {value:.4g} {unit}"
     if param == "coef":
         return f"coef = {value * 180 / 3.141592653589793 * 3600:.4g} deg/h per K ({value:.3g} rad/s/K)"
+    if param == "integrate":
+        return "averaged over each sample interval" if value else "point samples"
     if param == "order":
         return f"filter order {int(value)}"
     return f"{param} = {to_datasheet(param, value, axis):.4g} {datasheet_unit(param, axis)} ({value:.3g} SI)"

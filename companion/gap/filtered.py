@@ -49,28 +49,45 @@ def autocovariance(t, N: float, cutoff_hz: float, order: int = 2) -> np.ndarray:
     raise ValueError(f"filter order must be 1 or 2, got {order}")
 
 
+def _lag_autocovariance(L, tau0, N, cutoff_hz, order, integrate):
+    """r(L) = R(L tau0) of the logged sequence; with ``integrate`` each logged value is the mean of the
+    filtered rate over its own interval tau0 (PX4 sensor_combined: the gyro integral over integral_dt
+    divided by dt), whose autocovariance is R convolved with the triangle (1 - |s|/tau0)/tau0 on
+    [-tau0, tau0] (Simpson's rule, 41 nodes, one of them at s = 0 where R has its kink)."""
+    L = np.asarray(L, dtype=float)
+    if not integrate:
+        return autocovariance(L * tau0, N, cutoff_hz, order)
+    s_nodes = np.linspace(-tau0, tau0, 41)
+    w = np.ones(41)
+    w[1:-1:2], w[2:-1:2] = 4.0, 2.0
+    w *= (s_nodes[1] - s_nodes[0]) / 3.0 * (1.0 - np.abs(s_nodes) / tau0) / tau0
+    return autocovariance(L[:, None] * tau0 + s_nodes[None, :], N, cutoff_hz, order) @ w
+
+
 def correlation_time(cutoff_hz: float, order: int = 2) -> float:
     """Decay time of R: 1/(2 pi fc) (order 1), sqrt(2)/(2 pi fc) (order 2)."""
     return (1.0 if order == 1 else math.sqrt(2.0)) / (2.0 * math.pi * cutoff_hz)
 
 
-def aliasing_gain(cutoff_hz: float, rate_hz: float, order: int = 2) -> float:
-    """N_eff^2 / N^2 = tau0 sum_k R(k tau0) / N^2: the long-tau white level of the log over the sensor's."""
+def aliasing_gain(cutoff_hz: float, rate_hz: float, order: int = 2, integrate: bool = False) -> float:
+    """N_eff^2 / N^2 = tau0 sum_k r(k) / N^2: the long-tau white level of the log over the sensor's."""
     tau0 = 1.0 / rate_hz
-    kmax = int(min(_MAX_LAGS, math.ceil(_DECAY_TIMES * correlation_time(cutoff_hz, order) / tau0) + 1))
-    r = autocovariance(np.arange(kmax + 1) * tau0, 1.0, cutoff_hz, order)
+    kmax = int(min(_MAX_LAGS, math.ceil(_DECAY_TIMES * correlation_time(cutoff_hz, order) / tau0) + 2))
+    r = _lag_autocovariance(np.arange(kmax + 1), tau0, 1.0, cutoff_hz, order, integrate)
     return float(tau0 * (r[0] + 2.0 * np.sum(r[1:])))
 
 
-def avar_filtered_white(tau, N: float, cutoff_hz: float, rate_hz: float, order: int = 2) -> np.ndarray:
+def avar_filtered_white(tau, N: float, cutoff_hz: float, rate_hz: float, order: int = 2,
+                        integrate: bool = False) -> np.ndarray:
     """AVAR at ``tau`` (multiples of 1/rate_hz) of white noise N low-pass filtered at ``cutoff_hz`` and
-    sampled at ``rate_hz`` (exact for the sampled sequence; see the module docstring)."""
+    sampled at ``rate_hz`` (exact for the sampled sequence; see the module docstring); ``integrate``: each
+    sample is the mean over its interval instead of a point value (:func:`_lag_autocovariance`)."""
     tau = np.asarray(tau, dtype=float)
     tau0 = 1.0 / rate_hz
     m_all = np.maximum(np.rint(tau * rate_hz).astype(np.int64), 1)
-    kmax = int(min(_MAX_LAGS, math.ceil(_DECAY_TIMES * correlation_time(cutoff_hz, order) / tau0) + 1))
+    kmax = int(min(_MAX_LAGS, math.ceil(_DECAY_TIMES * correlation_time(cutoff_hz, order) / tau0) + 2))
     L = np.arange(kmax + 1)
-    r = autocovariance(L * tau0, N, cutoff_hz, order)
+    r = _lag_autocovariance(L, tau0, N, cutoff_hz, order, integrate)
     # m > kmax: every lag with r != 0 is below m, the weights are m (L = 0) and 2m - 3L (L >= 1)
     s1 = r[0] + 2.0 * np.sum(r[1:])
     s2 = 3.0 * np.sum(L[1:] * r[1:])
@@ -86,7 +103,7 @@ def avar_filtered_white(tau, N: float, cutoff_hz: float, rate_hz: float, order: 
 
 
 def synthesize_filtered_white(N: float, cutoff_hz: float, rate_hz: float, n: int, rng, order: int = 2,
-                              oversample: int = 8) -> np.ndarray:
+                              oversample: int = 8, integrate: bool = False) -> np.ndarray:
     """``n`` samples at ``rate_hz`` of white noise N through the low-pass, simulated at ``oversample`` x the
     rate (the autopilot's sensor rate) and picked every ``oversample``-th sample (no averaging: decimation).
     Noise above oversample x rate / 2 is left out (a small share for cut-offs below the log's rate)."""
@@ -96,4 +113,6 @@ def synthesize_filtered_white(N: float, cutoff_hz: float, rate_hz: float, n: int
     w = rng.standard_normal(n * oversample) * (N * math.sqrt(fs))
     sos = butter(order, min(cutoff_hz, 0.45 * fs), fs=fs, output="sos")
     y = sosfilt(sos, w)
+    if integrate:  # the mean over each logged interval
+        return y[: n * oversample].reshape(n, oversample).mean(axis=1)
     return y[oversample - 1:: oversample][:n]

@@ -62,7 +62,8 @@ def term_avar(term, tau, rate_hz: float) -> np.ndarray:
         return term["coef"] ** 2 * np.exp(ln)
     if term["effect"] == "white_noise" and term.get("cutoff_hz"):
         # the logged white noise behind an autopilot's low-pass filter, sampled (companion.gap.filtered)
-        return avar_filtered_white(tau, term["N"], term["cutoff_hz"], rate_hz, int(term.get("order", 2)))
+        return avar_filtered_white(tau, term["N"], term["cutoff_hz"], rate_hz, int(term.get("order", 2)),
+                                   bool(term.get("integrate", False)))
     return avar_term(term, tau)
 
 

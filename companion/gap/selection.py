@@ -158,29 +158,37 @@ def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Expl
 
 def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpass, shaped=(), sigma=None) -> list:
     """The low-pass filter on the state's white-noise term (:mod:`companion.gap.filtered`): alone (N held
-    as it stands) and with N recalibrated. ``lowpass`` = (cut-off Hz or None, order): a cut-off from the
+    as it stands) and with N recalibrated. ``lowpass`` = (cut-off Hz or None, order[, integrate]): a cut-off from the
     log's parameters is used as it is (a known property of the data: the level of a recalibration,
     chi^2_1(1 - ALPHA_RECAL) = 10.8), else it is fitted by profile likelihood over LOWPASS_GRID x rate (the
     level of a one-parameter added effect, 15.1). Its overdispersion is taken
     in the direction the filter changes the curve (filtered minus unfiltered white column)."""
     if lowpass is None:
         return []
-    fc0, order = lowpass
+    fc0, order = lowpass[0], lowpass[1]
+    integrate = bool(lowpass[2]) if len(lowpass) > 2 else False
     whites = [j for j, t in enumerate(state.terms) if t["effect"] == "white_noise" and not t.get("cutoff_hz")
               and t["N"] > 0]
     if not whites:
         return []
     j = whites[0]
-    grid = [fc0] if fc0 else list(LOWPASS_GRID * meas.rate_hz)
+    if any(t["effect"] == "gauss_markov" and t["tau_c"] * meas.rate_hz < FILTER_LIKE_SAMPLES and t["sigma"] > 0
+           for t in state.terms):
+        return []  # a filter-like Gauss-Markov term is already there: one filter, not two
+    # a cut-off from the log: the autopilot's two-pole filter; a fitted one: order 1 or 2, whichever fits
+    # (the sensor's own digital low-pass and averaging need not be two-pole)
+    grid = [(fc0, order)] if fc0 else [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz]
     out = []
     for recal in ((), (j,)):
         if recal and j not in recalibratable:
             continue
         fixed = [i for i in held if i not in recal]
         best = None
-        for fc in grid:
+        for fc, o in grid:
             trial = [dict(t) for t in state.terms]
-            trial[j].update(cutoff_hz=float(fc), order=int(order))
+            trial[j].update(cutoff_hz=float(fc), order=int(o))
+            if integrate:
+                trial[j]["integrate"] = True
             f = fit_terms(meas, trial, fixed, intervals=False)
             if best is None or f.dev < best.dev:
                 best = f
@@ -237,6 +245,11 @@ def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: 
                                    near=fits[e].terms[-1][q] if q else None)
             if f.terms[-1][MAGNITUDE[e]] > 0:
                 out.append(_explanation(meas, state, held, e, (j,), f, sigma))
+    if any(t["effect"] == "white_noise" and t.get("cutoff_hz") for t in terms):
+        # the low-pass filter is already in the model: a Gauss-Markov term at the filter's time scale would
+        # describe the same roll-off twice
+        out = [x for x in out if not (x.effect == "gauss_markov" and
+                                      x.added_term()["tau_c"] * meas.rate_hz < FILTER_LIKE_SAMPLES)]
     out.sort(key=lambda x: -x.score)
     return out
 
@@ -294,6 +307,24 @@ def nested_test(meas: Measured, best: Explanation, limit: Explanation, i: int) -
     return {"limit": effect, "lr": lr_raw / phi, "lr_raw": lr_raw, "inflation": phi, "threshold": threshold}
 
 
+#: a Gauss-Markov term with tau_c below this many samples is the look-alike of a low-pass filter
+FILTER_LIKE_SAMPLES = 10.0
+
+
+def filter_rule(meas: Measured, best: Explanation, ranked) -> Explanation:
+    """A short-tau Gauss-Markov term and a low-pass filter on the white noise look alike at the shortest
+    cluster times (both roll the white line off). When the winner is a Gauss-Markov term with tau_c below
+    FILTER_LIKE_SAMPLES samples and the filter explanation with the same recalibrations also passes its
+    level, the filter (one parameter, a known property of autopilot logs) is taken unless the Gauss-Markov
+    term fits better by more than chi^2_1(1 - ALPHA_RECAL) = 10.8 (its extra parameter's level)."""
+    if best.effect != "gauss_markov" or best.added_term()["tau_c"] * meas.rate_hz >= FILTER_LIKE_SAMPLES:
+        return best
+    lp = next((x for x in ranked if x.effect == LOWPASS and x.recal == best.recal), None)
+    if lp is None or lp.score <= 0 or lp.fit.dev - best.fit.dev > RECAL_PENALTY:
+        return best
+    return lp
+
+
 def runner_up(ranked, chosen: Explanation):
     """The best explanation other than ``chosen`` that is not ``chosen`` plus further changes."""
     c = chosen.changes()
@@ -340,6 +371,7 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
         return lim, nt, alt
 
     best, out["nested"], out["alternative"] = resolve(ranked[0])
+    best = filter_rule(meas, best, ranked)
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best

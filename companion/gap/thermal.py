@@ -10,9 +10,10 @@ the temperature curve is named "temperature", one that does not is not.
 The temperature channel is smoothed first (a centred moving average over 2 s): the temperature sensor's
 own quantisation and noise are not in the gyro, and the thermal response of the bias is slow.
 
-Check against the channel (:func:`regression_check`): the least-squares slope of the rate on T (each
-segment's means removed) with its standard error from the residual's lag-1 autocorrelation; the Allan-fitted
-|coef| is "confirmed" when it lies within a factor 2 of |slope| and the slope is significant (|t| > 3).
+Check against the channel (:func:`regression_check`): the least-squares slope of the rate on T with a
+linear ramp beside it (each segment's means removed; a warm-up that only rises is no evidence against a
+plain drift) with its standard error from the residual's lag-1 autocorrelation; the Allan-fitted |coef| is
+"confirmed" when it lies within a factor 2 of |slope| and the slope is significant (|t| > 3).
 """
 
 from __future__ import annotations
@@ -58,19 +59,32 @@ def thermal_term(temp_segments, rate_hz: float, tau) -> tuple[dict | None, list]
             "unit_avar": t_avar[ok].tolist()}, smooth
 
 
-def regression_check(y_segments, temp_smooth, coef: float) -> dict:
-    """Slope of the rate on the (smoothed) temperature, each segment's means removed, its standard error
-    (residual variance inflated by (1 + rho)/(1 - rho), rho the residual's lag-1 autocorrelation), and
-    whether the Allan-fitted ``coef`` agrees with it."""
-    ys = np.concatenate([np.asarray(y, dtype=float) - np.mean(y) for y in y_segments])
-    ts = np.concatenate([np.asarray(t, dtype=float) - np.mean(t) for t in temp_smooth])
-    sxx = float(np.dot(ts, ts))
-    if sxx <= 0:
-        return {"slope": 0.0, "se": math.inf, "t": 0.0, "confirmed": False, "coef": coef}
-    slope = float(np.dot(ts, ys) / sxx)
-    res = ys - slope * ts
+def regression_check(y_segments, temp_smooth, coef: float, rate_hz: float = 1.0) -> dict:
+    """Slope of the rate on the (smoothed) temperature, with a linear ramp in time beside it (each
+    segment's means removed), its standard error (residual variance inflated by (1 + rho)/(1 - rho), rho
+    the residual's lag-1 autocorrelation), and whether the Allan-fitted ``coef`` agrees with it. With the
+    ramp in the regression a warm-up that only rises cannot pass for a temperature effect: the channel
+    must explain the rate beyond a straight drift (the part of T that is not a ramp)."""
+    ys, ts, xs = [], [], []
+    for y, t in zip(y_segments, temp_smooth):
+        y = np.asarray(y, dtype=float)
+        t = np.asarray(t, dtype=float)
+        x = np.arange(y.shape[0], dtype=float) / rate_hz
+        ys.append(y - y.mean())
+        ts.append(t - t.mean())
+        xs.append(x - x.mean())
+    ys, ts, xs = np.concatenate(ys), np.concatenate(ts), np.concatenate(xs)
+    X = np.column_stack([ts, xs])
+    XtX = X.T @ X
+    try:
+        inv = np.linalg.inv(XtX)
+    except np.linalg.LinAlgError:
+        return {"slope": 0.0, "se": math.inf, "t": 0.0, "confirmed": False, "coef": coef, "ratio": math.inf}
+    beta = inv @ (X.T @ ys)
+    slope = float(beta[0])
+    res = ys - X @ beta
     rho = float(np.clip(np.dot(res[1:], res[:-1]) / max(np.dot(res, res), 1e-300), -0.99, 0.999))
-    se = math.sqrt(float(np.var(res)) / sxx * (1 + rho) / (1 - rho))
+    se = math.sqrt(max(float(np.var(res)) * inv[0, 0] * (1 + rho) / (1 - rho), 0.0))
     tval = slope / se if se > 0 else 0.0
     ratio = abs(coef) / abs(slope) if slope != 0 else math.inf
     return {"slope": slope, "se": se, "t": tval, "coef": coef, "ratio": ratio,

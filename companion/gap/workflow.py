@@ -140,7 +140,8 @@ def _simulate(terms, meas: Measured, seed: int, t_series=None):
     y = synthesize_axis(plain, meas.rate_hz, n, rng) if plain else np.zeros(n)
     for t in terms:
         if t.get("cutoff_hz"):  # the autopilot's filter and decimation, simulated at 8x the log's rate
-            y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)))
+            y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)),
+                                              integrate=bool(t.get("integrate", False)))
         if t["effect"] == "temperature" and t_series is not None and t_series.shape[0] >= n:
             y = y + t["coef"] * t_series[:n]
     m = meas.m[meas.m <= n // 2]
@@ -181,10 +182,11 @@ def lowpass_entry(t, cutoff_param, rate_hz, axis, index, terms0) -> dict:
     from companion.gap.filtered import aliasing_gain
 
     fc, order = float(t["cutoff_hz"]), int(t.get("order", 2))
-    gain = aliasing_gain(fc, rate_hz, order)
+    gain = aliasing_gain(fc, rate_hz, order, bool(t.get("integrate", False)))
     src = "the log's parameter" if cutoff_param else "fitted"
     entry = {"effect": selection.LOWPASS, "cutoff_hz": fc, "order": order, "source": src, "N": t["N"],
              "on_model_term": index < len(terms0), "aliasing_gain": gain,
+             "integrated": bool(t.get("integrate", False)),
              "explanation": explain.explain_lowpass(fc, order, rate_hz, gain, src, axis)}
     if cutoff_param:
         entry["cutoff_param_hz"] = float(cutoff_param)
@@ -195,7 +197,7 @@ def lowpass_entry(t, cutoff_param, rate_hz, axis, index, terms0) -> dict:
 _DRIFTS = ("ramp", "random_walk", "gauss_markov", "sinusoid", "bias_instability")
 
 
-def _thermal_arbitration(ranked, chosen, y_segs, t_smooth):
+def _thermal_arbitration(ranked, chosen, y_segs, t_smooth, rate_hz):
     """The temperature channel as independent evidence between look-alikes the Allan curve cannot
     separate: a drift-like winner gives way to the temperature explanation when that one also passes its
     level on the Allan curve (score > 0) and the direct regression of the rate on the channel confirms its
@@ -203,7 +205,7 @@ def _thermal_arbitration(ranked, chosen, y_segs, t_smooth):
     explanation. Returns (explanation to take or None, note)."""
     temp = next((x for x in ranked if x.effect == "temperature" and not x.recal), None)
     if chosen.effect == "temperature":
-        chk = regression_check(y_segs, t_smooth, chosen.added_term()["coef"])
+        chk = regression_check(y_segs, t_smooth, chosen.added_term()["coef"], rate_hz)
         if chk["confirmed"]:
             return chosen, ""
         other = next((x for x in ranked if x.effect != "temperature" and x.score > 0), None)
@@ -211,7 +213,7 @@ def _thermal_arbitration(ranked, chosen, y_segs, t_smooth):
                        f"channel does not confirm it (slope t = {chk['t']:.1f}, ratio {chk.get('ratio', 0):.2g}): "
                        "not named")
     if chosen.effect in _DRIFTS and temp is not None and temp.score > 0:
-        chk = regression_check(y_segs, t_smooth, temp.added_term()["coef"])
+        chk = regression_check(y_segs, t_smooth, temp.added_term()["coef"], rate_hz)
         if chk["confirmed"]:
             return temp, (f"{chosen.effect} and a temperature-driven rate both explain the Allan curve (scores "
                           f"{chosen.score:.1f}, {temp.score:.1f}); the temperature channel decides: regression "
@@ -248,13 +250,15 @@ def _params(term) -> dict:
 
 def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None, seed: int = 0,
             simulate: bool = True, max_iter: int = MAX_ITER, cutoff_hz: float | None = None, filter_order: int = 2,
-            lowpass: bool = True, segments=None, temperature=None) -> GapResult:
+            lowpass: bool = True, segments=None, temperature=None, integrated: bool = False) -> GapResult:
     """Run the whole workflow on rate samples ``y`` (SI) against the model ``terms`` of one axis.
 
     ``segments``: several still segments of one record (rate arrays); the Allan variance is then pooled
     over them (:func:`companion.gap.compare.measure_pooled`) and ``y`` may be None. ``cutoff_hz``: the
     low-pass cut-off of the logged data from the log's parameters (the filter candidate then uses it; None:
-    fitted); ``lowpass`` False leaves the filter out of the candidates (data known to be unfiltered)."""
+    fitted); ``lowpass`` False leaves the filter out of the candidates (data known to be unfiltered);
+    ``integrated``: each logged value is the mean of the filtered rate over its interval (PX4
+    sensor_combined), not a point sample."""
     if segments is not None and len(segments) > 1:
         segments = [np.asarray(s_, dtype=float) for s_ in segments]
         meas = measure_pooled(segments, rate_hz)
@@ -265,7 +269,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             y = np.asarray(segments[0], dtype=float)
         meas = measure(y, rate_hz)
         y_all = y
-    lp = (cutoff_hz, int(filter_order)) if lowpass else None
+    lp = (cutoff_hz, int(filter_order), bool(integrated)) if lowpass else None
     # the log's temperature channel (aligned with ``segments``, or with ``y``): a temperature-driven rate
     y_segs = segments if segments is not None else [y]
     t_segs = None
@@ -324,7 +328,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp, thermal=thermal)
         ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
         if thermal is not None and chosen is not None:
-            chosen, note = _thermal_arbitration(ranked, chosen, y_segs, t_smooth)
+            chosen, note = _thermal_arbitration(ranked, chosen, y_segs, t_smooth, rate_hz)
             if note:
                 res.notes.append(note)
                 top = chosen if chosen is not None else top
@@ -465,7 +469,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         if t["effect"] == "sinusoid" and t["amplitude"] > 0:
             ev = line_evidence(y, rate_hz, t["freq_hz"], t["amplitude"])
         if t["effect"] == "temperature":
-            chk = regression_check(y_segs, t_smooth, t["coef"])
+            chk = regression_check(y_segs, t_smooth, t["coef"], rate_hz)
             entry = {"effect": "temperature", "coef": t["coef"], "ci95": ci, "check": chk,
                      "explanation": explain.explain_temperature(t["coef"], chk, axis)}
             res.added.append(entry)
