@@ -83,8 +83,19 @@ def avar_filtered_white(tau, N: float, cutoff_hz: float, rate_hz: float, order: 
     sampled at ``rate_hz`` (exact for the sampled sequence; see the module docstring); ``integrate``: each
     sample is the mean over its interval instead of a point value (:func:`_lag_autocovariance`)."""
     tau = np.asarray(tau, dtype=float)
+    mf = np.maximum(tau * rate_hz, 1.0)
+    lo, hi = np.floor(mf + 1e-9).astype(np.int64), np.ceil(mf - 1e-9).astype(np.int64)
+    a_lo = _avar_at(lo, N, cutoff_hz, rate_hz, order, integrate)
+    if np.array_equal(lo, hi):
+        return a_lo
+    # between cluster sizes (a plot's dense tau grid): log-log interpolation of the integer-m values
+    a_hi = _avar_at(hi, N, cutoff_hz, rate_hz, order, integrate)
+    w = np.where(hi > lo, np.log(mf / lo) / np.log(np.maximum(hi, lo + 1) / lo), 0.0)
+    return np.exp((1 - w) * np.log(np.maximum(a_lo, 1e-300)) + w * np.log(np.maximum(a_hi, 1e-300)))
+
+
+def _avar_at(m_all, N, cutoff_hz, rate_hz, order, integrate):
     tau0 = 1.0 / rate_hz
-    m_all = np.maximum(np.rint(tau * rate_hz).astype(np.int64), 1)
     kmax = int(min(_MAX_LAGS, math.ceil(_DECAY_TIMES * correlation_time(cutoff_hz, order) / tau0) + 2))
     L = np.arange(kmax + 1)
     r = _lag_autocovariance(L, tau0, N, cutoff_hz, order, integrate)
