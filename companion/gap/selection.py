@@ -51,7 +51,8 @@ from scipy import stats
 from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
                                       fit_with_candidate, gm_rw_direction, lr_inflation, refine_shapes,
                                       unit_column)
-from companion.gap.likelihood import Measured
+from companion.gap.filtered import aliasing_gain
+from companion.gap.likelihood import MODEL_FLOOR, Measured
 
 #: level an added effect must pass (its score's penalty is chi^2_k(1 - ALPHA))
 ALPHA = 1e-4
@@ -65,7 +66,7 @@ NESTED = {"gauss_markov": ("random_walk", "white_noise")}
 #: the autopilot's low-pass filter (and the aliasing of the logger's decimation) on the white noise
 LOWPASS = "lowpass"
 #: cut-offs tried when the log does not give one, as fractions of the log's rate (8 per decade), at most
-#: 0.4: above it the aliasing of a free cut-off would mimic a larger N (white level x1.05 at 0.4, x1.25 at 0.6)
+#: 0.4 and only where the implied aliasing stays within the model floor (see lowpass_explanations)
 LOWPASS_GRID = 10.0 ** np.arange(math.log10(0.02), math.log10(0.4) + 1e-9, 1.0 / 8.0)
 
 
@@ -177,7 +178,10 @@ def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpa
         return []  # a filter-like Gauss-Markov term is already there: one filter, not two
     # a cut-off from the log: the autopilot's two-pole filter; a fitted one: order 1 or 2, whichever fits
     # (the sensor's own digital low-pass and averaging need not be two-pole)
-    grid = [(fc0, order)] if fc0 else [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz]
+    # (a free cut-off is kept where the aliasing it implies stays within the 5 % model floor in AVAR: beyond,
+    # a fitted filter would raise the long-tau white level and pass for "N is right" when N is not)
+    grid = [(fc0, order)] if fc0 else [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz
+                                       if aliasing_gain(fc, meas.rate_hz, o, integrate) <= 1.0 + MODEL_FLOOR]
     out = []
     for recal in ((), (j,)):
         if recal and j not in recalibratable:
