@@ -34,12 +34,18 @@ If the model already fits within the noise, it says so and adds nothing. See doc
 
 EPILOG = """\
 examples:
+  companion gap flight.bin --datasheet MPU-6000 --imu 0         datasheet model vs the log's still segments
+  companion gap flight.ulg --datasheet ICM-42688 --axis gz --plot gap.png
   companion gap flight.tlog --model imu_model.yaml --axis gx
-  companion gap adis.csv.gz --model datasheet.yaml --axis gy --json gap.json --out-model fixed.yaml --plot gap.png
+  companion gap adis.csv.gz --model datasheet.yaml --axis gy --json gap.json --out-model fixed.yaml
   companion gap raw.csv --model m.yaml --axis gz --lsb 1e-3     rate rounded to 1 mrad/s (int16 RAW_IMU)
 
-MEASURED is a .tlog or a .csv/.csv.gz (time_s,gx,gy,gz,ax,ay,az; rad/s, m/s^2); the longest gap-free
-segment of the longest IMU stream is used. The model's rate_hz should match the data (a warning otherwise).
+MEASURED is anything 'companion analyze' reads (.bin, .ulg, .tlog, .csv, .csv.gz); the still segments are
+selected as analyze selects them (armed state, motion; --start/--end/--all) and pooled. Besides the seven
+terms the candidates include the autopilot's low-pass filter with the logger's decimation (cut-off from
+INS_GYRO_FILTER / IMU_GYRO_CUTOFF or --cutoff, else fitted) and, when the log has a temperature channel,
+a temperature-driven rate checked against that channel. With --datasheet the first line says which
+datasheet term the measurement contradicts and by how much.
 """
 
 
