@@ -193,6 +193,31 @@ def lowpass_entry(t, cutoff_param, rate_hz, axis, index, terms0) -> dict:
     return entry
 
 
+def _spectral_line(ranked, y, rate_hz):
+    """The strongest sinusoid explanation that fell short of its level (chi^2_2(1 - ALPHA) = 18.4, the
+    frequency searched over the Allan profile) is taken at the level of a known-shape term
+    (chi^2_1(1 - ALPHA_RECAL) = 10.8) when the periodogram confirms a line at its frequency carrying its
+    power (:func:`companion.gap.spectral.line_evidence`, itself a test at 1e-3 over the band's bins):
+    the frequency is then a property of the data, as a log's filter cut-off is. Returns (explanation or
+    None, note)."""
+    for x in ranked[:6]:
+        if x.effect != "sinusoid" or x.recal:
+            continue
+        t = x.added_term()
+        if x.delta_dev - x.inflation * selection.RECAL_PENALTY <= 0:
+            return None, ""
+        ev = line_evidence(y, rate_hz, t["freq_hz"], t["amplitude"])
+        if ev is None or not ev["confirmed"]:
+            return None, ""
+        x.penalty = selection.RECAL_PENALTY
+        return x, (f"sinusoid at {t['freq_hz']:.4g} Hz: LR {x.lr:.1f} on the Allan curve is short of the "
+                   f"{selection.add_penalty(2):.1f} of a searched frequency, but the periodogram shows the line "
+                   f"({ev['peak_ratio']:.1f}x the local level at {ev['f_peak']:.4g} Hz, carrying "
+                   f"{ev['amplitude_psd'] / t['amplitude']:.2f} of its amplitude): taken at the level of a known "
+                   f"frequency, {selection.RECAL_PENALTY:.1f}")
+    return None, ""
+
+
 #: drift-like effects a temperature-driven rate is a look-alike of on the Allan curve
 _DRIFTS = ("ramp", "random_walk", "gauss_markov", "sinusoid", "bias_instability")
 
@@ -327,6 +352,12 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         shaped = [i for i in range(len(terms0), len(current)) if current[i]["effect"] in SHAPE and i not in held]
         step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp, thermal=thermal)
         ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
+        if chosen is None:  # a vibration line the periodogram shows is a known frequency, not a searched one
+            chosen, note = _spectral_line(ranked, y, rate_hz)
+            if note:
+                res.notes.append(note)
+                top = chosen
+                ru = selection.runner_up(ranked, chosen)
         if thermal is not None and chosen is not None:
             chosen, note = _thermal_arbitration(ranked, chosen, y_segs, t_smooth, rate_hz)
             if note:
