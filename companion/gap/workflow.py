@@ -243,6 +243,10 @@ def _thermal_arbitration(ranked, chosen, y_segs, t_smooth, rate_hz):
             return temp, (f"{chosen.effect} and a temperature-driven rate both explain the Allan curve (scores "
                           f"{chosen.score:.1f}, {temp.score:.1f}); the temperature channel decides: regression "
                           f"slope t = {chk['t']:.1f}, coefficient ratio {chk['ratio']:.2f}")
+        return chosen, (f"{chosen.effect} and a temperature-driven rate both explain the Allan curve (scores "
+                        f"{chosen.score:.1f}, {temp.score:.1f}); the temperature channel does not confirm the "
+                        f"latter beyond a straight drift (regression t = {chk['t']:.1f}, coefficient ratio "
+                        f"{chk['ratio']:.2g}): {chosen.effect} is named")
     return chosen, ""
 
 
