@@ -311,6 +311,22 @@ def nested_test(meas: Measured, best: Explanation, limit: Explanation, i: int) -
     return {"limit": effect, "lr": lr_raw / phi, "lr_raw": lr_raw, "inflation": phi, "threshold": threshold}
 
 
+def equal_size_rule(best: Explanation, ranked) -> Explanation:
+    """Between look-alikes of the same size (the same number of added parameters, the same model terms
+    recalibrated: a ramp or a random walk, a sinusoid or a Gauss-Markov term) that both pass their level,
+    the one with the larger likelihood wins. The overdispersion factor scales each one's evidence against
+    the state (its test), but between two explanations with the same penalty it would only favour the one
+    whose direction is less overdispersed (a deterministic ramp over a stochastic random walk that fits
+    better: the hidden random walk named a ramp)."""
+    if best.score <= 0 or not best.effect or best.effect in (LOWPASS, "temperature"):
+        return best
+    for y in ranked:
+        if (y is not best and y.effect and y.effect not in (LOWPASS, "temperature") and y.effect != best.effect
+                and y.k == best.k and y.recal == best.recal and y.score > 0 and y.fit.dev < best.fit.dev):
+            best = y
+    return best
+
+
 #: a Gauss-Markov term with tau_c below this many samples is the look-alike of a low-pass filter
 FILTER_LIKE_SAMPLES = 10.0
 
@@ -376,6 +392,8 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
 
     best, out["nested"], out["alternative"] = resolve(ranked[0])
     best = filter_rule(meas, best, ranked)
+    if out["nested"] is None:
+        best = equal_size_rule(best, ranked)
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best
