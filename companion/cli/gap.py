@@ -6,6 +6,8 @@ import argparse
 import math
 import sys
 
+import numpy as np
+
 from companion.cli.output import to_json, write_text
 from companion.errors import CompanionError
 from companion.samples import AXES, GYRO_AXES
@@ -32,12 +34,18 @@ If the model already fits within the noise, it says so and adds nothing. See doc
 
 EPILOG = """\
 examples:
+  companion gap flight.bin --datasheet MPU-6000 --imu 0         datasheet model vs the log's still segments
+  companion gap flight.ulg --datasheet ICM-42688 --axis gz --plot gap.png
   companion gap flight.tlog --model imu_model.yaml --axis gx
-  companion gap adis.csv.gz --model datasheet.yaml --axis gy --json gap.json --out-model fixed.yaml --plot gap.png
+  companion gap adis.csv.gz --model datasheet.yaml --axis gy --json gap.json --out-model fixed.yaml
   companion gap raw.csv --model m.yaml --axis gz --lsb 1e-3     rate rounded to 1 mrad/s (int16 RAW_IMU)
 
-MEASURED is a .tlog or a .csv/.csv.gz (time_s,gx,gy,gz,ax,ay,az; rad/s, m/s^2); the longest gap-free
-segment of the longest IMU stream is used. The model's rate_hz should match the data (a warning otherwise).
+MEASURED is anything 'companion analyze' reads (.bin, .ulg, .tlog, .csv, .csv.gz); the still segments are
+selected as analyze selects them (armed state, motion; --start/--end/--all) and pooled. Besides the seven
+terms the candidates include the autopilot's low-pass filter with the logger's decimation (cut-off from
+INS_GYRO_FILTER / IMU_GYRO_CUTOFF or --cutoff, else fitted) and, when the log has a temperature channel,
+a temperature-driven rate checked against that channel. With --datasheet the first line says which
+datasheet term the measurement contradicts and by how much.
 """
 
 
@@ -45,15 +53,29 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("gap", help="find where a noise model and a measurement disagree, name the missing "
                               "effect, fix the model", description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("measured", metavar="MEASURED", help=".tlog or .csv/.csv.gz with IMU data")
-    p.add_argument("--model", required=True, metavar="MODEL.yaml", help="noise model YAML (SI units)")
-    p.add_argument("--axis", required=True, choices=AXES, help="axis to compare")
+    p.add_argument("measured", metavar="MEASURED", help="log with IMU data: .bin, .ulg, .tlog, .csv (.gz)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--model", metavar="MODEL.yaml", help="noise model YAML (SI units)")
+    src.add_argument("--datasheet", metavar="NAME", help="start from a gyro's datasheet figures (" +
+                     ", ".join(_datasheet_names()) + ")")
+    p.add_argument("--axis", choices=AXES, help="axis to compare (default: every gyro axis of the model)")
+    sel = p.add_mutually_exclusive_group()
+    sel.add_argument("--imu", type=int, metavar="I", help="IMU instance to use (default: the IMU stream with the "
+                     "most still samples)")
+    sel.add_argument("--stream", metavar="LABEL", help="IMU stream by its label or message name, e.g. IMU[1], "
+                     "sensor_combined, RAW_IMU")
     p.add_argument("--json", metavar="OUT", help="write the result as JSON ('-' for stdout)")
     p.add_argument("--out-model", metavar="NEW.yaml", help="write the updated model (other axes unchanged)")
-    p.add_argument("--plot", metavar="PNG", help="write the gap figure")
+    p.add_argument("--plot", metavar="PNG", help="write the gap figure (one per axis: NAME_gx.png ... when several)")
     p.add_argument("--lsb", type=float, metavar="RAD_S",
                    help="output step of the data in SI (default: the format's, e.g. 1e-3 for RAW_IMU gyro, or "
                         "detected from the values)")
+    p.add_argument("--cutoff", type=float, metavar="HZ", help="low-pass cut-off of the logged data (default: the "
+                   "log's INS_GYRO_FILTER / IMU_GYRO_CUTOFF, else fitted)")
+    p.add_argument("--start", type=float, metavar="S", help="ignore data before this time (s)")
+    p.add_argument("--end", type=float, metavar="S", help="ignore data after this time (s)")
+    p.add_argument("--all", dest="use_all", action="store_true", help="use the whole record, not only still "
+                   "segments")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulations (default 0)")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
     p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
@@ -61,23 +83,61 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _load_axis(spec, axis, config, time_unit=None):
-    from companion.sources import load
+def _datasheet_names() -> list[str]:
+    try:
+        from companion.datasheets import names
 
-    res = load(spec, config=config, time_unit=time_unit)
-    streams = res.imu_streams() if hasattr(res, "imu_streams") else [s for s in res.streams if s.is_imu]
+        return names()
+    except Exception:  # the help text must not fail on a broken install
+        return []
+
+
+def _pick_stream(spec, streams, sel, args):
+    """The IMU stream asked for (--imu/--stream), else the one with the most still samples."""
+    if args.imu is not None:
+        hits = [s for s in streams if s.key.instance == args.imu]
+        if not hits:
+            raise CompanionError(f"{spec}: no IMU instance {args.imu} (has: "
+                                 f"{', '.join(s.key.label() for s in streams)})")
+        return max(hits, key=lambda s: s.samples)
+    if args.stream:
+        want = args.stream.lower()
+        hits = [s for s in streams if s.key.label().lower().startswith(want) or s.key.message.lower() == want]
+        if not hits:
+            raise CompanionError(f"{spec}: no IMU stream {args.stream!r} (has: "
+                                 f"{', '.join(s.key.label() for s in streams)})")
+        return hits[0]
+    return max(streams, key=lambda s: sum(b - a for a, b in sel.ranges(s)))
+
+
+def load_measured(spec, args):
+    """Load any input ``analyze`` reads, select the still segments (:func:`companion.sources.still.select_still`,
+    the same selection as ``companion analyze``), pick the stream. Returns (stream, ranges, selection, meta)."""
+    from companion.sources import load
+    from companion.sources.still import select_still
+
+    res = load(spec, config=getattr(args, "config", None), time_unit=getattr(args, "time_unit", None))
+    streams = res.imu_streams()
     if not streams:
         raise CompanionError(f"{spec}: no IMU stream")
-    st = max(streams, key=lambda s: s.samples)
-    from companion.sources.still import longest_still_range
-
-    a, b = longest_still_range(res, st, warn=lambda m: print(f"warning: {m}", file=sys.stderr))
-    y = st.axis(axis)[a:b]
-    lsb = st.gyro_lsb if axis in GYRO_AXES else st.accel_lsb
+    sel = select_still(streams, res.meta, start=args.start, end=args.end, use_all=args.use_all)
+    if not sel.intervals:
+        raise CompanionError(f"{spec}: {sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
+    st = _pick_stream(spec, streams, sel, args)
+    ranges = sel.ranges(st)
+    if not ranges:
+        raise CompanionError(f"{spec}: {st.key.label()} has no samples in the still segments ({sel.describe()})")
     rate = st.rate_hz
     if not (rate and math.isfinite(rate) and rate > 0):
         raise CompanionError(f"{spec}: cannot determine the sample rate of {st.key.label()}")
-    return y, rate, lsb, st.key.label()
+    return st, ranges, sel, res.meta
+
+
+def log_cutoff(stream, meta) -> float | None:
+    """The gyro low-pass cut-off of the logged data from the log's parameters (None if unknown)."""
+    from companion.analysis.stream import stream_filters
+
+    return stream_filters(stream, meta).get("gyro")
 
 
 def format_report(r, source: str, label: str) -> str:
@@ -141,6 +201,15 @@ def format_report(r, source: str, label: str) -> str:
     return "\n".join(out)
 
 
+def _axis_path(path, axis, several):
+    if not several or path in (None, "-"):
+        return path
+    from pathlib import Path
+
+    q = Path(path)
+    return str(q.with_name(f"{q.stem}_{axis}{q.suffix}"))
+
+
 def run(args) -> int:
     from companion.gap import run_gap
     from companion.sim.model import NoiseModel, load_model, save_model
@@ -151,46 +220,100 @@ def run(args) -> int:
             check_output_path(path, opt)
     if args.plot:
         check_plot_path(args.plot)
-    model = load_model(args.model)
-    if args.axis not in model.axes:
-        raise CompanionError(f"{args.model}: no terms for axis {args.axis} (has: {', '.join(model.axes) or 'none'})")
-    y, rate, lsb, label = _load_axis(args.measured, args.axis, args.config, getattr(args, "time_unit", None))
-    if args.lsb is not None:
-        if not (args.lsb > 0 and math.isfinite(args.lsb)):
-            raise CompanionError(f"--lsb must be a positive number, got {args.lsb}")
-        lsb = args.lsb
-    if y.shape[0] < 64:
-        raise CompanionError(f"{args.measured}: only {y.shape[0]} samples on {args.axis}; need at least 64")
-    r = run_gap(y, rate, model.axes[args.axis], axis=args.axis, lsb=lsb, seed=args.seed)
-    text = format_report(r, args.measured, label)
-    if abs(model.rate_hz - rate) > 0.02 * rate:
-        text += (f"\nnote: the model's rate_hz {model.rate_hz:g} differs from the data's {rate:.4g} Hz; the "
-                 "comparison uses the data's rate")
-    if args.json != "-":
-        print(text)
-    if args.json:
+    for opt in ("lsb", "cutoff"):
+        v = getattr(args, opt)
+        if v is not None and not (v > 0 and math.isfinite(v)):
+            raise CompanionError(f"--{opt} must be a positive number, got {v}")
+    sheet = None
+    if args.datasheet:
+        from companion.datasheets import model_terms
+
+        terms, sheet = model_terms(args.datasheet)
+    else:
+        model = load_model(args.model)  # before the data: a wrong model path fails fast
+    st, ranges, sel, meta = load_measured(args.measured, args)
+    rate = float(st.rate_hz)
+    if sheet is not None:
+        model = NoiseModel(rate_hz=rate, axes={a: [dict(t) for t in terms] for a in GYRO_AXES})
+        source_model = f"datasheet {sheet['name']} ({sheet['source']}; N from {sheet['si']['N_from']}" + \
+            (f", B from {sheet['si']['B_from']}" if sheet["si"]["B"] else ", no bias stability given") + ")"
+    else:
+        source_model = args.model
+    axes = [args.axis] if args.axis else [a for a in GYRO_AXES if a in model.axes]
+    for a in axes:
+        if a not in model.axes:
+            raise CompanionError(f"{args.model}: no terms for axis {a} (has: {', '.join(model.axes) or 'none'})")
+    if not axes:
+        raise CompanionError(f"{args.model}: no gyro axis; give --axis")
+    cutoff = args.cutoff if args.cutoff is not None else log_cutoff(st, meta)
+    # PX4 sensor_combined carries gyro_rad = integral / integral_dt: each value is a mean over its interval
+    integrated = meta.get("format") == "ulog" and st.key.message == "sensor_combined"
+    label = st.key.label()
+    docs, new_axes = [], {a: [dict(t) for t in ts] for a, ts in model.axes.items()}
+    several = len(axes) > 1
+    for axis in axes:
+        col = st.axis(axis)
+        temp = getattr(st, "temperature", None)
+        segs, tsegs = [], []
+        for a, b in ranges:
+            y = col[a:b]
+            ok = np.isfinite(y)
+            segs.append(y[ok])
+            if temp is not None:
+                tsegs.append(np.asarray(temp[a:b], dtype=float)[ok])
+        if sum(y.shape[0] for y in segs) < 64 or max(y.shape[0] for y in segs) < 16:
+            raise CompanionError(f"{args.measured}: only {sum(y.shape[0] for y in segs)} still samples on {axis}; "
+                                 "need at least 64")
+        lsb = args.lsb if args.lsb is not None else (st.gyro_lsb if axis in GYRO_AXES else st.accel_lsb)
+        r = run_gap(None, rate, model.axes[axis], axis=axis, lsb=lsb, seed=args.seed, cutoff_hz=cutoff,
+                    segments=segs, temperature=tsegs or None, integrated=integrated)
+        text = format_report(r, args.measured, label)
+        if sheet is not None:
+            from companion.gap.explain import datasheet_verdict
+
+            text = datasheet_verdict(r.recalibrated, sheet["name"], axis, r.added) + "\n" + text
+        text += f"\nmodel: {source_model}"
+        text += f"\nstill data used: {sel.describe()}; {label}: {len(ranges)} segment(s), " + \
+            ", ".join(f"{st.t[a]:.1f}-{st.t[b - 1]:.1f} s" for a, b in ranges)
+        if cutoff:
+            text += f"\nlow-pass cut-off of the logged gyro data: {cutoff:g} Hz " + \
+                ("(--cutoff)" if args.cutoff is not None else "(the log's parameter)")
+        if abs(model.rate_hz - rate) > 0.02 * rate:
+            text += (f"\nnote: the model's rate_hz {model.rate_hz:g} differs from the data's {rate:.4g} Hz; the "
+                     "comparison uses the data's rate")
+        if args.json != "-":
+            print(text + ("\n" if several else ""))
         doc = r.to_dict()
-        doc["source"] = str(args.measured)
-        doc["stream"] = label
-        s = to_json(doc, indent=2)
+        doc.update(source=str(args.measured), stream=label, selection=sel.to_dict(),
+                   ranges_s=[[float(st.t[a]), float(st.t[b - 1])] for a, b in ranges], cutoff_hz=cutoff,
+                   model_source=source_model)
+        if sheet is not None:
+            doc["datasheet"] = {k: v for k, v in sheet.items() if k != "si"} | {"si": sheet["si"]}
+            doc["verdict"] = text.splitlines()[0]
+        docs.append(doc)
+        # the model schema has no filter keys: the filter is a property of the log, not of the sensor
+        # a temperature-driven rate needs the log's temperature record: it stays in the report, not in the model
+        new_axes[axis] = [{k: v for k, v in t.items() if k not in ("ci95", "cutoff_hz", "order", "integrate")}
+                          for t in r.terms_after if t["effect"] != "temperature"]
+        if args.plot:
+            from companion.plots.gap_plot import plot_gap
+
+            try:
+                plot_gap(r, _axis_path(args.plot, axis, several))
+            except OSError as exc:
+                raise CompanionError(f"cannot write {args.plot}: {exc.strerror or exc}") from None
+    if args.json:
+        s = to_json(docs[0] if not several else {"axes": docs}, indent=2)
         if args.json == "-":
             print(s)
         else:
             write_text(args.json, s + "\n", "JSON")
     if args.out_model:
-        axes = {a: [dict(t) for t in ts] for a, ts in model.axes.items()}
-        axes[args.axis] = [{k: v for k, v in t.items() if k != "ci95"} for t in r.terms_after]
         try:
-            save_model(NoiseModel(rate_hz=model.rate_hz, axes=axes), args.out_model,
-                       header=f"updated by companion gap from {args.measured}, axis {args.axis}: "
-                              f"gap {r.gap_before:.3g} -> {r.gap_after:.3g}")
+            save_model(NoiseModel(rate_hz=model.rate_hz, axes=new_axes), args.out_model,
+                       header=f"updated by companion gap from {args.measured} ({label}), axes {', '.join(axes)}: "
+                              + ", ".join(f"{d['axis']} gap {d['gap_before']:.3g} -> {d['gap_after']:.3g}"
+                                          for d in docs))
         except OSError as exc:
             raise CompanionError(f"cannot write {args.out_model}: {exc.strerror or exc}") from None
-    if args.plot:
-        from companion.plots.gap_plot import plot_gap
-
-        try:
-            plot_gap(r, args.plot)
-        except OSError as exc:
-            raise CompanionError(f"cannot write {args.plot}: {exc.strerror or exc}") from None
     return 0

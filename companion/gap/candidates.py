@@ -27,7 +27,10 @@ from companion.gap.likelihood import MODEL_FLOOR, Measured, deviance, gap_metric
 
 #: The magnitude parameter of each effect (AVAR proportional to its square).
 MAGNITUDE = {"quantization": "Q", "white_noise": "N", "bias_instability": "B", "random_walk": "K",
-             "ramp": "R", "gauss_markov": "sigma", "sinusoid": "amplitude"}
+             "ramp": "R", "gauss_markov": "sigma", "sinusoid": "amplitude",
+             # a rate proportional to the log's temperature (companion.gap.thermal); offered only when the
+             # log has a temperature channel, never by the generic candidate loop
+             "temperature": "coef"}
 #: The shape parameter of effects that have one.
 SHAPE = {"gauss_markov": "tau_c", "sinusoid": "freq_hz"}
 #: Number of free parameters a candidate adds (its magnitude and its shape).
@@ -223,7 +226,7 @@ def estimate_covariance(meas: Measured, fit: Fit) -> np.ndarray:
     rate = meas.rate_hz
     s = np.maximum(fit.s, 1e-300)
     stoch = [dict(t, f0=t.get("f0") or rate / 2.0) if t["effect"] == "bias_instability" else dict(t)
-             for t in fit.terms if t["effect"] != "ramp" and t[MAGNITUDE[t["effect"]]] > 0]
+             for t in fit.terms if t["effect"] not in ("ramp", "temperature") and t[MAGNITUDE[t["effect"]]] > 0]
     cov = oavar_covariance(stoch, meas.m, meas.n, rate) if stoch else np.zeros((s.shape[0],) * 2)
     return cov + np.diag((MODEL_FLOOR * s) ** 2)
 
@@ -317,10 +320,14 @@ def refine_shapes(meas: Measured, terms, fixed, indices, steps: int = 3) -> Fit:
             trial[i][q] = float(math.exp(u))
             return fit_terms(meas, trial, fixed, intervals=False).dev
 
-        us = [u0 + k * step for k in range(-steps, steps + 1)]
+        u_lo = math.log(float(shape_grid(t["effect"], meas)[0]))
+        us = [max(u0 + k * step, u_lo) for k in range(-steps, steps + 1)]
         ds = [dev(u) for u in us]
         k = int(np.argmin(ds))
         res = minimize_scalar(dev, bounds=(us[max(k - 1, 0)], us[min(k + 1, len(us) - 1)]), method="bounded",
                               options={"xatol": 1e-4})
         terms[i][q] = float(math.exp(res.x if res.fun < ds[k] else us[k]))
+        lo_q = float(shape_grid(t["effect"], meas)[0])
+        if terms[i][q] < lo_q:  # the candidates' bounds hold after a refinement too (tau_c >= 3 tau0)
+            terms[i][q] = lo_q
     return fit_terms(meas, terms, fixed, intervals=False)

@@ -34,7 +34,7 @@ from companion.gap.likelihood import (MODEL_FLOOR, Measured, deviance, deviance_
 
 # the likelihood names moved to companion.gap.likelihood (no import cycle); re-exported here for callers
 __all__ = ["MODEL_FLOOR", "Measured", "Region", "deviance", "deviance_points", "disagreements", "expected_deviance",
-           "gap_metric", "gap_vs_simulation", "measure", "model_avar", "reference_curve", "term_avar", "z_scores"]
+           "gap_metric", "gap_vs_simulation", "measure", "measure_pooled", "model_avar", "reference_curve", "term_avar", "z_scores"]
 
 
 def measure(y, rate_hz: float, spec="octave", min_terms: int = 1, model_floor: float = MODEL_FLOOR) -> Measured:
@@ -57,6 +57,44 @@ def measure(y, rate_hz: float, spec="octave", min_terms: int = 1, model_floor: f
     for _ in range(2):  # EDF from the slopes of a smooth reference curve, refined once
         ref = reference_curve(meas)
         meas.nu = oavar_edf(n_phase, m, local_slope(tau, ref))
+    meas.nu_raw = meas.nu
+    meas.nu = 1.0 / (1.0 / meas.nu + model_floor**2 / 2.0)
+    meas.lo = meas.nu_raw * meas.avar / stats.chi2.ppf(0.975, meas.nu_raw)
+    meas.hi = meas.nu_raw * meas.avar / stats.chi2.ppf(0.025, meas.nu_raw)
+    return meas
+
+
+def measure_pooled(segments, rate_hz: float, spec="octave", model_floor: float = MODEL_FLOOR) -> Measured:
+    """Overlapping AVAR pooled over several rate segments of one record (still segments between motion;
+    no cluster crosses a gap: :func:`companion.allan.pooled.pooled_oavar`), with EDF and 95 % band.
+
+    The pooled estimate is sum_s w_s a_s with w_s the segments' shares of the second differences
+    (:func:`companion.allan.pooled.segment_weights`); the segments are independent, so its EDF is
+    1 / sum_s (w_s^2 / nu_s) with nu_s the EDF of segment s (:mod:`companion.gap._edf`, noise type from the
+    local slope of the smooth reference curve). ``n`` of the result is the total sample count."""
+    from companion.allan.pooled import pooled_cluster_sizes, pooled_oavar, segment_weights
+
+    segs = [np.asarray(s, dtype=float) for s in segments if np.asarray(s).shape[0] >= 16]
+    if not segs:
+        raise ValueError("too few samples for an Allan analysis; need a segment of at least 16")
+    lengths = [s.shape[0] for s in segs]
+    m = pooled_cluster_sizes(lengths, spec)
+    tau, avar, m, counts = pooled_oavar(segs, rate_hz, m=m)
+    keep = (counts >= 1) & (avar > 0)
+    tau, avar, m = tau[keep], avar[keep], m[keep]
+    w = segment_weights(lengths, m)
+
+    def edf(slope):
+        inv = np.zeros(m.shape[0])
+        for k, n_s in enumerate(lengths):
+            nu_s = np.nan_to_num(oavar_edf(n_s + 1, m, slope), nan=1.0)
+            inv += np.where(w[k] > 0, w[k] ** 2 / np.maximum(nu_s, 1.0), 0.0)
+        return np.maximum(1.0 / np.where(inv > 0, inv, 1.0), 1.0)
+
+    meas = Measured(tau=tau, avar=avar, m=m, nu=edf(np.full(m.shape, -1.0)), rate_hz=float(rate_hz),
+                    n=int(sum(lengths)))
+    for _ in range(2):
+        meas.nu = edf(local_slope(tau, reference_curve(meas)))
     meas.nu_raw = meas.nu
     meas.nu = 1.0 / (1.0 / meas.nu + model_floor**2 / 2.0)
     meas.lo = meas.nu_raw * meas.avar / stats.chi2.ppf(0.975, meas.nu_raw)

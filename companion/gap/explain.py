@@ -18,6 +18,8 @@ WHAT = {
     "ramp": "rate ramp (drift): ADEV rising with slope +1 at the longest cluster times (IEEE 952 C.5)",
     "gauss_markov": "first-order Gauss-Markov (exponentially correlated) noise: an ADEV bump peaking at "
                     "0.617 sigma near tau = 1.89 tau_c (IEEE 952 C.6)",
+    "temperature": "a rate that follows the log's temperature channel: coef x T(t), its ADEV that of the "
+                   "temperature record",
     "sinusoid": "a sinusoidal rate: an ADEV bump peaking at 0.725 A near tau = 0.371 / f0, then falling "
                 "as 1/tau with notches (IEEE 952 C.7)",
 }
@@ -33,6 +35,7 @@ CAUSES = {
             "rotation (e.g. Earth rate on a tilting mount)",
     "gauss_markov": "a correlated bias with a finite memory such as a thermal effect of the board or of the "
                     "heater/fan cycle, or a mount or vibration-isolator effect",
+    "temperature": "the temperature sensitivity of the gyro bias (warm-up, heater, airflow)",
     "sinusoid": "a periodic disturbance: thermostat or heater cycling, a fan, a pump, building or vehicle "
                 "oscillation, or a beat between the sample clock and a vibration",
 }
@@ -40,9 +43,15 @@ CAUSES = {
 
 def fmt_param(param: str, value: float, axis: str) -> str:
     """``N = 2.1 deg/sqrt(h) (6.1e-04 SI)``: datasheet unit first, SI in brackets."""
-    if param in ("tau_c", "freq_hz", "f0"):
+    if param in ("tau_c", "freq_hz", "f0", "cutoff_hz"):
         unit = "s" if param == "tau_c" else "Hz"
         return f"{param} = {value:.4g} {unit}"
+    if param == "coef":
+        return f"coef = {value * 180 / 3.141592653589793 * 3600:.4g} deg/h per K ({value:.3g} rad/s/K)"
+    if param == "integrate":
+        return "averaged over each sample interval" if value else "point samples"
+    if param == "order":
+        return f"filter order {int(value)}"
     return f"{param} = {to_datasheet(param, value, axis):.4g} {datasheet_unit(param, axis)} ({value:.3g} SI)"
 
 
@@ -132,3 +141,59 @@ def explain_runner_up(chosen: str, chosen_score: float, runner: str | None, runn
         how = "not significant on its own"
     return (f"{chosen} (score {chosen_score:.1f}) was weighed against {runner} (score {runner_score:.1f}, "
             f"{how}); score = deviance removed - overdispersion x penalty, on the same data.")
+
+
+def explain_lowpass(cutoff_hz: float, order: int, rate_hz: float, aliasing_gain: float, source: str,
+                    axis: str) -> str:
+    """The autopilot's low-pass filter (and the logger's decimation) on the white noise."""
+    tau_f = (1.0 if order == 1 else 2.0 ** 0.5) / (2.0 * 3.141592653589793 * cutoff_hz)
+    alias = (f"; sampling at {rate_hz:.4g} Hz folds the noise above {rate_hz / 2:.4g} Hz back in (aliasing from "
+             f"decimation): the long-tau white level is {aliasing_gain ** 0.5:.3g}x the sensor's N in ADEV"
+             if aliasing_gain > 1.01 else "")
+    return (f"low-pass filter on the white noise of {axis}: cut-off {cutoff_hz:.3g} Hz ({source}), order {order}: "
+            f"the logged data are filtered before logging, so the Allan deviation falls below the white-noise "
+            f"line at cluster times up to a few x {tau_f:.2g} s{alias}. This is the autopilot's gyro filter "
+            "(ArduPilot INS_GYRO_FILTER, PX4 IMU_GYRO_CUTOFF) or the sensor's own digital low-pass, not a "
+            "property of the sensing element.")
+
+
+def datasheet_verdict(recalibrated, name: str, axis: str, added=()) -> str:
+    """First line of a report against a datasheet model: which datasheet term the measurement contradicts
+    and by how much, in plain words (``recalibrated``: the workflow's per-term entries, each with the model
+    value, the value fitted at the final state, the corrected LR and the verdict)."""
+    parts, off = [], []
+    for e in recalibrated:
+        p, model, fitted = e["param"], e["model"], e["fitted"]
+        u = datasheet_unit(p, axis)
+        dm, df = to_datasheet(p, model, axis), to_datasheet(p, fitted, axis)
+        pct = 100.0 * (fitted / model - 1.0) if model > 0 else float("inf")
+        word = "above" if pct > 0 else "below"
+        text = (f"measured {e['effect']} {p} {df:.3g} {u} is {abs(pct):.0f} % {word} the datasheet's {dm:.3g} {u}")
+        if e["verdict"] != "consistent":
+            off.append((e.get("lr", 0.0), text + f" (LR {e.get('lr', float('nan')):.0f})"))
+        else:
+            parts.append(f"{e['effect']} {p} agrees with the datasheet within the noise ({df:.3g} vs {dm:.3g} {u})")
+    if off:
+        off.sort(key=lambda x: -x[0])
+        head = f"{name} datasheet contradicted on {axis}: " + "; ".join(t for _, t in off)
+    else:
+        head = f"{name} datasheet on {axis}: no datasheet term is contradicted"
+    if parts:
+        head += "; " + "; ".join(parts)
+    eff = [a["effect"] + (f" {a['cutoff_hz']:.3g} Hz" if "cutoff_hz" in a else "") +
+           (f" {a['freq_hz']:.3g} Hz" if "freq_hz" in a else "") for a in added]
+    if eff:
+        head += "; missing from the datasheet model: " + ", ".join(eff)
+    return head
+
+
+def explain_temperature(coef: float, check: dict, axis: str) -> str:
+    """A temperature-driven rate, with its check against the temperature channel."""
+    k = 180.0 / 3.141592653589793 * 3600.0
+    verdict = ("confirmed by the temperature channel" if check.get("confirmed") else
+               "NOT confirmed by the temperature channel (the Allan curve's drift has the temperature's shape "
+               "but the direct regression disagrees: treat it as a drift of unknown cause)")
+    return (f"temperature-driven rate on {axis}: |coef| = {abs(coef) * k:.3g} deg/h per K ({abs(coef):.3g} rad/s/K): "
+            f"{WHAT['temperature']}. Regression of the rate on the temperature: slope {check['slope'] * k:.3g} "
+            f"+- {check['se'] * k:.2g} deg/h per K (t = {check['t']:.1f}); {verdict}. Commonly caused by "
+            f"{CAUSES['temperature']}.")

@@ -17,6 +17,7 @@ import numpy as np
 from scipy import special, stats
 
 from companion.allan.terms import avar_term
+from companion.gap.filtered import avar_filtered_white
 
 
 @dataclass
@@ -48,9 +49,21 @@ MODEL_FLOOR = 0.05
 def term_avar(term, tau, rate_hz: float) -> np.ndarray:
     """AVAR of one term as the simulator produces it: a bias_instability term without ``f0`` gets the
     cut-off at the Nyquist frequency rate_hz/2 (thesis eq. (3.16)), which is how
-    :func:`companion.sim.synth.flicker` synthesises it; every other term as in :mod:`companion.allan.terms`."""
+    :func:`companion.sim.synth.flicker` synthesises it; a white_noise term with ``cutoff_hz`` (and
+    ``order``) is the sensor's white noise N behind a low-pass filter, sampled at rate_hz
+    (:mod:`companion.gap.filtered`); every other term as in :mod:`companion.allan.terms`."""
     if term["effect"] == "bias_instability" and term.get("f0") is None:
         term = dict(term, f0=rate_hz / 2.0)
+    if term["effect"] == "temperature":
+        # coef (rad/s per K) times the measured temperature record: its AVAR is coef^2 x the AVAR of the
+        # temperature series itself, carried by the term on its own cluster times (companion.gap.thermal)
+        t_tau, t_avar = np.asarray(term["unit_tau"], dtype=float), np.asarray(term["unit_avar"], dtype=float)
+        ln = np.interp(np.log(np.asarray(tau, dtype=float)), np.log(t_tau), np.log(np.maximum(t_avar, 1e-300)))
+        return term["coef"] ** 2 * np.exp(ln)
+    if term["effect"] == "white_noise" and term.get("cutoff_hz"):
+        # the logged white noise behind an autopilot's low-pass filter, sampled (companion.gap.filtered)
+        return avar_filtered_white(tau, term["N"], term["cutoff_hz"], rate_hz, int(term.get("order", 2)),
+                                   bool(term.get("integrate", False)))
     return avar_term(term, tau)
 
 

@@ -45,12 +45,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 from scipy import stats
 
 from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
                                       fit_with_candidate, gm_rw_direction, lr_inflation, refine_shapes,
                                       unit_column)
-from companion.gap.likelihood import Measured
+from companion.gap.filtered import aliasing_gain
+from companion.gap.likelihood import MODEL_FLOOR, Measured
 
 #: level an added effect must pass (its score's penalty is chi^2_k(1 - ALPHA))
 ALPHA = 1e-4
@@ -59,6 +61,13 @@ ALPHA_RECAL = 1e-3
 #: one-parameter limits of two-parameter effects (Gauss-Markov: tau_c >> T is a rate random walk,
 #: tau_c << tau0 white noise; IEEE 952 C.6)
 NESTED = {"gauss_markov": ("random_walk", "white_noise")}
+
+
+#: the autopilot's low-pass filter (and the aliasing of the logger's decimation) on the white noise
+LOWPASS = "lowpass"
+#: cut-offs tried when the log does not give one, as fractions of the log's rate (8 per decade), at most
+#: 0.4 and only where the implied aliasing stays within the model floor (see lowpass_explanations)
+LOWPASS_GRID = 10.0 ** np.arange(math.log10(0.02), math.log10(0.4) + 1e-9, 1.0 / 8.0)
 
 
 def add_penalty(k: int) -> float:
@@ -79,6 +88,8 @@ class Explanation:
     delta_dev: float
     inflation: float
     penalty: float
+    #: for "lowpass": the index of the white_noise term the filter is put on (no term is appended)
+    modifies: int | None = None
 
     @property
     def lr(self) -> float:
@@ -90,7 +101,13 @@ class Explanation:
 
     @property
     def k(self) -> int:
-        return (N_PARAMS[self.effect] if self.effect else 0) + len(self.recal)
+        return (N_PARAMS.get(self.effect, 1) if self.effect else 0) + len(self.recal)
+
+    def added_term(self) -> dict | None:
+        """The term the explanation adds (for "lowpass": the filtered white-noise term)."""
+        if not self.effect:
+            return None
+        return self.fit.terms[self.modifies] if self.modifies is not None else self.fit.terms[-1]
 
     def changes(self) -> set:
         return ({("add", self.effect)} if self.effect else set()) | {("recal", j) for j in self.recal}
@@ -107,7 +124,13 @@ class Explanation:
              "recalibrate": [f"{model_terms[j]['effect']}.{MAGNITUDE[model_terms[j]['effect']]}" for j in self.recal],
              "k": self.k, "delta_dev": self.delta_dev, "inflation": self.inflation, "lr": self.lr,
              "penalty": self.penalty, "score": self.score, "gap": self.fit.gap}
-        if self.effect:
+        if self.effect == "temperature":
+            t = self.added_term()
+            d["params"] = {"coef": t["coef"]}
+        elif self.effect == LOWPASS:
+            t = self.added_term()
+            d["params"] = {"cutoff_hz": t["cutoff_hz"], "order": t.get("order", 2), "N": t["N"]}
+        elif self.effect:
             d["params"] = {p: v for p, v in self.fit.terms[-1].items() if p != "effect"}
         if self.recal:
             d["recalibrated"] = {f"{model_terms[j]['effect']}.{MAGNITUDE[model_terms[j]['effect']]}":
@@ -120,7 +143,7 @@ class Explanation:
 def candidate_effects(terms) -> list[str]:
     """Effects that can be added: those the model lacks, and Gauss-Markov / sinusoid also a second time."""
     present = {t["effect"] for t in terms}
-    return [e for e in MAGNITUDE if e not in present or e in SHAPE]
+    return [e for e in MAGNITUDE if (e not in present or e in SHAPE) and e != "temperature"]
 
 
 def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Explanation:
@@ -134,8 +157,60 @@ def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Expl
     return Explanation(effect, tuple(recal), fit, state.dev - fit.dev, phi, pen)
 
 
+def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpass, shaped=(), sigma=None) -> list:
+    """The low-pass filter on the state's white-noise term (:mod:`companion.gap.filtered`): alone (N held
+    as it stands) and with N recalibrated. ``lowpass`` = (cut-off Hz or None, order[, integrate]): a cut-off from the
+    log's parameters is used as it is (a known property of the data: the level of a recalibration,
+    chi^2_1(1 - ALPHA_RECAL) = 10.8), else it is fitted by profile likelihood over LOWPASS_GRID x rate (the
+    level of a one-parameter added effect, 15.1). Its overdispersion is taken
+    in the direction the filter changes the curve (filtered minus unfiltered white column)."""
+    if lowpass is None:
+        return []
+    fc0, order = lowpass[0], lowpass[1]
+    integrate = bool(lowpass[2]) if len(lowpass) > 2 else False
+    whites = [j for j, t in enumerate(state.terms) if t["effect"] == "white_noise" and not t.get("cutoff_hz")
+              and t["N"] > 0]
+    if not whites:
+        return []
+    j = whites[0]
+    if any(t["effect"] == "gauss_markov" and t["tau_c"] * meas.rate_hz < FILTER_LIKE_SAMPLES and t["sigma"] > 0
+           for t in state.terms):
+        return []  # a filter-like Gauss-Markov term is already there: one filter, not two
+    # a cut-off from the log: the autopilot's two-pole filter; a fitted one: order 1 or 2, whichever fits
+    # (the sensor's own digital low-pass and averaging need not be two-pole)
+    # (a free cut-off is kept where the aliasing it implies stays within the 5 % model floor in AVAR: beyond,
+    # a fitted filter would raise the long-tau white level and pass for "N is right" when N is not)
+    grid = [(fc0, order)] if fc0 else [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz
+                                       if aliasing_gain(fc, meas.rate_hz, o, integrate) <= 1.0 + MODEL_FLOOR]
+    out = []
+    for recal in ((), (j,)):
+        if recal and j not in recalibratable:
+            continue
+        fixed = [i for i in held if i not in recal]
+        best = None
+        for fc, o in grid:
+            trial = [dict(t) for t in state.terms]
+            trial[j].update(cutoff_hz=float(fc), order=int(o))
+            if integrate:
+                trial[j]["integrate"] = True
+            f = fit_terms(meas, trial, fixed, intervals=False)
+            if best is None or f.dev < best.dev:
+                best = f
+        if shaped:
+            best = refine_shapes(meas, best.terms, fixed, shaped)
+        t0 = state.terms[j]
+        col = unit_column(best.terms[j], meas.tau, meas.rate_hz) - unit_column(t0, meas.tau, meas.rate_hz)
+        dirs = [col * t0["N"] ** 2] + [unit_column(t0, meas.tau, meas.rate_hz) for _ in recal]
+        phi = lr_inflation(meas, state, None, direction=dirs, sigma=sigma)
+        # a cut-off read from the log is a known property of the data, not a searched shape: it is tested at
+        # the level of a recalibration (chi^2_1(1 - ALPHA_RECAL)); a fitted cut-off at that of an added effect
+        pen = (RECAL_PENALTY if fc0 else add_penalty(1)) + RECAL_PENALTY * len(recal)
+        out.append(Explanation(LOWPASS, tuple(recal), best, state.dev - best.dev, phi, pen, modifies=j))
+    return out
+
+
 def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None,
-                 shaped=()) -> list:
+                 shaped=(), lowpass=None, thermal=None) -> list:
     """Fit every explanation from ``state`` (terms with the indices ``held`` fixed): each candidate effect
     added; each term of ``recalibratable`` (held model terms) freed; each effect added with one term freed.
     ``combine_top`` limits the combinations to the best-scoring effects alone (None: all). A recalibration
@@ -156,7 +231,15 @@ def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: 
     for j in recalibratable:
         f = refine_shapes(meas, terms, [i for i in held if i != j], shaped)
         out.append(_explanation(meas, state, held, None, (j,), f, sigma))
-    effects = [x.effect for x in sorted((x for x in out if x.effect), key=lambda x: -x.score)]
+    out += lowpass_explanations(meas, state, held, recalibratable, lowpass, shaped, sigma)
+    if thermal is not None and not any(t["effect"] == "temperature" for t in terms):
+        f = fit_terms(meas, list(terms) + [dict(thermal)], held, intervals=False)
+        if shaped:
+            f = refine_shapes(meas, f.terms, held, shaped)
+        if f.terms[-1]["coef"] > 0:
+            out.append(_explanation(meas, state, held, "temperature", (), f, sigma))
+    effects = [x.effect for x in sorted((x for x in out if x.effect and x.effect not in (LOWPASS, "temperature")),
+                                        key=lambda x: -x.score)]
     if combine_top is not None:
         effects = effects[:combine_top]
     for e in effects:
@@ -166,6 +249,11 @@ def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: 
                                    near=fits[e].terms[-1][q] if q else None)
             if f.terms[-1][MAGNITUDE[e]] > 0:
                 out.append(_explanation(meas, state, held, e, (j,), f, sigma))
+    if any(t["effect"] == "white_noise" and t.get("cutoff_hz") for t in terms):
+        # the low-pass filter is already in the model: a Gauss-Markov term at the filter's time scale would
+        # describe the same roll-off twice
+        out = [x for x in out if not (x.effect == "gauss_markov" and
+                                      x.added_term()["tau_c"] * meas.rate_hz < FILTER_LIKE_SAMPLES)]
     out.sort(key=lambda x: -x.score)
     return out
 
@@ -223,6 +311,40 @@ def nested_test(meas: Measured, best: Explanation, limit: Explanation, i: int) -
     return {"limit": effect, "lr": lr_raw / phi, "lr_raw": lr_raw, "inflation": phi, "threshold": threshold}
 
 
+def equal_size_rule(best: Explanation, ranked) -> Explanation:
+    """Between look-alikes of the same size (the same number of added parameters, the same model terms
+    recalibrated: a ramp or a random walk, a sinusoid or a Gauss-Markov term) that both pass their level,
+    the one with the larger likelihood wins. The overdispersion factor scales each one's evidence against
+    the state (its test), but between two explanations with the same penalty it would only favour the one
+    whose direction is less overdispersed (a deterministic ramp over a stochastic random walk that fits
+    better: the hidden random walk named a ramp)."""
+    if best.score <= 0 or not best.effect or best.effect in (LOWPASS, "temperature"):
+        return best
+    for y in ranked:
+        if (y is not best and y.effect and y.effect not in (LOWPASS, "temperature") and y.effect != best.effect
+                and y.k == best.k and y.recal == best.recal and y.score > 0 and y.fit.dev < best.fit.dev):
+            best = y
+    return best
+
+
+#: a Gauss-Markov term with tau_c below this many samples is the look-alike of a low-pass filter
+FILTER_LIKE_SAMPLES = 10.0
+
+
+def filter_rule(meas: Measured, best: Explanation, ranked) -> Explanation:
+    """A short-tau Gauss-Markov term and a low-pass filter on the white noise look alike at the shortest
+    cluster times (both roll the white line off). When the winner is a Gauss-Markov term with tau_c below
+    FILTER_LIKE_SAMPLES samples and the filter explanation with the same recalibrations also passes its
+    level, the filter (one parameter, a known property of autopilot logs) is taken unless the Gauss-Markov
+    term fits better by more than chi^2_1(1 - ALPHA_RECAL) = 10.8 (its extra parameter's level)."""
+    if best.effect != "gauss_markov" or best.added_term()["tau_c"] * meas.rate_hz >= FILTER_LIKE_SAMPLES:
+        return best
+    lp = next((x for x in ranked if x.effect == LOWPASS and x.recal == best.recal), None)
+    if lp is None or lp.score <= 0 or lp.fit.dev - best.fit.dev > RECAL_PENALTY:
+        return best
+    return lp
+
+
 def runner_up(ranked, chosen: Explanation):
     """The best explanation other than ``chosen`` that is not ``chosen`` plus further changes."""
     c = chosen.changes()
@@ -233,11 +355,12 @@ def runner_up(ranked, chosen: Explanation):
     return None
 
 
-def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None, shaped=()) -> dict:
+def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None, shaped=(),
+           lowpass=None, thermal=None) -> dict:
     """One step: rank all explanations, apply the nested rule, return
     {ranked, chosen (Explanation or None), best (top of the ranking, chosen or not), nested, alternative
     (Gauss-Markov fit the limit won over), runner_up}."""
-    ranked = explanations(meas, state, held, recalibratable, combine_top, shaped)
+    ranked = explanations(meas, state, held, recalibratable, combine_top, shaped, lowpass, thermal)
     out = {"ranked": ranked, "chosen": None, "best": ranked[0] if ranked else None, "nested": None,
            "alternative": None, "runner_up": None}
     if not ranked:
@@ -268,6 +391,9 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
         return lim, nt, alt
 
     best, out["nested"], out["alternative"] = resolve(ranked[0])
+    best = filter_rule(meas, best, ranked)
+    if out["nested"] is None:
+        best = equal_size_rule(best, ranked)
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best

@@ -42,9 +42,11 @@ from companion.gap import explain, selection
 from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation, refine_shapes,
                                      unit_column)
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
-                                   model_avar)
+                                   measure_pooled, model_avar)
 from companion.gap._edf import local_slope, oavar_edf
+from companion.gap.filtered import synthesize_filtered_white
 from companion.gap.spectral import line_evidence
+from companion.gap.thermal import regression_check, thermal_term
 from companion.sim.synth import synthesize_axis
 
 ALPHA = selection.ALPHA
@@ -128,12 +130,20 @@ def detect_lsb(y, rel_tol: float = 1e-3) -> float | None:
     return step
 
 
-def _simulate(terms, meas: Measured, seed: int):
+def _simulate(terms, meas: Measured, seed: int, t_series=None):
     """Simulate the model at the measurement's rate and length; its AVAR at the same m, with EDF."""
     n = min(meas.n, SIM_MAX_SAMPLES)
     if not terms:
         return None, None
-    y = synthesize_axis(terms, meas.rate_hz, n, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)
+    plain = [t for t in terms if not t.get("cutoff_hz") and t["effect"] != "temperature"]
+    y = synthesize_axis(plain, meas.rate_hz, n, rng) if plain else np.zeros(n)
+    for t in terms:
+        if t.get("cutoff_hz"):  # the autopilot's filter and decimation, simulated at 8x the log's rate
+            y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)),
+                                              integrate=bool(t.get("integrate", False)))
+        if t["effect"] == "temperature" and t_series is not None and t_series.shape[0] >= n:
+            y = y + t["coef"] * t_series[:n]
     m = meas.m[meas.m <= n // 2]
     if m.shape[0] < meas.m.shape[0]:
         return None, None
@@ -143,8 +153,8 @@ def _simulate(terms, meas: Measured, seed: int):
     return avar, nu
 
 
-def _sim_checks(terms, meas: Measured, seed: int):
-    avar, nu = _simulate(terms, meas, seed)
+def _sim_checks(terms, meas: Measured, seed: int, t_series=None):
+    avar, nu = _simulate(terms, meas, seed, t_series)
     if avar is None:
         return None, None, None
     g_meas_sim = gap_vs_simulation(meas, avar, nu)
@@ -165,6 +175,79 @@ def _strongest_left(res: GapResult) -> str:
     params = f" ({params})" if params else ""
     return (f"; the strongest explanation left, {t['effect']}{params}, has LR {t['lr']:.1f} < {t['threshold']:.1f}: "
             "suggestive, not significant at the documented level")
+
+
+def lowpass_entry(t, cutoff_param, rate_hz, axis, index, terms0) -> dict:
+    """The JSON/report entry of a low-pass filter put on the white-noise term ``t``."""
+    from companion.gap.filtered import aliasing_gain
+
+    fc, order = float(t["cutoff_hz"]), int(t.get("order", 2))
+    gain = aliasing_gain(fc, rate_hz, order, bool(t.get("integrate", False)))
+    src = "the log's parameter" if cutoff_param else "fitted"
+    entry = {"effect": selection.LOWPASS, "cutoff_hz": fc, "order": order, "source": src, "N": t["N"],
+             "on_model_term": index < len(terms0), "aliasing_gain": gain,
+             "integrated": bool(t.get("integrate", False)),
+             "explanation": explain.explain_lowpass(fc, order, rate_hz, gain, src, axis)}
+    if cutoff_param:
+        entry["cutoff_param_hz"] = float(cutoff_param)
+    return entry
+
+
+def _spectral_line(ranked, y, rate_hz):
+    """The strongest sinusoid explanation that fell short of its level (chi^2_2(1 - ALPHA) = 18.4, the
+    frequency searched over the Allan profile) is taken at the level of a known-shape term
+    (chi^2_1(1 - ALPHA_RECAL) = 10.8) when the periodogram confirms a line at its frequency carrying its
+    power (:func:`companion.gap.spectral.line_evidence`, itself a test at 1e-3 over the band's bins):
+    the frequency is then a property of the data, as a log's filter cut-off is. Returns (explanation or
+    None, note)."""
+    for x in ranked[:6]:
+        if x.effect != "sinusoid" or x.recal:
+            continue
+        t = x.added_term()
+        if x.delta_dev - x.inflation * selection.RECAL_PENALTY <= 0:
+            return None, ""
+        ev = line_evidence(y, rate_hz, t["freq_hz"], t["amplitude"])
+        if ev is None or not ev["confirmed"]:
+            return None, ""
+        x.penalty = selection.RECAL_PENALTY
+        return x, (f"sinusoid at {t['freq_hz']:.4g} Hz: LR {x.lr:.1f} on the Allan curve is short of the "
+                   f"{selection.add_penalty(2):.1f} of a searched frequency, but the periodogram shows the line "
+                   f"({ev['peak_ratio']:.1f}x the local level at {ev['f_peak']:.4g} Hz, carrying "
+                   f"{ev['amplitude_psd'] / t['amplitude']:.2f} of its amplitude): taken at the level of a known "
+                   f"frequency, {selection.RECAL_PENALTY:.1f}")
+    return None, ""
+
+
+#: drift-like effects a temperature-driven rate is a look-alike of on the Allan curve
+_DRIFTS = ("ramp", "random_walk", "gauss_markov", "sinusoid", "bias_instability")
+
+
+def _thermal_arbitration(ranked, chosen, y_segs, t_smooth, rate_hz):
+    """The temperature channel as independent evidence between look-alikes the Allan curve cannot
+    separate: a drift-like winner gives way to the temperature explanation when that one also passes its
+    level on the Allan curve (score > 0) and the direct regression of the rate on the channel confirms its
+    coefficient; a temperature winner that the regression does not confirm gives way to the best other
+    explanation. Returns (explanation to take or None, note)."""
+    temp = next((x for x in ranked if x.effect == "temperature" and not x.recal), None)
+    if chosen.effect == "temperature":
+        chk = regression_check(y_segs, t_smooth, chosen.added_term()["coef"], rate_hz)
+        if chk["confirmed"]:
+            return chosen, ""
+        other = next((x for x in ranked if x.effect != "temperature" and x.score > 0), None)
+        return other, ("a temperature-shaped drift fits the Allan curve but the regression on the temperature "
+                       f"channel does not confirm it (slope t = {chk['t']:.1f}, ratio {chk.get('ratio', 0):.2g}): "
+                       "not named")
+    if chosen.effect in _DRIFTS and temp is not None and temp.score > 0:
+        chk = regression_check(y_segs, t_smooth, temp.added_term()["coef"], rate_hz)
+        if chk["confirmed"]:
+            return temp, (f"{chosen.effect} and a temperature-driven rate both explain the Allan curve (scores "
+                          f"{chosen.score:.1f}, {temp.score:.1f}); the temperature channel decides: regression "
+                          f"slope t = {chk['t']:.1f}, coefficient ratio {chk['ratio']:.2f}")
+        return chosen, (f"{chosen.effect} and a temperature-driven rate both explain the Allan curve (scores "
+                        f"{chosen.score:.1f}, {temp.score:.1f}); the temperature channel does not confirm the "
+                        f"latter beyond a straight drift (regression t = {chk['t']:.1f}, coefficient ratio "
+                        f"{chk['ratio']:.2g}): {chosen.effect} is named")
+    return chosen, ""
 
 
 def _refit(meas: Measured, terms, held, n_model: int) -> Fit:
@@ -195,9 +278,34 @@ def _params(term) -> dict:
 
 
 def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None, seed: int = 0,
-            simulate: bool = True, max_iter: int = MAX_ITER) -> GapResult:
-    """Run the whole workflow on rate samples ``y`` (SI) against the model ``terms`` of one axis."""
-    meas = measure(y, rate_hz)
+            simulate: bool = True, max_iter: int = MAX_ITER, cutoff_hz: float | None = None, filter_order: int = 2,
+            lowpass: bool = True, segments=None, temperature=None, integrated: bool = False) -> GapResult:
+    """Run the whole workflow on rate samples ``y`` (SI) against the model ``terms`` of one axis.
+
+    ``segments``: several still segments of one record (rate arrays); the Allan variance is then pooled
+    over them (:func:`companion.gap.compare.measure_pooled`) and ``y`` may be None. ``cutoff_hz``: the
+    low-pass cut-off of the logged data from the log's parameters (the filter candidate then uses it; None:
+    fitted); ``lowpass`` False leaves the filter out of the candidates (data known to be unfiltered);
+    ``integrated``: each logged value is the mean of the filtered rate over its interval (PX4
+    sensor_combined), not a point sample."""
+    if segments is not None and len(segments) > 1:
+        segments = [np.asarray(s_, dtype=float) for s_ in segments]
+        meas = measure_pooled(segments, rate_hz)
+        y = max(segments, key=len) if y is None else y
+        y_all = np.concatenate(segments)
+    else:
+        if segments is not None:
+            y = np.asarray(segments[0], dtype=float)
+        meas = measure(y, rate_hz)
+        y_all = y
+    lp = (cutoff_hz, int(filter_order), bool(integrated)) if lowpass else None
+    # the log's temperature channel (aligned with ``segments``, or with ``y``): a temperature-driven rate
+    y_segs = segments if segments is not None else [y]
+    t_segs = None
+    if temperature is not None:
+        t_segs = temperature if segments is not None else [temperature]
+    thermal, t_smooth = thermal_term(t_segs, rate_hz, meas.tau)
+    t_series = np.concatenate(t_smooth) if t_smooth else None
     terms0 = [dict(t) for t in terms]
     s0 = model_avar(terms0, meas.tau, rate_hz) if terms0 else np.full_like(meas.tau, 1e-300)
     res = GapResult(axis=axis, measured=meas, terms_before=terms0, terms_after=terms0,
@@ -211,10 +319,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
 
     # 7. known LSB: rate rounding as a fixed white term
     if lsb is None:
-        lsb = detect_lsb(y)
+        lsb = detect_lsb(y_all)
     if lsb and not any(t["effect"] == "quantization" for t in terms0):
         N_q = lsb * math.sqrt(1.0 / (12.0 * rate_hz))
-        sigma = float(np.std(np.diff(np.asarray(y, dtype=float))) / math.sqrt(2.0))
+        sigma = float(np.std(np.diff(np.asarray(y_all, dtype=float))) / math.sqrt(2.0))
         q = {"lsb": lsb, "N_q": N_q, "sigma_sample_lsb": sigma / lsb, "dithered": sigma >= DITHER_RATIO * lsb,
              "added": False}
         qterm = {"effect": "white_noise", "N": N_q}
@@ -246,11 +354,23 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     for it in range(max_iter):
         recalibratable = [j for j in range(len(terms0)) if j in held]
         shaped = [i for i in range(len(terms0), len(current)) if current[i]["effect"] in SHAPE and i not in held]
-        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped)
+        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp, thermal=thermal)
         ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
+        if chosen is None:  # a vibration line the periodogram shows is a known frequency, not a searched one
+            chosen, note = _spectral_line(ranked, y, rate_hz)
+            if note:
+                res.notes.append(note)
+                top = chosen
+                ru = selection.runner_up(ranked, chosen)
+        if thermal is not None and chosen is not None:
+            chosen, note = _thermal_arbitration(ranked, chosen, y_segs, t_smooth, rate_hz)
+            if note:
+                res.notes.append(note)
+                top = chosen if chosen is not None else top
+                ru = selection.runner_up(ranked, chosen) if chosen is not None else ru
         record = {"iteration": it + 1, "gap_base": base.gap,
                   "candidates": [{"effect": x.effect, "delta_dev": x.delta_dev, "k": x.k, "gap": x.fit.gap,
-                                  "params": _params(x.fit.terms[-1])} for x in ranked if x.effect and not x.recal],
+                                  "params": _params(x.added_term())} for x in ranked if x.effect and not x.recal],
                   "explanations": [x.as_dict(terms0) for x in ranked[:8]],
                   "threshold": {k: selection.add_penalty(k) for k in (1, 2)},
                   "recal_threshold": selection.RECAL_PENALTY}
@@ -274,7 +394,9 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                                                    ru.label(terms0) if ru is not None else None,
                                                                    ru.score if ru is not None else None)})
         if step["alternative"] is not None:
-            if chosen.effect:
+            if chosen.effect in (selection.LOWPASS, "temperature"):
+                pass
+            elif chosen.effect:
                 alternatives[len(current)] = step["alternative"]
             else:
                 alternatives[[j for j in chosen.recal if current[j]["effect"] == step["nested"]["limit"]][0]] = \
@@ -310,7 +432,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         _, lr_raw, phi, hf = _hold_test(meas, base, held, j, terms0[j])
         value = lr_raw - phi * selection.RECAL_PENALTY
         shaped = [i for i in range(len(terms0), len(hf.terms)) if hf.terms[i]["effect"] in SHAPE and i not in held]
-        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped)
+        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped, lowpass=lp, thermal=thermal)
         x = step["chosen"]
         if x is None or x.score <= value:
             continue
@@ -381,6 +503,12 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         ev = None
         if t["effect"] == "sinusoid" and t["amplitude"] > 0:
             ev = line_evidence(y, rate_hz, t["freq_hz"], t["amplitude"])
+        if t["effect"] == "temperature":
+            chk = regression_check(y_segs, t_smooth, t["coef"], rate_hz)
+            entry = {"effect": "temperature", "coef": t["coef"], "ci95": ci, "check": chk,
+                     "explanation": explain.explain_temperature(t["coef"], chk, axis)}
+            res.added.append(entry)
+            continue
         entry = {**t, "ci95": ci, "explanation": explain.explain_added(t, axis, rate_hz, spectral=ev)}
         if ev is not None:
             entry["spectral"] = ev
@@ -389,10 +517,14 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             entry["alternative"] = alt
             entry["explanation"] += " " + explain.explain_alternative(alt, meas.n / rate_hz, rate_hz)
         res.added.append(entry)
+    for i, t in enumerate(final):
+        if t["effect"] == "white_noise" and t.get("cutoff_hz") and not (i < len(terms0) and terms0[i].get("cutoff_hz")):
+            res.added.append(lowpass_entry(t, cutoff_hz, rate_hz, axis, i, terms0))
     final = [t for i, t in enumerate(final) if i < len(terms0) or i in held or t[MAGNITUDE[t["effect"]]] > 0]
     s_final = model_avar(final, meas.tau, rate_hz)
     g_final = gap_metric(meas, s_final)
-    changed = any(e["verdict"] != "consistent" for e in res.recalibrated) or len(final) > len(terms0)
+    changed = any(e["verdict"] != "consistent" for e in res.recalibrated) or len(final) > len(terms0) or \
+        any(a["effect"] == selection.LOWPASS for a in res.added)
     if not changed:
         res.terms_after = terms0
         res.gap_after = res.gap_before
@@ -413,7 +545,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                                                           res.sim_check_before)
         else:
             res.sim_avar_after, res.gap_sim_after, res.sim_check_after = _sim_checks(res.terms_after, meas,
-                                                                                     seed + 1)
+                                                                                     seed + 1, t_series)
     if changed and res.gap_after > NOISE_FLOOR_G:
         res.notes.append(f"a gap remains above the noise floor (G = {res.gap_after:.2f} > {NOISE_FLOOR_G}): "
                          "the data hold something none of the seven effects describes well" + _strongest_left(res))

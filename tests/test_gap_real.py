@@ -1,0 +1,70 @@
+"""`companion gap` on the shared real logs and on multi-segment input: any format analyze reads, the
+still selection pooled over segments, --imu/--stream, --datasheet, and the datasheet verdict first."""
+
+import json
+
+import numpy as np
+import pytest
+
+from companion.cli.main import main
+from companion.gap.explain import datasheet_verdict
+from companion.sim.synth import synthesize_axis
+
+
+def test_verdict_names_the_contradicted_term_in_plain_words():
+    rec = [{"effect": "white_noise", "param": "N", "model": 5.818e-4, "fitted": 5.818e-4 * 1.25, "lr": 60.0,
+            "verdict": "too small"},
+           {"effect": "bias_instability", "param": "B", "model": 1.84e-4, "fitted": 1.9e-4, "lr": 1.0,
+            "verdict": "consistent"}]
+    line = datasheet_verdict(rec, "ADIS16405", "gy", [{"effect": "lowpass", "cutoff_hz": 35.0}])
+    assert line.startswith("ADIS16405 datasheet contradicted on gy: measured white_noise N 2.5 deg/sqrt(h) is "
+                           "25 % above the datasheet's 2 deg/sqrt(h)")
+    assert "bias_instability B agrees with the datasheet" in line and "lowpass 35 Hz" in line
+    rec[0]["verdict"] = "consistent"
+    assert "no datasheet term is contradicted" in datasheet_verdict(rec, "ADIS16405", "gy")
+
+
+def test_still_segments_pooled_and_named(tmp_path, capsys):
+    """Two still stretches with a turn between them: both used (pooled), the report says which."""
+    rate = 50.0
+    n = int(400 * rate)
+    terms = [{"effect": "white_noise", "N": 1e-3}]
+    rng = np.random.default_rng(4)
+    g = np.column_stack([synthesize_axis(terms, rate, 3 * n, rng) for _ in range(3)])
+    g[n:2 * n, 2] += 0.5  # a 0.5 rad/s turn in the middle third
+    t = np.arange(3 * n) / rate
+    a = np.zeros((3 * n, 3))
+    a[:, 2] = -9.80665
+    path = tmp_path / "two.csv"
+    np.savetxt(path, np.column_stack([t, g, a]), delimiter=",", header="time_s,gx,gy,gz,ax,ay,az", comments="",
+               fmt="%.9g")
+    model = tmp_path / "m.yaml"
+    model.write_text("rate_hz: 50\naxes:\n  gx:\n  - {effect: white_noise, N: 0.001}\n")
+    out = tmp_path / "g.json"
+    assert main(["gap", str(path), "--model", str(model), "--axis", "gx", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "still data used: 2 still segments" in text and "2 segment(s)" in text
+    doc = json.loads(out.read_text())
+    assert len(doc["ranges_s"]) == 2 and doc["ranges_s"][0][1] < 400 < doc["ranges_s"][1][0]
+    assert doc["added"] == [] and doc["fits_within_noise"]
+    assert main(["gap", str(path), "--model", str(model), "--stream", "IMU[4]"]) == 2
+    assert "no IMU stream 'IMU[4]'" in capsys.readouterr().err
+
+
+@pytest.mark.shared
+def test_ardupilot_bin_against_mpu6000_datasheet(shared_data, tmp_path, capsys):
+    """dronekit log171 IMU[0], gx: the datasheet N is 33 % optimistic, the 20 Hz INS_GYRO_FILTER is named
+    from the log's parameter, and the gap closes to the noise floor (docs/gap.md)."""
+    out = tmp_path / "ap.json"
+    assert main(["gap", str(shared_data / "ardupilot" / "dronekit_log171.bin"), "--datasheet", "MPU-6000",
+                 "--imu", "0", "--axis", "gx", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    first = text.splitlines()[0]
+    assert first.startswith("MPU-6000 datasheet contradicted on gx: measured white_noise N")
+    assert "above the datasheet's 0.212 deg/sqrt(h)" in first
+    doc = json.loads(out.read_text())
+    lp = [a for a in doc["added"] if a["effect"] == "lowpass"]
+    assert lp and lp[0]["cutoff_hz"] == 20.0 and lp[0]["source"] == "the log's parameter"
+    assert doc["gap_after"] <= 2.0 < doc["gap_before"]
+    assert all(t["tau_c"] >= 3 / doc["measured"]["rate_hz"] for t in doc["terms_after"]
+               if t["effect"] == "gauss_markov")
