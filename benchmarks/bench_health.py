@@ -87,7 +87,7 @@ class Gyro:
 def make(cfg, axes):
     p = Pipeline(cfg, Reporter(NullSink(), 1.0))
     ch = Channel(0, "SIM", cfg)
-    ch.rate_hz = RATE
+    ch.cutter.rate_hz = RATE
     ch.axes = axes
     ch.make_estimators(learning=True)
     p.channels[0] = ch
@@ -111,9 +111,10 @@ def run(cfg, seeds_axes, hours, step_axis=None, step=None, stop_on_flag=False):
             for j, ax in enumerate(("gx", "gy", "gz")):
                 if ax in chunks:
                     data[:, 1 + j] = chunks[ax][1][k:k + nb]
-            p._feed(ch, data)
+            if ch.feed(data):
+                p._learn_done(ch)
             tt = float(data[-1, 0])
-            if ch.next_check_t is not None and tt >= ch.next_check_t:
+            if ch.check_due(tt):
                 p._check(ch, tt)
                 if first is None and ch.detector.state == DEGRADING:
                     first = tt

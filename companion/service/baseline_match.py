@@ -56,18 +56,16 @@ def units_mismatch(base_params: dict | None, current: dict) -> str | None:
     return None
 
 
-def check_baseline(baseline, ch, force: bool, log) -> None:
-    """Raise :class:`companion.errors.CompanionError` (one line) when the loaded ``baseline`` does not match
-    channel ``ch``; with ``force`` only log it."""
-    from companion.errors import CompanionError
-
+def check_baseline(baseline, ch, force: bool, log) -> str | None:
+    """The one-line error when the loaded ``baseline`` does not match channel ``ch`` (None when it does);
+    with ``force`` only log it."""
     text = mismatch(baseline.meta.get(ch.imu), stream_meta(ch))
     if text is None:
         if ch.imu not in baseline.meta:
             log(f"IMU{ch.imu}: baseline {baseline.source} has no stream description (rate, message, LSB): not checked")
-        return
+        return None
     line = f"baseline {baseline.source} does not match IMU{ch.imu} ({ch.message}): {text}"
     if force:
         log(line + " (used anyway: --baseline-force)")
-        return
-    raise CompanionError(line + "; use a baseline of this stream or --baseline-force")
+        return None
+    return line + "; use a baseline of this stream or --baseline-force"

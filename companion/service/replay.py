@@ -2,9 +2,11 @@
 
 Frames are found by the fast walker (:mod:`companion.sources.tlog`) and decoded vectorised with the
 same rules as live messages (:mod:`companion.sources.decode`); HEARTBEATs and IMU samples are then
-handed to :class:`companion.service.pipeline.Pipeline` one by one in file order, exactly as the live
-loop would (message time only, so the result does not depend on how fast the log was recorded or is
-replayed).
+handed to :class:`companion.service.pipeline.Pipeline` in file order as arrays (:func:`feed_in_order`):
+every stretch of a stream that closes no block and meets no check goes in one
+:meth:`~companion.service.pipeline.Pipeline.on_samples` call, the samples that do (and the HEARTBEATs) at
+their place in the file, so the result is the one the live loop would give sample by sample (message time
+only: it does not depend on how fast the log was recorded or is replayed).
 """
 
 from __future__ import annotations
@@ -48,19 +50,103 @@ def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: F
     src = np.concatenate(srcs)
     row = np.concatenate(rows)
     order = np.argsort(frame, kind="stable")
-    used = 0
-    for i in order:
-        if stop():
-            break
-        j = int(row[i])
-        if src[i] < 0:
-            r = hb_rec[j]
-            pipeline.on_heartbeat(int(index.sysid[frame[i]]), int(r["type"]), int(r["autopilot"]), int(r["base_mode"]))
-        else:
-            s = streams[int(src[i])]
-            used += pipeline.on_sample(s.key, float(s.t[j]), s.gyro[j], s.accel[j])
+
+    def heartbeat(j):
+        r = hb_rec[j]
+        pipeline.on_heartbeat(int(index.sysid[hb[j]]), int(r["type"]), int(r["autopilot"]), int(r["base_mode"]))
+
+    used = feed_in_order(pipeline, streams, order, src, row, heartbeat, stop)
+    _raise_if_failed(pipeline)
     return {"frames": index.frames, "bad_frames": index.bad_frames, "bad_bytes": index.bad_bytes,
             "heartbeats": int(hb.size), "imu_samples": int(sum(s.t.shape[0] for s in streams)), "used": int(used)}
+
+
+def _raise_if_failed(pipeline) -> None:
+    """A user-facing error the pipeline found in the data (e.g. a baseline of another sensor): one line."""
+    if pipeline.failed:
+        from companion.errors import CompanionError
+
+        raise CompanionError(pipeline.failed)
+
+
+def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: False) -> int:
+    """Feed events in the order ``order`` (indices into ``src`` / ``row``: ``src`` -1 a HEARTBEAT, handed to
+    ``heartbeat(row)``, else sample ``row`` of ``streams[src]``) as arrays: each stream's samples up to the
+    next one that closes a block or falls due for a check (``Pipeline.quiet_run``), up to the next
+    HEARTBEAT, go at once; that sample or HEARTBEAT then alone, at its place. Nothing but the one-sample
+    events reads another stream's state, so the result is that of feeding every event one by one.
+    Returns the samples used."""
+    rank = np.empty(order.shape[0], dtype=np.int64)
+    rank[order] = np.arange(order.shape[0])
+    hb_pos = np.sort(rank[src < 0])
+    hb_row = row[order[hb_pos]] if hb_pos.size else hb_pos
+    feeds = []  # per stream: positions, rows in feed order, times, irregular positions
+    for k, s in enumerate(streams):
+        sel = np.flatnonzero(src == k)
+        pos = rank[sel]
+        o = np.argsort(pos, kind="stable")
+        pos, r = pos[o], row[sel][o]
+        t = np.asarray(s.t, dtype=float)[r]
+        g = np.asarray(s.gyro, dtype=float)[r]
+        a = np.asarray(s.accel, dtype=float)[r]
+        dt = np.diff(t)
+        # a sample after an interval that is not a clean step (and the one after it: the newest accepted
+        # stamp may differ) goes alone
+        bad = np.flatnonzero((dt <= 0.0) | (dt > pipeline.cfg.gap_s)) + 1
+        irregular = np.unique(np.concatenate([bad, bad + 1]))
+        feeds.append((s.key, pos, t, g, a, irregular))
+    cur = [0] * len(streams)
+    h = 0
+    used = 0
+    n_events = order.shape[0]
+    while True:
+        if stop():
+            break
+        # the next position where something happens that others may see
+        barrier = int(hb_pos[h]) if h < hb_pos.size else n_events
+        lims = []
+        for k, (key, pos, t, g, a, irr) in enumerate(feeds):
+            c = cur[k]
+            if c >= pos.size:
+                lims.append(c)
+                continue
+            i_irr = irr[np.searchsorted(irr, c)] if irr.size and irr[-1] >= c else pos.size
+            stop_at = min(int(i_irr), pos.size)
+            q = c + pipeline.quiet_run(key, t[c:stop_at]) if stop_at > c else c
+            lims.append(q)
+            if q < pos.size:
+                barrier = min(barrier, int(pos[q]))
+        # everything before the barrier, stream by stream; the reporter's clock in file order
+        ticks_pos, ticks_t = [], []
+        for k, (key, pos, t, g, a, irr) in enumerate(feeds):
+            c = cur[k]
+            e = min(lims[k], int(np.searchsorted(pos, barrier)))
+            if e > c:
+                u = pipeline.on_samples(key, t[c:e], g[c:e], a[c:e], tick=False)
+                used += u
+                if u:
+                    ticks_pos.append(pos[c:e])
+                    ticks_t.append(t[c:e])
+                cur[k] = e
+        if len(ticks_t) == 1:
+            pipeline.tick(ticks_t[0])
+        elif ticks_t:
+            pipeline.tick(np.concatenate(ticks_t)[np.argsort(np.concatenate(ticks_pos), kind="stable")])
+        if barrier >= n_events:
+            break
+        if h < hb_pos.size and hb_pos[h] == barrier:
+            heartbeat(int(hb_row[h]))
+            h += 1
+            continue
+        for k, (key, pos, t, g, a, irr) in enumerate(feeds):
+            c = cur[k]
+            if c < pos.size and pos[c] == barrier:
+                used += pipeline.on_samples(key, t[c:c + 1], g[c:c + 1], a[c:c + 1])
+                cur[k] = c + 1
+                break
+        if pipeline.failed:
+            break
+    return used
 
 
 MAV_MODE_FLAG_SAFETY_ARMED = 128
@@ -120,16 +206,12 @@ def replay_log(path, pipeline, stop=lambda: False) -> dict:
     order = np.lexsort((kind, t_ev))  # heartbeat first at equal times
     autopilot = _AUTOPILOT.get(res.meta.get("format"), 0)
     sysid = streams[0].key.sysid
-    used = 0
-    for i in order:
-        if stop():
-            break
-        k, j = int(kind[i]), int(rows[i])
-        if k < 0:
-            pipeline.on_heartbeat(sysid, 2, autopilot, MAV_MODE_FLAG_SAFETY_ARMED if hb_armed[j] else 0)
-        else:
-            s = streams[k]
-            used += pipeline.on_sample(s.key, float(s.t[j]), s.gyro[j], s.accel[j])
+
+    def heartbeat(j):
+        pipeline.on_heartbeat(sysid, 2, autopilot, MAV_MODE_FLAG_SAFETY_ARMED if hb_armed[j] else 0)
+
+    used = feed_in_order(pipeline, streams, order, kind, rows, heartbeat, stop)
+    _raise_if_failed(pipeline)
     return {"frames": int(res.totals.get("frames", 0)), "bad_frames": int(res.totals.get("bad_frames", 0)),
             "bad_bytes": int(res.totals.get("bad_bytes", 0)), "heartbeats": int(hb_t.shape[0]),
             "imu_samples": int(t_all.shape[0]), "used": int(used)}

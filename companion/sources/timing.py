@@ -163,3 +163,32 @@ def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT
     segments = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
     rep.duration_s = float(sum(tk[b - 1] - tk[a] for a, b in segments))
     return keep, segments, rep
+
+
+#: kinds of one timestamp interval (:func:`classify_intervals`)
+OK_STEP, GAP, RESET, DUPLICATE, BACKWARDS = 0, 1, 2, 3, 4
+
+
+def classify_interval(dt: float, reset_s: float, gap_s: float) -> int:
+    """:func:`classify_intervals` of one interval, in plain floats (the live path, one message at a time)."""
+    if dt == 0.0:
+        return DUPLICATE
+    if dt <= -reset_s:
+        return RESET
+    if dt < 0.0:
+        return BACKWARDS
+    return GAP if dt > gap_s else OK_STEP
+
+
+def classify_intervals(dt, reset_s: float, gap_s: float) -> np.ndarray:
+    """Kind of each interval ``dt`` between a timestamp and the newest one before it, by the rules above:
+    RESET when ``dt <= -reset_s``, DUPLICATE when 0, BACKWARDS when in (-reset_s, 0), GAP when above
+    ``gap_s``, else OK_STEP. The live pipeline applies it with its fixed thresholds (``run.reset_s``,
+    ``run.gap_s``) sample by sample or to a whole array at once."""
+    dt = np.asarray(dt, dtype=float)
+    out = np.full(dt.shape, OK_STEP, dtype=np.int8)
+    out[dt > gap_s] = GAP
+    out[dt < 0.0] = BACKWARDS
+    out[dt <= -reset_s] = RESET
+    out[dt == 0.0] = DUPLICATE
+    return out

@@ -1,0 +1,148 @@
+"""Block cutter of one IMU stream: timestamp rules, the stream's rate and blocks of ``block_s`` of message time.
+
+One vectorised path for every caller: the live loop hands it one row, a replay or the simulator whole
+arrays; the blocks, counts and rate are the same either way. Rows are ``(t, gx, gy, gz, ax, ay, az)``.
+
+Timestamp rules (:func:`companion.sources.timing.classify_intervals`, the rules of the offline time base
+with the live thresholds ``reset_s`` and ``gap_s``): a timestamp ``reset_s`` or more behind the last one
+is an autopilot reboot (the partial block is dropped); a repeated one is a duplicate and one slightly
+behind goes backwards (both dropped and counted); an interval longer than ``gap_s`` is a gap (the partial
+block is dropped). A block closes at the first sample with ``t - t0 >= block_s - period / 2``.
+
+The rate is 1 / :func:`companion.sources.timing.period_of` of the last 64 intervals, taken at the first
+block close with 8 intervals and re-taken at every close; a change of more than 20 % is reported.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Iterator
+
+import numpy as np
+
+from companion.sources.timing import GAP, OK_STEP, RESET, classify_interval, classify_intervals, period_of
+
+RATE_CHANGE = 0.2  # relative change of the rate that restarts the estimators
+MIN_INTERVALS = 8  # intervals before the rate is taken
+
+
+class BlockCutter:
+    """Explicit inputs (:meth:`cut` rows) and outputs (the events it yields); ``counts`` what it dropped."""
+
+    def __init__(self, block_s: float, reset_s: float, gap_s: float, time_res: float = 0.0):
+        self.block_s, self.reset_s, self.gap_s, self.time_res = float(block_s), float(reset_s), float(gap_s), time_res
+        self.last_t: float | None = None
+        self.dts: deque = deque(maxlen=64)
+        self.rate_hz: float | None = None
+        self.prev_rate_hz: float | None = None  # the rate before the last change
+        self._parts: list = []
+        self._t0: float | None = None
+        self.counts = {"samples": 0, "duplicates": 0, "backwards": 0, "resets": 0, "gaps": 0, "rate_changes": 0}
+
+    def period(self) -> float:
+        return 1.0 / self.rate_hz if self.rate_hz else (float(np.median(self.dts)) if self.dts else 0.0)
+
+    def drop(self) -> None:
+        """Forget the partial block (a time discontinuity)."""
+        self._parts, self._t0 = [], None
+
+    def cut(self, rows: np.ndarray) -> Iterator[tuple]:
+        """Feed rows (n, 7) in arrival order; yields, in order:
+
+        * ``("reset", t_before, t)`` / ``("gap", t)``: a discontinuity before the next sample (block dropped);
+        * ``("samples", tt)``: accepted samples that close no block (their timestamps);
+        * ``("block", data, rate)``: the block closed by its last sample; ``rate`` is None, ``"first"`` when
+          the rate was just taken or ``"changed"`` (``rate_hz`` holds the new value).
+        """
+        t = rows[:, 0]
+        n = t.shape[0]
+        i = 0
+        while i < n:
+            if self.last_t is not None:
+                kind = classify_interval(float(t[i]) - self.last_t, self.reset_s, self.gap_s)
+                if kind == RESET:
+                    self.counts["resets"] += 1
+                    self.drop()
+                    yield ("reset", self.last_t, float(t[i]))
+                elif kind == GAP:
+                    self.counts["gaps"] += 1
+                    self.drop()
+                    yield ("gap", float(t[i]))
+                elif kind == OK_STEP:
+                    self.dts.append(float(t[i] - self.last_t))
+                else:  # duplicate or backwards: dropped
+                    self.counts["duplicates" if t[i] == self.last_t else "backwards"] += 1
+                    i += 1
+                    continue
+            # the clean stretch from i: every interval within (0, gap_s]; while the rate is unknown the period
+            # (the median of the intervals so far) changes with every sample: one row at a time
+            if self.rate_hz is None or n - i == 1:
+                end = i + 1
+            else:
+                bad = np.flatnonzero(classify_intervals(np.diff(t[i:]), self.reset_s, self.gap_s) != OK_STEP)
+                end = i + 1 + (int(bad[0]) if bad.size else n - i - 1)
+                if end - i > 1:
+                    self.dts.extend(np.diff(t[i:end])[-self.dts.maxlen:].tolist())
+            self.counts["samples"] += end - i
+            self.last_t = float(t[end - 1])
+            yield from self._blocks(rows, i, end)
+            i = end
+
+    def _blocks(self, rows: np.ndarray, i: int, end: int) -> Iterator[tuple]:
+        t = rows[:, 0]
+        k = i
+        while k < end:
+            if self._t0 is None:
+                self._t0 = float(t[k])
+            x = self.block_s - 0.5 * self.period()
+            if end - k == 1:  # one row (the live path): the comparison itself
+                j = k if float(t[k]) - self._t0 >= x else end
+            else:  # first sample with t - t0 >= x (the same float operation as one row)
+                j = int(np.searchsorted(t[k:end], self._t0 + x, side="left")) + k
+            while j > k and t[j - 1] - self._t0 >= x:
+                j -= 1
+            while j < end and not (t[j] - self._t0 >= x):
+                j += 1
+            if j >= end:
+                self._parts.append(rows[k:end])
+                yield ("samples", t[k:end])
+                return
+            if j > k:
+                yield ("samples", t[k:j])
+            parts = self._parts + [rows[k:j + 1]]
+            data = parts[0] if len(parts) == 1 else np.concatenate(parts)
+            self._parts, self._t0 = [], None
+            yield ("block", data, self._rate())
+            k = j + 1
+
+    def quiet_run(self, t: np.ndarray, check_t: float | None = None) -> int:
+        """The number of leading samples of ``t`` (increasing, intervals within ``gap_s``) that close no block
+        and reach no ``check_t``: 0 while the rate is unknown or when the first interval is irregular."""
+        n = t.shape[0]
+        if n == 0 or self.rate_hz is None or self.last_t is None:
+            return 0
+        if classify_interval(float(t[0]) - self.last_t, self.reset_s, self.gap_s) != OK_STEP:
+            return 0
+        t0 = float(t[0]) if self._t0 is None else self._t0
+        x = self.block_s - 0.5 * self.period()
+        j = int(np.searchsorted(t, t0 + x, side="left"))
+        while j > 0 and t[j - 1] - t0 >= x:
+            j -= 1
+        while j < n and not (t[j] - t0 >= x):
+            j += 1
+        if check_t is not None:
+            j = min(j, int(np.searchsorted(t, check_t, side="left")))
+        return j
+
+    def _rate(self) -> str | None:
+        if len(self.dts) < MIN_INTERVALS:
+            return None
+        rate = 1.0 / period_of(self.dts, self.time_res)
+        if self.rate_hz is None:
+            self.rate_hz = rate
+            return "first"
+        if abs(rate / self.rate_hz - 1.0) > RATE_CHANGE:
+            self.counts["rate_changes"] += 1
+            self.prev_rate_hz, self.rate_hz = self.rate_hz, rate
+            return "changed"
+        return None

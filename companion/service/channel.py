@@ -1,0 +1,271 @@
+"""One IMU of the live pipeline (PX4's DataValidator to the group's DataValidatorGroup): its block cutter,
+motion gate, fault detectors, estimators, baseline learning and Allan health check.
+
+Inputs: rows through :attr:`Channel.cutter`, closed blocks through :meth:`Channel.on_block` (still or not,
+decided with the other IMUs by the pipeline), still settled blocks through :meth:`Channel.feed`;
+outputs: FaultEvents, health transitions (:meth:`Channel.check`), the reported terms and the state.
+
+Estimators per axis (companion.estimators.make_estimator): a *fast* one (exponential memory
+``forgetting_fast_s``) for Q and N, a *slow* one (``forgetting_slow_s``) for B, K and R, and while
+learning a third one without forgetting whose terms become the baseline after ``baseline_s`` seconds of
+still data. Still blocks are queued and handed over in batches of about ``check_s`` (the estimators'
+block updates are split-invariant: the same result, far fewer calls).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Mapping
+
+import numpy as np
+
+from companion.estimators import from_state_dict as estimator_from_state, make_estimator
+from companion.estimators.report import health_params
+from companion.health.detector import DEGRADING, LEARNING, HealthDetector, Transition
+from companion.health.faults import FAULT, OK, BlockStats, FaultEvent, block_stats
+from companion.health.monitor import ImuFaults
+from companion.samples import ACCEL_AXES, GYRO_AXES
+from companion.service.baseline_match import units_mismatch
+from companion.service.blocks import BlockCutter
+from companion.service.config import PipelineConfig
+from companion.service.motion import MotionGate, Peer, noise_ratio
+from companion.sources.timing import stamp_resolution
+
+FLOAT_MESSAGES = ("HIGHRES_IMU", "CSV")
+COLUMNS = {ax: 1 + i for i, ax in enumerate(GYRO_AXES + ACCEL_AXES)}  # column of each axis in a row
+
+
+class Channel:
+    def __init__(self, imu: int, message: str, cfg: PipelineConfig, gyro_lsb: float | None | str = "default"):
+        self.imu, self.message, self.cfg = imu, message, cfg
+        self.time_res = stamp_resolution(message)  # 1 ms for time_boot_ms: 400 Hz comes as 2 and 3 ms steps
+        # the LSB of the gyro (stored with a learned baseline); by default 1 mrad/s unless a float message
+        self.gyro_lsb = (None if message in FLOAT_MESSAGES else 1e-3) if gyro_lsb == "default" else gyro_lsb
+        self.axes = GYRO_AXES + (ACCEL_AXES if cfg.accel else ())
+        self.cutter = BlockCutter(cfg.block_s, cfg.reset_s, cfg.gap_s, self.time_res)
+        self.gate = MotionGate(cfg)
+        self.detector = HealthDetector(imu, cfg.health)
+        self.faults = ImuFaults(imu, cfg.gyro_limit, max(1, int(round(cfg.fault_ref_s / cfg.block_s))),
+                                stamp_res=self.time_res)
+        self.fast: dict = {}
+        self.slow: dict = {}
+        self.learn: dict = {}
+        self.learned_s = 0.0
+        self.fed_s = 0.0
+        self._queue: list = []
+        self._queue_s = 0.0
+        self.next_check_t: float | None = None
+        self.pending: np.ndarray | None = None  # still block waiting for the look-ahead
+        self.pending_stats: BlockStats | None = None
+        self.still_run_s = 0.0
+        self.last_stats: BlockStats | None = None  # of the last closed block (motion consensus between IMUs)
+        self.recent: deque = deque(maxlen=3)  # (t, gyro) of the last closed blocks (IMU disagreement)
+        self._blocks = {"blocks_still": 0, "blocks_moving": 0, "blocks_fed": 0}
+        self.current: dict[str, dict[str, tuple[float, float]]] = {}
+
+    # ------------------------------------------------------------------ read-only views
+    @property
+    def rate_hz(self) -> float | None:
+        return self.cutter.rate_hz
+
+    @property
+    def last_t(self) -> float | None:
+        return self.cutter.last_t
+
+    @property
+    def counts(self) -> dict:
+        """Samples dropped and kept, blocks by kind (a copy)."""
+        return {**self.cutter.counts, **self._blocks}
+
+    def peer(self) -> Peer | None:
+        """What another IMU's motion gate needs of this one's latest block."""
+        if self.last_stats is None:
+            return None
+        return Peer(self.last_stats, noise_ratio(self.last_stats, self.faults.still_sigma2()))
+
+    # ------------------------------------------------------------------ estimators
+    def make_estimators(self, learning: bool) -> None:
+        est = {k: v for k, v in self.cfg.estimator.items() if k != "forgetting_s"}
+        self.fast = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=self.cfg.forgetting_fast_s, **est) for a in self.axes}
+        self.slow = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=self.cfg.forgetting_slow_s, **est) for a in self.axes}
+        self.learn = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=None, **est) for a in self.axes} if learning else {}
+        self.learned_s = 0.0
+        self.fed_s = 0.0
+        self._queue, self._queue_s = [], 0.0
+
+    def relearn(self) -> None:
+        """Learn the baseline afresh (estimators without forgetting from now on)."""
+        est = {k: v for k, v in self.cfg.estimator.items() if k != "forgetting_s"}
+        self.learn = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=None, **est) for a in self.axes}
+        self.learned_s = 0.0
+
+    def stop_learning(self) -> None:
+        self.learn = {}
+
+    def restart_settling(self) -> None:
+        """A time discontinuity or a new rate: drop the look-ahead and settle again."""
+        self.pending, self.pending_stats, self.still_run_s = None, None, 0.0
+
+    def on_break(self) -> None:
+        """Time discontinuity: the partial block, the look-ahead and the recent blocks are dropped."""
+        self.cutter.drop()
+        self.restart_settling()
+        self.next_check_t = None
+        self.recent.clear()
+
+    # ------------------------------------------------------------------ blocks
+    def stats(self, data: np.ndarray) -> BlockStats:
+        return block_stats(data[:, 1:4], self.faults.dd_scale_ref())
+
+    def is_still(self, data: np.ndarray, st: BlockStats, peers: list[Peer]) -> bool:
+        """The motion gate for one block with the other IMUs' latest blocks."""
+        mine = noise_ratio(st, self.faults.still_sigma2())
+        return self.gate.still(data, st, mine, peers, settling=self.still_run_s == 0.0 and self.pending is None)
+
+    def on_block(self, data: np.ndarray, st: BlockStats, still: bool) -> list[FaultEvent]:
+        """Every closed block: remember it (motion consensus, disagreement) and run the per-block detectors."""
+        self.last_stats = st
+        self.recent.append((data[:, 0].copy(), data[:, 1:4].copy()))
+        return self.faults.on_block(st, data[:, 0], still)
+
+    def settle(self, data: np.ndarray, st: BlockStats, still: bool) -> np.ndarray | None:
+        """The look-ahead: returns the pending still block to feed (the block before this still one), if any,
+        and keeps this one pending once settled. A moving block drops the pending one."""
+        self._blocks["blocks_still" if still else "blocks_moving"] += 1
+        if not still:
+            self.restart_settling()
+            return None
+        out = self.pending
+        settled = self.still_run_s >= self.cfg.settle_s
+        self.pending = data if settled else None
+        self.pending_stats = st if settled else None
+        self.still_run_s += data.shape[0] / self.rate_hz
+        return out
+
+    def on_quiet(self, st: BlockStats, extra_var: Mapping[str, float]) -> list[FaultEvent]:
+        return self.faults.on_quiet(st, extra_var)
+
+    def feed(self, data: np.ndarray) -> bool:
+        """Queue a still block for the estimators; True when the baseline learning is complete (the caller
+        takes :meth:`learned_terms`)."""
+        self._blocks["blocks_fed"] += 1
+        self._queue.append(data)
+        duration = data.shape[0] / self.rate_hz
+        self.fed_s += duration
+        self._queue_s += duration
+        if self.next_check_t is None:
+            self.next_check_t = float(data[-1, 0]) + self.cfg.check_s
+        if self.learn:
+            self.learned_s += duration
+            if self.learned_s >= self.cfg.baseline_s:
+                self.flush()
+                return True
+        if self._queue_s >= self.cfg.check_s:
+            self.flush()
+        return False
+
+    def flush(self) -> None:
+        """Hand the queued still blocks to the estimators."""
+        if not self._queue:
+            return
+        data = np.concatenate(self._queue) if len(self._queue) > 1 else self._queue[0]
+        self._queue, self._queue_s = [], 0.0
+        for ax in self.axes:
+            y = np.ascontiguousarray(data[:, COLUMNS[ax]])
+            self.fast[ax].update(y)
+            self.slow[ax].update(y)
+            if self.learn:
+                self.learn[ax].update(y)
+
+    def learned_terms(self) -> dict[str, dict[str, tuple[float, float]]]:
+        """The learned baseline per axis ``{param: (value, std)}``; learning stops."""
+        self.flush()
+        out = {ax: health_params(est.terms(full=True) if est.kind == "octave" else est.terms())
+               for ax, est in self.learn.items()}
+        self.learn = {}
+        return out
+
+    # ------------------------------------------------------------------ checks and reports
+    def report_terms(self, ax: str, full: bool = False) -> list[dict]:
+        """The reported terms of one axis (SI; resolved values and 95 % bounds, ``"bound": True``): Q and N
+        from the fast estimator, B, K, R, Gauss-Markov and sinusoid from the slow one."""
+        def terms(est):
+            return est.terms(full=full) if est.kind == "octave" else est.terms()
+
+        fast = [t for t in terms(self.fast[ax]) if t["effect"] in ("quantization", "white_noise")]
+        slow = [t for t in terms(self.slow[ax]) if t["effect"] not in ("quantization", "white_noise")]
+        return fast + slow
+
+    def current_params(self, ax: str, terms=None) -> dict[str, tuple[float, float]]:
+        """``{param: (value, std)}`` of the resolved parameters (a bound is not compared with a baseline)."""
+        return health_params(self.report_terms(ax) if terms is None else terms)
+
+    def check_due(self, t: float) -> bool:
+        return self.next_check_t is not None and t >= self.next_check_t
+
+    def check(self, t: float, baseline, strict: bool) -> tuple[dict[str, list[dict]], list[Transition], str | None]:
+        """The Allan check at message time ``t``: returns the reported terms per axis (empty before
+        ``min_report_s`` of still data), the health transitions, and an error line when the loaded
+        baseline is in other units or of another sensor (``strict``: a loaded, not forced baseline)."""
+        self.next_check_t = t + self.cfg.check_s
+        self.flush()
+        if self.fed_s < self.cfg.min_report_s:
+            return {}, [], None
+        reported, transitions = {}, []
+        for ax in self.axes:
+            terms = self.report_terms(ax)
+            cur = self.current_params(ax, terms)
+            self.current[ax] = cur
+            reported[ax] = terms
+            base = baseline.get(self.imu, ax) if baseline is not None else None
+            if base is None or self.learn:
+                continue
+            bad = units_mismatch(base, cur) if strict else None
+            if bad:
+                return reported, transitions, (f"baseline {baseline.source} does not match IMU{self.imu} {ax}: "
+                                               f"{bad}; use a baseline of this stream or --baseline-force")
+            for tr in self.detector.check(ax, cur, base):
+                transitions.append(tr)
+                if ax in GYRO_AXES:
+                    high = any(d.state == DEGRADING for (a, _), d in self.detector.detectors.items() if a == ax)
+                    self.faults.set_external("allan", ax, FAULT if high else OK)
+        return reported, transitions, None
+
+    def health(self, has_baseline: bool) -> int:
+        """0 healthy, 1 degrading (any fault, even while the Allan baseline is still being learned), 2 learning."""
+        if self.faults.active():
+            return DEGRADING
+        if self.learn or not has_baseline:
+            return LEARNING
+        return self.detector.state
+
+    def allan_worst(self, ax: str) -> tuple[float, str]:
+        """(ratio, param) of the largest degrading Allan term of an axis."""
+        worst = [(d.ratio, p) for (a, p), d in self.detector.detectors.items() if a == ax and d.state == DEGRADING]
+        return max(worst) if worst else (math.nan, "N")
+
+    # ------------------------------------------------------------------ persistence
+    def state_dict(self) -> dict:
+        self.flush()
+        return {"message": self.message, "rate_hz": self.rate_hz, "fed_s": self.fed_s, "learned_s": self.learned_s,
+                "fast": {a: e.state_dict() for a, e in self.fast.items()},
+                "slow": {a: e.state_dict() for a, e in self.slow.items()},
+                "learn": {a: e.state_dict() for a, e in self.learn.items()},
+                "detector": self.detector.state_dict(), "faults": self.faults.state_dict()}
+
+    @classmethod
+    def from_state(cls, imu: int, c: Mapping, cfg: PipelineConfig) -> "Channel":
+        """A channel restored from :meth:`state_dict`; ValueError when it does not fit the configuration."""
+        ch = cls(imu, str(c["message"]), cfg)
+        ch.cutter.rate_hz = float(c["rate_hz"])
+        ch.fast = {a: estimator_from_state(s) for a, s in c["fast"].items()}
+        ch.slow = {a: estimator_from_state(s) for a, s in c["slow"].items()}
+        ch.learn = {a: estimator_from_state(s) for a, s in c["learn"].items()}
+        if set(ch.fast) != set(ch.axes) or set(ch.slow) != set(ch.axes) or (ch.learn and set(ch.learn) != set(ch.axes)):
+            raise ValueError("state holds other axes than configured")
+        ch.fed_s, ch.learned_s = float(c["fed_s"]), float(c["learned_s"])
+        ch.detector.load_state_dict(c["detector"])
+        if c.get("faults") is not None:
+            ch.faults.load_state_dict(c["faults"])
+        return ch
