@@ -9,6 +9,10 @@
   ``stale_s`` the requests are repeated every ``retry_s`` (link loss and return, autopilot reboot).
 - Replies go where the IMU data came from: on a ``udpin:`` link (several peers may write to our port),
   every message we send goes to the address of the last IMU message of the vehicle, not to all peers.
+- Ground-station outputs (``companion run --gcs CONN``): the reports (NAMED_VALUE_FLOAT, STATUSTEXT) and
+  our HEARTBEAT are also written, byte for byte (so with the same signature), to each of these links. A
+  router such as MAVProxy does not forward what its ``--out`` peer sends to its other outputs; this does.
+  Requests to the autopilot (COMMAND_LONG, REQUEST_DATA_STREAM) go only to the main link.
 
 Wall-clock time is used only here (heartbeats, retries); estimates and reports run on message time.
 """
@@ -216,6 +220,9 @@ class Link:
         self.requests = 0
         self.sent = 0
         self.recorder = None  # a TlogWriter: every frame we send is also recorded
+        self.outputs: list = []  # ground-station links (pymavlink connections): reports are copied there
+        self.output_sent = 0  # frames written to them (per output)
+        self._fanout = False  # the frame being encoded is a report or heartbeat (copied to ``outputs``)
         self.stats = LinkStats()
         self._loss_window_start: float | None = None
         self._loss_warned = False
@@ -254,17 +261,44 @@ class Link:
             except OSError:
                 pass
         self.sent += 1
+        if self._fanout and self.outputs:
+            for out in self.outputs:
+                try:
+                    out.write(buf)
+                except OSError:
+                    pass  # a ground station not there (yet): UDP refusals are not our link's problem
+            self.output_sent += 1
         if self.recorder is not None:
             self.recorder.write_raw(bytes(buf), time.time())
 
+    def _report(self, send, *args) -> None:
+        """Encode and send one report frame (also copied to the ground-station outputs)."""
+        self._fanout = True
+        try:
+            send(*args)
+        finally:
+            self._fanout = False
+
     def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None:
-        self._mav().named_value_float_send(int(time_boot_ms), name.encode("ascii"), float(value))
+        self._report(self._mav().named_value_float_send, int(time_boot_ms), name.encode("ascii"), float(value))
 
     def send_statustext(self, severity: int, text: str) -> None:
-        self._mav().statustext_send(int(severity), text.encode("ascii", "replace")[:50])
+        self._report(self._mav().statustext_send, int(severity), text.encode("ascii", "replace")[:50])
 
     def send_heartbeat(self) -> None:
-        self._mav().heartbeat_send(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE)
+        self._report(self._mav().heartbeat_send, MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0,
+                     MAV_STATE_ACTIVE)
+
+    def drain_outputs(self) -> None:
+        """Read and drop what ground stations send back on their outputs (their heartbeats), so their
+        sockets never fill; a GCS talks to the autopilot through its own link, not through ours."""
+        for out in self.outputs:
+            try:
+                for _ in range(64):
+                    if out.recv_msg() is None:
+                        break
+            except Exception:
+                pass
 
     # --- receiving ---
     def count(self, msg) -> None:
@@ -311,6 +345,7 @@ class Link:
         if now - self.last_heartbeat_wall >= self.cfg.heartbeat_s:
             self.send_heartbeat()
             self.last_heartbeat_wall = now
+            self.drain_outputs()
         self._check_loss(now)
         data_stale = self.last_imu_wall is None or now - self.last_imu_wall > self.cfg.stale_s
         if not data_stale:

@@ -7,9 +7,10 @@ import time
 
 
 def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, link_cfg, period, baseline, scales,
-             state, relearn: bool, save_period: float, writer, stop, log, warn, ready):
+             state, relearn: bool, save_period: float, writer, stop, log, warn, ready, gcs=()):
     """Open ``src``, build the pipeline and run until ``stop["flag"]`` or ``duration`` wall-clock seconds:
-    (pipeline, link). ``ready(src)`` is called once the link is open (signals are handled by the caller)."""
+    (pipeline, link). ``ready(src)`` is called once the link is open (signals are handled by the caller).
+    ``gcs``: ground-station connection strings (udpout:HOST:PORT, ...) that get a copy of every report."""
     from companion.health.detector import STALE
     from companion.mavlink.link import Link
     from companion.mavlink.reporter import MAV_SEVERITY_WARNING, Reporter
@@ -19,6 +20,7 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
 
     conn = open_connection(src, baud, source_system=pcfg.sysid or 1, source_component=link_cfg.compid,
                            mavlink2=signing is not None)
+    outputs = []
     try:
         if signing is not None:
             from companion.mavlink.signing import setup_signing
@@ -27,6 +29,12 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
             log("MAVLink 2 signing on: sending signed frames, accepting "
                 + ("signed and unsigned" if accept_unsigned else "only correctly signed") + " frames")
         link = Link(conn, link_cfg, pcfg.sysid, log=log)
+        for spec in gcs:
+            out = open_connection(spec, None, source_system=pcfg.sysid or 1, source_component=link_cfg.compid,
+                                  mavlink2=signing is not None, input=False)
+            outputs.append(out)
+            link.outputs.append(out)
+            log(f"reports also go to {spec}")
         if writer is not None:
             link.recorder = writer
         reporter = Reporter(link, period)
@@ -73,7 +81,8 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
         log(f"stopping: {link.sent} messages sent, {reporter.sent} NAMED_VALUE_FLOAT, {reporter.texts} STATUSTEXT")
         return pipeline, link
     finally:
-        try:
-            conn.close()
-        except Exception:
-            pass
+        for c in [conn, *outputs]:
+            try:
+                c.close()
+            except Exception:
+                pass

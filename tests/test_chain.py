@@ -1,0 +1,146 @@
+"""The companion in a real chain over loopback: `companion sim-autopilot` -> MAVProxy (from PyPI, as the
+router) -> `companion run --gcs udpout:...` -> a pymavlink ground-station listener. MAVProxy does not
+forward what its --out peer sends to its other outputs, so the reports reach the GCS through --gcs.
+Every wait is for a signal with a generous deadline; every process is killed at the end.
+
+Test model: white noise N = 3e-3 rad/s/sqrt(Hz) per gyro axis at 100 Hz; a stuck gyro X after the
+baseline is learned gives alarm STATUSTEXTs besides the reports.
+"""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from readiness import READY, wait_for_text
+
+from loopback import free_udp_port, start, stop
+
+pytestmark = [pytest.mark.network,
+              pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")]
+
+MODEL = """rate_hz: 100
+axes:
+  gx: [{effect: white_noise, N: 3e-3}]
+  gy: [{effect: white_noise, N: 3e-3}]
+  gz: [{effect: white_noise, N: 3e-3}]
+"""
+COMPANION = 191  # MAV_COMP_ID_ONBOARD_COMPUTER: the component id the companion sends with
+
+
+class Listener:
+    """A ground station: pymavlink on udpin:127.0.0.1:PORT in a thread, keeping every NAMED_VALUE_FLOAT
+    name, STATUSTEXT text and HEARTBEAT of the companion (component 191) it receives, with its arrival time."""
+
+    def __init__(self, port: int):
+        from pymavlink import mavutil
+
+        self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255, robust_parsing=True)
+        self.names: dict[str, float] = {}
+        self.texts: list[tuple[float, str]] = []
+        self.heartbeats = 0
+        self.lock = threading.Lock()
+        self._stop = False
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self):
+        while not self._stop:
+            msg = self.conn.recv_match(blocking=True, timeout=0.2)
+            if msg is None or msg.get_srcComponent() != COMPANION:
+                continue
+            with self.lock:
+                t = msg.get_type()
+                if t == "NAMED_VALUE_FLOAT":
+                    self.names[msg.name] = msg.value
+                elif t == "STATUSTEXT":
+                    self.texts.append((time.monotonic(), msg.text))
+                elif t == "HEARTBEAT":
+                    self.heartbeats += 1
+
+    def wait_for(self, cond, timeout=60.0) -> bool:
+        """Poll until ``cond(self)`` holds (True) or the deadline passes (False)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self.lock:
+                if cond(self):
+                    return True
+            time.sleep(0.05)  # polling interval, not a wait for another process
+        with self.lock:
+            return bool(cond(self))
+
+    def close(self):
+        self._stop = True
+        self.thread.join(5)
+        self.conn.close()
+
+
+def start_mavproxy(tmp_path, master_port, out_port, default_streamrate=False, name="mavproxy.out"):
+    """MAVProxy as the router: the vehicle on --master (udpin), the companion on --out (udpout)."""
+    args = [shutil.which("mavproxy.py"), f"--master=udpin:127.0.0.1:{master_port}",
+            f"--out=udpout:127.0.0.1:{out_port}", "--daemon", "--non-interactive", "--no-state",
+            "--default-modules=", "--nowait"]
+    if not default_streamrate:
+        args.append("--streamrate=-1")
+    return subprocess.Popen(args, cwd=tmp_path, stdout=open(tmp_path / name, "w"), stderr=subprocess.STDOUT,
+                            stdin=subprocess.DEVNULL, start_new_session=True)
+
+
+def sent_by_companion(tlog: Path):
+    """(NAMED_VALUE_FLOAT names, STATUSTEXT texts) the companion sent, decoded by pymavlink from its --out-tlog."""
+    from pymavlink import mavutil
+
+    names, texts = set(), []
+    conn = mavutil.mavlink_connection(str(tlog), robust_parsing=True)
+    while True:
+        m = conn.recv_match(type=["NAMED_VALUE_FLOAT", "STATUSTEXT"])
+        if m is None:
+            break
+        if m.get_srcComponent() != COMPANION:
+            continue
+        if m.get_type() == "NAMED_VALUE_FLOAT":
+            names.add(m.name)
+        else:
+            texts.append(m.text)
+    conn.close()
+    return names, texts
+
+
+def test_reports_reach_a_gcs_behind_mavproxy_through_gcs_output(tmp_path):
+    (tmp_path / "model.yaml").write_text(MODEL)
+    p_master, p_run, p_gcs = free_udp_port(), free_udp_port(), free_udp_port()
+    gcs = Listener(p_gcs)
+    procs = []
+    duration, speedup = 170.0, 10.0
+    try:
+        procs.append(start_mavproxy(tmp_path, p_master, p_run))
+        run = start(["run", "--source", f"udpin:127.0.0.1:{p_run}", "--gcs", f"udpout:127.0.0.1:{p_gcs}",
+                     "--no-state", "--baseline-s", "60", "--duration", "300", "--out-tlog",
+                     str(tmp_path / "run.tlog")], tmp_path, "run.out")
+        procs.append(run)
+        wait_for_text(tmp_path / "run.out", READY, run)
+        sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{p_master}",
+                     "--speedup", str(speedup), "--duration", str(duration), "--wait-request",
+                     "--fault", "stuck", "--fault-at", "110", "--fault-axis", "gx", "--wall-limit", "120",
+                     "--record", "rx.jsonl", "--quiet"], tmp_path, "sim.out")
+        procs.append(sim)
+        sim.wait(240)  # bounded by its --wall-limit
+        assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
+        assert stop(run) == 0, (tmp_path / "run.out").read_text()
+        names, texts = sent_by_companion(tmp_path / "run.tlog")
+        assert {"IMU0GX_N", "IMU0G_HLTH", "IMU0G_FLT"} <= names, names
+        assert any("stuck" in t for t in texts), texts  # an alarm was sent
+        assert any("baseline learned" in t for t in texts), texts
+        # everything the companion sent is at the GCS (UDP on loopback: wait for the listener to catch up)
+        ok = gcs.wait_for(lambda g: names <= set(g.names) and sorted(texts) == sorted(t for _, t in g.texts))
+        assert ok, (sorted(names - set(gcs.names)), texts, gcs.texts)
+        assert gcs.heartbeats > 0
+    finally:
+        for p in procs:
+            stop(p, signal.SIGKILL)
+        gcs.close()
