@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from readiness import READY, wait_for_text
 
-from loopback import free_udp_port, start, stop
+from loopback import free_udp_port, read_record, start, stop
 
 pytestmark = [pytest.mark.network,
               pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")]
@@ -144,3 +144,82 @@ def test_reports_reach_a_gcs_behind_mavproxy_through_gcs_output(tmp_path):
         for p in procs:
             stop(p, signal.SIGKILL)
         gcs.close()
+
+
+FAULT_WORDS = ("stuck", "noise", "bias", "spike", "drift", "saturat", "rate", "timing", "disagree", "degrad")
+
+
+def imu_times(tlog: Path):
+    """Message times (s) of the RAW_IMU frames the companion received, decoded by pymavlink from its --out-tlog."""
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(str(tlog), robust_parsing=True)
+    t = []
+    while True:
+        m = conn.recv_match(type="RAW_IMU")
+        if m is None:
+            break
+        t.append(m.time_usec * 1e-6)
+    conn.close()
+    return t
+
+
+def low_rate_episodes(t, rate_hz, min_s=1.0):
+    """(start, length) in message time of the stretches where the stream ran below 0.8 x ``rate_hz``
+    (intervals longer than 1.25 / rate), at least ``min_s`` long."""
+    out, start, last = [], None, None
+    for a, b in zip(t, t[1:]):
+        slow = b - a > 1.25 / rate_hz
+        if slow and start is None:
+            start = a
+        elif not slow and start is not None:
+            if a - start >= min_s:
+                out.append((start, a - start))
+            start = None
+        last = b
+    if start is not None and last - start >= min_s:
+        out.append((start, last - start))
+    return out
+
+
+def test_mavproxy_default_stream_rates_beside_the_companion_raise_no_alarm(tmp_path):
+    """An autopilot that refuses SET_MESSAGE_INTERVAL, MAVProxy with its default stream-rate behaviour
+    (REQUEST_DATA_STREAM of all streams at 4 Hz, again every 15 s of wall clock): the IMU rate falls from
+    50 to 4 Hz; the companion asks again and gets it back within 10 s of wall clock each time, and no
+    alarm is raised (a rate change is not a gyro fault)."""
+    (tmp_path / "model.yaml").write_text(MODEL)
+    p_master, p_run, p_gcs = free_udp_port(), free_udp_port(), free_udp_port()
+    gcs = Listener(p_gcs)
+    procs = []
+    duration, speedup = 360.0, 8.0
+    try:
+        procs.append(start_mavproxy(tmp_path, p_master, p_run, default_streamrate=True))
+        run = start(["run", "--source", f"udpin:127.0.0.1:{p_run}", "--gcs", f"udpout:127.0.0.1:{p_gcs}",
+                     "--no-state", "--baseline-s", "60", "--duration", "300", "--out-tlog",
+                     str(tmp_path / "run.tlog")], tmp_path, "run.out")
+        procs.append(run)
+        wait_for_text(tmp_path / "run.out", READY, run)
+        sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{p_master}",
+                     "--speedup", str(speedup), "--duration", str(duration), "--wait-request", "--refuse-interval",
+                     "--wall-limit", "150", "--record", "rx.jsonl"], tmp_path, "sim.out")
+        procs.append(sim)
+        sim.wait(300)  # bounded by its --wall-limit
+        assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
+        assert stop(run) == 0, (tmp_path / "run.out").read_text()
+    finally:
+        for p in procs:
+            stop(p, signal.SIGKILL)
+        gcs.close()
+    out = (tmp_path / "run.out").read_text()
+    sim_out = (tmp_path / "sim.out").read_text()
+    assert "REQUEST_DATA_STREAM 0 at 4 Hz" in sim_out, sim_out  # MAVProxy did ask for 4 Hz
+    t = imu_times(tmp_path / "run.tlog")
+    assert t and t[-1] - t[0] > 0.8 * duration
+    drops = low_rate_episodes(t, 50.0)
+    assert drops, "MAVProxy's requests never lowered the rate: the test shows nothing"
+    for start_t, length in drops:
+        assert length / speedup < 10.0, (drops, out)  # wall-clock seconds at the reduced rate
+    assert "asking again" in out
+    texts = [d["text"] for d in read_record(tmp_path / "rx.jsonl")[1]]
+    assert not [x for x in texts if any(w in x.lower() for w in FAULT_WORDS)], texts
+    assert "IMU0 gyro baseline learned" in texts, texts

@@ -225,6 +225,12 @@ class Link:
         self._fanout = False  # the frame being encoded is a report or heartbeat (copied to ``outputs``)
         self.stats = LinkStats()
         self._loss_window_start: float | None = None
+        self._unanswered = 0  # rate requests since the rate was last as asked
+        self._given_up_at: float | None = None  # the rate the autopilot kept after three requests
+        self.rate_low = False  # the measured rate is below what we asked for (another client's request)
+        self.rate_drops = 0  # times it fell below, each answered by asking again
+        self.rate_requests = 0
+        self._rate_request_wall: float | None = None
         self._loss_warned = False
         self._udp_server = bool(getattr(conn, "udp_server", False))
         self._conn_write = conn.write
@@ -359,7 +365,51 @@ class Link:
         self.request_streams()
         self.last_request_wall = now
 
-    def request_streams(self) -> None:
+    def requested_rate(self) -> float:
+        """The IMU rate our requests ask for (REQUEST_DATA_STREAM is capped at 50 Hz)."""
+        return min(self.cfg.rate_hz, 50.0) if self.use_data_stream and not self.acked else self.cfg.rate_hz
+
+    def check_rate(self, measured_hz: float | None) -> None:
+        """The IMU rate measured in message time (the slowest IMU). Below 0.8 x the rate we asked for,
+        another client's stream request (a GCS or router setting stream rates on a shared link) or a rate
+        change took it: ask again, at most every ``retry_s``; the first time of each drop is logged. An
+        autopilot that does not give more after three requests in a row is not asked again at that rate."""
+        if measured_hz is None or not measured_hz > 0:
+            return
+        now = self.clock()
+        if self.last_imu_wall is None or now - self.last_imu_wall > self.cfg.stale_s:
+            return  # no data: the stale path asks again
+        target = self.requested_rate()
+        if measured_hz >= 0.8 * target:
+            self._unanswered = 0
+            self._given_up_at = None
+            if self.rate_low:
+                self.rate_low = False
+                if self.rate_drops == 1:
+                    self.log(f"IMU rate back to {measured_hz:.0f} Hz")
+            return
+        if self._given_up_at is not None and abs(measured_hz / self._given_up_at - 1.0) <= 0.2:
+            return
+        self._given_up_at = None
+        if not self.rate_low:
+            self.rate_low = True
+            self.rate_drops += 1
+            if self.rate_drops == 1:  # said once; the count is in the exit line
+                self.log(f"IMU rate {measured_hz:.1f} Hz, below the {target:.0f} Hz asked for (another client's stream "
+                     f"request?): asking again")
+        if self._rate_request_wall is not None and now - self._rate_request_wall < self.cfg.retry_s:
+            return
+        if self._unanswered >= 3:
+            self._given_up_at = measured_hz
+            self._unanswered = 0
+            self.log(f"the autopilot keeps the IMU at {measured_hz:.1f} Hz after 3 requests: not asking again at that rate")
+            return
+        self._rate_request_wall = now
+        self._unanswered += 1
+        self.rate_requests += 1
+        self.request_streams(quiet=True)
+
+    def request_streams(self, quiet: bool = False) -> None:
         target = self.sysid if self.sysid is not None else 0
         comp = self.autopilot_compid if self.autopilot_compid is not None else 0
         interval_us = 1e6 / self.cfg.rate_hz
@@ -370,7 +420,8 @@ class Link:
             rate = int(max(1, min(50, round(self.cfg.rate_hz))))
             self._mav().request_data_stream_send(target, comp, MAV_DATA_STREAM_RAW_SENSORS, rate, 1)
         self.requests += 1
-        self.log(f"asked for IMU data at {self.cfg.rate_hz:g} Hz" + (" (and REQUEST_DATA_STREAM)" if self.use_data_stream else ""))
+        if not quiet:
+            self.log(f"asked for IMU data at {self.cfg.rate_hz:g} Hz" + (" (and REQUEST_DATA_STREAM)" if self.use_data_stream else ""))
 
     def _check_loss(self, now: float) -> None:
         """Every ``loss_window_s``: a WARNING STATUSTEXT when more than ``loss_warn`` of the frames of the

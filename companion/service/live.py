@@ -47,6 +47,7 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
         last_save = t_start
         stale = False
         last_stale_report = 0.0
+        last_rate_check = 0.0
         while not stop["flag"]:
             msg = conn.recv_match(blocking=True, timeout=0.1)
             now = time.monotonic()
@@ -65,6 +66,10 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
                         stale = False
                         log("IMU data back")
             link.service()
+            if now - last_rate_check >= 0.5:
+                last_rate_check = now
+                rates = [ch.rate_hz for ch in pipeline.channels.values() if ch.rate_hz]
+                link.check_rate(min(rates) if rates else None)
             if link.last_imu_wall is not None and now - link.last_imu_wall > link_cfg.stale_s:
                 if not stale:
                     stale = True
@@ -78,6 +83,9 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
                 last_save = now
             if duration is not None and now - t_start >= duration:
                 break
+        if link.rate_drops:
+            log(f"IMU rate fell below the request {link.rate_drops} times (another client's stream requests); "
+                f"asked again {link.rate_requests} times")
         log(f"stopping: {link.sent} messages sent, {reporter.sent} NAMED_VALUE_FLOAT, {reporter.texts} STATUSTEXT")
         return pipeline, link
     finally:

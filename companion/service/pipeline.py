@@ -45,12 +45,15 @@ from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTI
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import FLOAT_MESSAGES, Channel
 from companion.service.config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
+from companion.service.blocks import RATE_CHANGE
 from companion.service.imu_group import ImuGroup
+from companion.timebase import period_of
 
 FAST_PARAMS = ("Q", "N")
 SLOW_PARAMS = ("B", "K", "R")
 STATE_FORMAT = "companion-run-state"
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
+OFF_RATE_BLOCKS = 3  # consecutive blocks at one new rate before the channel switches to it
 
 
 class Pipeline:
@@ -71,6 +74,7 @@ class Pipeline:
         self.group = ImuGroup(cfg.reset_s)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
+        self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
         self.failed: str | None = None  # a user-facing error found in the data (the caller reports it)
         self._tick = True
         self._decode = None
@@ -208,7 +212,44 @@ class Pipeline:
             self.reporter.tick_times(tt)
 
     # ------------------------------------------------------------------ blocks
+    def _off_rate(self, ch: Channel, data: np.ndarray, rate_event: str | None) -> bool:
+        """A block whose own rate is off the stream's rate by more than RATE_CHANGE (another client's stream
+        request, a log-rate change) is held back from every detector and estimator: the references belong to
+        the old rate, a rate change is not a gyro fault. After OFF_RATE_BLOCKS such blocks at one rate the
+        channel switches to it (channel.switch_rate: the state of that rate back, or learned afresh)."""
+        if rate_event is not None:
+            if rate_event == "changed":  # the cutter saw it first (a slow drift of the rate)
+                new, old = ch.cutter.rate_hz, ch.cutter.prev_rate_hz
+                ch.cutter.rate_hz = old
+                self._switch_rate(ch, new, data[:, 0], old)
+            ch.off_rate = []
+            return rate_event == "changed"
+        if ch.rate_hz is None or data.shape[0] < 3:
+            return False
+        p = period_of(np.diff(data[:, 0]), ch.time_res)
+        if not (p > 0) or abs(1.0 / (p * ch.rate_hz) - 1.0) <= RATE_CHANGE:
+            ch.off_rate = []
+            return False
+        r = 1.0 / p
+        if ch.off_rate and abs(r / ch.off_rate[-1] - 1.0) > RATE_CHANGE:
+            ch.off_rate = []
+        ch.off_rate.append(r)
+        ch.restart_settling()
+        if len(ch.off_rate) >= OFF_RATE_BLOCKS:
+            old = ch.rate_hz
+            self._switch_rate(ch, float(np.median(ch.off_rate)), data[:, 0], old)
+        return True
+
+    def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None) -> None:
+        back = ch.switch_rate(rate, t_block)
+        self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
+        self.log(f"IMU{ch.imu}: rate changed {old:.1f} -> {ch.rate_hz:.1f} Hz (a stream request, not a gyro fault): "
+                 + ("the state kept for this rate is back" if back else "references and estimators learned afresh"))
+        self._set_state(ch)
+
     def _close_block(self, ch: Channel, data: np.ndarray, rate_event: str | None) -> None:
+        if self._off_rate(ch, data, rate_event):
+            return
         st = ch.stats(data)
         still = (not self.armed) and ch.is_still(data, st, self._peers(ch))
         t_end = float(data[-1, 0])
@@ -221,11 +262,6 @@ class Pipeline:
                     return
             ch.make_estimators(learning=not self._has_baseline(ch))
             self.log(f"IMU{ch.imu}: {ch.rate_hz:.1f} Hz")
-        elif rate_event == "changed":
-            self.log(f"IMU{ch.imu}: rate changed {ch.cutter.prev_rate_hz:.1f} -> {ch.rate_hz:.1f} Hz: estimators restart")
-            ch.make_estimators(learning=not self._has_baseline(ch))
-            ch.restart_settling()
-            return
         if ch.rate_hz is None:
             return
         pending, pending_stats = ch.pending, ch.pending_stats
