@@ -44,6 +44,7 @@ class Listener:
         self.names: dict[str, float] = {}
         self.texts: list[tuple[float, str]] = []
         self.heartbeats = 0
+        self.health: list[tuple[float, float]] = []  # (arrival, IMU0G_HLTH value)
         self.lock = threading.Lock()
         self._stop = False
         self.thread = threading.Thread(target=self._loop, daemon=True)
@@ -58,6 +59,8 @@ class Listener:
                 t = msg.get_type()
                 if t == "NAMED_VALUE_FLOAT":
                     self.names[msg.name] = msg.value
+                    if msg.name == "IMU0G_HLTH":
+                        self.health.append((time.monotonic(), msg.value))
                 elif t == "STATUSTEXT":
                     self.texts.append((time.monotonic(), msg.text))
                 elif t == "HEARTBEAT":
@@ -223,3 +226,44 @@ def test_mavproxy_default_stream_rates_beside_the_companion_raise_no_alarm(tmp_p
     texts = [d["text"] for d in read_record(tmp_path / "rx.jsonl")[1]]
     assert not [x for x in texts if any(w in x.lower() for w in FAULT_WORDS)], texts
     assert "IMU0 gyro baseline learned" in texts, texts
+
+
+def test_router_outage_texts_reach_the_gcs_and_health_leaves_stale_at_once(tmp_path):
+    """MAVProxy killed while data flow, restarted after two "data stopped" texts (>= 10 s): the GCS
+    (behind --gcs) gets "IMU data stopped" while the router is down and "IMU data back" after it; the
+    health IMU0G_HLTH it receives is 3 (stale) during the outage and leaves 3 within 2 s of "data back"."""
+    (tmp_path / "model.yaml").write_text(MODEL)
+    p_master, p_run, p_gcs = free_udp_port(), free_udp_port(), free_udp_port()
+    gcs = Listener(p_gcs)
+    procs = []
+    try:
+        proxy = start_mavproxy(tmp_path, p_master, p_run)
+        procs.append(proxy)
+        run = start(["run", "--source", f"udpin:127.0.0.1:{p_run}", "--gcs", f"udpout:127.0.0.1:{p_gcs}",
+                     "--no-state", "--baseline-s", "60", "--duration", "300"], tmp_path, "run.out")
+        procs.append(run)
+        wait_for_text(tmp_path / "run.out", READY, run)
+        sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{p_master}",
+                     "--speedup", "4", "--wait-request", "--wall-limit", "200", "--quiet"], tmp_path, "sim.out")
+        procs.append(sim)
+        assert gcs.wait_for(lambda g: "IMU0G_HLTH" in g.names, 120), (tmp_path / "run.out").read_text()
+        stop(proxy, signal.SIGKILL)
+        t_kill = time.monotonic()
+        stopped = lambda g: [t for t, x in g.texts if x.startswith("companion: IMU data stopped")]  # noqa: E731
+        assert gcs.wait_for(lambda g: len(stopped(g)) >= 2, 120), (gcs.texts, (tmp_path / "run.out").read_text())
+        assert gcs.wait_for(lambda g: any(v == 3.0 for _, v in g.health), 30)
+        procs.append(start_mavproxy(tmp_path, p_master, p_run, name="mavproxy2.out"))
+        back = lambda g: [t for t, x in g.texts if x.startswith("companion: IMU data back")]  # noqa: E731
+        assert gcs.wait_for(lambda g: back(g), 120), (gcs.texts, (tmp_path / "run.out").read_text())
+        t_back = back(gcs)[0]
+        assert gcs.wait_for(lambda g: any(t >= t_back - 0.5 and v != 3.0 for t, v in g.health), 30)
+        with gcs.lock:
+            first_ok = min(t for t, v in gcs.health if t >= t_back - 0.5 and v != 3.0)
+            later_stale = [t for t, v in gcs.health if t > first_ok and v == 3.0]
+        assert first_ok - t_back < 2.0
+        assert not later_stale
+        assert stopped(gcs)[0] > t_kill
+    finally:
+        for p in procs:
+            stop(p, signal.SIGKILL)
+        gcs.close()

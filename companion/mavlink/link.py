@@ -219,6 +219,8 @@ class Link:
         self.acked = False  # the autopilot accepted a SET_MESSAGE_INTERVAL
         self.requests = 0
         self.sent = 0
+        self.texts = 0  # STATUSTEXT sent (the reporter's and the link's own)
+        self.values_sent = 0  # NAMED_VALUE_FLOAT sent
         self.recorder = None  # a TlogWriter: every frame we send is also recorded
         self.outputs: list = []  # ground-station links (pymavlink connections): reports are copied there
         self.output_sent = 0  # frames written to them (per output)
@@ -286,9 +288,11 @@ class Link:
             self._fanout = False
 
     def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None:
+        self.values_sent += 1
         self._report(self._mav().named_value_float_send, int(time_boot_ms), name.encode("ascii"), float(value))
 
     def send_statustext(self, severity: int, text: str) -> None:
+        self.texts += 1
         self._report(self._mav().statustext_send, int(severity), text.encode("ascii", "replace")[:50])
 
     def send_heartbeat(self) -> None:

@@ -1,9 +1,13 @@
 """The live receive loop of ``companion run``: messages from the link into the pipeline, link housekeeping,
-stale-data detection (a warning, a STATUSTEXT and the STALE health value every second), periodic state saves."""
+stale-data detection (a warning; a STATUSTEXT every ``REPEAT_S`` until data return, since one sent while a
+router is down is lost; the STALE health value every second; a STATUSTEXT and the real health at once when
+data come back), a live warning when frames are rejected for their signature, periodic state saves."""
 
 from __future__ import annotations
 
 import time
+
+REPEAT_S = 10.0  # wall seconds between two "IMU data stopped" texts, and between two signature warnings
 
 
 def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, link_cfg, period, baseline, scales,
@@ -13,7 +17,7 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
     ``gcs``: ground-station connection strings (udpout:HOST:PORT, ...) that get a copy of every report."""
     from companion.health.detector import STALE
     from companion.mavlink.link import Link
-    from companion.mavlink.reporter import MAV_SEVERITY_WARNING, Reporter
+    from companion.mavlink.reporter import MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter
     from companion.service.pipeline import Pipeline
     from companion.service.runner import restore, save
     from companion.sources.connection import open_connection
@@ -48,6 +52,8 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
         stale = False
         last_stale_report = 0.0
         last_rate_check = 0.0
+        stale_since = last_stale_text = 0.0
+        rejected_seen, last_rejected_warn, rejected_texted = 0, -1e18, False
         while not stop["flag"]:
             msg = conn.recv_match(blocking=True, timeout=0.1)
             now = time.monotonic()
@@ -64,7 +70,19 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
                     link.on_message(msg, is_vehicle_imu=used)
                     if used and stale:
                         stale = False
-                        log("IMU data back")
+                        gap = now - stale_since
+                        log(f"IMU data back after {gap:.0f} s")
+                        reporter.statustext(f"companion: IMU data back after {gap:.0f} s", MAV_SEVERITY_NOTICE)
+                        pipeline.send_health_now()  # HLTH leaves STALE at once, not at the next transition
+                elif link.stats.rejected_signature > rejected_seen:
+                    rejected_seen = link.stats.rejected_signature
+                    if now - last_rejected_warn >= REPEAT_S:
+                        last_rejected_warn = now
+                        warn(f"{rejected_seen} frames rejected for their signature so far (wrong or missing "
+                             f"signing key on the other side?)")
+                        if not rejected_texted:
+                            rejected_texted = True
+                            reporter.statustext("companion: frames rejected: signature", MAV_SEVERITY_WARNING)
             link.service()
             if now - last_rate_check >= 0.5:
                 last_rate_check = now
@@ -73,8 +91,13 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
             if link.last_imu_wall is not None and now - link.last_imu_wall > link_cfg.stale_s:
                 if not stale:
                     stale = True
+                    stale_since = link.last_imu_wall
+                    last_stale_text = -1e18
                     warn("IMU data stopped")
-                    reporter.statustext("companion: IMU data stopped", MAV_SEVERITY_WARNING)
+                if now - last_stale_text >= REPEAT_S:  # repeated: a text sent while a router is down is lost
+                    last_stale_text = now
+                    reporter.statustext(f"companion: IMU data stopped {now - stale_since:.0f} s ago",
+                                        MAV_SEVERITY_WARNING)
                 if now - last_stale_report >= 1.0:
                     pipeline.send_health_now(STALE)
                     last_stale_report = now
@@ -86,7 +109,7 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
         if link.rate_drops:
             log(f"IMU rate fell below the request {link.rate_drops} times (another client's stream requests); "
                 f"asked again {link.rate_requests} times")
-        log(f"stopping: {link.sent} messages sent, {reporter.sent} NAMED_VALUE_FLOAT, {reporter.texts} STATUSTEXT")
+        log(f"stopping: {link.sent} messages sent, {link.values_sent} NAMED_VALUE_FLOAT, {link.texts} STATUSTEXT")
         return pipeline, link
     finally:
         for c in [conn, *outputs]:
