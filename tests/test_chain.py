@@ -9,6 +9,7 @@ baseline is learned gives alarm STATUSTEXTs besides the reports.
 
 from __future__ import annotations
 
+import re
 import shutil
 import signal
 import subprocess
@@ -143,6 +144,18 @@ def test_reports_reach_a_gcs_behind_mavproxy_through_gcs_output(tmp_path):
         ok = gcs.wait_for(lambda g: names <= set(g.names) and sorted(texts) == sorted(t for _, t in g.texts))
         assert ok, (sorted(names - set(gcs.names)), texts, gcs.texts)
         assert gcs.heartbeats > 0
+        # the last values the GCS got are those of the run summary (one source of truth)
+        out = (tmp_path / "run.out").read_text()
+        counted = re.search(r"stopping: \d+ messages sent, (\d+) NAMED_VALUE_FLOAT, (\d+) STATUSTEXT", out)
+        assert counted and int(counted.group(2)) == len(texts), (counted, texts)  # the exit line counts right
+        m = re.search(r"^  gy: N ([\d.]+) \+- [\d.]+ .*?; B (<? ?)([\d.e+]+) deg/h; K (<? ?)([\d.e+]+) deg/h\^1.5", out, re.M)
+        assert m, out
+        with gcs.lock:
+            last = dict(gcs.names)
+        assert last["IMU0GY_N"] == pytest.approx(float(m.group(1)), rel=2e-3, abs=1e-3)
+        for param, bound, value in (("B", m.group(2), m.group(3)), ("K", m.group(4), m.group(5))):
+            assert last[f"IMU0GY_{param}"] == pytest.approx(float(value), rel=1e-2, abs=0.5), (param, last, m.group(0))
+            assert (last[f"IMU0GY_{param}S"] == -1.0) == bool(bound.strip())  # a bound is sent with sigma -1
     finally:
         for p in procs:
             stop(p, signal.SIGKILL)

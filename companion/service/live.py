@@ -106,6 +106,7 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
                 last_save = now
             if duration is not None and now - t_start >= duration:
                 break
+        pipeline.send_final()  # the last values sent are the summary's
         if link.rate_drops:
             log(f"IMU rate fell below the request {link.rate_drops} times (another client's stream requests); "
                 f"asked again {link.rate_requests} times")

@@ -74,6 +74,7 @@ class Pipeline:
         self.group = ImuGroup(cfg.reset_s)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
+        self._final: dict = {}  # (imu, axis) -> ((estimator id, fed_s), summary terms)
         self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
         self.failed: str | None = None  # a user-facing error found in the data (the caller reports it)
         self._tick = True
@@ -352,6 +353,36 @@ class Pipeline:
             return
         self._set_state(ch)
 
+    def final_terms(self, ch: Channel, ax: str) -> list[dict]:
+        """The terms of the summary (a fresh model selection on all data fed so far), computed once per state
+        of the estimators: :meth:`send_final` sends exactly these, so the last report and the summary agree."""
+        ch.flush()
+        key = (ch.imu, ax)
+        stamp = (id(ch.fast.get(ax)), ch.fed_s)
+        hit = self._final.get(key)
+        if hit is None or hit[0] != stamp:
+            hit = self._final[key] = (stamp, ch.report_terms(ax, full=True))
+        return hit[1]
+
+    def send_final(self) -> int:
+        """At the end of a live run: the summary's terms of every reported IMU set and sent at once (values,
+        sigmas, bounds), then its health and fault code, so the last values a ground station got are the
+        summary's. Returns the number of NAMED_VALUE_FLOAT sent."""
+        n = 0
+        for imu, ch in sorted(self.channels.items()):
+            if not ch.fast or ch.fed_s < self.cfg.min_report_s:
+                continue
+            for ax in ch.axes:
+                self.reporter.set_online_terms(imu, ax, self.final_terms(ch, ax))
+            self._set_state(ch)
+            prefix = f"IMU{imu}"
+            t = ch.last_t or 0.0
+            for name, v in sorted(self.reporter.values.items()):
+                if name.startswith(prefix) and not name[len(prefix)].isdigit():
+                    self.reporter.send_now(name, v, t)
+                    n += 1
+        return n
+
     def report_terms(self, ch: Channel, ax: str, full: bool = False) -> list[dict]:
         return ch.report_terms(ax, full)
 
@@ -377,7 +408,7 @@ class Pipeline:
             if ch.fast and ch.fed_s > 0:
                 ch.flush()
                 for ax in ch.axes:
-                    terms = ch.report_terms(ax, full=True)
+                    terms = self.final_terms(ch, ax)
                     row["axes"][ax] = {"current": ch.current_params(ax, terms), "terms": terms,
                                        "baseline": self.baseline.get(imu, ax) if self.baseline else None}
             out.append(row)
