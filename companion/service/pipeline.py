@@ -53,6 +53,7 @@ FAST_PARAMS = ("Q", "N")
 SLOW_PARAMS = ("B", "K", "R")
 STATE_FORMAT = "companion-run-state"
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
+CONFIRM_BLOCKS = 3  # still blocks after a bias jump is flagged before its size is confirmed
 OFF_RATE_BLOCKS = 3  # consecutive blocks at one new rate before the channel switches to it
 
 
@@ -74,6 +75,7 @@ class Pipeline:
         self.group = ImuGroup(cfg.reset_s)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
+        self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
         self._final: dict = {}  # (imu, axis) -> ((estimator id, fed_s), summary terms)
         self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
         self.failed: str | None = None  # a user-facing error found in the data (the caller reports it)
@@ -268,6 +270,7 @@ class Pipeline:
         pending, pending_stats = ch.pending, ch.pending_stats
         if still and pending is not None:
             self._report(ch.on_quiet(pending_stats, self._bias_extra_var(ch)), float(pending[-1, 0]))
+            self._confirm_bias(ch, float(pending[-1, 0]))
             if ch.feed(pending):
                 self._learn_done(ch)
         ch.settle(data, st, still)
@@ -317,6 +320,8 @@ class Pipeline:
     def _report(self, events: Iterable[FaultEvent], t: float) -> None:
         for ev in events:
             text = ev.text()
+            if ev.kind == "bias_jump" and ev.state == FAULT:
+                self._bias_said[(ev.imu, ev.axis)] = ev.value
             self.transitions.append((t, text))
             self.log(text)
             if ev.state == FAULT:
@@ -330,6 +335,20 @@ class Pipeline:
             if ev.kind != "disagree" and len(self.channels) == 2 and self.group.active():
                 # another fault may tell which of the two disagrees
                 self._report(self.group.name(self.channels, self.armed), t)
+
+    def _confirm_bias(self, ch: Channel, t: float) -> None:
+        """A bias jump is flagged on the block that holds the step, often part-way (a 1 deg/s step half a
+        block in is first sized 0.5 deg/s): after CONFIRM_BLOCKS more still blocks its size is known
+        (health.bias: their median offset); when that differs by more than 10 % from what was said, say it
+        again with the confirmed size."""
+        for ax, af in ch.faults.axes.items():
+            b = af.bias
+            said = self._bias_said.get((ch.imu, ax))
+            if b.state != FAULT or said is None or len(b.post) != CONFIRM_BLOCKS or not math.isfinite(b.value):
+                continue
+            self._bias_said.pop((ch.imu, ax), None)
+            if abs(b.value - said) > 0.1 * abs(b.value):
+                self._report([FaultEvent(ch.imu, ax, "bias_jump", FAULT, b.value)], t)
 
     def _set_state(self, ch: Channel, health: int | None = None) -> None:
         self.reporter.set_health(ch.imu, self.health(ch) if health is None else health)
