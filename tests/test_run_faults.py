@@ -122,3 +122,19 @@ def test_fault_state_survives_a_restart():
     ch = p2.channels[0]
     assert ch.faults.active()[0] == ("stuck", "gx")  # the most severe first
     assert ch.faults.noise_ref("gy") is not None and p2.health(ch) == 1  # the still references kept
+
+
+@pytest.mark.parametrize("seed, at, size_deg", [(1, 280.5, 1.0), (2, 280.3, -0.5)])
+def test_bias_jump_size_is_reported_within_10_percent_once_confirmed(seed, at, size_deg):
+    """A step part-way into a block is first sized from that block (a fraction of the step); once
+    confirmed the STATUSTEXT says the size again and the summary quotes it, both within 10 % of the step."""
+    import re
+
+    p, sink = run(330.0, fault=Fault("bias", at=at, size=size_deg * DEG, axis="gy"), seed=seed)
+    said = [float(m.group(1)) for _, t in fault_texts(sink) for m in [re.match(r"IMU0 gyro Y bias jump ([-+]\d+\.\d+) deg/s$", t)] if m]
+    assert said, fault_texts(sink)
+    assert said[-1] == pytest.approx(size_deg, rel=0.10), said
+    out = io.StringIO()
+    print_summary(p, out)
+    m = re.search(r"FAULT: IMU0 gyro Y bias jump ([-+]\d+\.\d+) deg/s", out.getvalue())
+    assert m and float(m.group(1)) == pytest.approx(size_deg, rel=0.10), out.getvalue()

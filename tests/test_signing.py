@@ -107,6 +107,10 @@ def test_wrong_key_or_unsigned_vehicle_is_refused_and_counted(tmp_path, keys, ve
     out, sim_out = session(tmp_path, run_key=good, sim_key=wrong if vehicle == "wrong key" else None)
     assert "no IMU data from the vehicle" in out
     assert rejected(out) > 1000, out  # 10000 RAW_IMU and 100 HEARTBEAT sent, none accepted
+    # said while running, not only at exit: a stderr warning (and once a STATUSTEXT)
+    live = re.search(r"warning: (\d+) frames rejected for their signature so far", out)
+    assert live and 0 < int(live.group(1)) <= rejected(out), out
+    assert out.index("frames rejected for their signature so far") < out.index("stopping:")
     if vehicle == "wrong key":  # and the vehicle did not take our (differently signed) frames either
         assert re.search(r"received 0 NAMED_VALUE_FLOAT, 0 STATUSTEXT, 0 requests", sim_out), sim_out
 

@@ -36,6 +36,7 @@ examples:
   companion run --source tcp:127.0.0.1:5760 --baseline healthy_analyze.json
   companion run --source flight.tlog --baseline-s 300          replay a log, print the summary
   companion run --source udpin:127.0.0.1:14551 --duration 60 --out-tlog session.tlog
+  companion run --source udpin:0.0.0.0:14550 --gcs udpout:192.168.1.10:14551   reports also to a GCS
 
 watch it in MAVProxy:   graph NAMED_VALUE_FLOAT[IMU0GX_N].value
             in Mission Planner: Ctrl-F > Tuning > MAV_IMU0GX_N
@@ -71,6 +72,10 @@ def register(subparsers) -> None:
     p.add_argument("--sysid", type=int, help="system id of the vehicle (default: the first one sending IMU data)")
     p.add_argument("--rate", type=float, metavar="HZ", help="IMU message rate to ask the autopilot for (default 100)")
     p.add_argument("--report-period", type=float, metavar="S", help="seconds of message time between two reports of a value (default 1)")
+    p.add_argument("--gcs", action="append", default=[], metavar="CONN",
+                   help="also send the reports (NAMED_VALUE_FLOAT, STATUSTEXT) and our HEARTBEAT to this ground-station "
+                        "link, e.g. udpout:GCS_IP:14550 (repeatable; same frames and signing as the main link): for "
+                        "routers such as MAVProxy that do not forward what their --out peer sends to other outputs")
     p.add_argument("--out-tlog", metavar="FILE", help="record what was received and sent (or, for a replay, the reports) to a tlog")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (default: run until Ctrl-C/SIGTERM)")
     p.add_argument("--quiet", action="store_true", help="only warnings and the final summary")
@@ -173,10 +178,16 @@ def _run(args, stop) -> int:
     from companion.service.replay import is_replay_source
 
     is_replay = is_replay_source(src)
+    gcs = tuple(getattr(args, "gcs", None) or ())
     if not is_replay:
         from companion.sources.connection import parse_connection
 
         parse_connection(src, args.baud)  # a clear error before anything else
+        for spec in gcs:
+            if parse_connection(spec)[0] != "net":
+                raise CompanionError(f"--gcs {spec}: expected a network link (udpout:HOST:PORT, tcp:HOST:PORT, ...)")
+    elif gcs:
+        raise CompanionError("--gcs applies to live links, not to a replayed log")
     state_path = runner.state_path(args.state, extra.get("state_file"), args.no_state, live=not is_replay)
     save_period = float(extra.get("save_period_s", RUNNER["save_period_s"].default))
     _check_outputs(args, extra, state_path)  # every output path checked before the work starts
@@ -207,7 +218,7 @@ def _run(args, stop) -> int:
 
             pipeline, link = run_live(src, args.baud, args.signing, args.accept_unsigned, args.duration, pcfg, link_cfg,
                                       period, baseline, scales, state_path, args.relearn, save_period, writer, stop,
-                                      log, warn, ready)
+                                      log, warn, ready, gcs=gcs)
         if state_path is not None:
             runner.save(pipeline, state_path, warn)
         print_summary(pipeline)

@@ -56,6 +56,7 @@ class BiasDetector:
         self.run: list = []  # offsets x - r since the evidence started
         self.hist: deque = deque(maxlen=HIST_BLOCKS)  # recent still-block means (step or ramp?)
         self.value = math.nan  # jump size (deg/s)
+        self.post: list = []  # offsets x - r of the blocks after the jump was flagged (its size, refined)
         self.drift_state = OK
         self.drift_count = 0
         self.drift_value = math.nan
@@ -109,9 +110,15 @@ class BiasDetector:
                 else:
                     out.append("bias_jump")
                     self.value = sum(self.run) / len(self.run) / DEG
+                    self.post = []
             else:
                 out.append("bias_jump")
                 self.r = x  # back to normal: follow from here
+        elif was == FAULT:
+            # the size once confirmed: the blocks after the flag, all wholly after the step (the flagging
+            # block may hold the step part-way and the run blocks before it), against the frozen reference
+            self.post.append(d)
+            self.value = float(np.median(self.post)) / DEG
         quiet = self.state == OK and self.up.s < 0.25 * H_ON and self.down.s < 0.25 * H_ON
         if quiet:
             self.r += (x - self.r) / REF_TAU_BLOCKS

@@ -9,6 +9,10 @@
   ``stale_s`` the requests are repeated every ``retry_s`` (link loss and return, autopilot reboot).
 - Replies go where the IMU data came from: on a ``udpin:`` link (several peers may write to our port),
   every message we send goes to the address of the last IMU message of the vehicle, not to all peers.
+- Ground-station outputs (``companion run --gcs CONN``): the reports (NAMED_VALUE_FLOAT, STATUSTEXT) and
+  our HEARTBEAT are also written, byte for byte (so with the same signature), to each of these links. A
+  router such as MAVProxy does not forward what its ``--out`` peer sends to its other outputs; this does.
+  Requests to the autopilot (COMMAND_LONG, REQUEST_DATA_STREAM) go only to the main link.
 
 Wall-clock time is used only here (heartbeats, retries); estimates and reports run on message time.
 """
@@ -215,9 +219,20 @@ class Link:
         self.acked = False  # the autopilot accepted a SET_MESSAGE_INTERVAL
         self.requests = 0
         self.sent = 0
+        self.texts = 0  # STATUSTEXT sent (the reporter's and the link's own)
+        self.values_sent = 0  # NAMED_VALUE_FLOAT sent
         self.recorder = None  # a TlogWriter: every frame we send is also recorded
+        self.outputs: list = []  # ground-station links (pymavlink connections): reports are copied there
+        self.output_sent = 0  # frames written to them (per output)
+        self._fanout = False  # the frame being encoded is a report or heartbeat (copied to ``outputs``)
         self.stats = LinkStats()
         self._loss_window_start: float | None = None
+        self._unanswered = 0  # rate requests since the rate was last as asked
+        self._given_up_at: float | None = None  # the rate the autopilot kept after three requests
+        self.rate_low = False  # the measured rate is below what we asked for (another client's request)
+        self.rate_drops = 0  # times it fell below, each answered by asking again
+        self.rate_requests = 0
+        self._rate_request_wall: float | None = None
         self._loss_warned = False
         self._udp_server = bool(getattr(conn, "udp_server", False))
         self._conn_write = conn.write
@@ -254,17 +269,46 @@ class Link:
             except OSError:
                 pass
         self.sent += 1
+        if self._fanout and self.outputs:
+            for out in self.outputs:
+                try:
+                    out.write(buf)
+                except OSError:
+                    pass  # a ground station not there (yet): UDP refusals are not our link's problem
+            self.output_sent += 1
         if self.recorder is not None:
             self.recorder.write_raw(bytes(buf), time.time())
 
+    def _report(self, send, *args) -> None:
+        """Encode and send one report frame (also copied to the ground-station outputs)."""
+        self._fanout = True
+        try:
+            send(*args)
+        finally:
+            self._fanout = False
+
     def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None:
-        self._mav().named_value_float_send(int(time_boot_ms), name.encode("ascii"), float(value))
+        self.values_sent += 1
+        self._report(self._mav().named_value_float_send, int(time_boot_ms), name.encode("ascii"), float(value))
 
     def send_statustext(self, severity: int, text: str) -> None:
-        self._mav().statustext_send(int(severity), text.encode("ascii", "replace")[:50])
+        self.texts += 1
+        self._report(self._mav().statustext_send, int(severity), text.encode("ascii", "replace")[:50])
 
     def send_heartbeat(self) -> None:
-        self._mav().heartbeat_send(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE)
+        self._report(self._mav().heartbeat_send, MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0,
+                     MAV_STATE_ACTIVE)
+
+    def drain_outputs(self) -> None:
+        """Read and drop what ground stations send back on their outputs (their heartbeats), so their
+        sockets never fill; a GCS talks to the autopilot through its own link, not through ours."""
+        for out in self.outputs:
+            try:
+                for _ in range(64):
+                    if out.recv_msg() is None:
+                        break
+            except Exception:
+                pass
 
     # --- receiving ---
     def count(self, msg) -> None:
@@ -311,6 +355,7 @@ class Link:
         if now - self.last_heartbeat_wall >= self.cfg.heartbeat_s:
             self.send_heartbeat()
             self.last_heartbeat_wall = now
+            self.drain_outputs()
         self._check_loss(now)
         data_stale = self.last_imu_wall is None or now - self.last_imu_wall > self.cfg.stale_s
         if not data_stale:
@@ -324,7 +369,51 @@ class Link:
         self.request_streams()
         self.last_request_wall = now
 
-    def request_streams(self) -> None:
+    def requested_rate(self) -> float:
+        """The IMU rate our requests ask for (REQUEST_DATA_STREAM is capped at 50 Hz)."""
+        return min(self.cfg.rate_hz, 50.0) if self.use_data_stream and not self.acked else self.cfg.rate_hz
+
+    def check_rate(self, measured_hz: float | None) -> None:
+        """The IMU rate measured in message time (the slowest IMU). Below 0.8 x the rate we asked for,
+        another client's stream request (a GCS or router setting stream rates on a shared link) or a rate
+        change took it: ask again, at most every ``retry_s``; the first time of each drop is logged. An
+        autopilot that does not give more after three requests in a row is not asked again at that rate."""
+        if measured_hz is None or not measured_hz > 0:
+            return
+        now = self.clock()
+        if self.last_imu_wall is None or now - self.last_imu_wall > self.cfg.stale_s:
+            return  # no data: the stale path asks again
+        target = self.requested_rate()
+        if measured_hz >= 0.8 * target:
+            self._unanswered = 0
+            self._given_up_at = None
+            if self.rate_low:
+                self.rate_low = False
+                if self.rate_drops == 1:
+                    self.log(f"IMU rate back to {measured_hz:.0f} Hz")
+            return
+        if self._given_up_at is not None and abs(measured_hz / self._given_up_at - 1.0) <= 0.2:
+            return
+        self._given_up_at = None
+        if not self.rate_low:
+            self.rate_low = True
+            self.rate_drops += 1
+            if self.rate_drops == 1:  # said once; the count is in the exit line
+                self.log(f"IMU rate {measured_hz:.1f} Hz, below the {target:.0f} Hz asked for (another client's stream "
+                     f"request?): asking again")
+        if self._rate_request_wall is not None and now - self._rate_request_wall < self.cfg.retry_s:
+            return
+        if self._unanswered >= 3:
+            self._given_up_at = measured_hz
+            self._unanswered = 0
+            self.log(f"the autopilot keeps the IMU at {measured_hz:.1f} Hz after 3 requests: not asking again at that rate")
+            return
+        self._rate_request_wall = now
+        self._unanswered += 1
+        self.rate_requests += 1
+        self.request_streams(quiet=True)
+
+    def request_streams(self, quiet: bool = False) -> None:
         target = self.sysid if self.sysid is not None else 0
         comp = self.autopilot_compid if self.autopilot_compid is not None else 0
         interval_us = 1e6 / self.cfg.rate_hz
@@ -335,7 +424,8 @@ class Link:
             rate = int(max(1, min(50, round(self.cfg.rate_hz))))
             self._mav().request_data_stream_send(target, comp, MAV_DATA_STREAM_RAW_SENSORS, rate, 1)
         self.requests += 1
-        self.log(f"asked for IMU data at {self.cfg.rate_hz:g} Hz" + (" (and REQUEST_DATA_STREAM)" if self.use_data_stream else ""))
+        if not quiet:
+            self.log(f"asked for IMU data at {self.cfg.rate_hz:g} Hz" + (" (and REQUEST_DATA_STREAM)" if self.use_data_stream else ""))
 
     def _check_loss(self, now: float) -> None:
         """Every ``loss_window_s``: a WARNING STATUSTEXT when more than ``loss_warn`` of the frames of the

@@ -27,7 +27,7 @@ from companion.health.faults import FAULT, OK, BlockStats, FaultEvent, block_sta
 from companion.health.monitor import ImuFaults
 from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.service.baseline_match import units_mismatch
-from companion.service.blocks import BlockCutter
+from companion.service.blocks import RATE_CHANGE, BlockCutter
 from companion.service.config import PipelineConfig
 from companion.service.motion import MotionGate, Peer, noise_ratio
 from companion.sources.timing import stamp_resolution
@@ -46,8 +46,7 @@ class Channel:
         self.cutter = BlockCutter(cfg.block_s, cfg.reset_s, cfg.gap_s, self.time_res)
         self.gate = MotionGate(cfg)
         self.detector = HealthDetector(imu, cfg.health)
-        self.faults = ImuFaults(imu, cfg.gyro_limit, max(1, int(round(cfg.fault_ref_s / cfg.block_s))),
-                                stamp_res=self.time_res)
+        self.faults = self._new_faults()
         self.fast: dict = {}
         self.slow: dict = {}
         self.learn: dict = {}
@@ -63,6 +62,9 @@ class Channel:
         self.recent: deque = deque(maxlen=3)  # (t, gyro) of the last closed blocks (IMU disagreement)
         self._blocks = {"blocks_still": 0, "blocks_moving": 0, "blocks_fed": 0}
         self.current: dict[str, dict[str, tuple[float, float]]] = {}
+        self.off_rate: list[float] = []  # block rates of the consecutive blocks off the stream's rate
+        self._profiles: list[tuple[float, dict]] = []  # (rate, rate-dependent state) of rates seen before
+        self.rate_switches = 0
 
     # ------------------------------------------------------------------ read-only views
     @property
@@ -83,6 +85,42 @@ class Channel:
         if self.last_stats is None:
             return None
         return Peer(self.last_stats, noise_ratio(self.last_stats, self.faults.still_sigma2()))
+
+    def _new_faults(self) -> ImuFaults:
+        return ImuFaults(self.imu, self.cfg.gyro_limit, max(1, int(round(self.cfg.fault_ref_s / self.cfg.block_s))),
+                         stamp_res=self.time_res)
+
+    # ------------------------------------------------------------------ rate changes
+    def switch_rate(self, new_rate: float, t_block: np.ndarray) -> bool:
+        """The stream now comes at ``new_rate`` (another client's stream request, a log-rate change): not a
+        sensor fault. What depends on the rate (the estimators, the fault references and detectors, the timing
+        reference) is kept aside for the old rate; the state kept for the new rate comes back when there is one
+        (a rate that returns), else it is learned afresh, without alarms. True when a kept state came back."""
+        self.flush()
+        old = self.rate_hz
+        if old is not None:
+            self._profiles = [(r, p) for r, p in self._profiles if abs(r / old - 1.0) > RATE_CHANGE]
+            self._profiles.append((old, {"fast": self.fast, "slow": self.slow, "learn": self.learn,
+                                         "learned_s": self.learned_s, "fed_s": self.fed_s, "faults": self.faults}))
+            self._profiles = self._profiles[-4:]
+        kept = [(abs(r / new_rate - 1.0), i) for i, (r, _) in enumerate(self._profiles) if abs(r / new_rate - 1.0) <= RATE_CHANGE]
+        self.cutter.prev_rate_hz, self.cutter.rate_hz = old, float(new_rate)
+        self.cutter.dts.clear()
+        self.cutter.dts.extend(np.diff(np.asarray(t_block, dtype=float)).tolist())
+        self.restart_settling()
+        self.off_rate = []
+        self.rate_switches += 1
+        if kept:
+            _, i = min(kept)
+            _, p = self._profiles.pop(i)
+            self.fast, self.slow, self.learn = p["fast"], p["slow"], p["learn"]
+            self.learned_s, self.fed_s, self.faults = p["learned_s"], p["fed_s"], p["faults"]
+            self._queue, self._queue_s = [], 0.0
+            return True
+        learning = bool(self.learn)
+        self.make_estimators(learning=learning)
+        self.faults = self._new_faults()
+        return False
 
     # ------------------------------------------------------------------ estimators
     def make_estimators(self, learning: bool) -> None:

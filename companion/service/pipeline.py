@@ -45,12 +45,16 @@ from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTI
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import FLOAT_MESSAGES, Channel
 from companion.service.config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
+from companion.service.blocks import RATE_CHANGE
 from companion.service.imu_group import ImuGroup
+from companion.timebase import period_of
 
 FAST_PARAMS = ("Q", "N")
 SLOW_PARAMS = ("B", "K", "R")
 STATE_FORMAT = "companion-run-state"
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
+CONFIRM_BLOCKS = 3  # still blocks after a bias jump is flagged before its size is confirmed
+OFF_RATE_BLOCKS = 3  # consecutive blocks at one new rate before the channel switches to it
 
 
 class Pipeline:
@@ -71,6 +75,9 @@ class Pipeline:
         self.group = ImuGroup(cfg.reset_s)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
+        self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
+        self._final: dict = {}  # (imu, axis) -> ((estimator id, fed_s), summary terms)
+        self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
         self.failed: str | None = None  # a user-facing error found in the data (the caller reports it)
         self._tick = True
         self._decode = None
@@ -210,7 +217,44 @@ class Pipeline:
             self.reporter.tick_times(tt)
 
     # ------------------------------------------------------------------ blocks
+    def _off_rate(self, ch: Channel, data: np.ndarray, rate_event: str | None) -> bool:
+        """A block whose own rate is off the stream's rate by more than RATE_CHANGE (another client's stream
+        request, a log-rate change) is held back from every detector and estimator: the references belong to
+        the old rate, a rate change is not a gyro fault. After OFF_RATE_BLOCKS such blocks at one rate the
+        channel switches to it (channel.switch_rate: the state of that rate back, or learned afresh)."""
+        if rate_event is not None:
+            if rate_event == "changed":  # the cutter saw it first (a slow drift of the rate)
+                new, old = ch.cutter.rate_hz, ch.cutter.prev_rate_hz
+                ch.cutter.rate_hz = old
+                self._switch_rate(ch, new, data[:, 0], old)
+            ch.off_rate = []
+            return rate_event == "changed"
+        if ch.rate_hz is None or data.shape[0] < 3:
+            return False
+        p = period_of(np.diff(data[:, 0]), ch.time_res)
+        if not (p > 0) or abs(1.0 / (p * ch.rate_hz) - 1.0) <= RATE_CHANGE:
+            ch.off_rate = []
+            return False
+        r = 1.0 / p
+        if ch.off_rate and abs(r / ch.off_rate[-1] - 1.0) > RATE_CHANGE:
+            ch.off_rate = []
+        ch.off_rate.append(r)
+        ch.restart_settling()
+        if len(ch.off_rate) >= OFF_RATE_BLOCKS:
+            old = ch.rate_hz
+            self._switch_rate(ch, float(np.median(ch.off_rate)), data[:, 0], old)
+        return True
+
+    def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None) -> None:
+        back = ch.switch_rate(rate, t_block)
+        self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
+        self.log(f"IMU{ch.imu}: rate changed {old:.1f} -> {ch.rate_hz:.1f} Hz (a stream request, not a gyro fault): "
+                 + ("the state kept for this rate is back" if back else "references and estimators learned afresh"))
+        self._set_state(ch)
+
     def _close_block(self, ch: Channel, data: np.ndarray, rate_event: str | None) -> None:
+        if self._off_rate(ch, data, rate_event):
+            return
         st = ch.stats(data)
         still = (not self.armed) and ch.is_still(data, st, self._peers(ch))
         t_end = float(data[-1, 0])
@@ -223,16 +267,12 @@ class Pipeline:
                     return
             ch.make_estimators(learning=not self._has_baseline(ch))
             self.log(f"IMU{ch.imu}: {ch.rate_hz:.1f} Hz")
-        elif rate_event == "changed":
-            self.log(f"IMU{ch.imu}: rate changed {ch.cutter.prev_rate_hz:.1f} -> {ch.rate_hz:.1f} Hz: estimators restart")
-            ch.make_estimators(learning=not self._has_baseline(ch))
-            ch.restart_settling()
-            return
         if ch.rate_hz is None:
             return
         pending, pending_stats = ch.settle(data, st, still)
         if pending is not None:
             self._report(ch.on_quiet(pending_stats, self._bias_extra_var(ch)), float(pending[-1, 0]))
+            self._confirm_bias(ch, float(pending[-1, 0]))
             if ch.feed(pending):
                 self._learn_done(ch)
 
@@ -281,6 +321,8 @@ class Pipeline:
     def _report(self, events: Iterable[FaultEvent], t: float) -> None:
         for ev in events:
             text = ev.text()
+            if ev.kind == "bias_jump" and ev.state == FAULT:
+                self._bias_said[(ev.imu, ev.axis)] = ev.value
             self.transitions.append((t, text))
             self.log(text)
             if ev.state == FAULT:
@@ -294,6 +336,20 @@ class Pipeline:
             if ev.kind != "disagree" and len(self.channels) == 2 and self.group.active():
                 # another fault may tell which of the two disagrees
                 self._report(self.group.name(self.channels, self.armed), t)
+
+    def _confirm_bias(self, ch: Channel, t: float) -> None:
+        """A bias jump is flagged on the block that holds the step, often part-way (a 1 deg/s step half a
+        block in is first sized 0.5 deg/s): after CONFIRM_BLOCKS more still blocks its size is known
+        (health.bias: their median offset); when that differs by more than 10 % from what was said, say it
+        again with the confirmed size."""
+        for ax, af in ch.faults.axes.items():
+            b = af.bias
+            said = self._bias_said.get((ch.imu, ax))
+            if b.state != FAULT or said is None or len(b.post) != CONFIRM_BLOCKS or not math.isfinite(b.value):
+                continue
+            self._bias_said.pop((ch.imu, ax), None)
+            if abs(b.value - said) > 0.1 * abs(b.value):
+                self._report([FaultEvent(ch.imu, ax, "bias_jump", FAULT, b.value)], t)
 
     def _set_state(self, ch: Channel, health: int | None = None) -> None:
         self.reporter.set_health(ch.imu, self.health(ch) if health is None else health)
@@ -316,6 +372,36 @@ class Pipeline:
             self.failed = error
             return
         self._set_state(ch)
+
+    def final_terms(self, ch: Channel, ax: str) -> list[dict]:
+        """The terms of the summary (a fresh model selection on all data fed so far), computed once per state
+        of the estimators: :meth:`send_final` sends exactly these, so the last report and the summary agree."""
+        ch.flush()
+        key = (ch.imu, ax)
+        stamp = (id(ch.fast.get(ax)), ch.fed_s)
+        hit = self._final.get(key)
+        if hit is None or hit[0] != stamp:
+            hit = self._final[key] = (stamp, ch.report_terms(ax, full=True))
+        return hit[1]
+
+    def send_final(self) -> int:
+        """At the end of a live run: the summary's terms of every reported IMU set and sent at once (values,
+        sigmas, bounds), then its health and fault code, so the last values a ground station got are the
+        summary's. Returns the number of NAMED_VALUE_FLOAT sent."""
+        n = 0
+        for imu, ch in sorted(self.channels.items()):
+            if not ch.fast or ch.fed_s < self.cfg.min_report_s:
+                continue
+            for ax in ch.axes:
+                self.reporter.set_online_terms(imu, ax, self.final_terms(ch, ax))
+            self._set_state(ch)
+            prefix = f"IMU{imu}"
+            t = ch.last_t or 0.0
+            for name, v in sorted(self.reporter.values.items()):
+                if name.startswith(prefix) and not name[len(prefix)].isdigit():
+                    self.reporter.send_now(name, v, t)
+                    n += 1
+        return n
 
     def report_terms(self, ch: Channel, ax: str, full: bool = False) -> list[dict]:
         return ch.report_terms(ax, full)
@@ -342,7 +428,7 @@ class Pipeline:
             if ch.fast and ch.fed_s > 0:
                 ch.flush()
                 for ax in ch.axes:
-                    terms = ch.report_terms(ax, full=True)
+                    terms = self.final_terms(ch, ax)
                     row["axes"][ax] = {"current": ch.current_params(ax, terms), "terms": terms,
                                        "baseline": self.baseline.get(imu, ax) if self.baseline else None}
             out.append(row)
