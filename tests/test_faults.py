@@ -10,7 +10,7 @@ import pytest
 
 from companion.health.bias import BiasDetector
 from companion.health.disagreement import PairDisagreement
-from companion.health.faults import FAULT, OK, AxisRef, FaultEvent, block_stats
+from companion.health.faults import AXES, FAULT, OK, AxisRef, FaultEvent, Observation, block_stats
 from companion.health.noise import NoiseDetector
 from companion.health.saturation import SaturationDetector
 from companion.health.spikes import SpikeDetector
@@ -34,6 +34,11 @@ def learn_ref(rng, sigma, blocks=30, mean=0.0):
             r.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n, blocks)
     assert all(r.ready for r in refs)
     return refs
+
+
+def at(st, j, ref=None, **kw):
+    """The observation of axis j of a block, as monitor.ImuFaults hands it to a detector."""
+    return Observation(0, st, axis=AXES[j], ref=ref, **kw)
 
 
 def scale_of(refs):
@@ -66,13 +71,13 @@ def test_stuck_caught_fast_with_or_without_dither_and_never_on_healthy_rounded_n
         for _ in range(600):  # 10 healthy minutes per seed and axis
             st = block_stats(rounded_noise(rng, FS, sigma), scale_of(refs))
             for j, d in enumerate(dets):
-                flagged_healthy += d.update(refs[j], float(st.v2[j]), int(st.changes[j]), st.n)
+                flagged_healthy += len(d.update(at(st, j, refs[j])))
         frozen = rng.normal(0, sigma, 3)
         dither = rng.uniform(0, 0.3) * sigma * (seed % 2)  # half exactly frozen, half with a small dither
         for k in range(20):
             y = frozen + rng.normal(0, dither, (FS, 3)) if dither else np.tile(frozen, (FS, 1))
             st = block_stats(y, scale_of(refs))
-            if dets[0].update(refs[0], float(st.v2[0]), int(st.changes[0]), st.n):
+            if dets[0].update(at(st, 0, refs[0])):
                 delays.append(k + 1)
                 break
     assert flagged_healthy == 0
@@ -82,9 +87,12 @@ def test_stuck_caught_fast_with_or_without_dither_and_never_on_healthy_rounded_n
 def test_stuck_without_reference_uses_equal_values():
     d = StuckDetector()
     ref = AxisRef()
-    assert not d.update(ref, 0.0, 0, 100)
-    assert d.update(ref, 0.0, 0, 100) and d.state == FAULT
-    assert d.update(ref, 1e-4, 90, 100) and d.state == OK
+    frozen = block_stats(np.full((100, 3), 0.002))
+    moving = block_stats(np.round(np.random.default_rng(0).normal(0, 0.01, (100, 3)) / LSB) * LSB)
+    assert not d.update(at(frozen, 0, ref))
+    ev = d.update(at(frozen, 0, ref))
+    assert d.state == FAULT and [(e.kind, e.state, e.critical) for e in ev] == [("stuck", FAULT, True)]
+    assert d.update(at(moving, 0, ref)) and d.state == OK
 
 
 def test_noise_rise_detected_near_its_information_limit_and_not_on_healthy():
@@ -96,12 +104,12 @@ def test_noise_rise_detected_near_its_information_limit_and_not_on_healthy():
         d = NoiseDetector()
         for _ in range(600):
             st = block_stats(rounded_noise(rng, FS, sigma), scale_of(refs))
-            false += d.update(refs[0], float(st.v2[0]))
+            false += len(d.update(at(st, 0, refs[0])))
         for f in delays:
             d = NoiseDetector()
             for k in range(300):
                 st = block_stats(rounded_noise(rng, FS, f * sigma), scale_of(refs))
-                if d.update(refs[0], float(st.v2[0])):
+                if d.update(at(st, 0, refs[0])):
                     delays[f].append(k + 1)
                     assert d.value == pytest.approx(f, rel=0.35)
                     break
@@ -121,11 +129,11 @@ def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
         warm = 0.1 * DEG * (1 - np.exp(-np.arange(1200) / 200.0)) * (1 if seed % 2 else -1)
         for k in range(1200):  # 20 min of cold-start warm-up: 0.1 deg/s exponential, tau 200 s
             st = block_stats(rounded_noise(rng, FS, sigma, warm[k]), scale_of(refs))
-            quiet += len(d.update(refs[0], float(st.mean[0]), float(st.v2[0]), st.n))
+            quiet += len(d.update(at(st, 0, refs[0])))
         step = rng.uniform(0.3, 1.0) * DEG * (1 if seed % 2 else -1)
         for k in range(30):
             st = block_stats(rounded_noise(rng, FS, sigma, warm[-1] + step), scale_of(refs))
-            if "bias_jump" in d.update(refs[0], float(st.mean[0]), float(st.v2[0]), st.n):
+            if "bias_jump" in [e.kind for e in d.update(at(st, 0, refs[0]))]:
                 jumps.append((k + 1, d.value, step / DEG))
                 break
     assert quiet == 0
@@ -139,7 +147,7 @@ def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
     kinds = []
     for k in range(400):
         st = block_stats(rounded_noise(rng, FS, sigma, 2e-5 * max(k - 60, 0)), scale_of(refs))
-        kinds += d.update(refs[0], float(st.mean[0]), float(st.v2[0]), st.n)
+        kinds += [e.kind for e in d.update(at(st, 0, refs[0]))]
         if kinds:
             break
     assert kinds == ["bias_drift"] and d.drift_state == FAULT
@@ -154,15 +162,15 @@ def test_spikes_named_as_spikes_not_noise():
         sp, nd = SpikeDetector(), NoiseDetector()
         for _ in range(900):
             st = block_stats(rounded_noise(rng, FS, sigma), scale_of(refs))
-            false += sp.update(refs[0], int(st.spikes[0]), st.n)
+            false += len(sp.update(at(st, 0, refs[0])))
         frac = rng.uniform(0.002, 0.01)
         for k in range(60):
             y = rounded_noise(rng, FS, sigma)
             hit = rng.random(FS) < frac
             y[hit, 0] += 0.3 * rng.choice([-1, 1], hit.sum())
             st = block_stats(y, scale_of(refs))
-            noise_flags += nd.update(refs[0], float(st.v2[0]))
-            if sp.update(refs[0], int(st.spikes[0]), st.n):
+            noise_flags += len(nd.update(at(st, 0, refs[0])))
+            if sp.update(at(st, 0, refs[0])):
                 delays.append(k + 1)
                 break
     assert false == 0 and noise_flags == 0
@@ -179,16 +187,16 @@ def test_saturation_at_a_clip_level_and_at_the_range_limit():
         y = rounded_noise(rng, FS, 2e-3) + 1.2 * np.sin(2 * np.pi * 0.7 * t)[:, None]
         y[:, 0] = np.clip(y[:, 0], -0.8, 0.8)
         st = block_stats(y, scale_of(refs))
-        changed.append(d.update(refs[0], float(st.top[0]), int(st.top_run[0])))
+        changed.append(bool(d.update(at(st, 0, refs[0]))))
     assert any(changed) and d.state == FAULT and d.value == pytest.approx(0.8)
     healthy = SaturationDetector(abs_limit=32.767)  # the same motion unclipped (axis y): never
     for k in range(200):
         t = (k * FS + np.arange(FS)) / FS
         y = rounded_noise(rng, FS, 2e-3) + 1.2 * np.sin(2 * np.pi * 0.7 * t)[:, None]
         st = block_stats(y, scale_of(refs))
-        assert not healthy.update(refs[1], float(st.top[1]), int(st.top_run[1]))
+        assert not healthy.update(at(st, 1, refs[1]))
     hard = SaturationDetector(abs_limit=32.767)
-    assert hard.update(refs[0], 32.767, 1)
+    assert hard.update(at(block_stats(np.array([[32.767, 0, 0]] + [[0.0, 0, 0]] * 9)), 0, refs[0]))
 
 
 def test_timing_rate_drop_and_jitter():
@@ -197,23 +205,24 @@ def test_timing_rate_drop_and_jitter():
     t0 = 0.0
     for k in range(30):
         t = t0 + np.arange(100) / 100.0
-        assert not d.update(t)
+        assert not d.update(Observation(t=t))
         t0 = t[-1] + 0.01
     for k in range(10):  # 40 % of the messages lost on the link: not a sensor fault
         t = t0 + np.flatnonzero(rng.random(100) > 0.4) / 100.0
-        assert not d.update(t)
+        assert not d.update(Observation(t=t))
         t0 += 1.0
     for k in range(5):  # the sensor now samples at 50 Hz
         t = t0 + np.arange(50) / 50.0
-        ch = d.update(t)
+        ch = d.update(Observation(t=t))
         t0 = t[-1] + 0.02
     assert ch and d.state == FAULT and "50 Hz" in d.detail
+    assert [(e.kind, e.axis, e.state) for e in ch] == [("rate", "", FAULT)]
     d2 = TimingDetector()
     for k in range(10):
-        d2.update(np.arange(100) / 100.0 + k)
+        d2.update(Observation(t=np.arange(100) / 100.0 + k))
     for k in range(5):
         t = np.cumsum(rng.uniform(0.002, 0.018, 100)) + 20 + k
-        ch = d2.update(t)
+        ch = d2.update(Observation(t=t))
     assert ch and "irregular" in d2.detail
 
 
@@ -242,14 +251,17 @@ def test_disagreement_tolerates_scale_and_misalignment_in_fast_rotation_and_catc
             y0 = w + b0 + rng.normal(0, sigma, (FS, 3))
             y1 = w @ C.T + b1 + rng.normal(0, sigma, (FS, 3))
             nv = sigma ** 2 + LSB ** 2 / 12
-            false += len(pair.update(np.round(y0 / LSB) * LSB, np.round(y1 / LSB) * LSB, 2 * nv, nv))
+            false += len(pair.update(Observation(0, y=np.round(y0 / LSB) * LSB, other=np.round(y1 / LSB) * LSB,
+                                                 other_imu=1, noise_var=2 * nv, noise_other=nv)))
         step = DEG * (1 if seed % 2 else -1)
         for k in range(20):
             w = rotation(rng, FS, (600 + k) * FS)
             y0 = w + b0 + rng.normal(0, sigma, (FS, 3))
             y1 = w @ C.T + b1 + rng.normal(0, sigma, (FS, 3))
             y1[:, 2] += step
-            if 2 in pair.update(y0, y1, 2 * sigma ** 2, sigma ** 2):
+            ev = pair.update(Observation(0, y=y0, other=y1, other_imu=1, noise_var=2 * sigma ** 2, noise_other=sigma ** 2))
+            if "gz" in [e.axis for e in ev]:
+                assert ev[-1].detail == "IMU1" and ev[-1].state == FAULT
                 delays.append(k + 1)
                 break
     assert false == 0
@@ -274,18 +286,18 @@ def test_resolution_loss_and_float_data_untested():
     d = ResolutionDetector()
     for _ in range(300):
         st = block_stats(rounded_noise(rng, FS, 3 * LSB))
-        assert not d.update(float(st.step[0]), int(st.changes[0]))
+        assert not d.update(at(st, 0))
     assert d.lsb == pytest.approx(LSB)
     flagged = False
     for k in range(12):  # the output now moves in 4 mrad/s steps
         y = np.round(rng.normal(0, 8 * LSB, (FS, 3)) / (4 * LSB)) * 4 * LSB
         st = block_stats(y)
-        flagged |= d.update(float(st.step[0]), int(st.changes[0]))
+        flagged |= bool(d.update(at(st, 0)))
     assert flagged and d.value == pytest.approx(4.0)
     f = ResolutionDetector()  # float data: no LSB, never tested
     for _ in range(50):
         st = block_stats(rng.normal(0, 1e-3, (FS, 3)))
-        assert not f.update(float(st.step[0]), int(st.changes[0]))
+        assert not f.update(at(st, 0))
     assert f.lsb == 0.0
 
 
@@ -298,7 +310,7 @@ def test_millisecond_stamps_at_rates_off_the_ms_grid_are_regular(rate):
     n = int(rate)
     for k in range(40):
         t = np.floor((10.0 + k + np.arange(n) / rate + rng.uniform(0, 1e-4, n)) * 1e3) / 1e3
-        assert not d.update(t), (k, d.detail)
+        assert not d.update(Observation(t=t)), (k, d.detail)
     assert d.ref_rate == pytest.approx(rate, rel=0.01)
     if rate > 200.0:
         return  # a 1-ms stamp cannot show jitter of a fraction of a 2.5-3.3 ms period
@@ -307,5 +319,43 @@ def test_millisecond_stamps_at_rates_off_the_ms_grid_are_regular(rate):
         ideal = 10.0 + k + np.arange(n) / rate
         t = np.floor((ideal + rng.normal(0, 0.35 / rate, n)) * 1e3) / 1e3
         t = np.maximum.accumulate(t + 1e-9 * np.arange(n))
-        bad = d.update(t) or bad
+        bad = d.update(Observation(t=t)) or bad
     assert bad and "irregular" in d.detail
+
+
+def test_two_faults_at_once_are_both_in_the_mask_and_the_code_is_the_most_severe():
+    from companion.health.faults import KIND_CODE, fault_mask, mask_kinds
+    from companion.health.monitor import ImuFaults
+    from companion.mavlink.reporter import Reporter
+
+    rng = np.random.default_rng(7)
+    sigma = 2 * LSB
+    f = ImuFaults(0, ref_blocks=30)
+    for _ in range(30):  # learn the still references
+        st = block_stats(rounded_noise(rng, FS, sigma))
+        assert f.on_block(st, np.arange(FS) / FS, True) == [] and f.on_quiet(st) == []
+    assert f.mask() == 0 and f.code() == 0
+    events = []
+    for k in range(5):  # x frozen and y 5x noisier, in the same blocks
+        y = rounded_noise(rng, FS, sigma)
+        y[:, 0] = 0.004
+        y[:, 1] = np.round(rng.normal(0, 5 * sigma, FS) / LSB) * LSB
+        st = block_stats(y, f.dd_scale_ref())
+        t = 30 + k + np.arange(FS) / FS
+        events += f.on_block(st, t, True) + f.on_quiet(st)
+    assert {(e.kind, e.axis) for e in events} == {("stuck", "gx"), ("noise", "gy")}
+    assert f.code() == KIND_CODE["stuck"]  # the most severe
+    assert f.mask() == (1 << KIND_CODE["stuck"]) | (1 << KIND_CODE["noise"]) == fault_mask(["noise", "stuck"])
+    assert mask_kinds(f.mask()) == ["stuck", "noise"]
+
+    class Sink:
+        values = {}
+
+        def send_named_value_float(self, ms, name, value):
+            self.values[name] = value
+
+    rep = Reporter(Sink(), 1.0)
+    rep.set_fault(0, f.code(), f.mask())
+    rep.tick(0.0)
+    rep.tick(1.0)
+    assert Sink.values == {"IMU0G_FLT": 1.0, "IMU0G_FLM": 6.0}

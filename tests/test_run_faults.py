@@ -57,6 +57,7 @@ def test_healthy_handled_and_flown_two_imus_no_alarm():
     assert fault_texts(sink) == []
     assert sink.values["IMU0G_HLTH"] == 0.0 and sink.values["IMU1G_HLTH"] == 0.0
     assert sink.values["IMU0G_FLT"] == 0.0 and sink.values["IMU1G_FLT"] == 0.0
+    assert sink.values["IMU0G_FLM"] == 0.0 and sink.values["IMU1G_FLM"] == 0.0
     assert p.channels[0].counts["blocks_moving"] >= 230 + 40  # flight and handlings seen as motion
 
 
@@ -103,6 +104,9 @@ def test_in_flight_fault_named_from_the_disagreement(imus, kind):
     assert (MAV_SEVERITY_CRITICAL, f"IMU{odd} gyro X disagrees with {others}") in texts
     if kind == "stuck":
         assert (MAV_SEVERITY_CRITICAL, f"IMU{odd} gyro X stuck") in texts
+        # both faults at once: the code is the most severe, the mask holds both
+        assert sink.values[f"IMU{odd}G_FLT"] == KIND_CODE["stuck"]
+        assert sink.values[f"IMU{odd}G_FLM"] == (1 << KIND_CODE["stuck"]) | (1 << KIND_CODE["disagree"])
     assert not any(t.startswith("IMU0") for _, t in texts if imus == 3)
     assert sink.values[f"IMU{odd}G_HLTH"] == 1.0
     t_first = min(t for t, text in p.transitions if text.startswith(f"IMU{odd}"))

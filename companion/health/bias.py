@@ -29,7 +29,7 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.faults import FAULT, OK, AxisRef, Cusum, gauss_mean_llr
+from companion.health.faults import FAULT, OK, AxisRef, Cusum, FaultEvent, Observation, debounce, gauss_mean_llr
 
 DEG = math.pi / 180.0
 DELTA = 0.2 * DEG  # rad/s, mean shift the jump CUSUMs are tuned to
@@ -65,7 +65,19 @@ class BiasDetector:
     def state(self) -> int:
         return FAULT if FAULT in (self.up.state, self.down.state) else OK
 
-    def update(self, ref: AxisRef, x: float, v2: float, n: int, extra_var: float = 0.0) -> list[str]:
+    def update(self, obs: Observation) -> list[FaultEvent]:
+        """One still block of one axis (its mean and white variance; ``obs.extra_var`` the Allan-predicted
+        wander of a block mean); the ``bias_jump`` and ``bias_drift`` changes, in that order."""
+        st, j = obs.stats, obs.col
+        out = []
+        for kind in self._step(obs.ref, float(st.mean[j]), float(st.v2[j]), st.n, obs.extra_var):
+            if kind == "bias_jump":
+                out.append(obs.event(kind, self.state, self.value))
+            else:
+                out.append(obs.event(kind, self.drift_state, self.drift_value))
+        return out
+
+    def _step(self, ref: AxisRef, x: float, v2: float, n: int, extra_var: float = 0.0) -> list[str]:
         """One still block; returns the kinds that changed state (``bias_jump``, ``bias_drift``)."""
         if not (ref.ready and math.isfinite(x) and n > 0):
             return []
@@ -109,16 +121,16 @@ class BiasDetector:
         off = self.e - ref.mu
         if self.drift_state == OK:
             self.drift_count = self.drift_count + 1 if abs(off) - 4.0 * sig_e > DRIFT_TOL else 0
-            if self.drift_count >= DRIFT_HOLD and self.state == OK:
+            if self.drift_count >= DRIFT_HOLD and self.state == OK:  # not while a jump is flagged
                 self.drift_state, self.drift_count, self.drift_value = FAULT, 0, off / DEG
                 self.drift_r = ref.mu
                 out.append("bias_drift")
         else:
             last = list(self.hist)[-DRIFT_HOLD:]
             back = abs(off) < 0.7 * DRIFT_TOL and abs(sum(last) / len(last) - self.drift_r) < 0.5 * DELTA
-            self.drift_count = self.drift_count + 1 if back else 0
-            if self.drift_count >= DRIFT_HOLD:
-                self.drift_state, self.drift_count = OK, 0
+            self.drift_state, self.drift_count, changed = debounce(self.drift_state, self.drift_count, False,
+                                                                   DRIFT_HOLD, DRIFT_HOLD, good=back)
+            if changed:
                 out.append("bias_drift")
         return out
 

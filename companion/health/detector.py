@@ -32,6 +32,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping
 
+from companion.health.hold import debounce
+
 HEALTHY = 0
 DEGRADING = 1
 LEARNING = 2
@@ -100,17 +102,9 @@ class ParamDetector:
         if math.isnan(ratio):
             return False
         self.ratio = ratio
-        if self.state == HEALTHY:
-            self.count = self.count + 1 if lower > math.log(cfg.ratio_on) else 0
-            if self.count >= cfg.hold_on:
-                self.state, self.count = DEGRADING, 0
-                return True
-        else:
-            self.count = self.count + 1 if lower < math.log(cfg.ratio_off) else 0
-            if self.count >= cfg.hold_off:
-                self.state, self.count = HEALTHY, 0
-                return True
-        return False
+        self.state, self.count, changed = debounce(self.state, self.count, lower > math.log(cfg.ratio_on),
+                                                   cfg.hold_on, cfg.hold_off, good=lower < math.log(cfg.ratio_off))
+        return changed
 
 
 @dataclass

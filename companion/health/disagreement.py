@@ -31,7 +31,8 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.faults import DD_NU_PER_SAMPLE, FAULT, OK, Cusum, chi2_llr, gauss_mean_llr
+from companion.health.faults import (AXES, DD_NU_PER_SAMPLE, FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr,
+                                     gauss_mean_llr)
 
 DEG = math.pi / 180.0
 DELTA = 0.5 * DEG
@@ -68,11 +69,17 @@ class PairDisagreement:
     def state(self) -> int:
         return FAULT if any(self.axis_state(a) == FAULT for a in range(3)) else OK
 
-    def update(self, yi: np.ndarray, yj: np.ndarray, noise_var: float | None = None,
-               noise_j: float | None = None) -> list[int]:
-        """Aligned samples (m, 3) of both IMUs; returns the axes (0..2) whose state changed. ``noise_var``:
-        the white variance expected of the residual (both IMUs' still references summed), ``noise_j``: IMU
-        j's own (the regressor's noise, corrected for in the fit)."""
+    def update(self, obs: Observation) -> list[FaultEvent]:
+        """Aligned samples (m, 3) of both IMUs: ``obs.y`` of IMU i, ``obs.other`` of IMU j; ``obs.noise_var``
+        the white variance expected of the residual (both IMUs' still references summed), ``obs.noise_other``
+        IMU j's own (the regressor's noise, corrected for in the fit). Returns the pair's state changes per
+        axis as events of IMU i with ``detail`` "IMU{j}" (which IMU is at fault is decided by the group)."""
+        changed = self._step(obs.y, obs.other, obs.noise_var, obs.noise_other)
+        return [FaultEvent(self.i, AXES[a], self.kind, self.axis_state(a), float(self.value[a]), f"IMU{self.j}")
+                for a in changed]
+
+    def _step(self, yi: np.ndarray, yj: np.ndarray, noise_var: float | None = None,
+              noise_j: float | None = None) -> list[int]:
         m = yi.shape[0]
         if m < 10:
             return []

@@ -1,10 +1,14 @@
 """Fault taxonomy of a gyro: the common interface of the fault detectors, their codes and block statistics.
 
 Every detector (one module per kind: ``stuck``, ``noise``, ``bias``, ``spikes``, ``saturation``,
-``timing``, ``disagreement``) follows the same small contract, in the spirit of PX4's DataValidator:
+``resolution``, ``timing``, ``disagreement``) implements :class:`FaultDetector`, in the spirit of PX4's
+DataValidator (small explicit states, named thresholds, one update):
 
-* ``update(...)`` with the statistics of one block of samples (``BlockStats``, one column per axis);
-  it returns a ``FaultEvent`` when the state changed (OK -> FAULT or FAULT -> OK), else None;
+* ``update(obs: Observation) -> list[FaultEvent]``: one block's :class:`Observation` (the block's
+  ``BlockStats``, timestamps, still or not, the axis and its reference, the Allan-predicted extra variance of
+  a block mean, and for a pair of IMUs the aligned samples of both); it returns the state changes
+  (OK -> FAULT or FAULT -> OK) as events, empty when nothing changed (the bias detector may return two:
+  a jump and a drift);
 * ``state`` is ``OK`` or ``FAULT``; ``value`` the figure the report quotes (ratio, offset, percentage);
 * ``state_dict()`` / ``load_state_dict()`` for the run state file.
 
@@ -16,25 +20,25 @@ healthy hypothesis H0 (the reference learned from still data) and a fault hypoth
 A CUSUM with threshold h has an in-control average run length of about e^h blocks (Lorden's bound:
 ARL0 >= e^h), and a detection delay close to h / KL(H1 || H0), the information limit for that
 false-alarm rate (Lorden 1971). Once in FAULT the same recursion with -llr (evidence for healthy)
-clears it when it exceeds ``h_off``.
+clears it when it exceeds ``h_off``. The others count consecutive bad / good blocks (:func:`debounce`).
 
-Numbers (codes) for the NAMED_VALUE_FLOAT ``IMU{i}G_FLT`` (the most severe active fault of the IMU):
-see ``KIND_CODE``. Pure numpy; no I/O.
+Reported as NAMED_VALUE_FLOAT: ``IMU{i}G_FLT`` the code of the most severe active fault (``KIND_CODE``,
+order ``PRIORITY``) and ``IMU{i}G_FLM`` the bitmask of every active fault (bit k set: code k active,
+:func:`fault_mask`), so that faults present together are all seen. Pure numpy; no I/O.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Mapping, Protocol
+from dataclasses import dataclass, replace
+from typing import Iterable, Mapping, Protocol
 
 import numpy as np
 
-OK = 0
-FAULT = 1
+from companion.health.hold import FAULT, OK, debounce  # noqa: F401  (re-exported)
 
-#: fault kind -> code sent as IMU{i}G_FLT (0: no fault). Ordered by severity: the highest-priority
-#: active kind (lowest position in PRIORITY) is the one reported.
+#: fault kind -> code sent as IMU{i}G_FLT (0: no fault) and bit in IMU{i}G_FLM. The highest-priority active
+#: kind (lowest position in PRIORITY) is the code reported.
 KIND_CODE = {
     "none": 0,
     "stuck": 1,
@@ -92,12 +96,70 @@ KIND_WORDS = {"stuck": "stuck", "noise": "noise", "bias_jump": "bias jump", "bia
               "allan": "Allan terms", "resolution": "resolution loss"}
 
 
+AXES = ("gx", "gy", "gz")
+
+
+def fault_mask(kinds: Iterable[str]) -> int:
+    """Bitmask of active fault kinds: bit ``KIND_CODE[kind]`` set for each (``IMU{i}G_FLM``; exact in a float32
+    up to 2^24)."""
+    m = 0
+    for k in kinds:
+        m |= 1 << KIND_CODE[k]
+    return m
+
+
+def mask_kinds(mask: int) -> list[str]:
+    """The kinds whose bits are set in ``mask`` (inverse of :func:`fault_mask`)."""
+    return [k for k, c in KIND_CODE.items() if c and int(mask) >> c & 1]
+
+
+@dataclass
+class Observation:
+    """What a fault detector sees of one block of one IMU (the one argument of ``update``).
+
+    * ``imu``: the IMU; ``axis``: "gx", "gy", "gz" for a per-axis detector ("" for the whole IMU);
+    * ``stats``: the block's statistics (``BlockStats``, one column per axis); ``t``: its timestamps (s);
+    * ``still``: the motion gate's decision for the block; ``ref``: the axis' still reference (``AxisRef``);
+    * ``extra_var``: Allan-predicted variance of a block mean around the bias reference ((rad/s)^2);
+    * pairs of IMUs only: ``y`` and ``other`` the aligned samples (m, 3) of this IMU and of ``other_imu``,
+      ``noise_var`` the white variance expected of their difference, ``noise_other`` the other IMU's own.
+    """
+
+    imu: int = 0
+    stats: BlockStats | None = None
+    t: np.ndarray | None = None
+    still: bool = True
+    axis: str = ""
+    ref: AxisRef | None = None
+    extra_var: float = 0.0
+    y: np.ndarray | None = None
+    other: np.ndarray | None = None
+    other_imu: int = -1
+    noise_var: float | None = None
+    noise_other: float | None = None
+
+    @property
+    def col(self) -> int:
+        """Column of ``axis`` in ``stats`` and in the samples."""
+        return AXES.index(self.axis)
+
+    def at(self, axis: str, ref: "AxisRef | None" = None, **kw) -> "Observation":
+        """The same block seen by the detector of one axis."""
+        return replace(self, axis=axis, ref=ref, **kw)
+
+    def event(self, kind: str, state: int, value: float = math.nan, detail: str = "",
+              critical: bool = False) -> "FaultEvent":
+        return FaultEvent(self.imu, self.axis, kind, state, value, detail, critical)
+
+
 class FaultDetector(Protocol):
-    """The small interface every fault detector implements."""
+    """The interface every fault detector implements (see the module docstring)."""
 
     kind: str
     state: int
     value: float
+
+    def update(self, obs: Observation) -> list[FaultEvent]: ...
 
     def state_dict(self) -> dict: ...
 

@@ -15,7 +15,8 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.bias import BiasDetector
-from companion.health.faults import (FAULT, KIND_CODE, OK, PRIORITY, AxisRef, BlockStats, FaultEvent)
+from companion.health.faults import (AXES, FAULT, KIND_CODE, OK, PRIORITY, AxisRef, BlockStats, FaultDetector,
+                                     FaultEvent, Observation, fault_mask)
 from companion.health.noise import NoiseDetector
 from companion.health.resolution import ResolutionDetector
 from companion.health.saturation import SaturationDetector
@@ -23,7 +24,6 @@ from companion.health.spikes import SpikeDetector
 from companion.health.stuck import StuckDetector
 from companion.health.timing import TimingDetector
 
-AXES = ("gx", "gy", "gz")
 REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detectors
 
 
@@ -36,6 +36,10 @@ class AxisFaults:
         self.spikes = SpikeDetector()
         self.saturation = SaturationDetector(abs_limit)
         self.resolution = ResolutionDetector()
+        #: run on every block (still or moving), spikes and saturation only while the axis is not stuck
+        self.every: tuple[FaultDetector, ...] = (self.stuck, self.spikes, self.saturation)
+        #: run on still, settled blocks once the reference is learned and the axis is not stuck
+        self.quiet: tuple[FaultDetector, ...] = (self.resolution, self.noise, self.bias)
 
     def states(self) -> dict[str, int]:
         return {"stuck": self.stuck.state, "noise": self.noise.state, "bias_jump": self.bias.state,
@@ -73,42 +77,38 @@ class ImuFaults:
             return None
         return np.array([math.sqrt(6.0 * r.sigma2) for r in refs])
 
+    def observe(self, st: BlockStats, t: np.ndarray | None = None, still: bool = True) -> Observation:
+        """The observation of one block handed to the detectors of this IMU (``at`` narrows it to an axis)."""
+        return Observation(self.imu, st, t, still)
+
     def on_block(self, st: BlockStats, t: np.ndarray, still: bool) -> list[FaultEvent]:
-        """Every block: stuck, spikes, saturation, timing."""
-        ev = []
-        if self.timing.update(t):
-            ev.append(FaultEvent(self.imu, "", "rate", self.timing.state, self.timing.value, self.timing.detail))
-        for j, (ax, af) in enumerate(self.axes.items()):
-            if af.stuck.update(af.ref, float(st.v2[j]), int(st.changes[j]), st.n):
-                ev.append(FaultEvent(self.imu, ax, "stuck", af.stuck.state, critical=True))
-            count = int(st.spikes[j] if still else st.spikes_solo[j])
-            if af.stuck.state == OK and af.spikes.update(af.ref, count, st.n):
-                ev.append(FaultEvent(self.imu, ax, "spikes", af.spikes.state, af.spikes.value))
-            if af.stuck.state == OK and af.saturation.update(af.ref, float(st.top[j]), int(st.top_run[j])):
-                ev.append(FaultEvent(self.imu, ax, "saturation", af.saturation.state, af.saturation.value))
+        """Every block: timing, then per axis stuck, spikes, saturation."""
+        obs = self.observe(st, t, still)
+        ev = self.timing.update(obs)
+        for ax, af in self.axes.items():
+            o = obs.at(ax, af.ref)
+            ev += af.stuck.update(o)
+            if af.stuck.state == OK:
+                ev += af.spikes.update(o)
+                ev += af.saturation.update(o)
         return ev
 
     def on_quiet(self, st: BlockStats, extra_var: Mapping[str, float] | None = None) -> list[FaultEvent]:
-        """A still, settled block: learn the references, then noise and bias."""
+        """A still, settled block: learn the references, then resolution, noise and bias."""
         ev = []
         self.quiet_blocks += 1
+        obs = self.observe(st)
         for j, (ax, af) in enumerate(self.axes.items()):
-            v2, x = float(st.v2[j]), float(st.mean[j])
             if not af.ref.ready:
                 if af.stuck.state == OK and af.spikes.state == OK:
-                    af.ref.add(v2, float(st.m2[j]), x, int(st.spikes[j]), st.n, self.ref_blocks)
+                    af.ref.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n,
+                               self.ref_blocks)
                 continue
             if af.stuck.state == FAULT:
                 continue
-            if af.resolution.update(float(st.step[j]), int(st.changes[j])):
-                ev.append(FaultEvent(self.imu, ax, "resolution", af.resolution.state, af.resolution.value))
-            if af.noise.update(af.ref, v2):
-                ev.append(FaultEvent(self.imu, ax, "noise", af.noise.state, af.noise.value))
-            for kind in af.bias.update(af.ref, x, v2, st.n, (extra_var or {}).get(ax, 0.0)):
-                if kind == "bias_jump":
-                    ev.append(FaultEvent(self.imu, ax, kind, af.bias.state, af.bias.value))
-                else:
-                    ev.append(FaultEvent(self.imu, ax, kind, af.bias.drift_state, af.bias.drift_value))
+            o = obs.at(ax, af.ref, extra_var=(extra_var or {}).get(ax, 0.0))
+            for det in af.quiet:
+                ev += det.update(o)
         return ev
 
     def set_external(self, kind: str, axis: str, state: int) -> None:
@@ -127,8 +127,13 @@ class ImuFaults:
         return sorted(out, key=lambda ka: (PRIORITY.index(ka[0]), ka[1]))
 
     def code(self) -> int:
+        """``IMU{i}G_FLT``: the code of the most severe active fault (0: none)."""
         act = self.active()
         return KIND_CODE[act[0][0]] if act else 0
+
+    def mask(self) -> int:
+        """``IMU{i}G_FLM``: every active fault kind as a bit (bit k: code k), e.g. stuck and noise -> 0b110."""
+        return fault_mask(k for k, _ in self.active())
 
     def noise_ref(self, axis: str) -> float | None:
         r = self.axes[axis].ref

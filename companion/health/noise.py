@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
-from companion.health.faults import AxisRef, Cusum, OK, chi2_llr
+from companion.health.faults import Cusum, FaultEvent, OK, Observation, chi2_llr
 
 R1 = 1.69
 H_ON = 20.0
@@ -40,7 +40,11 @@ class NoiseDetector:
     def state(self) -> int:
         return self.cusum.state
 
-    def update(self, ref: AxisRef, v2: float) -> bool:
+    def update(self, obs: Observation) -> list[FaultEvent]:
+        """One still block of one axis: the white-noise variance against the reference."""
+        return [obs.event(self.kind, self.state, self.value)] if self._step(obs.ref, float(obs.stats.v2[obs.col])) else []
+
+    def _step(self, ref, v2: float) -> bool:
         if not (ref.ready and ref.sigma2 > 0 and math.isfinite(v2)):
             return False
         u = v2 / ref.sigma2

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
-from companion.health.faults import FAULT, OK
+from companion.health.faults import FAULT, FaultEvent, OK, Observation, debounce
 
 MIN_CHANGES = 20
 HOLD = 10
@@ -31,7 +31,13 @@ class ResolutionDetector:
         self.count = 0
         self.value = math.nan
 
-    def update(self, step: float, changes: int) -> bool:
+    def update(self, obs: Observation) -> list[FaultEvent]:
+        """One still block of one axis: its smallest step against the reference LSB."""
+        st, j = obs.stats, obs.col
+        step = float(st.step[j])
+        return [obs.event(self.kind, self.state, self.value)] if self._step(step, int(st.changes[j])) else []
+
+    def _step(self, step: float, changes: int) -> bool:
         if changes < MIN_CHANGES or not math.isfinite(step) or step <= 0:
             return False
         if math.isnan(self.lsb):
@@ -43,18 +49,10 @@ class ResolutionDetector:
             return False
         if self.lsb <= 0:
             return False
-        bad = step >= 1.9 * self.lsb
-        if self.state == OK:
-            self.count = self.count + 1 if bad else 0
-            if self.count >= HOLD:
-                self.state, self.count, self.value = FAULT, 0, step / self.lsb
-                return True
-        else:
-            self.count = self.count + 1 if not bad else 0
-            if self.count >= HOLD:
-                self.state, self.count = OK, 0
-                return True
-        return False
+        self.state, self.count, changed = debounce(self.state, self.count, step >= 1.9 * self.lsb, HOLD, HOLD)
+        if changed and self.state == FAULT:
+            self.value = step / self.lsb
+        return changed
 
     def state_dict(self) -> dict:
         return {"state": self.state, "lsb": None if math.isnan(self.lsb) else self.lsb, "count": self.count}

@@ -14,7 +14,7 @@ import math
 from collections import deque
 from typing import Mapping
 
-from companion.health.faults import FAULT, OK, AxisRef
+from companion.health.faults import FAULT, OK, FaultEvent, Observation, debounce
 
 RUN = 5
 BLOCKS = 3
@@ -33,22 +33,22 @@ class SaturationDetector:
         self.quiet = 0
         self.value = math.nan
 
-    def update(self, ref: AxisRef, top: float, top_run: int) -> bool:
-        noise = 10.0 * math.sqrt(ref.sigma2) if ref.ready else 0.0
+    def update(self, obs: Observation) -> list[FaultEvent]:
+        """One block of one axis: at the range limit, or a plateau at the same level again and again."""
+        ref, st, j = obs.ref, obs.stats, obs.col
+        top, top_run = float(st.top[j]), int(st.top_run[j])
+        noise = 10.0 * math.sqrt(ref.sigma2) if (ref is not None and ref.ready) else 0.0
         hit = top >= 0.999 * self.abs_limit
         level = top if (top_run >= RUN and top >= max(MIN_LEVEL, noise)) else None
         self.levels.append(level)
         same = sum(1 for v in self.levels if v is not None and level is not None and abs(v - level) <= 1e-9 * max(1.0, level))
         now = hit or (level is not None and same >= BLOCKS)
-        if self.state == OK and now:
-            self.state, self.value, self.quiet = FAULT, top, 0
-            return True
-        if self.state == FAULT:
-            self.quiet = 0 if (hit or level is not None) else self.quiet + 1
-            if self.quiet >= CLEAR_BLOCKS:
-                self.state = OK
-                return True
-        return False
+        # on at once; cleared after CLEAR_BLOCKS blocks with neither the limit nor a plateau
+        self.state, self.quiet, changed = debounce(self.state, self.quiet, now, 1, CLEAR_BLOCKS,
+                                                   good=not (hit or level is not None))
+        if changed and self.state == FAULT:
+            self.value = top
+        return [obs.event(self.kind, self.state, self.value)] if changed else []
 
     def state_dict(self) -> dict:
         return {"state": self.state, "quiet": self.quiet, "value": None if math.isnan(self.value) else self.value}

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
-from companion.health.faults import AxisRef, Cusum
+from companion.health.faults import Cusum, FaultEvent, Observation
 
 LAMBDA1 = 1e-3  # outliers per sample under H1
 LAMBDA0_FLOOR = 1e-5
@@ -41,7 +41,14 @@ class SpikeDetector:
     def state(self) -> int:
         return self.cusum.state
 
-    def update(self, ref: AxisRef, count: int, n: int) -> bool:
+    def update(self, obs: Observation) -> list[FaultEvent]:
+        """One block of one axis: every outlier when still, else only those on this axis alone (a shock
+        moves every axis)."""
+        st, j = obs.stats, obs.col
+        count = int(st.spikes[j] if obs.still else st.spikes_solo[j])
+        return [obs.event(self.kind, self.state, self.value)] if self._step(obs.ref, count, st.n) else []
+
+    def _step(self, ref, count: int, n: int) -> bool:
         if n <= 0:
             return False
         lam0 = max(ref.spike_rate if ref.ready else 0.0, LAMBDA0_FLOOR)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
-from companion.health.faults import FAULT, OK, AxisRef, Cusum, chi2_llr
+from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 
 R1 = 0.1  # variance collapse the CUSUM is tuned to
 H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
@@ -42,8 +42,13 @@ class StuckDetector:
     def state(self) -> int:
         return self.cusum.state
 
-    def update(self, ref: AxisRef, v2: float, changes: int, n: int) -> bool:
-        """One block of one axis (any motion state); True when the state changed."""
+    def update(self, obs: Observation) -> list[FaultEvent]:
+        """One block of one axis (any motion state); the state change, if any (always critical)."""
+        return [obs.event(self.kind, self.state, critical=True)] if self._step(obs) else []
+
+    def _step(self, obs: Observation) -> bool:
+        j, st, ref = obs.col, obs.stats, obs.ref
+        v2, changes, n = float(st.v2[j]), int(st.changes[j]), st.n
         self.equal_run = self.equal_run + 1 if (changes == 0 and n >= 50) else 0
         if ref.ready and ref.sigma2 > 0 and math.isfinite(v2):
             u = v2 / ref.sigma2

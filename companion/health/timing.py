@@ -19,7 +19,7 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.faults import FAULT, OK
+from companion.health.faults import FAULT, FaultEvent, OK, Observation, debounce
 from companion.sources.timing import period_of
 
 REF_BLOCKS = 10
@@ -40,7 +40,13 @@ class TimingDetector:
         self.value = math.nan
         self.detail = ""
 
-    def update(self, t: np.ndarray) -> bool:
+    def update(self, obs: Observation) -> list[FaultEvent]:
+        """One block of the IMU (its timestamps ``obs.t``); the event names the whole IMU (axis "")."""
+        if not self._step(np.asarray(obs.t, dtype=float)):
+            return []
+        return [FaultEvent(obs.imu, "", self.kind, self.state, self.value, self.detail)]
+
+    def _step(self, t: np.ndarray) -> bool:
         if t.size < 5 or t[-1] <= t[0]:
             return False
         dt = np.diff(t)
@@ -58,19 +64,12 @@ class TimingDetector:
                 self._rates = []
             return False
         bad = rate < DROP * self.ref_rate or jitter > JITTER
-        if self.state == OK:
-            self.count = self.count + 1 if bad else 0
-            if self.count >= HOLD:
-                self.state, self.count, self.value = FAULT, 0, rate
-                self.detail = (f"rate {rate:.0f} Hz (was {self.ref_rate:.0f})" if rate < DROP * self.ref_rate
-                               else f"timing irregular ({100 * jitter:.0f} % jitter)")
-                return True
-        else:
-            self.count = self.count + 1 if not bad else 0
-            if self.count >= HOLD:
-                self.state, self.count = OK, 0
-                return True
-        return False
+        self.state, self.count, changed = debounce(self.state, self.count, bad, HOLD, HOLD)
+        if changed and self.state == FAULT:
+            self.value = rate
+            self.detail = (f"rate {rate:.0f} Hz (was {self.ref_rate:.0f})" if rate < DROP * self.ref_rate
+                           else f"timing irregular ({100 * jitter:.0f} % jitter)")
+        return changed
 
     def state_dict(self) -> dict:
         return {"state": self.state, "ref_rate": None if math.isnan(self.ref_rate) else self.ref_rate,

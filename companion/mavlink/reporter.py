@@ -15,11 +15,14 @@ name                value                                        unit
 ``IMU{i}A{a}_K``    accel random walk (optional)                 m/s/h^1.5
 ``IMU{i}G_HLTH``    0 healthy, 1 degrading, 2 learning, 3 stale  -
 ``IMU{i}G_FLT``     fault kind code (0 none; table below)        -
+``IMU{i}G_FLM``     bitmask of all active faults (bit k: code k) -
 ==================  ==========================================  =========================
 
 ``IMU{i}G_FLT`` (companion.health.faults.KIND_CODE; the most severe active fault of the IMU's gyros):
 0 none, 1 stuck, 2 noise, 3 bias jump, 4 bias drift, 5 spikes, 6 saturation, 7 rate drop / irregular
-timing, 8 disagreement with another IMU, 9 Allan term (N, B, K) above its baseline.
+timing, 8 disagreement with another IMU, 9 Allan term (N, B, K) above its baseline, 10 resolution loss.
+``IMU{i}G_FLM`` has bit k set for every active code k (e.g. 6.0 = stuck and noise together), so faults
+present at the same time are all reported while ``IMU{i}G_FLT`` keeps the most severe.
 
 Uncertainty and bounds (:meth:`Reporter.set_online_terms`, what ``companion run`` sends): each value
 ``IMU{i}G{a}_{P}`` (P = Q, N, B, K, R) has a companion ``IMU{i}G{a}_{P}S`` = its 1-sigma in the same unit
@@ -73,6 +76,13 @@ def health_name(imu: int) -> str:
 
 def fault_name(imu: int) -> str:
     name = f"IMU{int(imu)}G_FLT"
+    if not NAME_RE.match(name):
+        raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} is not <= 10 characters of [A-Z0-9_]")
+    return name
+
+
+def fault_mask_name(imu: int) -> str:
+    name = f"IMU{int(imu)}G_FLM"
     if not NAME_RE.match(name):
         raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} is not <= 10 characters of [A-Z0-9_]")
     return name
@@ -145,9 +155,18 @@ class Reporter:
     def set_health(self, imu: int, state: int) -> None:
         self.set_value(health_name(imu), float(state))
 
-    def set_fault(self, imu: int, code: int) -> None:
-        """``IMU{i}G_FLT``: the fault kind code of the IMU (0: none)."""
+    def set_fault(self, imu: int, code: int, mask: int | None = None) -> None:
+        """``IMU{i}G_FLT``: the fault kind code of the IMU (0: none); ``IMU{i}G_FLM``: the bitmask of every
+        active fault (bit k: code k), when given."""
         self.set_value(fault_name(imu), float(code))
+        if mask is not None:
+            self.set_value(fault_mask_name(imu), float(mask))
+
+    def send_now(self, name: str, value: float, t_s: float) -> None:
+        """Set ``name`` and send it at once, out of the cadence (e.g. STALE when no message time advances)."""
+        self.set_value(name, value)
+        self.sink.send_named_value_float(int(round(t_s * 1000.0)) & 0xFFFFFFFF, name, float(value))
+        self.sent += 1
 
     def tick(self, t_s: float) -> int:
         """Send what is due at message time ``t_s``; return the number of messages sent."""

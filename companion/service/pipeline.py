@@ -40,10 +40,10 @@ from companion.health.baseline import Baseline
 from companion.service.baseline_match import check_baseline, stream_meta, units_mismatch
 from companion.health.detector import DEGRADING, LEARNING, DetectorConfig, HealthDetector, STATE_NAMES
 from companion.health.disagreement import PairDisagreement
-from companion.health.faults import FAULT, OK, FaultEvent, block_stats
+from companion.health.faults import FAULT, OK, FaultEvent, Observation, block_stats
 from companion.health.monitor import ImuFaults
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
-                                        Reporter)
+                                        Reporter, health_name)
 from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.sources.timing import period_of, stamp_resolution
 
@@ -488,7 +488,9 @@ class Pipeline:
             nv = [ci.faults.noise_ref(ax) for ax in ("gx", "gy", "gz")] + [cj.faults.noise_ref(ax) for ax in ("gx", "gy", "gz")]
             ready = all(v is not None for v in nv)
             noise_var = (max(nv[:3]) + max(nv[3:])) if ready else None
-            if pair.update(gi, gj, noise_var, max(nv[3:]) if ready else None):
+            obs = Observation(i, y=gi, other=gj, other_imu=j, noise_var=noise_var,
+                              noise_other=max(nv[3:]) if ready else None)
+            if pair.update(obs):
                 self._name_disagreement(float(t[-1]))
 
     def _name_disagreement(self, t: float) -> None:
@@ -540,7 +542,7 @@ class Pipeline:
             self.reporter.statustext(text, sev)
             ch = self.channels.get(ev.imu)
             if ch is not None:
-                self.reporter.set_fault(ch.imu, ch.faults.code())
+                self.reporter.set_fault(ch.imu, ch.faults.code(), ch.faults.mask())
                 self.reporter.set_health(ch.imu, self.health(ch))
             if ev.kind != "disagree" and len(self.channels) == 2 and self.disagree:
                 self._name_disagreement(t)  # another fault may tell which of the two disagrees
@@ -613,7 +615,7 @@ class Pipeline:
         self._flush_feed(ch)
         if ch.fed_s < self.cfg.min_report_s:
             self.reporter.set_health(ch.imu, self.health(ch) if ch.faults.active() else LEARNING)
-            self.reporter.set_fault(ch.imu, ch.faults.code())
+            self.reporter.set_fault(ch.imu, ch.faults.code(), ch.faults.mask())
             return
         effects_params = None
         for ax in ch.axes:
@@ -641,7 +643,7 @@ class Pipeline:
                     high = any(d.state == DEGRADING for (a, _), d in ch.detector.detectors.items() if a == ax)
                     ch.faults.set_external("allan", ax, FAULT if high else OK)
         self.reporter.set_health(ch.imu, self.health(ch))
-        self.reporter.set_fault(ch.imu, ch.faults.code())
+        self.reporter.set_fault(ch.imu, ch.faults.code(), ch.faults.mask())
 
     def health(self, ch: Channel) -> int:
         """0 healthy, 1 degrading (any fault, even while the Allan baseline is still being learned), 2 learning."""
@@ -655,9 +657,7 @@ class Pipeline:
         """Send every IMU's health at once (e.g. STALE when the link is silent: no message time advances)."""
         for imu, ch in sorted(self.channels.items()):
             s = self.health(ch) if state is None else state
-            self.reporter.set_health(imu, s)
-            self.reporter.sink.send_named_value_float(
-                int(round((ch.last_t or 0.0) * 1000)) & 0xFFFFFFFF, f"IMU{imu}G_HLTH", float(s))
+            self.reporter.send_now(health_name(imu), float(s), ch.last_t or 0.0)
 
     def summary(self) -> list[dict]:
         out = []
