@@ -40,6 +40,7 @@ from companion.health.baseline import Baseline
 from companion.service.baseline_match import check_baseline, stream_meta, units_mismatch
 from companion.health.detector import DEGRADING, LEARNING, DetectorConfig, HealthDetector, STATE_NAMES
 from companion.health.disagreement import PairDisagreement
+from companion.health.limits import FaultLimits
 from companion.health.faults import FAULT, OK, FaultEvent, Observation, block_stats
 from companion.health.monitor import ImuFaults
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
@@ -76,6 +77,7 @@ class PipelineConfig:
     gap_s: float = 0.5
     estimator: dict = field(default_factory=dict)  # passed to make_estimator (e.g. effects, phases, max_tau_s)
     health: DetectorConfig = field(default_factory=DetectorConfig)
+    faults: FaultLimits = field(default_factory=FaultLimits)  # magnitude floors of the fault detectors
 
     @classmethod
     def from_mapping(cls, cfg: Mapping | None) -> "PipelineConfig":
@@ -86,6 +88,8 @@ class PipelineConfig:
                 raise ValueError(f"run: unknown key {k!r}")
             if k == "health":
                 out.health = DetectorConfig.from_mapping(v)
+            elif k == "faults":
+                out.faults = FaultLimits.from_mapping(v)
             elif k == "estimator":
                 out.estimator = dict(v or {})
             elif k == "sysid":
@@ -126,7 +130,7 @@ class Channel:
         self.next_check_t: float | None = None
         self.detector = HealthDetector(imu, cfg.health)
         self.faults = ImuFaults(imu, cfg.gyro_limit, max(1, int(round(cfg.fault_ref_s / cfg.block_s))),
-                                stamp_res=self.time_res)
+                                stamp_res=self.time_res, limits=cfg.faults)
         self.last_stats = None  # BlockStats of the last closed block (motion consensus between IMUs)
         self.pending_stats = None
         self.ref_accel_std = None
@@ -463,7 +467,7 @@ class Pipeline:
             key = (i, j)
             pair = self.pairs.get(key)
             if pair is None:
-                pair = self.pairs[key] = PairDisagreement(i, j)
+                pair = self.pairs[key] = PairDisagreement(i, j, self.cfg.faults)
             ti = np.concatenate([b[0] for b in ci.recent])
             tj = np.concatenate([b[0] for b in cj.recent])
             t_end = min(ti[-1], tj[-1])
@@ -738,7 +742,7 @@ class Pipeline:
         pairs = {}
         for key, pd in (d.get("pairs") or {}).items():
             i, j = (int(v) for v in key.split("-"))
-            pairs[(i, j)] = PairDisagreement(i, j)
+            pairs[(i, j)] = PairDisagreement(i, j, self.cfg.faults)
             pairs[(i, j)].load_state_dict(pd)
         self.pairs = pairs
         self.disagree = {(int(k), str(a)): str(dt) for k, a, dt in d.get("disagree") or []}
