@@ -195,7 +195,7 @@ def run_case(kind, seed, max_delay):
 def run_b2(seed, max_delay=3600.0):
     """B x2 with the baseline from `companion analyze` (analyze_axis: the same code) of a 2 h still log of the
     same gyro (another seed); the degradation adds an independent flicker of B sqrt(3) at t_d."""
-    from companion.cli.analyze import analyze_axis
+    from companion.analysis.axis import analyze_axis
     from companion.health.baseline import Baseline, params_from_terms
     from companion.sim.vehicle import Degradation
 

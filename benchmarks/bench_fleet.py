@@ -41,7 +41,7 @@ sys.path.insert(0, ROOT)
 
 def _warm():
     """Import what the task needs (both runs are timed warm: the imports are a once-per-process cost)."""
-    import companion.cli.analyze  # noqa: F401
+    import companion.analysis.stream  # noqa: F401
     import companion.fleet.identity  # noqa: F401
     import companion.fleet.task  # noqa: F401
     import companion.sources.tlog  # noqa: F401

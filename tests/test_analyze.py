@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from companion.cli.analyze import analyze_axis, parse_taus
+from companion.analysis.axis import analyze_axis
+from companion.analysis.taus import parse_taus
 from companion.cli.main import main
 from companion.errors import CompanionError
 
@@ -95,7 +96,7 @@ def test_user_errors_exit_2(tmp_path, capsys):
 
 def test_sample_tlog_analyses(repo_root):
     """The README's first command: tlogs/sample.tlog, made from tlogs/sample_model.yaml."""
-    from companion.cli.analyze import analyze_stream
+    from companion.analysis.stream import analyze_stream
     from companion.sim.model import load_model
     from companion.sources import load
 

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from companion import units
-from companion.cli.analyze import analyze_axis
+from companion.analysis.axis import analyze_axis
 
 pytestmark = pytest.mark.shared
 

@@ -179,10 +179,7 @@ def _flight_log(rng, N, rate=100.0, still=(900.0, 700.0), flight=120.0, gap=15.0
 
 @pytest.mark.parametrize("layout", ["2015", "4.x"])
 def test_still_flight_still_gives_N_within_3_percent(tmp_path, layout):
-    from companion.cli.analyze import analyze_source
-
-    class Args:
-        taus, online, start, end, use_all, min_still, config, duration = "octave", False, None, None, False, 10.0, None, None
+    from companion.analysis.source import analyze_source
 
     errs = []
     seeds = range(6)
@@ -192,7 +189,7 @@ def test_still_flight_still_gives_N_within_3_percent(tmp_path, layout):
         t, g, acc, armed = _flight_log(rng, N)
         p = tmp_path / f"s{seed}.bin"
         write_imu_log(p, t, g[None], acc[None], layout=layout, params={"INS_GYRO_FILTER": 20.0}, armed=armed)
-        entries, summary = analyze_source(str(p), Args, ["gx", "gy", "gz"], progress_enabled=False)
+        entries, summary = analyze_source(str(p), ["gx", "gy", "gz"], "octave")
         sel = summary["selection"]
         assert len(sel["intervals"]) == 2, sel["description"]
         assert 1550 <= sel["still_s"] <= 1605  # 1600 s still, minus guards
@@ -208,11 +205,8 @@ def test_still_flight_still_gives_N_within_3_percent(tmp_path, layout):
 
 
 def test_px4_still_flight_still_gives_N_within_3_percent(tmp_path):
-    from companion.cli.analyze import analyze_source
+    from companion.analysis.source import analyze_source
     from companion.sim.ulog_writer import write_ulog
-
-    class Args:
-        taus, online, start, end, use_all, min_still, config, duration = "octave", False, None, None, False, 10.0, None, None
 
     errs = []
     for seed in range(4):
@@ -224,7 +218,7 @@ def test_px4_still_flight_still_gives_N_within_3_percent(tmp_path):
         p = tmp_path / f"s{seed}.ulg"
         write_ulog(p, t[:n], g[None, :n], acc[None, :n], combined=(gc[:n], ac[:n]),
                    params={"IMU_GYRO_CUTOFF": 20.0}, armed=armed)
-        entries, summary = analyze_source(str(p), Args, ["gx", "gy", "gz"], progress_enabled=False)
+        entries, summary = analyze_source(str(p), ["gx", "gy", "gz"], "octave")
         assert len(summary["selection"]["intervals"]) == 2, summary["selection"]["description"]
         assert summary["selection"]["method"] == "armed state + motion"
         assert sorted(e["message"] for e in entries) == ["sensor_combined", "sensor_gyro"]
@@ -336,7 +330,7 @@ def test_run_replays_a_dataflash_log(tmp_path, capsys):
 def test_N_survives_model_misfit():
     """White noise plus a square-wave bias and a slow line the model lacks: the global fit misfits and moves
     N by about 2 %; the local refit of the white-noise region keeps N within 1 % of the truth."""
-    from companion.cli.analyze import analyze_axis
+    from companion.analysis.axis import analyze_axis
 
     for seed in range(4):
         rng = np.random.default_rng(seed)

@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import sys
-import time
 from pathlib import Path
 
 from companion.errors import CompanionError
@@ -77,7 +75,7 @@ def register(subparsers) -> None:
     p.add_argument("--out-tlog", metavar="FILE", help="record what was received and sent (or, for a replay, the reports) to a tlog")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (default: run until Ctrl-C/SIGTERM)")
     p.add_argument("--quiet", action="store_true", help="only warnings and the final summary")
-    # i14: MAVLink 2 signing (companion/mavlink/signing.py, docs/run.md#signed-links)
+    # MAVLink 2 signing (companion/mavlink/signing.py, docs/run.md#signed-links)
     p.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing with this 32-byte key (raw or 64 hex "
                    "digits; the autopilot's key, set with SETUP_SIGNING): sign what we send, accept only "
                    "correctly signed frames, count the rejected ones")
@@ -160,70 +158,15 @@ def build(args, log):
     return pcfg, link_cfg, period, extra, baseline, scales
 
 
-class ReplaySink:
-    """Reporter sink for a replay: counts, keeps the latest values, optionally writes a tlog."""
-
-    def __init__(self, writer=None, echo=None):
-        self.writer = writer
-        self.echo = echo
-        self.values: dict[str, float] = {}
-        self.sent = 0
-        self.texts: list[str] = []
-        self.t = 0.0
-
-    def send_named_value_float(self, time_boot_ms, name, value):
-        self.values[name] = value
-        self.sent += 1
-        self.t = time_boot_ms / 1000.0
-        if self.writer is not None:
-            self.writer.write(self.writer.mav.named_value_float_encode(int(time_boot_ms), name.encode(), float(value)), self.t)
-
-    def send_statustext(self, severity, text):
-        self.texts.append(text)
-        if self.echo:
-            self.echo(f"STATUSTEXT sev={severity} t={self.t:.0f}s: {text}")
-        if self.writer is not None:
-            self.writer.write(self.writer.mav.statustext_encode(int(severity), text.encode()), self.t)
-
-
-def _state_path(args, extra, live: bool) -> Path | None:
-    if args.no_state:
-        return None
-    if args.state:
-        return Path(args.state)
-    if extra.get("state_file"):
-        return Path(os.path.expanduser(str(extra["state_file"])))
-    if not live:
-        return None
-    base = os.environ.get("XDG_STATE_HOME") or os.path.join(os.path.expanduser("~"), ".local", "state")
-    return Path(base) / "companion" / "run_state.json"
-
-
 def print_summary(pipeline, out=None) -> None:
-    out = out or sys.stdout
+    from companion.service.runner import summary_lines
 
-    rows = pipeline.summary()
-    if not rows:
-        print("no IMU data from the vehicle", file=out)
-        return
-    for r in rows:
-        c = r["counts"]
-        rate = f"{r['rate_hz']:.1f} Hz" if r["rate_hz"] else "rate unknown"
-        print(f"IMU{r['imu']} ({r['message']}, {rate}): {r['health']}; {r['still_s']:.0f} s still data used; "
-              f"{c['samples']} samples, {c['blocks_moving']} moving blocks, {c['resets']} resets, {c['gaps']} gaps, "
-              f"{c['duplicates']} duplicates", file=out)
-        for text in r.get("faults") or ():
-            print(f"  FAULT: {text}", file=out)
-        from companion.estimators.report import summary_line
-
-        for ax, d in r["axes"].items():
-            print(f"  {ax}: " + summary_line(d["terms"], ax, d["baseline"]), file=out)
-    for t, text in pipeline.transitions:
-        print(f"  at {t:.0f} s: {text}", file=out)
+    for line in summary_lines(pipeline):
+        print(line, file=out or sys.stdout)
 
 
 def run(args) -> int:
-    # i14: signal handling first (a SIGTERM during start-up still saves and exits 0), then the imports
+    # signal handling first (a SIGTERM during start-up still saves and exits 0), then the imports
     stop = {"flag": False}
 
     def on_signal(signum, frame):
@@ -238,9 +181,7 @@ def run(args) -> int:
 
 
 def _run(args, stop) -> int:
-    from companion.mavlink.reporter import Reporter
-    from companion.service.pipeline import Pipeline
-    from companion.service.state import load_state, save_state
+    from companion.service import runner
 
     quiet = args.quiet
 
@@ -262,9 +203,9 @@ def _run(args, stop) -> int:
         from companion.sources.connection import parse_connection
 
         parse_connection(src, args.baud)  # a clear error before anything else
-    state_path = _state_path(args, extra, live=not is_replay)
+    state_path = runner.state_path(args.state, extra.get("state_file"), args.no_state, live=not is_replay)
     save_period = float(extra.get("save_period_s", 60.0))
-    _check_outputs(args, extra, state_path)  # i14: every output path checked before the work starts
+    _check_outputs(args, extra, state_path)  # every output path checked before the work starts
     args.signing = _signing_key(args, is_replay, warn)
 
     writer = None
@@ -277,27 +218,25 @@ def _run(args, stop) -> int:
             except OSError as exc:
                 raise CompanionError(f"{args.out_tlog}: cannot write ({exc.strerror or exc})") from None
         if is_replay:
-            from companion.service.replay import replay_log, replay_tlog
-
-            sink = ReplaySink(writer, echo=None if quiet else print)
-            reporter = Reporter(sink, period)
-            pipeline = Pipeline(pcfg, reporter, baseline, log, scales)
-            _restore(pipeline, state_path, args, load_state, warn, log)
-            if src.lower().endswith((".tlog", ".tlog.gz")):
-                totals = replay_tlog(src, pipeline, scales, stop=lambda: stop["flag"])
-            else:
-                totals = replay_log(src, pipeline, stop=lambda: stop["flag"])
+            pipeline, sink, totals = runner.replay(src, pcfg, period, baseline, scales, writer, state_path, args.relearn,
+                                                   lambda: stop["flag"], log, warn, echo=None if quiet else print)
             log(f"replayed {totals['frames']} frames ({totals['imu_samples']} IMU samples, {totals['bad_frames']} bad frames), "
                 f"{sink.sent} NAMED_VALUE_FLOAT, {len(sink.texts)} STATUSTEXT")
             if not pipeline.channels:
                 raise CompanionError(f"{src}: no IMU data to replay")
         else:
-            pipeline, link = _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_period,
-                                   writer, stop, log, warn)
+            from companion.service.live import run_live
+
+            def ready(source):  # printed even with --quiet: the socket/port is open and signals are handled
+                print(f"{READY_LINE} {source}", file=sys.stderr, flush=True)
+
+            pipeline, link = run_live(src, args.baud, args.signing, args.accept_unsigned, args.duration, pcfg, link_cfg,
+                                      period, baseline, scales, state_path, args.relearn, save_period, writer, stop,
+                                      log, warn, ready)
         if state_path is not None:
-            _save(pipeline, state_path, save_state, warn)
+            runner.save(pipeline, state_path, warn)
         print_summary(pipeline)
-        if not is_replay:  # i14: link health (loss, reordering, late, rejected frames) per source
+        if not is_replay:  # link health (loss, reordering, late, rejected frames) per source
             for line in link.stats.summary_lines():
                 print(line)
         return 0
@@ -307,7 +246,7 @@ def _run(args, stop) -> int:
 
 
 def _signing_key(args, is_replay, warn):
-    """i14: the signing key (bytes) of --signing-key, or None."""
+    """The signing key (bytes) of --signing-key, or None."""
     if args.accept_unsigned and not args.signing_key:
         raise CompanionError("--accept-unsigned needs --signing-key")
     if not args.signing_key:
@@ -338,88 +277,3 @@ def _check_outputs(args, extra, state_path) -> None:
             raise CompanionError(f"default state file {state_path}: cannot create its directory "
                                  f"({exc.strerror or exc}); give --state FILE or --no-state") from None
         check_output_path(state_path, "state file")
-
-
-def _restore(pipeline, state_path, args, load_state, warn, log) -> None:
-    if state_path is None:
-        return
-    if load_state(state_path, pipeline.load_state_dict, warn):
-        if args.relearn and not pipeline.baseline_fixed:
-            pipeline.baseline = None
-            for ch in pipeline.channels.values():
-                ch.make_estimators(learning=True)
-        log(f"state restored from {state_path}" + (" (baseline dropped: --relearn)" if args.relearn else ""))
-
-
-def _save(pipeline, state_path, save_state, warn) -> None:
-    try:
-        save_state(state_path, pipeline.state_dict())
-    except OSError as exc:
-        warn(f"cannot save state to {state_path} ({exc.strerror or exc})")
-
-
-def _live(args, src, pcfg, link_cfg, period, baseline, scales, state_path, save_period, writer, stop, log, warn):
-    from companion.health.detector import STALE
-    from companion.mavlink.link import Link
-    from companion.mavlink.reporter import MAV_SEVERITY_WARNING, Reporter
-    from companion.service.pipeline import Pipeline
-    from companion.service.state import load_state, save_state
-    from companion.sources.connection import open_connection
-
-    conn = open_connection(src, args.baud, source_system=pcfg.sysid or 1, source_component=link_cfg.compid,
-                           mavlink2=args.signing is not None)
-    try:
-        if args.signing is not None:  # i14
-            from companion.mavlink.signing import setup_signing
-
-            setup_signing(conn, args.signing, accept_unsigned=args.accept_unsigned)
-            log("MAVLink 2 signing on: sending signed frames, accepting "
-                + ("signed and unsigned" if args.accept_unsigned else "only correctly signed") + " frames")
-        link = Link(conn, link_cfg, pcfg.sysid, log=log)
-        if writer is not None:
-            link.recorder = writer
-        reporter = Reporter(link, period)
-        pipeline = Pipeline(pcfg, reporter, baseline, log, scales)
-        _restore(pipeline, state_path, args, load_state, warn, log)
-        if pipeline.sysid is not None and link.sysid is None:
-            link.set_sysid(pipeline.sysid)
-        # i14: the readiness line, printed even with --quiet: the socket/port is open and signals are handled
-        print(f"{READY_LINE} {src}", file=sys.stderr, flush=True)
-        t_start = time.monotonic()
-        last_save = t_start
-        stale = False
-        last_stale_report = 0.0
-        while not stop["flag"]:
-            msg = conn.recv_match(blocking=True, timeout=0.1)
-            now = time.monotonic()
-            if msg is not None:
-                link.count(msg)  # i14: sequence numbers, loss, reordering per source
-                if writer is not None:
-                    writer.write_raw(msg.get_msgbuf(), time.time())
-                if msg.get_type() != "BAD_DATA":
-                    used = pipeline.handle(msg)
-                    link.on_message(msg, is_vehicle_imu=used)
-                    if used and stale:
-                        stale = False
-                        log("IMU data back")
-            link.service()
-            if link.last_imu_wall is not None and now - link.last_imu_wall > link_cfg.stale_s:
-                if not stale:
-                    stale = True
-                    warn("IMU data stopped")
-                    reporter.statustext("companion: IMU data stopped", MAV_SEVERITY_WARNING)
-                if now - last_stale_report >= 1.0:
-                    pipeline.send_health_now(STALE)
-                    last_stale_report = now
-            if state_path is not None and now - last_save >= save_period:
-                _save(pipeline, state_path, save_state, warn)
-                last_save = now
-            if args.duration is not None and now - t_start >= args.duration:
-                break
-        log(f"stopping: {link.sent} messages sent, {reporter.sent} NAMED_VALUE_FLOAT, {reporter.texts} STATUSTEXT")
-        return pipeline, link
-    finally:
-        try:
-            conn.close()
-        except Exception:
-            pass

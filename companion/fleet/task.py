@@ -3,7 +3,7 @@
 This is what a Dask worker runs (it must stay importable and picklable: plain arguments, plain dict
 result). The numbers are those of ``companion analyze``: the log is read by
 :func:`companion.sources.load` (so every format it reads flows in), each IMU stream is analysed by
-:func:`companion.cli.analyze.analyze_stream` over the still segments that
+:func:`companion.analysis.stream.analyze_stream` over the still segments that
 :func:`companion.sources.still.select_still` picks (armed state and motion, as ``companion analyze``
 does), pooled, with the same filter handling, fit and intervals. Only the gyro axes by default.
 
@@ -95,7 +95,7 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
     out = {"path": str(path), "format": fmt, "status": "failed", "error": None, "log": {}, "rows": [],
            "elapsed_s": 0.0}
     try:
-        from companion.cli.analyze import analyze_stream, stream_filters
+        from companion.analysis.stream import analyze_stream, stream_filters
         from companion.fleet.identity import log_identity
         from companion.sources import load
         from companion.sources.still import select_still

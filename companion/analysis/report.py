@@ -1,0 +1,95 @@
+"""The analysis report as a text table in datasheet units."""
+
+from __future__ import annotations
+
+import math
+
+from companion import units
+from companion.allan.terms import PARAMS
+from companion.samples import ACCEL_AXES, GYRO_AXES
+
+
+def _fmt(v: float) -> str:
+    if v == 0 or not math.isfinite(v):
+        return f"{v:g}"
+    return f"{v:.3g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.2e}"
+
+
+def format_term(t: dict, axis: str) -> str:
+    """'B 28.4 [26.1, 31.0] deg/h' style text of a fitted term in datasheet units."""
+    parts = []
+    for p in PARAMS[t["effect"]]:
+        v = units.to_datasheet(p, t[p], axis)
+        s = f"{p} {_fmt(v)}"
+        ci = t.get("ci95", {}).get(p)
+        if ci:
+            s += f" [{_fmt(units.to_datasheet(p, ci[0], axis))}, {_fmt(units.to_datasheet(p, ci[1], axis))}]"
+        parts.append(s + " " + units.datasheet_unit(p, axis))
+    return ", ".join(parts)
+
+
+def format_table(report: dict) -> str:
+    lines = []
+    for st in report["streams"]:
+        src = f"{st['source']}: " if len(report.get("sources", [])) > 1 and st.get("source") else ""
+        tm = st.get("timing") or {}
+        extra = ", ".join(f"{tm[k]} {k}" for k in ("gaps", "duplicates", "backwards", "resets") if tm.get(k))
+        lines.append(f"{src}{st['message']}[{st['instance']}] sys{st['sysid']}/comp{st['compid']}: "
+                     f"{st['samples']} samples at {st['rate_hz']:.4g} Hz, {st['duration_s']:.1f} s"
+                     + (f" in {st['still_segments']} still segments" if st.get("still_segments", 1) > 1 else "")
+                     + (f" ({extra} in the stream)" if extra else "")
+                     + (f"; filter {', '.join(f'{k} {v:g} Hz' for k, v in st['filters_hz'].items())}"
+                        if st.get("filters_hz") else ""))
+        for w in st.get("warnings", []):
+            lines.append(f"  WARNING: {w}")
+        for group, names in (("gyro", GYRO_AXES), ("accel", ACCEL_AXES)):
+            axes = [a for a in names if a in st["axes"]]
+            if not axes:
+                continue
+            ref = axes[0]
+            u = {p: units.datasheet_unit(p, ref) for p in ("N", "B", "K")}
+            lines.append(f"  {group:<5} {'N [' + u['N'] + ']':<28}{'B [' + u['B'] + ']':<26}"
+                         f"{'K [' + u['K'] + ']':<26}other terms / notes")
+            for a in axes:
+                r = st["axes"][a]
+                if r["status"] == "absent":
+                    continue
+                if r["status"] != "ok":
+                    lines.append(f"  {a:<5} {r['status']}: {r.get('note', '')}")
+                    continue
+                cells, other = {}, []
+                for t in r["terms"]:
+                    p = {"white_noise": "N", "bias_instability": "B", "random_walk": "K"}.get(t["effect"])
+                    if p:
+                        lo, hi = t["ci95"][p]
+                        cells[p] = (f"{_fmt(units.to_datasheet(p, t[p], a))} "
+                                    f"[{_fmt(units.to_datasheet(p, lo, a))}, {_fmt(units.to_datasheet(p, hi, a))}]")
+                    else:
+                        other.append(format_term(t, a))
+                for t in r.get("bounds") or ():
+                    p = {"white_noise": "N", "bias_instability": "B", "random_walk": "K"}.get(t["effect"])
+                    if p and p not in cells:
+                        cells[p] = f"< {_fmt(units.to_datasheet(p, t[p], a))}"
+                if r.get("fit") and r["fit"].get("model_error"):
+                    other.append(f"misfit: +{100 * r['fit']['model_error']:.0f} % model error")
+                for n_ in (r.get("fit") or {}).get("notes", []):
+                    if n_.startswith(("N from a local", "cluster times below", "the record is too short")):
+                        other.append(n_)
+                q = r.get("quantization")
+                if q and q.get("note"):
+                    other.append(q["note"])
+                lines.append(f"  {a:<5} {cells.get('N', '-'):<28}{cells.get('B', '-'):<26}{cells.get('K', '-'):<26} "
+                             + "; ".join(other))
+                if r.get("online") is not None:
+                    lines.append("  " + _online_row(r, a))
+    return "\n".join(lines)
+
+
+def _online_row(r: dict, a: str) -> str:
+    """'online N 1.05 [1.04, 1.06] ... B < 31 ...': the online report (companion.estimators.report, the same
+    text as `companion run`'s summary): resolved values with 95 % intervals, 95 % upper bounds as '< x'."""
+    from companion.estimators.report import cell, extra_text
+
+    cells = {p: cell(r["online"], p, a) for p in ("N", "B", "K")}
+    return (f"{'online':<5} {cells['N']:<28}{cells['B']:<26}{cells['K']:<26} "
+            + "; ".join(extra_text(r["online"], a)))

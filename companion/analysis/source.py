@@ -1,0 +1,75 @@
+"""One source end to end: load it, select its still segments, analyse every IMU stream."""
+
+from __future__ import annotations
+
+import math
+
+from companion.errors import CompanionError
+
+#: Log parameters copied into the source summary (low-pass filters, fast sampling, batch logging).
+SUMMARY_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_FAST_SAMPLE", "INS_LOG_BAT_OPT", "INS_LOG_BAT_MASK",
+                  "IMU_GYRO_CUTOFF", "IMU_ACCEL_CUTOFF", "IMU_INTEG_RATE")
+
+
+def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, start=None, end=None,
+                   use_all=False, min_still=10.0, online=False, progress=None, warn=None) -> tuple[list[dict], dict]:
+    """Load one source, select its still segments and analyse every IMU stream: (stream entries, summary).
+
+    The summary holds the source, the inspect notes (the same sentences ``companion inspect`` prints) and
+    the still selection (:func:`companion.sources.still.select_still`). ``progress(steps, values)``, if
+    given, makes an object with ``step(label)`` and ``close()``; ``warn(text)`` receives the --taus cluster
+    times beyond the record."""
+    from companion.analysis.notes import notes as inspect_notes
+    from companion.analysis.stream import analyze_stream, stream_filters
+    from companion.sources import load
+    from companion.sources.still import select_still
+
+    res = load(spec, config=config, duration=duration)
+    streams = res.imu_streams()
+    if isinstance(taus, str):
+        check_taus_reachable(taus, streams, warn)
+    sel = select_still(streams, res.meta, start=start, end=end, use_all=use_all, min_segment_s=min_still)
+    summary = {"source": str(spec), "notes": inspect_notes(res), "selection": sel.to_dict(),
+               "format": res.meta.get("format", "tlog/csv/live"),
+               "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
+    if not sel.intervals:
+        raise CompanionError(f"{spec}: {sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
+    total = sum(s.samples for s in streams) * len(axes)
+    bar = progress(len(streams) * len(axes), total) if progress is not None else None
+    entries = []
+    try:
+        for s in streams:
+            ranges = sel.ranges(s)
+            if not ranges:
+                continue
+            e = analyze_stream(s, axes, taus, bar, online=online, ranges=ranges, filters=stream_filters(s, res.meta))
+            e["source"] = str(spec)
+            entries.append(e)
+    finally:
+        if bar is not None:
+            bar.close()
+    return entries, summary
+
+
+def check_taus_reachable(spec: str, streams, warn=None) -> None:
+    """--taus cluster times beyond a record are reported through ``warn``, or refused when none is reachable."""
+    from companion.analysis.taus import taus_beyond
+
+    reachable = False
+    for st in streams:
+        a, b = st.longest_segment()
+        rate = float(st.rate_hz)
+        if not (rate > 0 and math.isfinite(rate)):
+            continue
+        beyond = taus_beyond(spec, b - a, rate)
+        asked = taus_beyond(spec, 0, rate)  # every valid seconds value (none for octave etc.)
+        if len(beyond) < len(asked) or not asked:
+            reachable = True
+        if beyond and warn is not None:
+            longest = (b - a) // 2 / rate
+            warn(f"--taus {', '.join(f'{x:g}' for x in beyond)} s beyond "
+                 f"{st.key.label()}: its longest segment ({(b - a) / rate:.0f} s) reaches tau {longest:.4g} s; "
+                 "not shown")
+    if streams and not reachable:
+        raise CompanionError(f"--taus {spec}: every cluster time is beyond the record (overlapping Allan deviation "
+                             "reaches half the longest gap-free segment)")

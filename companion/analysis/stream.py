@@ -1,0 +1,70 @@
+"""The report entry of one IMU stream: every axis analysed over the still ranges, with warnings."""
+
+from __future__ import annotations
+
+import math
+
+from companion.analysis.axis import analyze_axis, filter_tau
+from companion.analysis.limits import FIT_MIN_RATE_HZ, FIT_MIN_SECONDS
+from companion.samples import GYRO_AXES
+
+
+def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None, filters=None) -> dict:
+    """The JSON ``streams`` entry of one :class:`companion.samples.ImuStream`.
+
+    ``ranges``: index ranges to analyse (the still segments, pooled); None: the longest segment.
+    ``filters``: {"gyro": Hz, "accel": Hz} low-pass cut-offs of the logged data (their roll-off is kept out
+    of the fit). The entry carries ``warnings`` (rate < 10 Hz, < 60 s analysed) and the stream's timing.
+    """
+    if ranges is None:
+        ranges = [stream.longest_segment()] if stream.samples else []
+    rate = float(stream.rate_hz)
+    used = sum(b - a for a, b in ranges)
+    secs = sum(float(stream.t[b - 1] - stream.t[a]) + (1.0 / rate if rate > 0 else 0.0) for a, b in ranges if b > a)
+    t = stream.timing
+    entry = {"message": stream.key.message, "instance": stream.key.instance, "sysid": stream.key.sysid,
+             "compid": stream.key.compid, "rate_hz": rate, "samples": int(used), "duration_s": float(secs),
+             "segments": len(stream.segments) or 1, "still_segments": len(ranges),
+             "ranges_s": [[float(stream.t[a]), float(stream.t[b - 1])] for a, b in ranges if b > a],
+             "timing": {"gaps": t.gaps, "duplicates": t.duplicates, "backwards": t.backwards, "resets": t.resets},
+             "filters_hz": dict(filters or {}), "warnings": [], "axes": {}}
+    if not (rate >= FIT_MIN_RATE_HZ):
+        entry["warnings"].append(f"only {rate:.3g} Hz (< {FIT_MIN_RATE_HZ:g} Hz): the Allan curve starts at "
+                                 f"{1 / rate if rate > 0 else float('inf'):.3g} s, N is aliased with every faster effect")
+    if secs < FIT_MIN_SECONDS:
+        entry["warnings"].append(f"only {secs:.0f} s analysed (< {FIT_MIN_SECONDS:g} s): too few clusters for a usable N")
+    for axis in axes:
+        lsb = stream.gyro_lsb if axis in GYRO_AXES else stream.accel_lsb
+        fc = (filters or {}).get("gyro" if axis in GYRO_AXES else "accel")
+        if not (rate > 0 and math.isfinite(rate)):
+            entry["axes"][axis] = {"tau": [], "adev": [], "adev_lo": [], "adev_hi": [], "terms": [],
+                                   "status": "too_short", "note": "no sample rate"}
+        else:
+            col = stream.axis(axis)
+            entry["axes"][axis] = analyze_axis(None, rate, taus, lsb=lsb, segments=[col[a:b] for a, b in ranges],
+                                               tau_min=filter_tau(fc, rate))
+            if online and entry["axes"][axis]["status"] == "ok":
+                from companion.estimators import online_terms
+
+                a, b = max(ranges, key=lambda r: r[1] - r[0])
+                y = col[a:b]
+                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate)
+        if progress:
+            progress.step(f"{stream.key.message}[{stream.key.instance}] {axis}")
+    return entry
+
+
+def stream_filters(stream, meta: dict) -> dict:
+    """Low-pass cut-offs (Hz) of a stream's logged data from the log's parameters (empty if unknown)."""
+    params = (meta or {}).get("params") or {}
+    msg = stream.key.message
+    out = {}
+    if meta.get("format") == "dataflash" and msg == "IMU":
+        for k, p in (("gyro", "INS_GYRO_FILTER"), ("accel", "INS_ACCEL_FILTER")):
+            if params.get(p):
+                out[k] = float(params[p])
+    elif meta.get("format") == "ulog" and msg in ("sensor_combined", "sensor_gyro", "vehicle_imu"):
+        for k, p in (("gyro", "IMU_GYRO_CUTOFF"), ("accel", "IMU_ACCEL_CUTOFF")):
+            if params.get(p):
+                out[k] = float(params[p])
+    return out

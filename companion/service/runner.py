@@ -1,0 +1,115 @@
+"""What ``companion run`` does around the pipeline: the replay sink, the state file (where it is, restoring
+and saving it), a log replayed end to end, and the summary lines. Argument parsing and printing stay in
+:mod:`companion.cli.run`."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+class ReplaySink:
+    """Reporter sink for a replay: counts, keeps the latest values, optionally writes a tlog."""
+
+    def __init__(self, writer=None, echo=None):
+        self.writer = writer
+        self.echo = echo
+        self.values: dict[str, float] = {}
+        self.sent = 0
+        self.texts: list[str] = []
+        self.t = 0.0
+
+    def send_named_value_float(self, time_boot_ms, name, value):
+        self.values[name] = value
+        self.sent += 1
+        self.t = time_boot_ms / 1000.0
+        if self.writer is not None:
+            self.writer.write(self.writer.mav.named_value_float_encode(int(time_boot_ms), name.encode(), float(value)), self.t)
+
+    def send_statustext(self, severity, text):
+        self.texts.append(text)
+        if self.echo:
+            self.echo(f"STATUSTEXT sev={severity} t={self.t:.0f}s: {text}")
+        if self.writer is not None:
+            self.writer.write(self.writer.mav.statustext_encode(int(severity), text.encode()), self.t)
+
+
+def state_path(explicit: str | None, configured: str | None, no_state: bool, live: bool) -> Path | None:
+    """The state file: --no-state none; else --state, the config's run.state_file, and on a live link the
+    default $XDG_STATE_HOME/companion/run_state.json (a replay keeps no state unless told)."""
+    if no_state:
+        return None
+    if explicit:
+        return Path(explicit)
+    if configured:
+        return Path(os.path.expanduser(str(configured)))
+    if not live:
+        return None
+    base = os.environ.get("XDG_STATE_HOME") or os.path.join(os.path.expanduser("~"), ".local", "state")
+    return Path(base) / "companion" / "run_state.json"
+
+
+def restore(pipeline, path, relearn: bool, warn, log) -> None:
+    """Restore the pipeline from the state file, if there is one (``relearn``: drop its baseline)."""
+    from companion.service.state import load_state
+
+    if path is None:
+        return
+    if load_state(path, pipeline.load_state_dict, warn):
+        if relearn and not pipeline.baseline_fixed:
+            pipeline.baseline = None
+            for ch in pipeline.channels.values():
+                ch.make_estimators(learning=True)
+        log(f"state restored from {path}" + (" (baseline dropped: --relearn)" if relearn else ""))
+
+
+def save(pipeline, path, warn) -> None:
+    """Save the pipeline's state atomically; a failure is a warning (the run goes on)."""
+    from companion.service.state import save_state
+
+    try:
+        save_state(path, pipeline.state_dict())
+    except OSError as exc:
+        warn(f"cannot save state to {path} ({exc.strerror or exc})")
+
+
+def replay(src: str, pcfg, period: float, baseline, scales, writer, state: Path | None, relearn: bool, stop,
+           log, warn, echo=None):
+    """Replay a log through a new pipeline (its reports go to a :class:`ReplaySink`): (pipeline, sink, totals)."""
+    from companion.mavlink.reporter import Reporter
+    from companion.service.pipeline import Pipeline
+    from companion.service.replay import replay_log, replay_tlog
+
+    sink = ReplaySink(writer, echo=echo)
+    reporter = Reporter(sink, period)
+    pipeline = Pipeline(pcfg, reporter, baseline, log, scales)
+    restore(pipeline, state, relearn, warn, log)
+    if src.lower().endswith((".tlog", ".tlog.gz")):
+        totals = replay_tlog(src, pipeline, scales, stop=stop)
+    else:
+        totals = replay_log(src, pipeline, stop=stop)
+    return pipeline, sink, totals
+
+
+def summary_lines(pipeline) -> list[str]:
+    """The run summary: per IMU its health, data used and counts, active faults and per-axis estimates,
+    then the health transitions."""
+    from companion.estimators.report import summary_line
+
+    rows = pipeline.summary()
+    if not rows:
+        return ["no IMU data from the vehicle"]
+    out = []
+    for r in rows:
+        c = r["counts"]
+        rate = f"{r['rate_hz']:.1f} Hz" if r["rate_hz"] else "rate unknown"
+        out.append(f"IMU{r['imu']} ({r['message']}, {rate}): {r['health']}; {r['still_s']:.0f} s still data used; "
+                   f"{c['samples']} samples, {c['blocks_moving']} moving blocks, {c['resets']} resets, {c['gaps']} gaps, "
+                   f"{c['duplicates']} duplicates")
+        for text in r.get("faults") or ():
+            out.append(f"  FAULT: {text}")
+        for ax, d in r["axes"].items():
+            out.append(f"  {ax}: " + summary_line(d["terms"], ax, d["baseline"]))
+    for t, text in pipeline.transitions:
+        out.append(f"  at {t:.0f} s: {text}")
+    return out
