@@ -6,6 +6,8 @@
 1. ``companion.sim.vehicle.VehicleSimulator`` (3 IMUs: body motion, vibration, per-IMU errors, warm-up,
    model noise; 600 s blocks) against ``companion.sim.synth.simulate_model`` of the same model for the
    same samples (3 IMUs x 6 axes of noise only): the price of the vehicle over its noise.
+   And the same vehicle with the realistic gyro path of ``--preset`` (default copter: 1 kHz sensors,
+   filter, decimation, vibration, skew, temperature; ``companion.sim.realism``) at the same 100 Hz.
 2. ``companion.sim.vehicle.write_tlog`` (3 streams and HEARTBEATs merged in time order, block by block)
    against ``companion.mavlink.tlog_writer.write_imu_tlog`` writing the same samples as 3 separate tlogs.
 Times are CPU seconds of this process (the machine is shared). Also printed: how much of the run was armed
@@ -38,6 +40,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, default=1.0)
     ap.add_argument("--seed", type=int, default=2)
+    ap.add_argument("--preset", default="copter", help="preset of the realistic run (copter, plane, rover)")
     args = ap.parse_args()
     dur = args.hours * 3600.0
     sch = Schedule.random(dur, seed=args.seed, flights_per_hour=3, handlings_per_hour=3)
@@ -60,6 +63,15 @@ def main() -> int:
           f"({100 * armed:.1f} % armed), {len(sch.handlings)} handlings; peak body rate {peak:.2f} rad/s")
     print(f"simulate  vehicle {t_vehicle:6.2f} s ({dur / t_vehicle:,.0f}x real time) | noise only "
           f"{t_synth:6.2f} s | ratio {t_vehicle / t_synth:.2f}")
+    from companion.sim.realism import load_preset
+
+    real = load_preset(args.preset)["realism"]
+    t0 = time.process_time()
+    for _ in VehicleSimulator(MODEL, imus=3, seed=args.seed, schedule=sch, warmup=WarmUp(), realism=real).blocks(dur):
+        pass
+    t_real = time.process_time() - t0
+    print(f"realistic vehicle (--preset {args.preset}: {real.sensor_rate_hz:g} Hz sensors, {real.gyro_lpf_hz:g} Hz "
+          f"low-pass) {t_real:6.2f} s ({dur / t_real:,.0f}x real time) | {t_real / t_vehicle:.2f}x the plain vehicle")
     with tempfile.TemporaryDirectory() as d:
         t0 = time.process_time()
         counts = write_tlog(Path(d) / "v.tlog", make(), dur)

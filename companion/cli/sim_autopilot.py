@@ -79,7 +79,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("sim-autopilot", help="simulated ArduPilot vehicle with 1-3 IMUs, flights and faults (SITL loopback)",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", required=True, metavar="MODEL.yaml", help="noise model (companion.sim.model format)")
+    p.add_argument("--model", metavar="MODEL.yaml", help="noise model (companion.sim.model format; optional with --preset)")
     p.add_argument("--connect", required=True, metavar="CONN", help="where to send, e.g. udpout:127.0.0.1:14551")
     p.add_argument("--rate", type=float, metavar="HZ", help="IMU message rate before any request (default: the model's rate_hz)")
     p.add_argument("--speedup", type=float, default=1.0, metavar="X", help="simulated seconds per wall second (default 1)")
@@ -128,7 +128,9 @@ def run(args) -> int:
         v = getattr(args, name)
         if v is not None and not v > 0:
             raise CompanionError(f"--{name.replace('_', '-')} must be > 0")
-    model = load_model(args.model)
+    if args.model is None and args.preset is None:
+        raise CompanionError("give --model MODEL.yaml or --preset NAME")
+    model = load_model(args.model) if args.model is not None else None
     if args.rate is not None and not args.rate > 0:
         raise CompanionError("--rate must be > 0")
     sim = build_simulator(args, model, args.rate)

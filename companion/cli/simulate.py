@@ -53,7 +53,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("simulate", help="synthesise IMU noise from a model YAML into a .tlog or .csv",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("model", help="noise model YAML")
+    p.add_argument("model", nargs="?", help="noise model YAML (with --vehicle --preset: optional, the preset's model)")
     p.add_argument("--duration", type=float, required=True, metavar="S", help="seconds to synthesise")
     p.add_argument("--out", required=True, metavar="FILE", help="output .tlog, .csv or .csv.gz")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -67,7 +67,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-VEHICLE_ONLY = {"imus": 1, "arm_at": None, "disarm_at": None, "arm_s": None, "handle_at": None, "warmup_deg_s": 0.0,
+VEHICLE_ONLY = {"imus": None, "preset": None, "arm_at": None, "disarm_at": None, "arm_s": None, "handle_at": None, "warmup_deg_s": 0.0,
                 "fault": None, "fault_at": None, "fault_size": None}
 
 
@@ -118,7 +118,13 @@ def write_csv(path: str, t, gyro, accel) -> None:
 def run(args) -> int:
     from companion.sim.model import load_model
 
-    model = load_model(args.model)
+    if args.model is None and not (args.vehicle and args.preset):
+        raise CompanionError("give a noise model MODEL.yaml (or --vehicle --preset NAME)")
+    model = load_model(args.model) if args.model is not None else None
+    if model is None:
+        from companion.sim.realism import load_preset
+
+        model = load_preset(args.preset)["model"]
     if not (args.duration > 0 and math.isfinite(args.duration)):
         raise CompanionError("--duration must be a positive number of seconds")
     n = int(round(args.duration * model.rate_hz))

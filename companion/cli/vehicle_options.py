@@ -26,7 +26,10 @@ A fault (--fault KIND --fault-at S) on IMU --fault-imu, gyro axis --fault-axis; 
 def add_vehicle_options(p) -> None:
     """--imus, flight, handling, warm-up and IMU-spread options (times in s since the simulation start)."""
     g = p.add_argument_group("vehicle (times in s since the simulation start)")
-    g.add_argument("--imus", type=int, default=1, metavar="N", help="number of IMUs, 1-3: RAW_IMU, +SCALED_IMU2, +SCALED_IMU3 (default 1)")
+    g.add_argument("--imus", type=int, default=None, metavar="N", help="number of IMUs, 1-3: RAW_IMU, +SCALED_IMU2, +SCALED_IMU3 (default 1, or the preset's)")
+    g.add_argument("--preset", metavar="NAME|FILE", help="realistic autopilot data (companion.sim.realism): copter, plane, rover or a preset "
+                   "YAML: gyro low-pass at the sensor rate and decimation, vibration per IMU and flight phase, IMU timing skew, "
+                   "temperature-driven bias, sensor LSB; its noise model is used when no model is given")
     g.add_argument("--arm-at", type=float, metavar="S", help="arm (and fly) at S")
     g.add_argument("--disarm-at", type=float, metavar="S", help="land and disarm at S (default: --arm-at + 60)")
     g.add_argument("--arm-s", type=float, metavar="D", help="older form of --disarm-at: armed for D seconds")
@@ -61,6 +64,23 @@ def build_simulator(args, model, rate_hz: float | None = None):
     """The :class:`companion.sim.vehicle.VehicleSimulator` the options describe (every check up front)."""
     from companion.sim import vehicle as V
 
+    realism = None
+    preset = getattr(args, "preset", None)
+    if preset is not None:
+        from companion.sim.realism import load_preset
+
+        P = load_preset(preset)
+        realism = P["realism"]
+        if model is None:  # the preset's model at the preset's logged rate
+            model = P["model"]
+            if rate_hz is None and "rate_hz" in P["vehicle"]:
+                rate_hz = float(P["vehicle"]["rate_hz"])
+        if args.imus is None:
+            args.imus = int(P["vehicle"].get("imus", 1))
+    if model is None:
+        raise CompanionError("give a noise model (MODEL.yaml) or --preset")
+    if args.imus is None:
+        args.imus = 1
     if not 1 <= args.imus <= 3:
         raise CompanionError(f"--imus must be 1, 2 or 3, got {args.imus}")
     flights = []
@@ -114,7 +134,8 @@ def build_simulator(args, model, rate_hz: float | None = None):
     if not rate > 0:
         raise CompanionError("--rate must be > 0")
     return _checked(lambda: V.VehicleSimulator(model, imus=args.imus, seed=args.seed, rate_hz=rate, schedule=schedule,
-                                               fault=fault, warmup=warmup, spread=spread, degrade=degrade), "--fault")
+                                               fault=fault, warmup=warmup, spread=spread, degrade=degrade,
+                                               realism=realism), "--fault/--preset")
 
 
 def _checked(make, option):

@@ -213,7 +213,7 @@ class ImuTlogStream:
     >>> with ImuTlogStream("x.tlog") as out:
     ...     out.write([("RAW_IMU", 0, t, g0, a0), ("SCALED_IMU2", 1, t, g1, a1)], heartbeat_t, heartbeat_armed)
 
-    Each ``write`` takes streams ``(message, instance, t_s, gyro, accel)`` in SI (units, rounding and
+    Each ``write`` takes streams ``(message, instance, t_s, gyro, accel[, temperature degC])`` in SI (units, rounding and
     clipping as :func:`imu_payloads`) and HEARTBEAT times (s since boot) with their armed flags; the
     records of one call are sorted by time (a HEARTBEAT before samples of the same time, then the
     streams in the order given) and appended. Calls must come in time order. Sequence numbers
@@ -239,11 +239,13 @@ class ImuTlogStream:
             bases.append(np.full(hb_t.size, M.HEARTBEAT.base_len))
             times.append(hb_t)
             keys.append(np.full(hb_t.size, -1))
-        for k, (message, instance, t_s, gyro, accel) in enumerate(streams):
+        for k, stream in enumerate(streams):
+            message, instance, t_s, gyro, accel = stream[:5]
+            temperature = stream[5] if len(stream) > 5 else None
             layout = M.IMU_LAYOUTS.get(message)
             if layout is None:
                 raise ValueError(f"unknown IMU message {message!r}; expected one of {', '.join(M.IMU_LAYOUTS)}")
-            rec = imu_payloads(message, t_s, gyro, accel, instance, None, self.gyro_scale, self.accel_scale)
+            rec = imu_payloads(message, t_s, gyro, accel, instance, temperature, self.gyro_scale, self.accel_scale)
             n = rec.shape[0]
             rows.append(rec.view(np.uint8).reshape(n, layout.full_len))
             ids.append(np.full(n, layout.msgid))

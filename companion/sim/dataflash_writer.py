@@ -48,6 +48,8 @@ def write_imu_log(path, t_s, gyro, accel, layout: str = "4.x", params: dict | No
                   gps_utc: tuple[float, float] | None = None) -> int:
     """Write a DataFlash log: ``t_s`` (n,) seconds since boot; ``gyro``, ``accel`` (k, n, 3) per IMU.
 
+    ``temperature``: degC, one value or (k, n) per IMU and sample (a simulated warm-up,
+    :attr:`companion.sim.vehicle.VehicleBlock.temperature`).
     Returns the number of bytes written. Parameters, armed transitions and mode changes are placed at
     their times (parameters and messages at the start). ``gps_utc`` = (t since boot, unix time then): one
     ``GPS`` record with a 3D fix and that time as GPS week and ms of week (4.x layout only).
@@ -89,10 +91,12 @@ def write_imu_log(path, t_s, gyro, accel, layout: str = "4.x", params: dict | No
             rec[c] = gyro[i, :, j]
         for j, c in enumerate(("AccX", "AccY", "AccZ")):
             rec[c] = accel[i, :, j]
+        tmp = np.asarray(temperature, dtype=float)
+        tmp = tmp[i] if tmp.ndim == 2 else tmp  # (k, n) per IMU and sample, or one value
         if layout == "4.x":
-            rec["I"], rec["T"], rec["GH"], rec["AH"] = i, temperature, 1, 1
+            rec["I"], rec["T"], rec["GH"], rec["AH"] = i, tmp, 1, 1
         else:
-            rec["Temp"] = temperature
+            rec["Temp"] = tmp
         recs.append(rec.view(np.uint8).reshape(n, -1))
     # the IMUs interleave sample by sample (IMU, IMU2, IMU3, IMU, ...), as the logger writes them
     chunks = [(np.repeat(tick, k), np.full(n * k, 10), np.stack(recs, axis=1).reshape(n * k, -1))]

@@ -333,6 +333,13 @@ class BodyMotion:
         w, f, env = self._body(s)
         return w + self._vibration(s, env, 0, rng), f + self._vibration(s, env, 1, rng)
 
+    def sample_parts(self, s: np.ndarray, rng: np.random.Generator):
+        """(body rate without vibration, specific force with vibration, vibration envelope (n,): 0 disarmed,
+        0.3 armed on the ground, 1 in the air) at times ``s``: for a simulator that makes the gyro
+        vibration itself (:mod:`companion.sim.realism`)."""
+        w, f, env = self._body(s)
+        return w, f + self._vibration(s, env, 1, rng), env
+
     def _body(self, s: np.ndarray):
         n = s.shape[0]
         w = np.zeros((n, 3))

@@ -55,7 +55,8 @@ def write_ulog(path, t_s, gyro, accel, combined=None, params: dict | None = None
     ``k`` IMUs; ``combined`` = (gyro, accel) (n, 3) each for sensor_combined (default: IMU 0's data).
     ``fifo`` = (t0_s, rate_hz, counts (m, 3) int16, scale, per_message): a sensor_gyro_fifo[0] topic whose
     message j holds samples [j*per, (j+1)*per) (the last message may hold fewer), the last one at
-    ``timestamp_sample``. Returns the bytes written."""
+    ``timestamp_sample``. ``temperature``: degC, one value or (k, n) per IMU and sample (a simulated
+    warm-up, :attr:`companion.sim.vehicle.VehicleBlock.temperature`). Returns the bytes written."""
     t_s = np.asarray(t_s, dtype=float)
     gyro, accel = np.asarray(gyro, dtype=float), np.asarray(accel, dtype=float)
     if gyro.ndim == 2:
@@ -119,7 +120,8 @@ def write_ulog(path, t_s, gyro, accel, combined=None, params: dict | None = None
                 rec["timestamp_sample"] = us
                 rec["device_id"] = 1000 + mid
                 rec["x"], rec["y"], rec["z"] = v[:, 0], v[:, 1], v[:, 2]
-                rec["temperature"] = temperature
+                tmp = np.asarray(temperature, dtype=float)
+                rec["temperature"] = tmp[mid] if tmp.ndim == 2 else tmp  # (k, n) per IMU, or one value
         rec["_hdr"], rec["_type"], rec["_id"] = dt.itemsize - 3, ord("D"), msg_id
         blocks.append((rec["timestamp"].astype(np.int64), rec.view(np.uint8).reshape(rec.shape[0], -1)))
     # data in time order: rows of different sizes, merged by a stable sort on the timestamp

@@ -73,6 +73,7 @@ from companion.sim.motion import (BodyMotion, Flight, Handling, Schedule, _err, 
                                    rotation_nb, specific_force_at_rest)
 from companion.allan.terms import validate_term
 from companion.sim.synth import flicker, quantization
+from companion.sim.realism import Realism, SensorStage
 
 GYRO_AXES = ("gx", "gy", "gz")
 ACCEL_AXES = ("ax", "ay", "az")
@@ -210,27 +211,34 @@ class VehicleBlock:
     armed: np.ndarray  # (n,) bool
     rate_true: np.ndarray  # (n, 3) rad/s, body
     accel_true: np.ndarray  # (n, 3) m/s^2, body specific force
+    temperature: np.ndarray | None = None  # (imus, n) degC (with Realism), else None
+    t_imu: np.ndarray | None = None  # (imus, n) each IMU's own time stamp (Realism stamp="own"), else None
 
     @property
     def n(self) -> int:
         return int(self.t.shape[0])
 
     def imu(self, i: int):
-        return self.t, self.gyro[i], self.accel[i]
+        return (self.t if self.t_imu is None else self.t_imu[i]), self.gyro[i], self.accel[i]
 
     def __getitem__(self, sl) -> "VehicleBlock":
         return VehicleBlock(self.t[sl], self.gyro[:, sl], self.accel[:, sl], self.armed[sl],
-                            self.rate_true[sl], self.accel_true[sl])
+                            self.rate_true[sl], self.accel_true[sl],
+                            None if self.temperature is None else self.temperature[:, sl],
+                            None if self.t_imu is None else self.t_imu[:, sl])
 
     @staticmethod
     def concat(blocks: list, imus: int) -> "VehicleBlock":
         if not blocks:
             z3 = np.zeros((0, 3))
             return VehicleBlock(np.zeros(0), np.zeros((imus, 0, 3)), np.zeros((imus, 0, 3)), np.zeros(0, bool), z3, z3)
+        temp = None if blocks[0].temperature is None else np.concatenate([b.temperature for b in blocks], axis=1)
+        t_imu = None if blocks[0].t_imu is None else np.concatenate([b.t_imu for b in blocks], axis=1)
         return VehicleBlock(np.concatenate([b.t for b in blocks]), np.concatenate([b.gyro for b in blocks], axis=1),
                             np.concatenate([b.accel for b in blocks], axis=1),
                             np.concatenate([b.armed for b in blocks]),
-                            np.concatenate([b.rate_true for b in blocks]), np.concatenate([b.accel_true for b in blocks]))
+                            np.concatenate([b.rate_true for b in blocks]), np.concatenate([b.accel_true for b in blocks]),
+                            temp, t_imu)
 
 
 def _misalignment(rng, max_deg: float) -> np.ndarray:
@@ -250,7 +258,7 @@ class VehicleSimulator:
     def __init__(self, model, imus: int = 1, seed: int = 0, rate_hz: float | None = None,
                  schedule: Schedule | None = None, fault: Fault | None = None, warmup: WarmUp | None = None,
                  spread: ImuSpread | None = None, degrade: Degradation | None = None, t_start: float = 1.0,
-                 rest_tilt_deg: float = 2.0):
+                 rest_tilt_deg: float = 2.0, realism: Realism | None = None):
         self.rate_hz = float(model["rate_hz"] if isinstance(model, Mapping) else model.rate_hz) if rate_hz is None else float(rate_hz)
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise _err(f"rate must be > 0 Hz, got {rate_hz!r}")
@@ -310,6 +318,20 @@ class VehicleSimulator:
         amp = rng_warm.uniform(0.5, 1.0, (MAX_IMUS, 3)) * rng_warm.choice([-1.0, 1.0], (MAX_IMUS, 3))
         self.warmup_amplitude = amp * (warmup.amplitude if warmup is not None else 0.0)
         self.motion = BodyMotion(self.schedule, rng_motion, self.rate_hz, rest_tilt_deg)
+        # the realistic gyro path: its own random streams (spawned after the others: old draws unchanged)
+        self.realism = realism
+        self._stage = None
+        if realism is not None:
+            if not isinstance(realism, Realism):
+                raise _err("realism must be a companion.sim.realism.Realism")
+            if realism.sensor_rate_hz < self.rate_hz:
+                raise _err(f"sensor_rate_hz ({realism.sensor_rate_hz:g}) is below the logged rate ({self.rate_hz:g} Hz)")
+            r_ch = ss.spawn(3 + MAX_IMUS)
+            rng_r, rng_timing = np.random.default_rng(r_ch[0]), np.random.default_rng(r_ch[1])
+            self._rng_gmb = np.random.default_rng(r_ch[2])
+            self._rng_sensor = [np.random.default_rng(x) for x in r_ch[3:]]
+            self.temp_slope = rng_r.normal(0.0, realism.temp_slope, (MAX_IMUS, 3))  # rad/s per K (truth)
+            self._stage = SensorStage(realism, self.imus, self.t_start, rng_timing)
         # stream state
         self.t_next = self.t_start
         self._state: dict = {}  # stateful noise components at the last sample taken
@@ -336,6 +358,9 @@ class VehicleSimulator:
         if rate_hz > 0 and abs(rate_hz - self.rate_hz) > 1e-9:
             self.rate_hz = float(rate_hz)
             self._blk, self._i = None, 0
+            if self._stage is not None:  # the sensor clock restarts at the next sample (filter state kept)
+                self._stage.k_next = int(math.floor((self.t_next - 0.1) * self._stage.fs))
+                self._stage.acc = None
 
     # ----------------------------------------------------------------- sample production
     def take_until(self, t_end: float) -> VehicleBlock:
@@ -370,7 +395,18 @@ class VehicleSimulator:
         if self._blk_frozen is not None and j > self._blk_frozen[0]:
             self._frozen = self._blk_frozen[1]
 
+    def temperature_at(self, t) -> np.ndarray:
+        """(imus, n) IMU temperatures (degC) at times since boot ``t`` (with Realism; else the ambient 25 C)."""
+        t = np.asarray(t, dtype=float)
+        r = self.realism
+        if r is None:
+            return np.full((self.imus, t.shape[0]), 25.0)
+        return np.array([r.ambient_c + r.temp_offset_c[i] + r.rise_c[i] * (1.0 - np.exp(-t / r.temp_tau_s[i]))
+                         for i in range(self.imus)])
+
     def _make_block(self) -> None:
+        if self.realism is not None:
+            return self._make_block_real()
         n = max(1, int(round(self.BLOCK_S * self.rate_hz)))
         t = self.t_next + np.arange(n) / self.rate_hz
         s = t - self.t_start
@@ -403,17 +439,76 @@ class VehicleSimulator:
         self._blk = VehicleBlock(t, gyro, accel, armed, w, f)
         self._i = 0
 
-    def _noise(self, i: int, ax: str, s: np.ndarray, rng: np.random.Generator):
-        """(white part, everything else) of IMU i's model noise on ``ax`` at times ``s`` (since start)."""
+    def _make_block_real(self) -> None:
+        """One block through the realistic path (:mod:`companion.sim.realism`): the slow part at the logged
+        rate, white noise and vibration at the sensor rate, filter, per-IMU decimation."""
+        r = self.realism
+        n = max(1, int(round(self.BLOCK_S * self.rate_hz)))
+        t = self.t_next + np.arange(n) / self.rate_hz
+        s = t - self.t_start
+        w, f, env = self.motion.sample_parts(s, self._rng_vib)
+        armed = np.asarray(self.armed_at(t), dtype=bool)
+        slow = np.empty((self.imus, n, 3))
+        accel = np.empty((self.imus, n, 3))
+        white_std = np.zeros((self.imus, 3))
+        self._blk_state = {}
+        temp = self.temperature_at(t)
+        for i in range(self.imus):
+            slow[i] = w @ self.gyro_matrix[i].T + self.gyro_bias[i]
+            if self.warmup is not None:
+                slow[i] += self.warmup_amplitude[i] * np.exp(-t / self.warmup.tau_s)[:, None]
+            slow[i] += (temp[i] - r.ambient_c)[:, None] * self.temp_slope[i]
+            accel[i] = f @ self.accel_matrix[i].T + self.accel_bias[i]
+            rng = self._rng_noise[i]
+            for j, ax in enumerate(GYRO_AXES + ACCEL_AXES):
+                if j < 3:
+                    var_white, other = self._noise(i, ax, s, rng, white=False)
+                    slow[i, :, j] += other
+                    white_std[i, j] = math.sqrt(var_white * r.sensor_rate_hz)
+                    if r.bias_gm_sigma > 0:
+                        key = ("gm_bias", i, j)
+                        c = self._gauss_markov(r.bias_gm_sigma, r.bias_gm_tau_s, n, self._rng_gmb, self._state.get(key))
+                        self._blk_state[key] = c
+                        slow[i, :, j] += c
+                else:
+                    white, other = self._noise(i, ax, s, rng)
+                    accel[i, :, j - 3] += white + other
+            if not any(self.axes[a] for a in ACCEL_AXES):
+                accel[i] += rng.normal(0.0, DEFAULT_ACCEL_NOISE, (n, 3))
+        if self.degrade is not None:
+            self._apply_degradation(slow, accel, s)
+        white_of = None
+        if self.fault is not None and self.fault.kind == "noise":
+            white_of = (self.fault.imu, GYRO_AXES.index(self.fault.axis))
+        gyro, ts_imu, wout = self._stage.run(t, slow, white_std, env, self._rng_vib, self._rng_sensor, white_of)
+        self._blk_raw = gyro.copy()
+        self._blk_frozen = None
+        if self.fault is not None:
+            parts = {} if wout is None else {(self.fault.imu, self.fault.axis): wout}
+            self._apply_fault(gyro, s, parts)
+        t_imu = None
+        if r.stamp == "own":  # each IMU stamped with its own sample time, to the microsecond
+            t_imu = np.round(ts_imu * 1e6) / 1e6
+        self._blk = VehicleBlock(t, gyro, accel, armed, w, f, temp, t_imu)
+        self._i = 0
+
+    def _noise(self, i: int, ax: str, s: np.ndarray, rng: np.random.Generator, white: bool = True):
+        """(white part, everything else) of IMU i's model noise on ``ax`` at times ``s`` (since start); with
+        ``white=False`` the white part is not drawn and its per-sample variance per Hz (sum of N^2) is
+        returned instead."""
         n = s.shape[0]
         fs = self.rate_hz
-        white = np.zeros(n)
+        draw_white = white
+        white = np.zeros(n) if draw_white else 0.0
         other = np.zeros(n)
         for k, term in enumerate(self.axes[ax]):
             e = term["effect"]
             key = (i, ax, k)
             if e == "white_noise":
-                white += rng.normal(0.0, term["N"] * math.sqrt(fs), n)
+                if draw_white:
+                    white += rng.normal(0.0, term["N"] * math.sqrt(fs), n)
+                else:
+                    white += term["N"] ** 2
             elif e == "quantization":
                 other += quantization(term["Q"], fs, n, rng)
             elif e == "bias_instability":
@@ -532,7 +627,8 @@ def write_tlog(path, sim: VehicleSimulator, duration_s: float, sysid: int = 1, c
                     hb.append(next_hb)
                     next_hb += 1.0 / heartbeat_hz
             hb = np.asarray(hb)
-            streams = [(IMU_MESSAGES[i], i, blk.t, blk.gyro[i], blk.accel[i]) for i in range(sim.imus)]
+            streams = [(IMU_MESSAGES[i], i, *blk.imu(i)) + (() if blk.temperature is None else (blk.temperature[i],))
+                       for i in range(sim.imus)]
             out.write(streams, hb, np.asarray(sim.armed_at(hb), dtype=bool).reshape(-1))
             counts["imu_messages"] += blk.n * sim.imus
             counts["heartbeats"] += hb.size
