@@ -130,7 +130,7 @@ def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
         for k in range(1200):  # 20 min of cold-start warm-up: 0.1 deg/s exponential, tau 200 s
             st = block_stats(rounded_noise(rng, FS, sigma, warm[k]), scale_of(refs))
             quiet += len(d.update(at(st, 0, refs[0])))
-        step = rng.uniform(0.5, 1.0) * DEG * (1 if seed % 2 else -1)  # at or above the 0.5 deg/s floor
+        step = rng.uniform(1.0, 2.0) * DEG * (1 if seed % 2 else -1)  # at or above the 1 deg/s floor
         for k in range(30):
             st = block_stats(rounded_noise(rng, FS, sigma, warm[-1] + step), scale_of(refs))
             if "bias_jump" in [e.kind for e in d.update(at(st, 0, refs[0]))]:
@@ -141,13 +141,13 @@ def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
     assert len(jumps) == 8 and max(k for k, _, _ in jumps) <= 6
     for _, v, s in jumps:
         assert v == pytest.approx(s, abs=0.15)
-    # a step below the floor (0.3 deg/s, clearly significant against this noise) is wander, not a fault
+    # a step below the floor (0.6 deg/s, clearly significant against this noise) is wander, not a fault
     rng = np.random.default_rng(8)
     refs = learn_ref(rng, sigma)
     d = BiasDetector()
     small = []
     for k in range(300):
-        st = block_stats(rounded_noise(rng, FS, sigma, 0.3 * DEG if k >= 100 else 0.0), scale_of(refs))
+        st = block_stats(rounded_noise(rng, FS, sigma, 0.6 * DEG if k >= 100 else 0.0), scale_of(refs))
         small += d.update(at(st, 0, refs[0]))
     assert small == []
     # a ramp: named a drift

@@ -34,9 +34,10 @@ DEG = math.pi / 180.0
 class FaultLimits:
     """Floors of the fault detectors, in datasheet units (deg/s) as a user writes them.
 
-    * ``bias_jump_dps``: a step of the still bias smaller than this is wander, not a fault. 0.5 deg/s is
-      5x the warm-up of a cold MEMS gyro and above the 1 s bias wander seen on standing rovers with a
-      motor running (+-0.4 deg/s, benchmarks/bench_reallogs.py).
+    * ``bias_jump_dps``: a step of the still bias smaller than this is wander, not a fault. 1 deg/s is
+      10x the warm-up of a cold MEMS gyro and above the bias wander seen on standing rovers (1 s means
+      +-0.4 deg/s with a motor running; an uncalibrated MPU wandering 0.8 deg/s over 20 s,
+      benchmarks/bench_reallogs.py); an EKF absorbs a bias of this size (PX4 EKF2_GYR_B_LIM: 8.6 deg/s).
     * ``bias_drift_dps``: the still bias may move this far from the reference of the start before it
       is a drift: 1 deg/s (an uncalibrated MPU-6000 moves by about 0.25 deg/s per 10 degC).
     * ``disagree_dps``: two IMUs' 1 s mean rates may differ by this much plus ``disagree_rel`` of the
@@ -48,7 +49,7 @@ class FaultLimits:
       fault (the per-block LLR is capped at h / hold).
     """
 
-    bias_jump_dps: float = 0.5
+    bias_jump_dps: float = 1.0
     bias_drift_dps: float = 1.0
     disagree_dps: float = 5.0
     disagree_rel: float = 0.1

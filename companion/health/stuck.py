@@ -48,6 +48,7 @@ class StuckDetector:
         self.equal_run = 0
         self.value = math.nan
         self.lsb = math.inf  # smallest non-zero step seen (the sensor's resolution, or finer)
+        self.quantised = False  # a healthy block repeated a code: the data are quantised near the noise level
 
     @property
     def state(self) -> int:
@@ -69,15 +70,19 @@ class StuckDetector:
             # frozen values, not just a quiet gyro: the codes must repeat more than the noise explains.
             # Differences far below the resolution count as repeats (a frozen value with a little dither):
             # the block's repeat rate is at least what its own white noise would give at that resolution.
+            # (only for data seen to repeat codes when healthy: the smallest step of a float log is no resolution)
             if math.isfinite(self.lsb):
                 p0 = p_equal_codes(math.sqrt(ref.sigma2) / self.lsb)
                 pairs = n - 1
-                p_hat = max((pairs - changes) / max(pairs, 1), p_equal_codes(math.sqrt(max(v2, 0.0)) / self.lsb))
+                p_hat = (pairs - changes) / max(pairs, 1)
+                if self.quantised:
+                    p_hat = max(p_hat, p_equal_codes(math.sqrt(max(v2, 0.0)) / self.lsb))
                 llr = min(llr, equal_codes_llr(int(round(p_hat * pairs)), pairs, p0))
             else:
                 llr = min(llr, 0.0)
             if llr <= 0.0 and self.cusum.state == OK and math.isfinite(step) and step > 0:
                 self.lsb = min(self.lsb, step)  # the resolution, learned from blocks without evidence
+                self.quantised = self.quantised or changes < n - 1
             if self.equal_run >= EQUAL_BLOCKS and self.cusum.state == OK:
                 llr = max(llr, 2.0 * H_ON)
             return self.cusum.step(llr)
@@ -92,9 +97,10 @@ class StuckDetector:
 
     def state_dict(self) -> dict:
         return {"cusum": self.cusum.state_dict(), "equal_run": self.equal_run,
-                "lsb": self.lsb if math.isfinite(self.lsb) else None}
+                "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
         self.equal_run = int(d.get("equal_run", 0))
         self.lsb = math.inf if d.get("lsb") is None else float(d["lsb"])
+        self.quantised = bool(d.get("quantised", False))
