@@ -108,6 +108,8 @@ def find_logs(dirs: list[Path]) -> list[Path]:
             continue
         for p in sorted(d.rglob("*")):
             name = p.name.lower()
+            if "sim" in p.relative_to(d).parts[:-1]:
+                continue  # simulated logs kept beside the real ones are not real data
             if p.is_file() and name.endswith(EXTS) and p.stat().st_size > 20_000:
                 out.append(p)
     return out
@@ -158,7 +160,7 @@ def run_log(path: Path, analyze: bool) -> dict:
             lines = [ln for ln in (a.stderr + a.stdout).splitlines() if ln.strip()]
             row["analyze_note"] = ""
             for ln in lines:
-                if "dead" in ln or "constant" in ln or "error" in ln.lower():
+                if "gyro dead" in ln or (a.returncode != 0 and "error" in ln.lower()):
                     row["analyze_note"] = ln.strip()[:160]
                     break
             if a.returncode != 0 and not row["analyze_note"]:
