@@ -126,7 +126,9 @@ class BiasDetector:
             self.wander = wander_var(self.hist)
         # drift against the reference period's bias
         self.e += (x - self.e) / DRIFT_TAU_BLOCKS
-        sig_e = sig / math.sqrt(2.0 * DRIFT_TAU_BLOCKS)
+        # the EWMA averages the white part down, not a slow wander (correlated over tens of blocks)
+        white = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + extra_var
+        sig_e = math.sqrt(white / (2.0 * DRIFT_TAU_BLOCKS) + self.wander)
         off = self.e - ref.mu
         tol = max(DRIFT_TOL, lim.bias_drift)
         if self.drift_state == OK:

@@ -118,15 +118,16 @@ def allan_wander_var(B: float | None, K: float | None, T: float) -> float:
 
 def wander_var(means: Sequence[float], min_blocks: int = 10) -> float:
     """Wander of the still-block means measured on the vehicle: the larger of the robust variance of
-    successive differences / 2 (block-to-block) and the robust variance of the recent means themselves
-    (slow wander within the window). 0 with fewer than ``min_blocks``."""
+    successive differences / 2 (block-to-block) and the variance of the recent means themselves (slow
+    wander within the window; not a robust spread: a slow excursion of tens of blocks is exactly the
+    wander to allow for, and the caller measures it only while nothing is flagged). 0 with fewer than
+    ``min_blocks``."""
     x = np.asarray([m for m in means if math.isfinite(m)], dtype=float)
     if x.size < min_blocks:
         return 0.0
     d = np.diff(x)
     mad_d = float(np.median(np.abs(d - np.median(d)))) / 0.6745
-    mad_x = float(np.median(np.abs(x - np.median(x)))) / 0.6745
-    return max(0.5 * mad_d * mad_d, mad_x * mad_x)
+    return max(0.5 * mad_d * mad_d, float(np.var(x)))
 
 
 _PHI0 = 1.0 / math.sqrt(2.0 * math.pi)

@@ -106,6 +106,7 @@ class ImuFaults:
                 if af.stuck.state == OK and af.spikes.state == OK:
                     af.ref.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n,
                                self.ref_blocks)
+                    af.bias.hist.append(float(st.mean[j]))  # the bias wander of the reference period counts too
                 continue
             if af.stuck.state == FAULT:
                 continue
