@@ -39,10 +39,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from companion import units  # noqa: E402
 from companion.health import bias, disagreement, noise, spikes, stuck  # noqa: E402
+from companion.health.limits import FaultLimits  # noqa: E402
 from companion.mavlink.reporter import Reporter  # noqa: E402
 from companion.service.pipeline import Pipeline, PipelineConfig  # noqa: E402
 from companion.service.replay import replay_vehicle  # noqa: E402
 from companion.sim.vehicle import Fault, Flight, Schedule, VehicleSimulator, WarmUp  # noqa: E402
+
+LIMITS = FaultLimits()
 
 RATE = 100.0
 LSB = 1e-3
@@ -122,7 +125,8 @@ def run_case(kind, seed, max_delay):
         desc = f"x{size:.2f}"
         fault_kind = "noise"
     elif kind == "bias":
-        size = float(rng.uniform(0.3, 2.0)) * DEG * (1 if rng.random() < 0.5 else -1)
+        # a step at or above the floor (health.limits.FaultLimits.bias_jump_dps): smaller ones are wander
+        size = float(rng.uniform(LIMITS.bias_jump_dps, 2.0)) * DEG * (1 if rng.random() < 0.5 else -1)
         limit = bias.H_ON / (RATE * size * size / (2 * s_tot ** 2))
         desc = f"{size / DEG:+.2f} deg/s"
         fault_kind = "bias"
@@ -153,7 +157,8 @@ def run_case(kind, seed, max_delay):
             limit = 1.0 / RATE
             desc = f"{imus} IMUs, IMU{imu} frozen in flight"
         else:
-            fault_kind, size = "bias", 1.0 * DEG * (1 if rng.random() < 0.5 else -1)
+            # above the disagreement floor: 5 deg/s + 10 % of the flight's rms rate (~0.5 rad/s: 7.9 deg/s)
+            fault_kind, size = "bias", float(rng.uniform(10.0, 15.0)) * DEG * (1 if rng.random() < 0.5 else -1)
             limit = disagreement.H_ON / (RATE * size * size / (2 * 2 * s_tot ** 2))
             desc = f"{imus} IMUs, IMU{imu} {size / DEG:+.0f} deg/s in flight"
     else:

@@ -96,7 +96,8 @@ def test_stuck_during_baseline_learning_is_flagged_before_any_baseline():
 
 @pytest.mark.parametrize("imus, kind", [(3, "stuck"), (3, "bias"), (2, "stuck")])
 def test_in_flight_fault_named_from_the_disagreement(imus, kind):
-    fault = Fault(kind, at=300.0, size=0.0 if kind == "stuck" else 1.0 * DEG, imu=imus - 1, axis="gx")
+    # a bias above the disagreement floor (5 deg/s + 10 % of the rms rate of the flight)
+    fault = Fault(kind, at=300.0, size=0.0 if kind == "stuck" else 10.0 * DEG, imu=imus - 1, axis="gx")
     p, sink = run(312.0, imus=imus, fault=fault, schedule=Schedule(flights=(Flight(240.0, 600.0),)))
     texts = fault_texts(sink)
     odd = imus - 1

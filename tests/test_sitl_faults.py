@@ -109,11 +109,11 @@ def test_saturation_in_flight_is_named(tmp_path):
 @pytest.mark.parametrize("kind, imus", [("stuck", 3), ("bias", 2)])
 def test_in_flight_disagreement_names_the_faulty_imu(tmp_path, kind, imus):
     """Armed and flying (the single-IMU tests cannot run): IMU1's gyro X freezes (three IMUs: the odd one out
-    is named) or jumps by +1 deg/s (two IMUs) at 120 s; a STATUSTEXT names IMU1 with the disagreement or the
+    is named) or jumps by +10 deg/s (two IMUs) at 120 s; a STATUSTEXT names IMU1 with the disagreement or the
     kind within 30 s (issue target: 10 s), CRITICAL for the disagreement and for stuck; with three IMUs,
     IMU0 and IMU2 are not blamed alone."""
     at = 120.0
-    size = "0" if kind == "stuck" else "0.01745"
+    size = "0" if kind == "stuck" else "0.1745"  # 10 deg/s: above the disagreement floor
     nvf, texts = sim_against_run(
         tmp_path, MODEL, ["--imus", str(imus), "--arm-at", "80", "--disarm-at", "160", "--fault", kind,
                           "--fault-at", str(at), "--fault-size", size, "--fault-imu", "1", "--fault-axis", "gx",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 from companion.analysis.limits import LONG_TERMS_S, SHORT_TAU_RATE_HZ
+from companion.health.dead import dead_gyro_text
 
 
 def notes(res) -> list[str]:
@@ -16,6 +17,9 @@ def notes(res) -> list[str]:
         if not s.is_imu:
             out.append(f"{lab}: accel and gyro are zero in every sample: a compass-only instance, not an IMU.")
             continue
+        dead = dead_gyro_text(lab, s.gyro)
+        if dead:
+            out.append(dead)
         t = s.timing
         if t.duplicates or t.backwards or t.resets:
             out.append(f"{lab}: dropped {t.duplicates} duplicate and {t.backwards} backward timestamps; "

@@ -33,8 +33,14 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     summary = {"source": str(spec), "notes": inspect_notes(res), "selection": sel.to_dict(),
                "format": res.meta.get("format", "tlog/csv/live"),
                "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
+    dead = dead_gyros(streams)
     if not sel.intervals:
-        raise CompanionError(f"{spec}: {sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
+        # a dead gyro is said first: it is the reason to look at this log, whatever the armed state says
+        first = "; ".join(dead) + "; " if dead else ""
+        raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
+    if dead and warn is not None:
+        for d in dead:
+            warn(d)
     total = sum(s.samples for s in streams) * len(axes)
     bar = progress(len(streams) * len(axes), total) if progress is not None else None
     entries = []
@@ -52,6 +58,18 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
         if bar is not None:
             bar.close()
     return entries, summary
+
+
+def dead_gyros(streams) -> list[str]:
+    """The sentences naming every dead gyro (health.dead) of the IMU streams."""
+    from companion.health.dead import dead_gyro_text
+
+    out = []
+    for s in streams:
+        text = dead_gyro_text(s.key.label(), s.gyro)
+        if text:
+            out.append(text)
+    return out
 
 
 def check_taus_reachable(spec: str, streams, warn=None) -> None:

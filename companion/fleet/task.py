@@ -124,7 +124,13 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
                       "imu_ids": {int(k): int(v) for k, v in ident.get("imu_ids", {}).items()},
                       "start_time": ident.get("start_time"), "duration_s": duration, "streams": len(streams)}
         out["rows"] = rows
-        if not rows:
+        from companion.analysis.source import dead_gyros
+
+        dead = dead_gyros(streams)
+        if dead:  # recorded as a dead gyro, whatever else the log lacks
+            out["error"] = "; ".join(dead)[:300]
+            out["dead_gyro"] = True
+        elif not rows:
             out["error"] = f"no still data ({sel.describe()})"
         elif not any(r["status"] == "ok" for r in rows):
             notes = sorted({f"{r['status']}" + (f" ({r['note']})" if r.get("note") else "") for r in rows})

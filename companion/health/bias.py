@@ -29,7 +29,8 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.faults import FAULT, OK, AxisRef, Cusum, FaultEvent, Observation, debounce, gauss_mean_llr
+from companion.health.faults import FAULT, OK, AxisRef, Cusum, FaultEvent, Observation, debounce
+from companion.health.limits import FaultLimits, capped, floored_mean_llr, wander_var
 
 DEG = math.pi / 180.0
 DELTA = 0.2 * DEG  # rad/s, mean shift the jump CUSUMs are tuned to
@@ -48,7 +49,9 @@ class BiasDetector:
 
     kind = "bias_jump"
 
-    def __init__(self):
+    def __init__(self, limits: FaultLimits | None = None):
+        self.limits = limits or FaultLimits()
+        self.wander = 0.0  # variance of the still-block means measured on this axis while quiet
         self.up = Cusum(H_ON, H_OFF)
         self.down = Cusum(H_ON, H_OFF)
         self.r = math.nan  # tracking reference (rad/s)
@@ -87,7 +90,10 @@ class BiasDetector:
             self.r = ref.mu
         if math.isnan(self.e):
             self.e = ref.mu  # the reference period's mean (30 blocks), not one noisy block
-        var_m = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + extra_var
+        lim = self.limits
+        # the block mean's spread around the reference: white noise, the Allan-predicted wander, and the
+        # wander measured on the vehicle (vibration, small real motion, temperature) while nothing was flagged
+        var_m = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + max(extra_var, self.wander)
         sig = math.sqrt(max(var_m, 1e-18))
         d = x - self.r
         was = self.state
@@ -96,8 +102,10 @@ class BiasDetector:
         self.run.append(d)
         self.hist.append(x)
         if self.drift_state == OK:  # a drift already flagged is not named again as jumps
-            self.up.step(gauss_mean_llr(d, sig, DELTA))
-            self.down.step(gauss_mean_llr(-d, sig, DELTA))
+            # a step below the floor is wander, not a fault; one knock is not a step (capped evidence)
+            hold = lim.bias_hold_blocks
+            self.up.step(capped(floored_mean_llr(d, sig, lim.bias_jump, DELTA), H_ON, hold))
+            self.down.step(capped(floored_mean_llr(-d, sig, lim.bias_jump, DELTA), H_ON, hold))
         if self.state != was:
             if self.state == FAULT:
                 if self._is_ramp(sig):  # the evidence grew like a ramp: a drift, not a step
@@ -122,19 +130,23 @@ class BiasDetector:
         quiet = self.state == OK and self.up.s < 0.25 * H_ON and self.down.s < 0.25 * H_ON
         if quiet:
             self.r += (x - self.r) / REF_TAU_BLOCKS
+            self.wander = wander_var(self.hist)
         # drift against the reference period's bias
         self.e += (x - self.e) / DRIFT_TAU_BLOCKS
-        sig_e = sig / math.sqrt(2.0 * DRIFT_TAU_BLOCKS)
+        # the EWMA averages the white part down, not a slow wander (correlated over tens of blocks)
+        white = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + extra_var
+        sig_e = math.sqrt(white / (2.0 * DRIFT_TAU_BLOCKS) + self.wander)
         off = self.e - ref.mu
+        tol = max(DRIFT_TOL, lim.bias_drift)
         if self.drift_state == OK:
-            self.drift_count = self.drift_count + 1 if abs(off) - 4.0 * sig_e > DRIFT_TOL else 0
+            self.drift_count = self.drift_count + 1 if abs(off) - 4.0 * sig_e > tol else 0
             if self.drift_count >= DRIFT_HOLD and self.state == OK:  # not while a jump is flagged
                 self.drift_state, self.drift_count, self.drift_value = FAULT, 0, off / DEG
                 self.drift_r = ref.mu
                 out.append("bias_drift")
         else:
             last = list(self.hist)[-DRIFT_HOLD:]
-            back = abs(off) < 0.7 * DRIFT_TOL and abs(sum(last) / len(last) - self.drift_r) < 0.5 * DELTA
+            back = abs(off) < 0.7 * tol and abs(sum(last) / len(last) - self.drift_r) < 0.5 * max(DELTA, lim.bias_jump)
             self.drift_state, self.drift_count, changed = debounce(self.drift_state, self.drift_count, False,
                                                                    DRIFT_HOLD, DRIFT_HOLD, good=back)
             if changed:
@@ -168,7 +180,8 @@ class BiasDetector:
         f = lambda v: None if math.isnan(v) else v  # noqa: E731
         return {"up": self.up.state_dict(), "down": self.down.state_dict(), "r": f(self.r), "e": f(self.e),
                 "value": f(self.value), "drift_state": self.drift_state, "drift_count": self.drift_count,
-                "drift_value": f(self.drift_value), "drift_r": f(self.drift_r), "hist": list(self.hist)}
+                "drift_value": f(self.drift_value), "drift_r": f(self.drift_r), "hist": list(self.hist),
+                "wander": self.wander}
 
     def load_state_dict(self, d: Mapping) -> None:
         g = lambda k: math.nan if d.get(k) is None else float(d[k])  # noqa: E731
@@ -177,4 +190,5 @@ class BiasDetector:
         self.r, self.e, self.value, self.drift_value = g("r"), g("e"), g("value"), g("drift_value")
         self.drift_state, self.drift_count = int(d.get("drift_state", OK)), int(d.get("drift_count", 0))
         self.drift_r = g("drift_r")
+        self.wander = float(d.get("wander", 0.0))
         self.hist = deque((float(v) for v in d.get("hist") or []), maxlen=HIST_BLOCKS)

@@ -14,11 +14,14 @@ uncertainty sigma_d^2 = 2 var_w(r) / n (var_w: the white variance of the residua
 differences, doubled for colour) + sigma_n^2 m^T (S + lambda I)^-1 m
 (the predictive variance of the fitted E at the block's mean rate m: the regression's own uncertainty, so
 the first seconds of a flight, before E is known, are tested with the 3 % prior and not falsely).
-Two CUSUMs (faults eq. (1)) of the Gaussian mean-shift LLR with delta = +-0.5 deg/s, h = 15, each fed
-the larger of that LLR and the chi-square LLR of a residual white-variance rise by 4 against the sum of
-both IMUs' still noise references (a gyro frozen or noisy in steady flight). A +1 deg/s
-bias of one IMU: about 10 nats per block once E is fitted; a gyro frozen in flight: the whole rotation
-rate shows in d (and stuck.py flags it anyway).
+Two CUSUMs (faults eq. (1)) of a mean-shift LLR with a floor (limits.floored_mean_llr), h = 15: no evidence
+below ``disagree_dps`` (5 deg/s, ArduPilot's gyro consistency limit) plus ``disagree_rel`` (10 %) of the
+block's rms rate, and each block's evidence capped at h / ``disagree_hold_blocks`` (3 blocks at least):
+healthy IMUs in fast manoeuvres differ by a few deg/s and ~10 % of the rate (each sampled at its own
+instants and filtered on its own; log171's 1 s means: p99 4.6 deg/s, max 14 deg/s at the crash). The
+residual's variance is not used: in flight each IMU vibrates its own way, and at rest each IMU's own noise
+detector singles out a noisy one. A gyro frozen in flight shows its whole mean rate in d (and stuck.py
+flags it anyway); a biased one above the floor about 10+ nats per block.
 
 With three IMUs the odd one out is the IMU whose two pairs disagree while the third pair agrees
 (service/imu_group.py names it: ``IMU1 gyro X disagrees with IMU0/IMU2``).
@@ -31,8 +34,8 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.faults import (AXES, DD_NU_PER_SAMPLE, FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr,
-                                     gauss_mean_llr)
+from companion.health.limits import FaultLimits, capped, floored_mean_llr
+from companion.health.faults import AXES, FAULT, OK, Cusum, FaultEvent, Observation
 
 DEG = math.pi / 180.0
 DELTA = 0.5 * DEG
@@ -44,14 +47,14 @@ FIT_TAU_BLOCKS = 600.0
 REF_TAU_BLOCKS = 60.0
 MOTION_RMS = 0.02  # rad/s: a block with this much (demeaned) rotation is fitted
 WARM_BLOCKS = 5
-VAR_R1 = 4.0  # residual white variance rise the variance LLR is tuned to (2x its std)
 
 
 class PairDisagreement:
     kind = "disagree"
 
-    def __init__(self, i: int, j: int):
+    def __init__(self, i: int, j: int, limits: FaultLimits | None = None):
         self.i, self.j = i, j
+        self.limits = limits or FaultLimits()
         self.S = np.zeros((3, 3))
         self.T = np.zeros((3, 3))
         self.E = np.zeros((3, 3))
@@ -100,17 +103,21 @@ class PairDisagreement:
         changed = []
         evidence = False
         self.blocks += 1
-        nu = DD_NU_PER_SAMPLE * (m - 2)
+        lim = self.limits
+        # two healthy IMUs differ by up to a few deg/s plus ~10 % of the rate in fast manoeuvres (own
+        # sampling instants and filters, percent-level scale factors): below that floor no evidence at all
+        floor = lim.disagree + lim.disagree_rel * np.sqrt(np.mean(yj * yj, axis=0))
         for a in range(3):
             if self.blocks <= WARM_BLOCKS:
                 break
             was = self.axis_state(a)
             s = math.sqrt(var_d[a])
-            llr_v = chi2_llr(var_r[a] / noise_var, nu, VAR_R1) if noise_var else -math.inf
-            # the mean-shift CUSUMs carry the residual-variance evidence too (a frozen or very noisy gyro
-            # during steady flight has little mean offset but a residual that is no longer white noise)
-            self.up[a].step(max(gauss_mean_llr(d[a], s, DELTA), llr_v))
-            self.down[a].step(max(gauss_mean_llr(-d[a], s, DELTA), llr_v))
+            # only the mean offset counts: a residual variance rise is each IMU's own vibration (in flight)
+            # or noise (still: the IMU's own noise detector singles it out); one violent second is not a
+            # disagreement (evidence capped: ``disagree_hold_blocks`` blocks at least)
+            hold = lim.disagree_hold_blocks
+            self.up[a].step(capped(floored_mean_llr(d[a], s, float(floor[a]), DELTA), H_ON, hold))
+            self.down[a].step(capped(floored_mean_llr(-d[a], s, float(floor[a]), DELTA), H_ON, hold))
             if self.axis_state(a) != was:
                 changed.append(a)
                 self.value[a] = d[a] / DEG

@@ -17,6 +17,7 @@ import numpy as np
 from companion.health.bias import BiasDetector
 from companion.health.faults import (AXES, FAULT, KIND_CODE, OK, PRIORITY, AxisRef, BlockStats, FaultDetector,
                                      FaultEvent, Observation, fault_mask)
+from companion.health.limits import FaultLimits
 from companion.health.noise import NoiseDetector
 from companion.health.resolution import ResolutionDetector
 from companion.health.saturation import SaturationDetector
@@ -28,11 +29,11 @@ REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detecto
 
 
 class AxisFaults:
-    def __init__(self, abs_limit: float):
+    def __init__(self, abs_limit: float, limits: FaultLimits | None = None):
         self.ref = AxisRef()
         self.stuck = StuckDetector()
-        self.noise = NoiseDetector()
-        self.bias = BiasDetector()
+        self.noise = NoiseDetector(limits)
+        self.bias = BiasDetector(limits)
         self.spikes = SpikeDetector()
         self.saturation = SaturationDetector(abs_limit)
         self.resolution = ResolutionDetector()
@@ -62,10 +63,12 @@ class AxisFaults:
 
 
 class ImuFaults:
-    def __init__(self, imu: int, abs_limit: float = math.inf, ref_blocks: int = REF_BLOCKS, stamp_res: float = 0.0):
+    def __init__(self, imu: int, abs_limit: float = math.inf, ref_blocks: int = REF_BLOCKS, stamp_res: float = 0.0,
+                 limits: FaultLimits | None = None):
         self.imu = imu
         self.ref_blocks = int(ref_blocks)
-        self.axes = {ax: AxisFaults(abs_limit) for ax in AXES}
+        self.limits = limits or FaultLimits()
+        self.axes = {ax: AxisFaults(abs_limit, self.limits) for ax in AXES}
         self.timing = TimingDetector(stamp_res)
         self.external: dict[tuple[str, str], int] = {}  # (kind, axis) -> state, e.g. ("disagree", "gx")
         self.quiet_blocks = 0
@@ -103,6 +106,7 @@ class ImuFaults:
                 if af.stuck.state == OK and af.spikes.state == OK:
                     af.ref.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n,
                                self.ref_blocks)
+                    af.bias.hist.append(float(st.mean[j]))  # the bias wander of the reference period counts too
                 continue
             if af.stuck.state == FAULT:
                 continue

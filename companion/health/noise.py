@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
+from companion.health.limits import FaultLimits, capped
 from companion.health.faults import Cusum, FaultEvent, OK, Observation, chi2_llr
 
 R1 = 1.69
@@ -30,7 +31,8 @@ EWMA_W = 0.2  # weight of a new block in the reported ratio
 class NoiseDetector:
     kind = "noise"
 
-    def __init__(self):
+    def __init__(self, limits: FaultLimits | None = None):
+        self.limits = limits or FaultLimits()
         self.cusum = Cusum(H_ON, H_OFF)
         self.u_avg = math.nan
         self.run: list = []
@@ -52,7 +54,9 @@ class NoiseDetector:
             self.run = []
         self.run.append(u)
         self.u_avg = u if not math.isfinite(self.u_avg) else (1 - EWMA_W) * self.u_avg + EWMA_W * u
-        changed = self.cusum.step(chi2_llr(u, ref.nu, R1))
+        # one knock (a block of a standing vehicle bumped) is not a noise change: at least
+        # ``noise_hold_blocks`` blocks of evidence
+        changed = self.cusum.step(capped(chi2_llr(u, ref.nu, R1), H_ON, self.limits.noise_hold_blocks))
         if changed and self.cusum.state != OK:  # the ratio quoted: the last blocks of the evidence
             self.u_avg = self.run[-1]  # the block that decided (earlier ones may predate the jump)
         self.value = math.sqrt(max(self.u_avg, 0.0))

@@ -1,4 +1,4 @@
-"""Stuck (frozen) gyro axis: the block variance collapses below what the healthy noise allows.
+"""Stuck (frozen) gyro axis: the output repeats its value (codes) and its variance collapses.
 
 Statistic: u = v2 / sigma0^2, the block's white-noise variance from second differences (faults.BlockStats)
 over the reference sigma0^2 learned from still data; nu v2 / sigma^2 ~ chi2(nu) (nu from the reference,
@@ -13,6 +13,15 @@ while d^2 < 0.256 sigma0^2 (d < 0.5 sigma0). Motion only adds variance, so this 
 (still, handled, armed, flying). Figure: benchmarks/bench_faults.py (stuck delay 1-2 s, 0 false alarms in
 100 h including 0.7 LSB int16 rounding, where healthy blocks never came below u = 0.4).
 
+A variance drop alone is no evidence of a frozen gyro: a plane's gyro whose noise falls 5x when the engine
+stops keeps giving distinct values (150 distinct 10 Hz samples in 15 s, benchmarks/bench_reallogs.py). So
+the per-block evidence is the smaller of the variance LLR and the evidence of repeated codes
+(limits.equal_codes_llr): the number of successive equal samples against the rate p0 a healthy gyro
+repeats its code by nature, predicted from its noise-to-LSB ratio (limits.p_equal_codes: 0.37 at 0.7 LSB
+of white noise, so a healthy coarse gyro's runs of equal codes are not a fault; about 0 for float logs,
+whose codes always change). The LSB is the smallest non-zero step seen on the axis. A frozen value
+(every code equal) gives ~ n ln(1 / p0) nats: flagged in one block.
+
 Before a reference exists (the first seconds of still data) the PX4-like rule applies: ``equal_blocks``
 consecutive blocks of at least 50 samples with every value equal (no change at all).
 """
@@ -23,6 +32,7 @@ import math
 from typing import Mapping
 
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
+from companion.health.limits import equal_codes_llr, p_equal_codes
 
 R1 = 0.1  # variance collapse the CUSUM is tuned to
 H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
@@ -37,6 +47,8 @@ class StuckDetector:
         self.cusum = Cusum(H_ON, H_OFF)
         self.equal_run = 0
         self.value = math.nan
+        self.lsb = math.inf  # smallest non-zero step seen (the sensor's resolution, or finer)
+        self.quantised = False  # a healthy block repeated a code: the data are quantised near the noise level
 
     @property
     def state(self) -> int:
@@ -50,10 +62,27 @@ class StuckDetector:
         j, st, ref = obs.col, obs.stats, obs.ref
         v2, changes, n = float(st.v2[j]), int(st.changes[j]), st.n
         self.equal_run = self.equal_run + 1 if (changes == 0 and n >= 50) else 0
+        step = float(st.step[j])
         if ref.ready and ref.sigma2 > 0 and math.isfinite(v2):
             u = v2 / ref.sigma2
             self.value = u
             llr = chi2_llr(u, ref.nu, R1)
+            # frozen values, not just a quiet gyro: the codes must repeat more than the noise explains.
+            # Differences far below the resolution count as repeats (a frozen value with a little dither):
+            # the block's repeat rate is at least what its own white noise would give at that resolution.
+            # (only for data seen to repeat codes when healthy: the smallest step of a float log is no resolution)
+            if math.isfinite(self.lsb):
+                p0 = p_equal_codes(math.sqrt(ref.sigma2) / self.lsb)
+                pairs = n - 1
+                p_hat = (pairs - changes) / max(pairs, 1)
+                if self.quantised:
+                    p_hat = max(p_hat, p_equal_codes(math.sqrt(max(v2, 0.0)) / self.lsb))
+                llr = min(llr, equal_codes_llr(int(round(p_hat * pairs)), pairs, p0))
+            else:
+                llr = min(llr, 0.0)
+            if llr <= 0.0 and self.cusum.state == OK and math.isfinite(step) and step > 0:
+                self.lsb = min(self.lsb, step)  # the resolution, learned from blocks without evidence
+                self.quantised = self.quantised or changes < n - 1
             if self.equal_run >= EQUAL_BLOCKS and self.cusum.state == OK:
                 llr = max(llr, 2.0 * H_ON)
             return self.cusum.step(llr)
@@ -67,8 +96,11 @@ class StuckDetector:
         return False
 
     def state_dict(self) -> dict:
-        return {"cusum": self.cusum.state_dict(), "equal_run": self.equal_run}
+        return {"cusum": self.cusum.state_dict(), "equal_run": self.equal_run,
+                "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
         self.equal_run = int(d.get("equal_run", 0))
+        self.lsb = math.inf if d.get("lsb") is None else float(d["lsb"])
+        self.quantised = bool(d.get("quantised", False))

@@ -88,7 +88,7 @@ class Channel:
 
     def _new_faults(self) -> ImuFaults:
         return ImuFaults(self.imu, self.cfg.gyro_limit, max(1, int(round(self.cfg.fault_ref_s / self.cfg.block_s))),
-                         stamp_res=self.time_res)
+                         stamp_res=self.time_res, limits=self.cfg.faults)
 
     # ------------------------------------------------------------------ rate changes
     def switch_rate(self, new_rate: float, t_block: np.ndarray) -> bool:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, fields
 from typing import Mapping
 
 from companion.health.detector import DetectorConfig
+from companion.health.limits import FaultLimits
 
 
 @dataclass
@@ -33,6 +34,7 @@ class PipelineConfig:
     gap_s: float = 0.5
     estimator: dict = field(default_factory=dict)  # passed to make_estimator (e.g. effects, phases, max_tau_s)
     health: DetectorConfig = field(default_factory=DetectorConfig)
+    faults: FaultLimits = field(default_factory=FaultLimits)  # magnitude floors of the fault detectors
 
     @classmethod
     def from_mapping(cls, cfg: Mapping | None) -> "PipelineConfig":
@@ -43,6 +45,8 @@ class PipelineConfig:
                 raise ValueError(f"run: unknown key {k!r}")
             if k == "health":
                 out.health = DetectorConfig.from_mapping(v)
+            elif k == "faults":
+                out.faults = FaultLimits.from_mapping(v)
             elif k == "estimator":
                 out.estimator = dict(v or {})
             elif k == "sysid":

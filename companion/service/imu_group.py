@@ -23,8 +23,9 @@ MIN_ALIGNED = 10  # samples both IMUs cover before a pair is tested
 
 
 class ImuGroup:
-    def __init__(self, reset_s: float):
+    def __init__(self, reset_s: float, limits=None):
         self.reset_s = float(reset_s)
+        self.limits = limits  # magnitude floors of the disagreement test (health.limits.FaultLimits)
         self.pairs: dict[tuple[int, int], PairDisagreement] = {}
         self.pair_done: dict[tuple[int, int], float] = {}
         self.disagree: dict[tuple[int, str], str] = {}  # (imu, axis) -> detail of an active disagreement
@@ -48,7 +49,7 @@ class ImuGroup:
             key = (i, j)
             pair = self.pairs.get(key)
             if pair is None:
-                pair = self.pairs[key] = PairDisagreement(i, j)
+                pair = self.pairs[key] = PairDisagreement(i, j, self.limits)
             ti = np.concatenate([b[0] for b in ci.recent])
             tj = np.concatenate([b[0] for b in cj.recent])
             t_end = min(ti[-1], tj[-1])
@@ -125,7 +126,7 @@ class ImuGroup:
         pairs = {}
         for key, pd in (d.get("pairs") or {}).items():
             i, j = (int(v) for v in key.split("-"))
-            pairs[(i, j)] = PairDisagreement(i, j)
+            pairs[(i, j)] = PairDisagreement(i, j, self.limits)
             pairs[(i, j)].load_state_dict(pd)
         self.pairs = pairs
         self.disagree = {(int(k), str(a)): str(dt) for k, a, dt in d.get("disagree") or []}

@@ -72,7 +72,7 @@ class Pipeline:
         self.sysid = cfg.sysid
         self.armed = False
         self.channels: dict[int, Channel] = {}
-        self.group = ImuGroup(cfg.reset_s)
+        self.group = ImuGroup(cfg.reset_s, cfg.faults)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
@@ -464,7 +464,7 @@ class Pipeline:
         if self.sysid is not None and d.get("sysid") not in (None, self.sysid):
             raise ValueError(f"state is for system id {d.get('sysid')}, not {self.sysid}")
         channels = {int(key): Channel.from_state(int(key), c, self.cfg) for key, c in (d.get("channels") or {}).items()}
-        group = ImuGroup(self.cfg.reset_s)
+        group = ImuGroup(self.cfg.reset_s, self.cfg.faults)
         group.load_state_dict(d)
         self.group = group
         baseline = None

@@ -1,0 +1,91 @@
+"""A dead gyro (every sample exactly 0, as in a real 2014 rover log with an absent MPU-9250) is named by
+inspect, analyze (before the armed-state refusal), fleet and run. The logs are written by the simulator's
+DataFlash writer: two IMUs, IMU1's gyro all zeros, armed from the first sample to the last."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.health.dead import constant_axes, dead_gyro_text
+from companion.sim.dataflash_writer import write_imu_log
+
+REPO = Path(__file__).resolve().parents[1]
+REAL = Path("/work/reallogs/erle/pxf_rover_2-8-2014_mpu9250-ms5611_7.BIN")  # local copy of a public log
+
+
+def companion(*args, cwd=None):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True, text=True, env=env,
+                          timeout=300, cwd=cwd)
+
+
+def dead_log(path, armed_throughout=True, seconds=90.0):
+    rng = np.random.default_rng(4)
+    n = int(seconds * 50)
+    t = 5.0 + np.arange(n) / 50.0
+    g = np.stack([rng.normal(0.0, 2e-3, (n, 3)), np.zeros((n, 3))])
+    a = np.stack([np.array([0.0, 0.0, -9.81]) + rng.normal(0.0, 0.05, (n, 3)) for _ in range(2)])
+    armed = [(5.0, True)] if armed_throughout else None
+    write_imu_log(path, t, g, a, layout="4.x", params={"INS_GYRO_FILTER": 20.0}, armed=armed)
+    return path
+
+
+def test_constant_axes():
+    g = np.zeros((100, 3))
+    g[:, 1] = np.arange(100) * 1e-3
+    assert constant_axes(g) == [0, 2]
+    assert constant_axes(g[:5]) == []  # too short to tell
+    assert "exactly 0" in dead_gyro_text("IMU[1]", np.zeros((50, 3)))
+    assert "constant (0.0123 rad/s)" in dead_gyro_text("IMU[1]", np.full((50, 3), 0.0123))
+    assert dead_gyro_text("IMU[0]", np.random.default_rng(0).normal(size=(50, 3))) is None
+
+
+def test_inspect_and_analyze_name_the_dead_gyro_before_the_armed_state(tmp_path):
+    p = dead_log(tmp_path / "dead.bin")
+    r = companion("inspect", str(p), "--json", str(tmp_path / "i.json"))
+    assert r.returncode == 0, r.stderr
+    assert "IMU[1]" in r.stdout and "gyro dead: X, Y, Z exactly 0" in r.stdout
+    r = companion("analyze", str(p), "--quiet")
+    assert r.returncode != 0
+    err = r.stderr.strip().splitlines()[-1]
+    assert "gyro dead: X, Y, Z exactly 0" in err
+    assert err.index("gyro dead") < err.index("armed"), err  # named first
+    assert "Traceback" not in r.stderr
+
+
+def test_analyze_with_still_data_warns_about_the_dead_gyro(tmp_path):
+    p = dead_log(tmp_path / "dead_still.bin", armed_throughout=False)
+    out = tmp_path / "a.json"
+    r = companion("analyze", str(p), "--json", str(out), "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "gyro dead" in r.stderr
+    assert any("gyro dead" in n for n in json.loads(out.read_text())["sources"][0]["notes"])
+
+
+def test_fleet_records_a_dead_gyro_not_no_still_data(tmp_path):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    dead_log(logs / "dead.bin")
+    r = companion("fleet", "analyze", str(logs), "--db", str(tmp_path / "f.sqlite"), "--workers", "1")
+    text = r.stdout + r.stderr
+    assert "gyro dead" in text and "no still data" not in text, text
+
+
+def test_run_names_the_dead_gyro(tmp_path):
+    p = dead_log(tmp_path / "dead_run.bin")
+    r = companion("run", "--source", str(p), "--no-state", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "IMU1 gyro X stuck" in r.stdout and "IMU0 gyro" not in r.stdout.split("at ")[-1]
+
+
+@pytest.mark.skipif(not REAL.exists(), reason="local copy of the public erlerobot/logs rover log absent")
+def test_real_rover_log_dead_gyro_named_by_inspect_and_analyze():
+    r = companion("inspect", str(REAL))
+    assert "gyro dead: X, Y, Z exactly 0 in all 8578 samples" in r.stdout
+    r = companion("analyze", str(REAL), "--quiet")
+    assert r.returncode != 0 and "gyro dead" in r.stderr
