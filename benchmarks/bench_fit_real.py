@@ -5,7 +5,7 @@ real: every gyro axis of the real still stretches in ../shared/data through `com
 (the user's path), against an independent reference: the white-noise plateau of ADEV sqrt(tau), i.e. the
 EDF-weighted mean of AVAR x tau over the longest run of octave points where it is flat (the earliest of equal
 ones), starting at or after the first point that is no longer below the following ones (above the filter's corner)
-nor, below 10 sample periods, above them (an output line near Nyquist lifts the first octaves). "Flat": every point within 2.5 standard deviations (white-noise EDF
+nor, below 10 sample periods, more than 25 % above them (an output line near Nyquist lifts the first octaves). "Flat": every point within 2.5 standard deviations (white-noise EDF
 of NIST SP 1065 Table 5, with a floor of 2 % of AVAR x tau, 1 % of ADEV sqrt(tau): on hours of 100 Hz data the
 EDF alone would call a 1 % wiggle of a real sensor's curve a break) of the run's mean; at least 3 points, and
 the corner within 100 sample periods, else "no plateau".
@@ -51,11 +51,12 @@ def plateau(tau, avar, n, rate_hz, k=2.5):
     edf = np.maximum(np.array([edf_simple(n + 1, mm, 0) for mm in m]), 1.0)
     r = avar * tau
     rel = np.maximum(np.sqrt(2.0 / edf), 0.02)  # of AVAR x tau: 1 % of ADEV sqrt(tau)
-    # corner: first point not significantly below the median of the next three (nor above it below 10 tau0)
+    # corner: first point not significantly below the median of the next three (nor above it by > 25 %, a line's
+    # lift, below 10 tau0; on a 30-s record a point 10 % above is noise)
     i0 = 0
     while i0 + 3 < len(r):
         med = np.median(r[i0 + 1:i0 + 4])
-        if not (r[i0] < med * (1 - 2.0 * rel[i0]) or (r[i0] > med * (1 + 2.0 * rel[i0]) and m[i0] < 10)):
+        if not (r[i0] < med * (1 - 2.0 * rel[i0]) or (r[i0] > med * (1 + max(2.0 * rel[i0], 0.25)) and m[i0] < 10)):
             break
         i0 += 1
     if m[i0] > 100:  # no corner within 100 sample periods: the curve rises throughout, no plateau
