@@ -3,9 +3,12 @@
 
 real: every gyro axis of the real still stretches in ../shared/data through `companion analyze --online --json`
 (the user's path), against an independent reference: the white-noise plateau of ADEV sqrt(tau), i.e. the
-EDF-weighted mean of AVAR x tau over the run of octave points where it is flat, from the first point that is
-no longer below the following ones (above the filter's corner). "Flat": every point within 2.5 standard
-deviations (white-noise EDF of NIST SP 1065 Table 5) of the run's mean; at least 3 points, else "no plateau".
+EDF-weighted mean of AVAR x tau over the longest run of octave points where it is flat (the earliest of equal
+ones), starting at or after the first point that is no longer below the following ones (above the filter's corner)
+nor, below 10 sample periods, more than 25 % above them (an output line near Nyquist lifts the first octaves). "Flat": every point within 2.5 standard deviations (white-noise EDF
+of NIST SP 1065 Table 5, with a floor of 2 % of AVAR x tau, 1 % of ADEV sqrt(tau): on hours of 100 Hz data the
+EDF alone would call a 1 % wiggle of a real sensor's curve a break) of the run's mean; at least 3 points, and
+the corner within 100 sample periods, else "no plateau".
 """
 
 from __future__ import annotations
@@ -47,23 +50,34 @@ def plateau(tau, avar, n, rate_hz, k=2.5):
     m = np.maximum(np.round(tau * rate_hz), 1)
     edf = np.maximum(np.array([edf_simple(n + 1, mm, 0) for mm in m]), 1.0)
     r = avar * tau
-    rel = np.sqrt(2.0 / edf)
-    # corner: first point not significantly below the median of the next three
+    rel = np.maximum(np.sqrt(2.0 / edf), 0.02)  # of AVAR x tau: 1 % of ADEV sqrt(tau)
+    # corner: first point not significantly below the median of the next three (nor above it by > 25 %, a line's
+    # lift, below 10 tau0; on a 30-s record a point 10 % above is noise)
     i0 = 0
-    while i0 + 3 < len(r) and r[i0] < np.median(r[i0 + 1:i0 + 4]) * (1 - 2.0 * rel[i0]):
-        i0 += 1
-    best = None
-    j = i0 + 1
-    while j < len(r):
-        w = edf[i0:j + 1]
-        mean = float(np.sum(w * r[i0:j + 1]) / np.sum(w))
-        if np.any(np.abs(r[i0:j + 1] - mean) > k * rel[i0:j + 1] * mean):
+    while i0 + 3 < len(r):
+        med = np.median(r[i0 + 1:i0 + 4])
+        if not (r[i0] < med * (1 - 2.0 * rel[i0]) or (r[i0] > med * (1 + max(2.0 * rel[i0], 0.25)) and m[i0] < 10)):
             break
-        best = (mean, j)
-        j += 1
-    if best is None or best[1] - i0 + 1 < 3:
+        i0 += 1
+    if m[i0] > 100:  # no corner within 100 sample periods: the curve rises throughout, no plateau
         return None, None
-    return math.sqrt(best[0]), (float(tau[i0]), float(tau[best[1]]))
+    best = None  # (points, -start, mean, start, stop): the longest flat run, the earliest of equal ones
+    for s0 in range(i0, len(r)):
+        if m[s0] > 100:
+            break
+        j, run = s0 + 1, None
+        while j < len(r):
+            w = edf[s0:j + 1]
+            mean = float(np.sum(w * r[s0:j + 1]) / np.sum(w))
+            if np.any(np.abs(r[s0:j + 1] - mean) > k * rel[s0:j + 1] * mean):
+                break
+            run = (j - s0 + 1, -s0, mean, s0, j)
+            j += 1
+        if run and (best is None or run[:2] > best[:2]):
+            best = run
+    if best is None or best[0] < 3:
+        return None, None
+    return math.sqrt(best[2]), (float(tau[best[3]]), float(tau[best[4]]))
 
 
 def _val(terms, effect, p):

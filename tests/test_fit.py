@@ -96,3 +96,27 @@ def test_sinusoid_when_asked():
     assert s["ci95"]["freq_hz"][0] <= 0.05 <= s["ci95"]["freq_hz"][1]
     assert s["ci95"]["amplitude"][0] <= 2e-3 <= s["ci95"]["amplitude"][1]
     assert s["freq_hz"] == pytest.approx(0.05, rel=0.05)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_quantization_only_where_its_slope_is(seed):
+    """White noise + a 19.7 Hz line at 100 Hz sampling (lifts the 0.02 s octave, as on the ADIS16405 z axes):
+    no quantization term stands in for the line (AVAR does not fall like tau^-2 from the smallest cluster
+    time; without that rule one did, with the roll-off search of `analyze`); with a real quantization term
+    (3 Q^2 / tau^2 dominating the first octaves) it is found."""
+    rng = np.random.default_rng(seed)
+    n, rate = 400_000, 100.0
+
+    def fit(y):
+        m = cluster_sizes(len(y))
+        tau, av, _, _ = oavar(y, rate, m=m)
+        return fit_avar(tau, av, edf_simple(len(y) + 1, m, 0), None, n=len(y), rate_hz=rate, m=m,
+                        detect_filter="point")
+
+    line = synthesize_axis([{"effect": "white_noise", "N": 7e-4},
+                            {"effect": "sinusoid", "amplitude": 6e-3, "freq_hz": 19.7}], rate, n, rng)
+    assert fit(line).term("quantization") is None
+    q = synthesize_axis([{"effect": "white_noise", "N": 7e-4}, {"effect": "quantization", "Q": 1e-3}], rate, n, rng)
+    fq = fit(q)
+    assert fq.term("quantization") is not None
+    assert fq.term("quantization")["Q"] == pytest.approx(1e-3, rel=0.2)

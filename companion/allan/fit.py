@@ -18,7 +18,9 @@ When the caller gives no ``n``/``rate_hz`` (only tau, avar and the EDF), C is di
 
 Term selection (``effects=None``): every subset of the usual gyro model {white_noise, bias_instability,
 random_walk} is fitted and the one with the least Bayesian information criterion BIC = chi^2 + k ln(n_points)
-is kept (k = non-zero coefficients; Schwarz 1978). Then quantization, ramp and one Gauss-Markov term
+is kept (k = non-zero coefficients; Schwarz 1978). Then quantization (only when AVAR at the two smallest
+cluster times falls at least like tau^-1.5, :func:`quantization_slope`: a quantization term without its
+slope region stands in for an output line or a filter's bump and moves N), ramp and one Gauss-Markov term
 (2 parameters; tau_c found by a grid over the tau range -- AVAR peak 1.89 tau_c within
 [4 tau_min, tau_max/4] -- refined by a bounded 1-D minimisation, and kept only at an interior optimum: a
 tau_c pinned to the edge of the range is not identified) are tried in turn (a sinusoid, same way, only
@@ -69,6 +71,11 @@ _NL_LINEAR = {"gauss_markov": "sigma", "sinusoid": "amplitude"}
 _NL_SHAPE = {"gauss_markov": "tau_c", "sinusoid": "freq_hz"}
 #: a Gauss-Markov correlation time shorter than this many sample periods is a filter's or the sampling's shape
 GM_MIN_SAMPLES = 3.0
+#: quantization is a candidate only where the data show its slope: AVAR between the two smallest cluster times
+#: falls at least as fast as tau^QUANT_SLOPE (quantization alone: tau^-2; white noise: tau^-1, less under a
+#: filter). Without that region a quantization term only stands in for something else at short tau (an output
+#: line near the Nyquist frequency, a filter's bump) and moves N.
+QUANT_SLOPE = -1.5
 #: relative uncertainty of a modelled low-pass filter's shape, per unit of its bend 1 - AVAR tau / N^2
 FILTER_SHAPE_ERROR = 0.25
 
@@ -299,6 +306,12 @@ def record_needed(terms, tau0: float) -> dict[str, float]:
         dom = np.flatnonzero(avar_term(t, grid) >= 0.5 * total)
         out[t["effect"]] = RESOLVE_RECORD_FACTOR * float(grid[dom[0]]) if dom.size else math.inf
     return out
+def quantization_slope(tau, avar) -> bool:
+    """True when AVAR at the two smallest cluster times falls like quantization noise (log-log slope at most
+    QUANT_SLOPE): the region a quantization term needs before it is a candidate of the automatic selection."""
+    if len(tau) < 2 or not (avar[0] > 0 and avar[1] > 0 and tau[1] > tau[0]):
+        return False
+    return math.log(avar[1] / avar[0]) / math.log(tau[1] / tau[0]) <= QUANT_SLOPE
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
@@ -377,6 +390,8 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     bad = [e for e in effects if e not in LINEAR_EFFECTS + NONLINEAR_EFFECTS]
     if bad:
         raise ValueError(f"unknown effect {bad[0]!r}")
+    if auto and "quantization" in effects and not quantization_slope(tau, avar):
+        effects.remove("quantization")
     if tau.size < 3:
         effects = [e for e in effects if e in ("white_noise",)] or effects[:1]
         notes.append("fewer than 3 cluster times: only white noise fitted")

@@ -93,11 +93,18 @@ def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0
     start = (shape >= 0.9) if wn.get("filter_hz") else (tau >= 10.0 * tau0 * (1 - 1e-9))
     # ... and not before the data's own corner: a real filter chain rolls off more slowly than the modelled
     # 2-pole shape when the model misfits; points still significantly below the next three (filter-corrected
-    # AVAR x tau, 2 standard deviations from their EDF) are left to the global fit
+    # AVAR x tau, 2 standard deviations from their EDF) are left to the global fit. So are leading points
+    # significantly above them below 10 tau0: an output line (vibration, a sensor's clock) at frequency f
+    # lifts the octave points near 0.371 / f, and the model has no term for a line that close to Nyquist
     r = (np.asarray(avar, dtype=float) - (total - white)) * tau / np.where(shape > 0, shape, 1.0)
     rel = np.sqrt(2.0 / np.maximum(np.asarray(edf, dtype=float), 1.0))
     c = 0
-    while c + 3 < r.shape[0] and r[c] < np.median(r[c + 1:c + 4]) * (1.0 - 2.0 * rel[c]):
+    while c + 3 < r.shape[0]:
+        med = float(np.median(r[c + 1:c + 4]))
+        below = r[c] < med * (1.0 - 2.0 * rel[c])
+        above = r[c] > med * (1.0 + 2.0 * rel[c]) and tau[c] < 10.0 * tau0 * (1 - 1e-9)
+        if not (below or above):
+            break
         c += 1
     start &= np.arange(tau.shape[0]) >= c
     ok = (frac >= share) & start

@@ -2,11 +2,12 @@
 
 One code path for ``companion analyze --online`` and ``companion run`` (numpy/scipy only).
 
-Model. The octave bank's Allan variances are fitted with every effect of the offline model as a
-candidate (quantization, white_noise, bias_instability, random_walk, ramp, gauss_markov, sinusoid): the
-offline procedure :func:`companion.allan.fit.fit_avar` with its automatic selection (BIC over N, B, K;
-the other effects, including one Gauss-Markov term with its correlation time and one sinusoid with its
-frequency, only on very strong evidence; GLS with the full model covariance of the Allan estimates).
+Model. The octave bank's Allan variances are fitted with the offline fit's automatic candidates
+(quantization, white_noise, bias_instability, random_walk, ramp, gauss_markov; a sinusoid is no automatic
+candidate offline either -- on octave-spaced points it fits chance bumps): the offline procedure
+:func:`companion.allan.fit.fit_avar` with its automatic selection (BIC over N, B, K; the other effects,
+including one Gauss-Markov term with its correlation time, only on very strong evidence; quantization only
+where the data show its slope; GLS with the full model covariance of the Allan estimates).
 A correlated term the data show is therefore in the model, and its power does not land in N.
 
 Report. For every linear candidate (Q, N, B, K, R):
@@ -77,8 +78,11 @@ def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ra
     ``candidates``; the white-noise term's low-pass filter from ``white_filter`` (the log's cut-off) or the data,
     as the offline fit does). Returns ``(FitResult, Structure)``."""
     from companion.allan.confidence import edf_simple
-    from companion.allan.fit import fit_avar
+    from companion.allan.fit import AUTO_EFFECTS, fit_avar
 
+    # the offline fit's automatic candidate set (a sinusoid only when the offline fit is asked for one too):
+    # one model online and offline, so the same data give the same terms
+    candidates = [e for e in candidates if e in AUTO_EFFECTS]
     tau = np.asarray(tau, float)
     m = np.round(tau * rate_hz).astype(np.int64)
     n = max(int(n), int(2 * m.max() + 2)) if m.size else int(n)
