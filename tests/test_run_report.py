@@ -1,4 +1,4 @@
-"""`companion run` reports (issue 13): nothing invented on a healthy replay, 1-sigma and bound markers in
+"""`companion run` reports: nothing invented on a healthy replay, 1-sigma and bound markers in
 NAMED_VALUE_FLOAT, a baseline that must match the stream."""
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ class PipelineConfig:
     forgetting_fast_s: float = 600.0
     forgetting_slow_s: float = 7200.0
     accel: bool = False  # also estimate and report the accelerometer axes
-    baseline_force: bool = False  # use a loaded baseline even if it does not match the stream (issue 13)
+    baseline_force: bool = False  # use a loaded baseline even if it does not match the stream (e.g. a swapped board)
     gyro_mean: float = 0.1  # rad/s
     gyro_std_factor: float = 5.0
     accel_shift: float = 0.3  # m/s^2
