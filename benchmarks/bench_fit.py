@@ -1,4 +1,4 @@
-"""Accuracy and interval coverage of the automatic fit on the issue's case, side by side with a plain
+"""Accuracy and interval coverage of the automatic fit on simulated records with known terms, side by side with a plain
 weighted NNLS (weights from the measured points, N/B/K columns given, no selection, no intervals).
 
 2 h at 50 Hz of white noise N = 1e-3 rad/s/sqrt(Hz), flicker B = 5e-4 rad/s and rate random walk

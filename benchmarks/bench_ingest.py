@@ -7,7 +7,7 @@
    companion.mavlink.tlog_writer in a temp dir. Timed: ``companion.sources.load`` (read, CRC-check,
    decode to SI, timing analysis) and pymavlink ``mavlogfile(...).recv_match(type='RAW_IMU')`` until
    the end. Values compared (time_usec and gyro of every message).
-2. The issue's robustness case: 60,000 RAW_IMU records with a 1-40 byte garbage run every 500 records,
+2. Robustness against a corrupted link: 60,000 RAW_IMU records with a 1-40 byte garbage run every 500 records,
    for a few garbage seeds. Counts of RAW_IMU messages each reader returns (pymavlink's loss depends on
    where a garbage byte happens to look like a frame start: from a few % to half of the file).
 """

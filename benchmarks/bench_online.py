@@ -1,4 +1,4 @@
-"""Benchmark of the online Allan-coefficient estimators (issue #4): agreement with the offline fit,
+"""Benchmark of the online Allan-coefficient estimators: agreement with the offline fit,
 accuracy against truth, convergence, bounded state and memory, speed.
 
     python benchmarks/bench_online.py                 # everything (a few minutes on one core)
@@ -323,7 +323,7 @@ def section_convergence(fs=100.0, n=1_800_000, plot=True):
         print(f"plot: {out.relative_to(ROOT)}")
 
 
-# ---------------------------------------------------------------- issue 13: full model, bounds, coverage
+# ---------------------------------------------------------------- full model, bounds, coverage
 def offline_report(y, fs):
     """Offline reference with the same model selection and bound rule as the online report: the overlapping
     ADEV at octave cluster sizes (all samples) through companion.estimators.report.select / report."""

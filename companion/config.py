@@ -1,8 +1,9 @@
 """The configuration schema: every key of the YAML configuration, its default and its type, in one place.
 
-``config/default.yaml`` documents exactly these defaults (a test keeps them equal, and equal to the
-defaults of the dataclasses built from the sections: ``PipelineConfig``, ``LinkConfig``,
-``DetectorConfig``). :func:`load` reads a configuration file and checks it against the schema: an
+``config/default.yaml`` documents exactly these defaults (a test keeps them equal). ``PipelineConfig`` and
+``LinkConfig`` take their defaults from here; ``DetectorConfig`` (numerical core, which may not import this
+module) holds its own and :data:`HEALTH` is read from it; the estimators' keyword defaults are kept equal
+to :data:`ESTIMATOR` by a test. :func:`load` reads a configuration file and checks it against the schema: an
 unknown key or a value of the wrong type is a one-line :class:`CompanionError` naming the key
 (``config: unknown key 'run.blok_s'``). Values are checked further (ranges) where they are used.
 """
@@ -46,14 +47,37 @@ ESTIMATOR = {
     },
 }
 
-HEALTH = {
-    "z": Key(3.0, "number"),
-    "ratio_on": Key(1.3, "number"),
-    "ratio_off": Key(1.15, "number"),
-    "hold_on": Key(3, "int"),
-    "hold_off": Key(6, "int"),
-    "params": Key(["N", "B", "K"], "list"),
-}
+def _keys_of(cls) -> dict:
+    """Schema keys from a dataclass of the numerical core, which holds its own defaults (the core may not
+    import this adapter module); the type follows the default's."""
+    from dataclasses import fields
+
+    kinds = {float: "number", int: "int", bool: "bool", str: "str", tuple: "list", list: "list"}
+    out = {}
+    for f in fields(cls):
+        v = f.default
+        out[f.name] = Key(list(v) if isinstance(v, tuple) else v, kinds[type(v)])
+    return out
+
+
+def _health_keys() -> dict:
+    from companion.health.detector import DetectorConfig
+
+    return _keys_of(DetectorConfig)
+
+
+#: the degradation test (companion.health.detector.DetectorConfig holds the defaults)
+HEALTH = _health_keys()
+
+
+def _fault_keys() -> dict:
+    from companion.health.limits import FaultLimits
+
+    return _keys_of(FaultLimits)
+
+
+#: the fault detectors' magnitude floors (companion.health.limits.FaultLimits holds the defaults)
+FAULTS = _fault_keys()
 
 #: keys of the run section that configure the link (companion.mavlink.link.LinkConfig)
 LINK = {
@@ -97,6 +121,7 @@ PIPELINE = {
     "reset_s": Key(1.0, "number"),
     "gap_s": Key(0.5, "number"),
     "estimator": ESTIMATOR,  # optional: the top-level estimator section is used when absent
+    "faults": FAULTS,
     "health": HEALTH,
 }
 

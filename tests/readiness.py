@@ -66,3 +66,11 @@ def wait_until_read(port: int, proc=None, timeout: float = DEADLINE_S) -> None:
         if time.monotonic() > deadline:
             raise AssertionError(f"port {port}: {q} bytes still unread after {timeout:.0f} s")
         time.sleep(0.02)  # polling interval
+
+
+def kill_left(*procs) -> None:
+    """Kill the processes of a test that are still running (None: never started), after a failure."""
+    for p in procs:
+        if p is not None and p.poll() is None:
+            p.kill()
+            p.wait(10)

@@ -1,5 +1,5 @@
 """DataFlash and ULog readers against pymavlink's DFReader / pyulog, still selection and the pooled fit on
-simulated flight logs, and the newcomer cases of issue 12 (shuffled CSV, ms time, 2 Hz tlog)."""
+simulated flight logs, and the inputs a newcomer brings (shuffled CSV, ms time, 2 Hz tlog)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Bad output paths, plot formats, links and models: one clear line on stderr before any work (issue 14).
+"""Bad output paths, plot formats, links and models: one clear line on stderr before any work (not a traceback after an hour of analysis).
 
 The rule for every file the CLI writes: its directory must exist (nothing is created), it must not be a
 directory and must be writable; plots need a format matplotlib writes. All checked before the work, so
@@ -31,7 +31,7 @@ def one_line_error(capsys, argv, *needles):
     return cap
 
 
-MISSING = "/nonexistent-dir-i14/sub"
+MISSING = "/nonexistent-dir-companion/sub"
 
 
 @pytest.mark.parametrize("argv, option", [

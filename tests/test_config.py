@@ -42,8 +42,9 @@ def test_dataclass_and_estimator_defaults_equal_the_schema():
     assert link == {k: run[k] for k in config.LINK}
     pipe = _fields(PipelineConfig())
     assert {k: _plain(v) for k, v in _fields(pipe.pop("health")).items()} == run["health"]
+    assert {k: _plain(v) for k, v in _fields(pipe.pop("faults")).items()} == run["faults"]
     assert pipe.pop("estimator") == {}  # empty: the estimator section's defaults apply
-    assert pipe == {k: run[k] for k in config.PIPELINE if k not in ("health", "estimator")}
+    assert pipe == {k: run[k] for k in config.PIPELINE if k not in ("health", "faults", "estimator")}
     for cls, section in ((OctaveBankEstimator, d["estimator"]), (MiaoSHAKF, d["estimator"]["miao"])):
         sig = inspect.signature(cls.__init__).parameters
         for k, v in section.items():
@@ -77,3 +78,19 @@ def test_a_valid_partial_file_is_accepted(tmp_path):
     f.write_text("streams:\n  - {message: RAW_IMU, gyro_scale: 1.0e-3}\nrun:\n  sysid: null\n  block_s: 2\n"
                  "  health: {z: 2.5}\n  estimator: {phases: 8}\nestimator:\n  kind: miao\n")
     assert config.load(f)["run"]["block_s"] == 2
+
+
+@pytest.mark.parametrize("mapping, message", [
+    ({"blok_s": 1.0}, "unknown key 'run.blok_s'"),
+    ({"health": {"zz": 1.0}}, "unknown key 'run.health.zz'"),
+    ({"block_s": "fast"}, "run.block_s must be a number"),
+    ({"gap_s": 0}, "run.gap_s must be > 0"),
+])
+def test_pipeline_config_from_a_mapping_is_checked_against_the_schema(mapping, message):
+    """A mapping built in code (not read from a file) goes through the same schema: the key is named."""
+    from companion.service.config import PipelineConfig
+
+    with pytest.raises(CompanionError, match=message.replace(".", r"\.")):
+        PipelineConfig.from_mapping(mapping)
+    cfg = PipelineConfig.from_mapping({"block_s": 2, "sysid": 3, "accel": True, "health": {"z": 2.5}})
+    assert (cfg.block_s, cfg.sysid, cfg.accel, cfg.health.z, cfg.gap_s) == (2.0, 3, True, 2.5, 0.5)

@@ -1,6 +1,6 @@
 """`companion analyze --online` and `companion run` on the shipped sample log, against the truth of its
 model file (tlogs/sample_model.yaml): every reported value within its 95 % interval, every effect absent
-from the truth reported as a 95 % upper bound, and both commands print the same report (issue 13)."""
+from the truth reported as a 95 % upper bound, and both commands print the same report."""
 
 from __future__ import annotations
 

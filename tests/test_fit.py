@@ -1,4 +1,4 @@
-"""Automatic fit against simulated data with known terms (the issue's 'Done when' case) and edge cases."""
+"""Automatic fit against simulated data with known terms (N, B and K recovered within their intervals) and edge cases."""
 
 import math
 

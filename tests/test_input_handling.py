@@ -224,15 +224,15 @@ def _n_k(seed, seconds, rate=20.0, N=1e-3, K=8e-4):
 
 
 def test_random_walk_resolved_only_from_a_long_enough_record():
-    """N 1e-3, K 8e-4 (SI): K dominates the AVAR from tau = sqrt(3) N / K = 2.2 s, so it needs 20 x 2.2 = 43 s
-    of record: a 33 s record gives a bound and says how long it would need, 20 minutes resolve it."""
+    """N 1e-3, K 8e-4 (SI): K dominates the AVAR from tau = sqrt(3) N / K = 2.2 s, so it needs 10 x 2.2 = 22 s
+    of record: a 15 s record gives a bound and says how long it would need, 20 minutes resolve it."""
     from companion.allan.fit import record_needed
     from companion.cli.analyze import analyze_axis
 
     need = record_needed([{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 8e-4}], 0.05)
-    assert need["random_walk"] == pytest.approx(20 * np.sqrt(3) * 1e-3 / 8e-4, rel=0.01)
+    assert need["random_walk"] == pytest.approx(10 * np.sqrt(3) * 1e-3 / 8e-4, rel=0.01)
     for seed in range(3):
-        short = analyze_axis(_n_k(seed, 33.0), 20.0)
+        short = analyze_axis(_n_k(seed, 15.0), 20.0)
         assert "random_walk" not in [t["effect"] for t in short["terms"]]
         assert "random_walk" in [t["effect"] for t in short["bounds"]]
     for seed in range(2):

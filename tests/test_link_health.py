@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 from loopback import pacing
-from readiness import DEADLINE_S, READY, udp_rx_queue, wait_for_text
+from readiness import DEADLINE_S, READY, kill_left, udp_rx_queue, wait_for_text
 
 from companion.mavlink.link import LinkStats, SourceStats
 
@@ -201,10 +201,7 @@ def loop_through_relay(tmp_path, **relay_kw):
         run.send_signal(signal.SIGTERM)
         run.wait(DEADLINE_S)
     finally:
-        for p in (sim, run):
-            if p is not None and p.poll() is None:
-                p.kill()
-                p.wait(10)
+        kill_left(sim, run)
         relay.stop.set()
         relay.join(5)
         relay.sock.close()

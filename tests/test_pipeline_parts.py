@@ -16,19 +16,9 @@ from companion.service.blocks import BlockCutter
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.replay import feed_in_order
 from companion.sim.vehicle import IMU_MESSAGES, Fault, Flight, Schedule, VehicleSimulator, WarmUp
+from sinks import RecordingSink
 
 LSB = 1e-3
-
-
-class Sink:
-    def __init__(self):
-        self.msgs = []
-
-    def send_named_value_float(self, ms, name, value):
-        self.msgs.append((ms, name, float(value)))
-
-    def send_statustext(self, sev, text):
-        self.msgs.append(("T", sev, text))
 
 
 def messy_times(rng, n=3000, rate=100.0):
@@ -104,7 +94,7 @@ def test_replay_as_arrays_equals_one_event_at_a_time():
     order, src, row, streams, hb_armed = file_order()
     results = []
     for arrays in (False, True):
-        sink = Sink()
+        sink = RecordingSink()
         p = Pipeline(PipelineConfig(baseline_s=60.0), Reporter(sink, 1.0))
 
         def heartbeat(j):
@@ -135,7 +125,7 @@ def test_a_baseline_in_other_units_stops_the_pipeline_with_one_line():
     base = Baseline("b.json")
     for ax in ("gx", "gy", "gz"):
         base.set_axis(0, ax, {"N": (1.0, 0.01)})  # rad/s/sqrt(Hz): 1000x the stream's
-    p = Pipeline(PipelineConfig(min_report_s=10.0), Reporter(Sink(), 1.0), baseline=base)
+    p = Pipeline(PipelineConfig(min_report_s=10.0), Reporter(RecordingSink(), 1.0), baseline=base)
     key = StreamKey(1, 1, "RAW_IMU", 0)
     n = 100 * 60
     t = 1.0 + np.arange(n) / 100.0

@@ -21,6 +21,7 @@ from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.state import load_state, save_state
 from readiness import DEADLINE_S, READY, wait_for_text
+from sinks import RecordingSink
 
 ROOT = Path(__file__).resolve().parent.parent
 KEY = StreamKey(1, 1, "RAW_IMU", 0)
@@ -29,19 +30,8 @@ FS = 100.0
 G = np.array([0.0, 0.0, -9.80665])
 
 
-class Sink:
-    def __init__(self):
-        self.values, self.texts = {}, []
-
-    def send_named_value_float(self, ms, name, value):
-        self.values[name] = value
-
-    def send_statustext(self, sev, text):
-        self.texts.append((sev, text))
-
-
 def make_pipeline(**cfg):
-    sink = Sink()
+    sink = RecordingSink()
     p = Pipeline(PipelineConfig.from_mapping({"baseline_s": 200, **cfg}), Reporter(sink, 1.0))
     return p, sink
 

@@ -1,4 +1,4 @@
-"""`companion run` reports (issue 13): nothing invented on a healthy replay, 1-sigma and bound markers in
+"""`companion run` reports: nothing invented on a healthy replay, 1-sigma and bound markers in
 NAMED_VALUE_FLOAT, a baseline that must match the stream."""
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from companion.cli.main import main
 from companion.mavlink.reporter import NAME_RE, Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
+from sinks import RecordingSink
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "tlogs" / "sample.tlog"
@@ -22,21 +23,10 @@ FS = 50.0
 N_TRUE = 1.0e-3  # rad/s/sqrt(Hz), white noise only: no B, no K
 
 
-class Sink:
-    def __init__(self):
-        self.values, self.texts = {}, []
-
-    def send_named_value_float(self, ms, name, value):
-        self.values[name] = value
-
-    def send_statustext(self, sev, text):
-        self.texts.append(text)
-
-
 @pytest.mark.parametrize("seed", [0])
 def test_healthy_white_noise_replay_invents_no_b_or_k(seed):
     rng = np.random.default_rng(seed)
-    sink = Sink()
+    sink = RecordingSink()
     p = Pipeline(PipelineConfig.from_mapping({"baseline_s": 300}), Reporter(sink, 1.0))
     n = int(1200 * FS)
     g = rng.normal(0.0, N_TRUE * math.sqrt(FS), (n, 3))
@@ -50,7 +40,7 @@ def test_healthy_white_noise_replay_invents_no_b_or_k(seed):
         n_dh = N_TRUE / (math.pi / 180.0 / 60.0)
         assert abs(v[f"IMU0G{ax}_N"] / n_dh - 1.0) < 4 * v[f"IMU0G{ax}_NS"] / n_dh + 1e-9
         assert v[f"IMU0G{ax}_NS"] > 0
-    assert not any("degrading" in t for t in sink.texts)
+    assert not any("degrading" in t for _, t in sink.texts)
     assert v["IMU0G_HLTH"] == 0.0
     ch = p.channels[0]
     for ax in ("gx", "gy", "gz"):
@@ -114,7 +104,7 @@ def test_scaled_imu2_stamped_in_ms_off_the_ms_grid(rate):
     step alone says 500 or 333 Hz, which would scale N by sqrt(1.25) and raise "timing irregular"), N is
     right, and no fault is raised."""
     rng = np.random.default_rng(int(rate))
-    sink = Sink()
+    sink = RecordingSink()
     p = Pipeline(PipelineConfig.from_mapping({"baseline_s": 60}), Reporter(sink, 1.0))
     key = StreamKey(1, 1, "SCALED_IMU2", 1)
     n_si = 3e-3
@@ -127,7 +117,7 @@ def test_scaled_imu2_stamped_in_ms_off_the_ms_grid(rate):
     ch = p.channels[1]
     # the rate comes from the last 64 intervals: 1 ms of stamp resolution over 64 periods is 0.5 % at most
     assert ch.rate_hz == pytest.approx(rate, rel=0.006) and ch.counts["rate_changes"] == 0
-    assert not p.transitions and not [x for x in sink.texts if "learned" not in x], sink.texts
+    assert not p.transitions and not [x for _, x in sink.texts if "learned" not in x], sink.texts
     n_true = math.sqrt(n_si**2 + 1e-6 / (12 * rate)) / (math.pi / 180.0 / 60.0)  # deg/sqrt(h), with rounding
     for ax in "XYZ":
         assert sink.values[f"IMU1G{ax}_N"] == pytest.approx(n_true, rel=0.05)

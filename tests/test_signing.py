@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from loopback import pacing
-from readiness import DEADLINE_S, READY, wait_for_text, wait_until_read
+from readiness import DEADLINE_S, READY, kill_left, wait_for_text, wait_until_read
 
 from companion.cli.main import main
 
@@ -61,10 +61,7 @@ def session(tmp_path, run_key=None, sim_key=None, wait_request=False):
         run.send_signal(signal.SIGTERM)
         run.wait(DEADLINE_S)
     finally:
-        for p in (sim, run):
-            if p is not None and p.poll() is None:
-                p.kill()
-                p.wait(10)
+        kill_left(sim, run)
         run_out.close()
     out, sim_out = (tmp_path / "run.out").read_text(), (tmp_path / "sim.out").read_text()
     assert run.returncode == 0 and sim.returncode == 0, out + sim_out

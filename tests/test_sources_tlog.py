@@ -151,7 +151,7 @@ def test_pymavlink_field_equality_on_a_large_written_file(tmp_path):
 
 
 def test_garbage_that_breaks_pymavlink_is_recovered(tmp_path):
-    """1-40 garbage bytes every 500 records (the issue's measurement, smaller)."""
+    """1-40 garbage bytes every 500 records (the corruption measured on a real radio link, smaller)."""
     n = 6000
     src = tmp_path / "c.tlog"
     t = np.arange(n) / 50.0

@@ -22,6 +22,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+from companion.config import LINK
+
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_TYPE_GCS = 6
 MAV_AUTOPILOT_INVALID = 8
@@ -187,14 +189,17 @@ class LinkStats:
 
 @dataclass
 class LinkConfig:
-    rate_hz: float = 100.0
-    messages: tuple[str, ...] = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
-    compid: int = MAV_COMP_ID_ONBOARD_COMPUTER
-    heartbeat_s: float = 1.0
-    stale_s: float = 3.0
-    retry_s: float = 5.0
-    loss_warn: float = 0.05  # STATUSTEXT when more than this fraction of frames was lost over loss_window_s
-    loss_window_s: float = 30.0
+    """The link keys of the ``run`` section; defaults from the schema (:data:`companion.config.LINK`)."""
+
+    rate_hz: float = LINK["rate_hz"].default
+    messages: tuple[str, ...] = tuple(LINK["messages"].default)
+    compid: int = LINK["compid"].default  # MAV_COMP_ID_ONBOARD_COMPUTER
+    heartbeat_s: float = LINK["heartbeat_s"].default
+    stale_s: float = LINK["stale_s"].default
+    retry_s: float = LINK["retry_s"].default
+    # STATUSTEXT when more than this fraction of frames was lost over loss_window_s
+    loss_warn: float = LINK["loss_warn"].default
+    loss_window_s: float = LINK["loss_window_s"].default
 
 
 class Link:

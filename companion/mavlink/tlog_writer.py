@@ -207,7 +207,21 @@ def write_imu_tlog(path, t_s, gyro, accel, message: str = "RAW_IMU", sysid: int 
     return n
 
 
-class ImuTlogStream:
+class _TlogFile:
+    """The open tlog file of a writer (``self._fh``), closed by :meth:`close` or at the end of a ``with``."""
+
+    def close(self) -> None:
+        self._fh.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+class ImuTlogStream(_TlogFile):
     """Several IMU streams and HEARTBEATs merged in time order into one tlog, appended block by block.
 
     >>> with ImuTlogStream("x.tlog") as out:
@@ -275,18 +289,8 @@ class ImuTlogStream:
         self.records += total
         return total
 
-    def close(self) -> None:
-        self._fh.close()
 
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-        return False
-
-
-class TlogWriter:
+class TlogWriter(_TlogFile):
     """Write any pymavlink message object to a tlog with a timestamp (tests, small files).
 
     >>> with TlogWriter("x.tlog") as w:
@@ -316,16 +320,6 @@ class TlogWriter:
             self._fh.write(struct.pack(">Q", int(round(t_unix * 1e6))))
             self.records += 1
         self._fh.write(frame)
-
-    def close(self) -> None:
-        self._fh.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-        return False
 
 
 __all__ = ["write_imu_tlog", "ImuTlogStream", "TlogWriter", "imu_payloads", "encode_frames", "pack_records",

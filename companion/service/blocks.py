@@ -3,11 +3,11 @@
 One vectorised path for every caller: the live loop hands it one row, a replay or the simulator whole
 arrays; the blocks, counts and rate are the same either way. Rows are ``(t, gx, gy, gz, ax, ay, az)``.
 
-Timestamp rules (:func:`companion.sources.timing.classify_intervals`, the rules of the offline time base
-with the live thresholds ``reset_s`` and ``gap_s``): a timestamp ``reset_s`` or more behind the last one
-is an autopilot reboot (the partial block is dropped); a repeated one is a duplicate and one slightly
-behind goes backwards (both dropped and counted); an interval longer than ``gap_s`` is a gap (the partial
-block is dropped). A block closes at the first sample with ``t - t0 >= block_s - period / 2``.
+Timestamp rules (:func:`companion.sources.timing.classify_steps`, the rules of the offline time base with
+the live thresholds ``reset_s`` and ``gap_s`` given to :func:`~companion.sources.timing.step_rules`): a
+timestamp more than ``reset_s`` behind the last one is an autopilot reboot (the partial block is dropped);
+a repeated one is a duplicate and one slightly behind goes backwards (both dropped and counted); an
+interval longer than ``gap_s`` is a gap (the partial block is dropped). A block closes at the first sample with ``t - t0 >= block_s - period / 2``.
 
 The rate is 1 / :func:`companion.sources.timing.period_of` of the last 64 intervals, taken at the first
 block close with 8 intervals and re-taken at every close; a change of more than 20 % is reported.
@@ -20,7 +20,7 @@ from typing import Iterator
 
 import numpy as np
 
-from companion.sources.timing import GAP, OK_STEP, RESET, classify_interval, classify_intervals, period_of
+from companion.sources.timing import BACKWARD, DUPLICATE, OK, RESET, classify_steps, period_of, step_rules
 
 RATE_CHANGE = 0.2  # relative change of the rate that restarts the estimators
 MIN_INTERVALS = 8  # intervals before the rate is taken
@@ -30,7 +30,9 @@ class BlockCutter:
     """Explicit inputs (:meth:`cut` rows) and outputs (the events it yields); ``counts`` what it dropped."""
 
     def __init__(self, block_s: float, reset_s: float, gap_s: float, time_res: float = 0.0):
-        self.block_s, self.reset_s, self.gap_s, self.time_res = float(block_s), float(reset_s), float(gap_s), time_res
+        self.block_s, self.time_res = float(block_s), time_res
+        # the period is unknown until the first blocks: the configured thresholds stand in for it
+        self.rules = step_rules(0.0, time_res, reset_s=reset_s, gap_s=gap_s)
         self.last_t: float | None = None
         self.dts: deque = deque(maxlen=64)
         self.rate_hz: float | None = None
@@ -56,30 +58,31 @@ class BlockCutter:
         """
         t = rows[:, 0]
         n = t.shape[0]
+        kinds = classify_steps(t, self.last_t, self.rules)
         i = 0
         while i < n:
             if self.last_t is not None:
-                kind = classify_interval(float(t[i]) - self.last_t, self.reset_s, self.gap_s)
+                kind = kinds[i]
                 if kind == RESET:
                     self.counts["resets"] += 1
                     self.drop()
                     yield ("reset", self.last_t, float(t[i]))
-                elif kind == GAP:
+                elif kind == DUPLICATE or kind == BACKWARD:  # dropped
+                    self.counts["duplicates" if kind == DUPLICATE else "backwards"] += 1
+                    i += 1
+                    continue
+                elif kind != OK:  # a gap (a live gap also splits: the same here)
                     self.counts["gaps"] += 1
                     self.drop()
                     yield ("gap", float(t[i]))
-                elif kind == OK_STEP:
+                else:
                     self.dts.append(float(t[i] - self.last_t))
-                else:  # duplicate or backwards: dropped
-                    self.counts["duplicates" if t[i] == self.last_t else "backwards"] += 1
-                    i += 1
-                    continue
             # the clean stretch from i: every interval within (0, gap_s]; while the rate is unknown the period
             # (the median of the intervals so far) changes with every sample: one row at a time
             if self.rate_hz is None or n - i == 1:
                 end = i + 1
             else:
-                bad = np.flatnonzero(classify_intervals(np.diff(t[i:]), self.reset_s, self.gap_s) != OK_STEP)
+                bad = np.flatnonzero(kinds[i + 1:] != OK)
                 end = i + 1 + (int(bad[0]) if bad.size else n - i - 1)
                 if end - i > 1:
                     self.dts.extend(np.diff(t[i:end])[-self.dts.maxlen:].tolist())
@@ -121,7 +124,7 @@ class BlockCutter:
         n = t.shape[0]
         if n == 0 or self.rate_hz is None or self.last_t is None:
             return 0
-        if classify_interval(float(t[0]) - self.last_t, self.reset_s, self.gap_s) != OK_STEP:
+        if classify_steps(t[:1], self.last_t, self.rules)[0] != OK:
             return 0
         t0 = float(t[0]) if self._t0 is None else self._t0
         x = self.block_s - 0.5 * self.period()

@@ -18,6 +18,7 @@ import numpy as np
 from companion.sources import messages as M
 from companion.sources import tlog
 from companion.sources.decode import ScaleTable, split_by_imu
+from companion.sources.timing import OK, classify_steps, step_rules
 
 
 def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: False) -> dict:
@@ -81,6 +82,7 @@ def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: Fa
     hb_pos = np.sort(rank[src < 0])
     hb_row = row[order[hb_pos]] if hb_pos.size else hb_pos
     feeds = []  # per stream: positions, rows in feed order, times, irregular positions
+    rules = step_rules(0.0, reset_s=pipeline.cfg.reset_s, gap_s=pipeline.cfg.gap_s)  # the block cutter's
     for k, s in enumerate(streams):
         sel = np.flatnonzero(src == k)
         pos = rank[sel]
@@ -89,10 +91,8 @@ def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: Fa
         t = np.asarray(s.t, dtype=float)[r]
         g = np.asarray(s.gyro, dtype=float)[r]
         a = np.asarray(s.accel, dtype=float)[r]
-        dt = np.diff(t)
-        # a sample after an interval that is not a clean step (and the one after it: the newest accepted
-        # stamp may differ) goes alone
-        bad = np.flatnonzero((dt <= 0.0) | (dt > pipeline.cfg.gap_s)) + 1
+        # a sample that is not a clean step under the block cutter's rules (and the one after it) goes alone
+        bad = np.flatnonzero(classify_steps(t, None, rules)[1:] != OK) + 1
         irregular = np.unique(np.concatenate([bad, bad + 1]))
         feeds.append((s.key, pos, t, g, a, irregular))
     cur = [0] * len(streams)

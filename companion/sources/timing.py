@@ -39,11 +39,17 @@ class StepRules:
     split_s: float  # a step forward by more than this also splits the segment
 
 
-def step_rules(period: float, resolution: float = 0.0, split_periods: float = SPLIT_PERIODS) -> StepRules:
+def step_rules(period: float, resolution: float = 0.0, split_periods: float = SPLIT_PERIODS, *,
+               reset_s: float | None = None, gap_s: float | None = None) -> StepRules:
     """The timestamp rules (reset, gap, split thresholds) for sampling period ``period`` and stamp resolution
-    ``resolution``: the one definition the offline analysis (:func:`analyse`) and a live block cutter share."""
-    return StepRules(period, resolution, max(1.0, 10.0 * period), 1.5 * period + resolution,
-                     split_periods * period + resolution)
+    ``resolution``: the one definition the offline analysis (:func:`analyse`) and the live block cutter
+    (``service/blocks.py``) share. The live cutter does not know the period when the first samples arrive,
+    so it passes its configured thresholds (``run.reset_s``, ``run.gap_s``) instead of the period-derived
+    ones; a gap then also counts as a split (it drops the partial block either way)."""
+    reset = max(1.0, 10.0 * period) if reset_s is None else float(reset_s)
+    gap = 1.5 * period + resolution if gap_s is None else float(gap_s)
+    split = split_periods * period + resolution if gap_s is None else gap
+    return StepRules(period, resolution, reset, gap, split)
 
 
 #: step kinds of :func:`classify_steps`
@@ -58,6 +64,11 @@ def classify_steps(t, newest: float | None, rules: StepRules) -> np.ndarray:
     the first of the stream, OK). A live caller passes one sample (a one-row call) or a block; the counts
     over a whole stream equal :func:`analyse`'s with the same period."""
     t = np.asarray(t, dtype=np.float64).reshape(-1)
+    if t.shape[0] == 1 and newest is not None:  # one live sample: the same rules in plain floats (8x faster)
+        d = float(t[0]) - float(newest)
+        k = (RESET if d < -rules.reset_s else DUPLICATE if d == 0.0 else BACKWARD if d < 0.0
+             else SPLIT if d > rules.split_s else GAP if d > rules.gap_s else OK)
+        return np.array([k], dtype=np.int8)
     kind = np.zeros(t.shape[0], dtype=np.int8)
     start = 0
     prev = -np.inf if newest is None else float(newest)
@@ -164,31 +175,3 @@ def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT
     rep.duration_s = float(sum(tk[b - 1] - tk[a] for a, b in segments))
     return keep, segments, rep
 
-
-#: kinds of one timestamp interval (:func:`classify_intervals`)
-OK_STEP, GAP, RESET, DUPLICATE, BACKWARDS = 0, 1, 2, 3, 4
-
-
-def classify_interval(dt: float, reset_s: float, gap_s: float) -> int:
-    """:func:`classify_intervals` of one interval, in plain floats (the live path, one message at a time)."""
-    if dt == 0.0:
-        return DUPLICATE
-    if dt <= -reset_s:
-        return RESET
-    if dt < 0.0:
-        return BACKWARDS
-    return GAP if dt > gap_s else OK_STEP
-
-
-def classify_intervals(dt, reset_s: float, gap_s: float) -> np.ndarray:
-    """Kind of each interval ``dt`` between a timestamp and the newest one before it, by the rules above:
-    RESET when ``dt <= -reset_s``, DUPLICATE when 0, BACKWARDS when in (-reset_s, 0), GAP when above
-    ``gap_s``, else OK_STEP. The live pipeline applies it with its fixed thresholds (``run.reset_s``,
-    ``run.gap_s``) sample by sample or to a whole array at once."""
-    dt = np.asarray(dt, dtype=float)
-    out = np.full(dt.shape, OK_STEP, dtype=np.int8)
-    out[dt > gap_s] = GAP
-    out[dt < 0.0] = BACKWARDS
-    out[dt <= -reset_s] = RESET
-    out[dt == 0.0] = DUPLICATE
-    return out
