@@ -20,7 +20,7 @@ Tiers (seed ranges disjoint, printed):
 * mis-sized model: each model term off by a factor drawn uniform 0.7-1.4, plus one hidden effect
   (quantization, ramp, gauss_markov, sinusoid): named exactly; model terms after within 30 % of the truth.
 * two effects at once (two of quantization, ramp, gauss_markov, sinusoid): both named, nothing else.
-* the issue-16 family: ramp R around 4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (each x0.8-1.25):
+* the ramp-under-random-walk family: ramp R around 4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (each x0.8-1.25):
   ramp named vs random walk K recalibrated.
 """
 
@@ -589,8 +589,8 @@ def hard_tier(draws, seed0=600_000, cases=None):
 
 
 def issue_ramp_family(seeds, seed0=500_000):
-    """The issue-16 case and draws around it: ramp named, and how the random-walk recalibration fared."""
-    print(f"\n== issue 16 family: ramp ~4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (each x0.8-1.25), "
+    """The ramp-under-random-walk case and draws around it: ramp named, and how the random-walk recalibration fared."""
+    print(f"\n== ramp-under-random-walk family: ramp ~4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (each x0.8-1.25), "
           f"{seeds} draws ==")
     named = k_recal = 0
     margins = []

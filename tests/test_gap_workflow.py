@@ -255,7 +255,7 @@ def test_alternative_explanations_name_the_right_limit():
     assert "white noise" in wn and "2 samples" in wn and "random walk" not in wn
 
 
-# --- issue 16: explanations weighed head to head on the same data ----------------------------------------
+# --- a ramp under a mis-sized random walk: explanations weighed head to head on the same data ----------------------------------------
 RATE_50 = 50.0
 N_50 = int(2 * 3600 * RATE_50)
 ISSUE_MODEL = [{"effect": "white_noise", "N": 1.5e-3}, {"effect": "bias_instability", "B": 7.3e-4},
@@ -267,7 +267,7 @@ def _ranked(r, it=0):
 
 
 def test_issue_ramp_is_named_not_a_larger_random_walk():
-    """The case of issue 16: R = 4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (2 h at 50 Hz). Before, a
+    """A ramp that hides under the random walk: R = 4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (2 h at 50 Hz). Before, a
     ramp test against a model whose K was already free gave LR 14.4 < 15.1 and 'K 5x too small' won; now
     the ramp and the recalibrated K are fitted from the same state and the ramp scores higher."""
     y = synthesize_axis(ISSUE_MODEL + [{"effect": "ramp", "R": 4.9e-6}], RATE_50, N_50, np.random.default_rng(0))
