@@ -63,10 +63,7 @@ def run_live(src: str, baud, signing, accept_unsigned: bool, duration, pcfg, lin
                     writer.write_raw(msg.get_msgbuf(), time.time())
                 if msg.get_type() != "BAD_DATA":
                     used = pipeline.handle(msg)
-                    if pipeline.failed:
-                        from companion.errors import CompanionError
-
-                        raise CompanionError(pipeline.failed)
+                    pipeline.raise_if_failed()
                     link.on_message(msg, is_vehicle_imu=used)
                     if used and stale:
                         stale = False

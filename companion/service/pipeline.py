@@ -83,6 +83,15 @@ class Pipeline:
         self._decode = None
 
     # ------------------------------------------------------------------ input
+    def raise_if_failed(self) -> None:
+        """The caller's step after feeding: a user-facing error the pipeline found in the data (e.g. a
+        baseline of another sensor) as one line (CompanionError). The pipeline itself never raises it
+        inside the loop; it only stops using the input."""
+        if self.failed:
+            from companion.errors import CompanionError
+
+            raise CompanionError(self.failed)
+
     def handle(self, msg) -> bool:
         """One pymavlink message; returns True when it was an IMU sample of the vehicle that was used."""
         mtype = msg.get_type()

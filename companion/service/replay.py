@@ -57,17 +57,9 @@ def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: F
         pipeline.on_heartbeat(int(index.sysid[hb[j]]), int(r["type"]), int(r["autopilot"]), int(r["base_mode"]))
 
     used = feed_in_order(pipeline, streams, order, src, row, heartbeat, stop)
-    _raise_if_failed(pipeline)
+    pipeline.raise_if_failed()
     return {"frames": index.frames, "bad_frames": index.bad_frames, "bad_bytes": index.bad_bytes,
             "heartbeats": int(hb.size), "imu_samples": int(sum(s.t.shape[0] for s in streams)), "used": int(used)}
-
-
-def _raise_if_failed(pipeline) -> None:
-    """A user-facing error the pipeline found in the data (e.g. a baseline of another sensor): one line."""
-    if pipeline.failed:
-        from companion.errors import CompanionError
-
-        raise CompanionError(pipeline.failed)
 
 
 def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: False) -> int:
@@ -211,7 +203,7 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
         pipeline.on_heartbeat(sysid, 2, autopilot, MAV_MODE_FLAG_SAFETY_ARMED if hb_armed[j] else 0)
 
     used = feed_in_order(pipeline, streams, order, kind, rows, heartbeat, stop)
-    _raise_if_failed(pipeline)
+    pipeline.raise_if_failed()
     return {"frames": int(res.totals.get("frames", 0)), "bad_frames": int(res.totals.get("bad_frames", 0)),
             "bad_bytes": int(res.totals.get("bad_bytes", 0)), "heartbeats": int(hb_t.shape[0]),
             "imu_samples": int(t_all.shape[0]), "used": int(used)}
