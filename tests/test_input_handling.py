@@ -227,7 +227,7 @@ def test_random_walk_resolved_only_from_a_long_enough_record():
     """N 1e-3, K 8e-4 (SI): K dominates the AVAR from tau = sqrt(3) N / K = 2.2 s, so it needs 10 x 2.2 = 22 s
     of record: a 15 s record gives a bound and says how long it would need, 20 minutes resolve it."""
     from companion.allan.fit import record_needed
-    from companion.cli.analyze import analyze_axis
+    from companion.analysis.axis import analyze_axis
 
     need = record_needed([{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 8e-4}], 0.05)
     assert need["random_walk"] == pytest.approx(10 * np.sqrt(3) * 1e-3 / 8e-4, rel=0.01)

@@ -4,7 +4,6 @@ contribution."""
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -113,44 +112,3 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     N = next((t["N"] for t in terms if t["effect"] == "white_noise"), None)
     out["quantization"] = lsb_report(pieces[int(np.argmax(lengths))], rate_hz, lsb, N)
     return out
-
-
-def rolloff_tau(tau, avar, drop: float = 0.95) -> float:
-    """Shortest cluster time not bent down by a low-pass filter, detected from the data: AVAR x tau of a
-    white-noise region is flat; a filter makes it smaller at the shortest taus. The reference is the median
-    of AVAR x tau over the 3rd-6th octave points; leading points below ``drop`` x that are left out.
-    Returns 0 when nothing is bent (or too few points to tell)."""
-    tau = np.asarray(tau, dtype=float)
-    avar = np.asarray(avar, dtype=float)
-    if tau.shape[0] < 7:
-        return 0.0
-    r = avar * tau
-    ref = float(np.median(r[3:7]))
-    if not (ref > 0):
-        return 0.0
-    k = 0
-    while k < 3 and r[k] < drop * ref:
-        k += 1
-    return float(tau[k]) if k else 0.0
-
-
-def filter_tau(cutoff_hz: float | None, rate_hz: float) -> float:
-    """Cluster time from which a 2-pole low-pass filter at ``cutoff_hz`` bends AVAR by < 2 %.
-
-    Simulated (white noise at 1 kHz through a 2-pole Butterworth, logged at the stream's rate): AVAR x tau
-    is 1 - 0.14 / (f_c tau), so tau >= 7 / f_c. When the log samples slower than 2.5 f_c the decimation
-    leaves the samples nearly white (50 Hz logging of a 20 Hz filter: -3 % at 2 samples, -1 % at 3): 3 samples.
-    """
-    if not cutoff_hz or cutoff_hz <= 0 or not rate_hz or rate_hz <= 0:
-        return 0.0
-    if rate_hz <= 2.5 * cutoff_hz:
-        return 3.0 / rate_hz
-    return 7.0 / cutoff_hz
-
-
-def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0.5):
-    """N from a local weighted fit of the white-noise region under model misfit: the core's
-    :func:`companion.allan.white.local_white_noise` (the online report applies the same rule)."""
-    from companion.allan.white import local_white_noise as core
-
-    return core(terms, tau, avar, edf, tau0, share)

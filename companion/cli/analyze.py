@@ -151,18 +151,3 @@ def run(args) -> int:
     if failed:
         raise CompanionError(f"{len(failed)} of {len(sources)} sources not analysed: {'; '.join(failed)}")
     return 0
-
-
-#: Names that moved to :mod:`companion.analysis`, still importable from here (loaded on first use, so that
-#: argument parsing stays light).
-_MOVED = {"analyze_axis": "axis", "filter_tau": "axis", "local_white_noise": "axis", "rolloff_tau": "axis",
-          "analyze_stream": "stream", "stream_filters": "stream", "parse_taus": "taus", "taus_beyond": "taus",
-          "format_table": "report", "format_term": "report", "kalibr_yaml": "kalibr", "kalibr_blockers": "kalibr"}
-
-
-def __getattr__(name):
-    if name in _MOVED:
-        import importlib
-
-        return getattr(importlib.import_module(f"companion.analysis.{_MOVED[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
