@@ -236,8 +236,11 @@ def open_client(workers: int | None = None, scheduler: str | None = None, timeou
     except ValueError:  # not the main thread
         old_int = None
     try:
+        # the workers' own logs at CRITICAL only: a worker whose heartbeat meets the scheduler closing (a
+        # Ctrl-C on a loaded machine) logs an ERROR with a traceback, which the user would take for a crash;
+        # a task's real failure reaches this process as its future's exception and is recorded per log
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+                               dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL)
     finally:
         if old_int is not None:
             signal.signal(signal.SIGINT, old_int)
