@@ -55,12 +55,14 @@ def main() -> int:
                     help="a real-time soak: S wall seconds at 1x (sets --duration S --speedup 1)")
     ap.add_argument("--outage", type=float, default=20.0, help="wall seconds without MAVProxy (0: none)")
     ap.add_argument("--baseline", type=float, default=120.0, help="run --baseline-s (simulated s)")
+    ap.add_argument("--keep", metavar="DIR", help="keep the processes' outputs and run's tlog in DIR")
     args = ap.parse_args()
     if args.wall_seconds:
         args.duration, args.speedup = args.wall_seconds, 1.0
     wall = args.duration / args.speedup
     with tempfile.TemporaryDirectory() as d:
-        tmp = Path(d)
+        tmp = Path(args.keep or d)
+        tmp.mkdir(parents=True, exist_ok=True)
         chain = start_chain(tmp, ["--baseline-s", str(args.baseline), "--duration", str(wall + 200),
                                   "--out-tlog", str(tmp / "run.tlog")], default_streamrate=True)
         gcs, run = chain.gcs, chain.run
@@ -90,12 +92,18 @@ def main() -> int:
         drops = low_rate_episodes(t, 50.0, min_s=1.0, gap_s=2.0)
         texts = list(gcs.texts)
         alarms = [x for _, x in texts if any(w in x.lower() for w in FAULT_WORDS)]
+        learned = [ta - t0 for ta, x in texts if "baseline learned" in x]
+        states = [v for _, v in gcs.health]
         print(f"chain: {args.duration:g} simulated s at {args.speedup:g}x ({wall:.0f} s wall), MAVProxy default "
               f"stream rates, {args.outage:g} s router outage")
         longest = max((x for _, x in drops), default=0.0)
         print(f"  IMU rate drops below 40 Hz: {len(drops)}; longest {longest:.1f} s message time = "
               f"{longest / args.speedup:.2f} s wall (target < 10 s)")
         print(f"  false alarms at the GCS: {len(alarms)} {alarms[:5]}")
+        print(f"  baseline learned {learned[0]:.0f} s (wall) after the start" if learned else
+              "  baseline never learned")
+        print("  IMU0G_HLTH at the GCS: " + ", ".join(f"{int(h)}: {states.count(h)}" for h in sorted(set(states)))
+              + " reports")
         lost = re.search(r"link from 1/1: (\d+) frames received, (\d+) lost \(([\d.]+) %\)", out)
         print(f"  frames the companion counted lost: {lost.group(2)} of {int(lost.group(1)) + int(lost.group(2))} "
               f"({lost.group(3)} %)" if lost else "  frames lost: no link line in run's output")

@@ -248,7 +248,7 @@ class Pipeline:
         if ch.off_rate and abs(r / ch.off_rate[-1] - 1.0) > RATE_CHANGE:
             ch.off_rate = []
         ch.off_rate.append(r)
-        ch.restart_settling()
+        ch.drop_lookahead()
         if len(ch.off_rate) >= OFF_RATE_BLOCKS:
             old = ch.rate_hz
             self._switch_rate(ch, float(np.median(ch.off_rate)), data[:, 0], old)
