@@ -90,6 +90,26 @@ def start_mavproxy(tmp_path, master_port, out_port, default_streamrate=False, na
                             stdin=subprocess.DEVNULL, start_new_session=True)
 
 
+def mavlink_routerd() -> str | None:
+    """The mavlink-router binary: $MAVLINK_ROUTERD, else ``mavlink-routerd`` on PATH (no Debian or PyPI
+    package carries it: built from its source)."""
+    import os
+
+    path = os.environ.get("MAVLINK_ROUTERD") or shutil.which("mavlink-routerd")
+    return path if path and os.access(path, os.X_OK) else None
+
+
+def start_mavlink_router(tmp_path, master_port, endpoint_ports, name="router.out"):
+    """mavlink-router as the router on the companion computer: the vehicle on a UDP server port (``master_port``),
+    each of ``endpoint_ports`` a UDP client endpoint (the companion, the GCS); no TCP port."""
+    args = [mavlink_routerd(), "-t", "0"]
+    for port in endpoint_ports:
+        args += ["-e", f"127.0.0.1:{port}"]
+    args.append(f"127.0.0.1:{master_port}")
+    return subprocess.Popen(args, cwd=tmp_path, stdout=open(Path(tmp_path) / name, "w"), stderr=subprocess.STDOUT,
+                            stdin=subprocess.DEVNULL, start_new_session=True)
+
+
 @dataclass
 class Chain:
     """The processes and ports of one chain; ``procs`` holds every process started, for the caller to stop."""

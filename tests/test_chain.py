@@ -15,9 +15,11 @@ import signal
 import time
 
 import pytest
-from chain import FAULT_WORDS, imu_times, low_rate_episodes, sent_by_companion, start_chain
+from chain import (FAULT_WORDS, MODEL, Listener, imu_times, low_rate_episodes, mavlink_routerd, sent_by_companion,
+                   start_chain, start_mavlink_router)
+from readiness import READY, wait_for_text
 
-from loopback import read_record, stop
+from loopback import free_udp_port, read_record, start, stop
 
 pytestmark = [pytest.mark.network,
               pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")]
@@ -121,3 +123,39 @@ def test_router_outage_texts_reach_the_gcs_and_health_is_back_to_healthy_at_once
         assert stopped(gcs)[0] > t_kill
     finally:
         chain.close()
+
+
+@pytest.mark.skipif(mavlink_routerd() is None, reason="mavlink-routerd not found (set MAVLINK_ROUTERD)")
+def test_reports_reach_a_gcs_through_mavlink_router_on_the_companion_computer(tmp_path):
+    """mavlink-router forwards between its endpoints: `companion run` on one UDP endpoint (no --gcs), the
+    GCS on another; the GCS receives every NAMED_VALUE_FLOAT name and every STATUSTEXT the companion sent,
+    and the vehicle's data reach the companion at the rate it asked for through the router."""
+    (tmp_path / "model.yaml").write_text(MODEL)
+    p_master, p_run, p_gcs = free_udp_port(), free_udp_port(), free_udp_port()
+    gcs = Listener(p_gcs)
+    procs = []
+    try:
+        procs.append(start_mavlink_router(tmp_path, p_master, [p_run, p_gcs]))
+        run = start(["run", "--source", f"udpin:127.0.0.1:{p_run}", "--no-state", "--baseline-s", "30",
+                     "--duration", "300", "--out-tlog", str(tmp_path / "run.tlog")], tmp_path, "run.out")
+        procs.append(run)
+        wait_for_text(tmp_path / "run.out", READY, run)
+        sim = start(["sim-autopilot", "--model", "model.yaml", "--connect", f"udpout:127.0.0.1:{p_master}",
+                     "--speedup", "10", "--duration", "90", "--wait-request", "--fault", "stuck", "--fault-at", "50",
+                     "--fault-axis", "gx", "--wall-limit", "120", "--quiet"], tmp_path, "sim.out")
+        procs.append(sim)
+        sim.wait(240)  # bounded by its --wall-limit
+        assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
+        assert stop(run) == 0, (tmp_path / "run.out").read_text()
+        names, texts = sent_by_companion(tmp_path / "run.tlog")
+        assert {"IMU0GX_N", "IMU0G_HLTH", "IMU0G_FLT"} <= names, names
+        assert any("stuck" in t for t in texts) and any("baseline learned" in t for t in texts), texts
+        ok = gcs.wait_for(lambda g: names <= set(g.names) and sorted(texts) == sorted(t for _, t in g.texts))
+        assert ok, (sorted(names - set(gcs.names)), texts, gcs.texts, (tmp_path / "router.out").read_text())
+        assert gcs.heartbeats > 0
+        t = imu_times(tmp_path / "run.tlog")
+        assert len(t) > 100 and (len(t) - 1) / (t[-1] - t[0]) > 90.0  # the 100 Hz asked for, through the router
+    finally:
+        for p in procs:
+            stop(p, signal.SIGKILL)
+        gcs.close()
