@@ -55,7 +55,14 @@ def test_a_router_setting_stream_rates_every_15_s_leaves_still_data_and_raises_n
     # 30 cycles of 9 s at 50 Hz: 3 s of each go to the rate switch and one block to the look-ahead, about
     # 5 s of still data per cycle; settling 10 s after every switch left none at all
     assert "IMU0 gyro baseline learned" in texts, (texts, ch.counts)
-    assert sink.values["IMU0G_HLTH"] == 0.0  # healthy at the rate asked for (at 4 Hz it learns that rate)
+    assert sink.values["IMU0G_HLTH"] == 0.0
+    # once the baseline is learned and checked, HLTH stays 0 through the 4 Hz stretches too (2 means "no
+    # baseline yet"; before this change it read 2 at 4 Hz until 30 s of data at that rate were used)
+    learned_at = next(i for i, m in enumerate(sink.msgs) if m[0] == "T" and "baseline learned" in m[2])
+    after = [m[2] for m in sink.msgs[learned_at:] if m[0] != "T" and m[1] == "IMU0G_HLTH"]
+    assert 0.0 in after, after
+    after = after[after.index(0.0):]  # from the first check after learning on
+    assert set(after) == {0.0}, after
     n_true = math.sqrt(N_SI**2 + 1e-6 / (12 * 50.0)) / (math.pi / 180.0 / 60.0)  # deg/sqrt(h), with rounding
     for ax in "XYZ":
         assert sink.values[f"IMU0G{ax}_N"] == pytest.approx(n_true, rel=0.15)
