@@ -107,7 +107,7 @@ class Channel:
         self.cutter.prev_rate_hz, self.cutter.rate_hz = old, float(new_rate)
         self.cutter.dts.clear()
         self.cutter.dts.extend(np.diff(np.asarray(t_block, dtype=float)).tolist())
-        self.restart_settling()
+        self.drop_lookahead()
         self.off_rate = []
         self.rate_switches += 1
         if kept:
@@ -142,8 +142,15 @@ class Channel:
         self.learn = {}
 
     def restart_settling(self) -> None:
-        """A time discontinuity or a new rate: drop the look-ahead and settle again."""
+        """Motion or a time discontinuity: drop the look-ahead and settle again."""
         self.pending, self.pending_stats, self.still_run_s = None, None, 0.0
+
+    def drop_lookahead(self) -> None:
+        """A rate change: the look-ahead block belongs to the other rate and is dropped, but the vehicle has
+        not moved, so the still time counts on. Settling again at each change would leave no still data at
+        all under a router that sets stream rates every 15 s (MAVProxy's default: 4-6 s at 4 Hz, then 10 s
+        of settling, in every 15 s)."""
+        self.pending, self.pending_stats = None, None
 
     def on_break(self) -> None:
         """Time discontinuity: the partial block, the look-ahead and the recent blocks are dropped."""

@@ -248,7 +248,7 @@ class Pipeline:
         if ch.off_rate and abs(r / ch.off_rate[-1] - 1.0) > RATE_CHANGE:
             ch.off_rate = []
         ch.off_rate.append(r)
-        ch.restart_settling()
+        ch.drop_lookahead()
         if len(ch.off_rate) >= OFF_RATE_BLOCKS:
             old = ch.rate_hz
             self._switch_rate(ch, float(np.median(ch.off_rate)), data[:, 0], old)
@@ -256,6 +256,8 @@ class Pipeline:
 
     def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None) -> None:
         back = ch.switch_rate(rate, t_block)
+        if self._has_baseline(ch):
+            ch.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
         self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
         self.log(f"IMU{ch.imu}: rate changed {old:.1f} -> {ch.rate_hz:.1f} Hz (a stream request, not a gyro fault): "
                  + ("the state kept for this rate is back" if back else "references and estimators learned afresh"))
@@ -368,7 +370,10 @@ class Pipeline:
         strict = self.baseline_fixed and not self.cfg.baseline_force
         reported, transitions, error = ch.check(t, self.baseline, strict)
         if ch.fed_s < self.cfg.min_report_s:
-            self._set_state(ch, self.health(ch) if ch.faults.active() else LEARNING)
+            # at a rate the stream switched to (another client's stream request) the IMU keeps the health it
+            # has against its baseline: HLTH 2 means "no baseline yet", not "new rate"
+            switched = ch.rate_switches > 0 and self._has_baseline(ch)
+            self._set_state(ch, self.health(ch) if ch.faults.active() or switched else LEARNING)
             return
         for ax, terms in reported.items():
             self.reporter.set_online_terms(ch.imu, ax, terms)
