@@ -51,7 +51,7 @@ from scipy import stats
 from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
                                       fit_with_candidate, gm_rw_direction, lr_inflation, refine_shapes,
                                       unit_column)
-from companion.gap.filtered import aliasing_gain
+from companion.allan.filtered_white import aliasing_gain
 from companion.gap.likelihood import MODEL_FLOOR, Measured
 
 #: level an added effect must pass (its score's penalty is chi^2_k(1 - ALPHA))
@@ -158,7 +158,7 @@ def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Expl
 
 
 def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpass, shaped=(), sigma=None) -> list:
-    """The low-pass filter on the state's white-noise term (:mod:`companion.gap.filtered`): alone (N held
+    """The low-pass filter on the state's white-noise term (:mod:`companion.allan.filtered_white`): alone (N held
     as it stands) and with N recalibrated. ``lowpass`` = (cut-off Hz or None, order[, integrate]): a cut-off from the
     log's parameters is used as it is (a known property of the data: the level of a recalibration,
     chi^2_1(1 - ALPHA_RECAL) = 10.8), else it is fitted by profile likelihood over LOWPASS_GRID x rate (the
@@ -181,7 +181,7 @@ def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpa
     # (a free cut-off is kept where the aliasing it implies stays within the 5 % model floor in AVAR: beyond,
     # a fitted filter would raise the long-tau white level and pass for "N is right" when N is not)
     grid = [(fc0, order)] if fc0 else [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz
-                                       if aliasing_gain(fc, meas.rate_hz, o, integrate) <= 1.0 + MODEL_FLOOR]
+                                       if aliasing_gain(fc, None if integrate else meas.rate_hz, o) <= 1.0 + MODEL_FLOOR]
     out = []
     for recal in ((), (j,)):
         if recal and j not in recalibratable:

@@ -179,10 +179,10 @@ def _strongest_left(res: GapResult) -> str:
 
 def lowpass_entry(t, cutoff_param, rate_hz, axis, index, terms0) -> dict:
     """The JSON/report entry of a low-pass filter put on the white-noise term ``t``."""
-    from companion.gap.filtered import aliasing_gain
+    from companion.allan.filtered_white import aliasing_gain
 
     fc, order = float(t["cutoff_hz"]), int(t.get("order", 2))
-    gain = aliasing_gain(fc, rate_hz, order, bool(t.get("integrate", False)))
+    gain = aliasing_gain(fc, None if t.get("integrate") else rate_hz, order)
     src = "the log's parameter" if cutoff_param else "fitted"
     entry = {"effect": selection.LOWPASS, "cutoff_hz": fc, "order": order, "source": src, "N": t["N"],
              "on_model_term": index < len(terms0), "aliasing_gain": gain,
