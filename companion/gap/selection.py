@@ -312,17 +312,20 @@ def nested_test(meas: Measured, best: Explanation, limit: Explanation, i: int) -
 
 
 def equal_size_rule(best: Explanation, ranked) -> Explanation:
-    """Between look-alikes of the same size (the same number of added parameters, the same model terms
-    recalibrated: a ramp or a random walk, a sinusoid or a Gauss-Markov term) that both pass their level,
-    the one with the larger likelihood wins. The overdispersion factor scales each one's evidence against
-    the state (its test), but between two explanations with the same penalty it would only favour the one
-    whose direction is less overdispersed (a deterministic ramp over a stochastic random walk that fits
-    better: the hidden random walk named a ramp)."""
-    if best.score <= 0 or not best.effect or best.effect in (LOWPASS, "temperature"):
+    """Between look-alikes of the same size (the same number of free parameters: a ramp or a random walk, a
+    sinusoid or a Gauss-Markov term, a ramp or the model's random walk K recalibrated) that both pass their
+    level, the one with the larger likelihood wins. The overdispersion factor scales each one's evidence
+    against the state (its test), and the level of a recalibration (10.8) is below that of an added effect
+    (15.1) because a model term is already there; but between two explanations with the same number of
+    parameters, once both pass, either difference would only favour the one that fits worse (a
+    deterministic ramp over a stochastic random walk that fits better: the hidden random walk named a ramp;
+    the model's K recalibrated 7-16x over the ramp that fits better: the hidden ramp absorbed). The filter
+    and the temperature term keep their own rules."""
+    if best.score <= 0 or best.effect in (LOWPASS, "temperature"):
         return best
     for y in ranked:
-        if (y is not best and y.effect and y.effect not in (LOWPASS, "temperature") and y.effect != best.effect
-                and y.k == best.k and y.recal == best.recal and y.score > 0 and y.fit.dev < best.fit.dev):
+        if (y is not best and y.effect not in (LOWPASS, "temperature") and y.changes() != best.changes()
+                and y.k == best.k and y.score > 0 and y.fit.dev < best.fit.dev):
             best = y
     return best
 
