@@ -39,7 +39,7 @@ from scipy import stats
 from companion.allan.adev import oavar
 from companion.allan.lsb import DITHER_RATIO
 from companion.gap import explain, selection
-from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, _intervals, fit_terms, lr_inflation,
+from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation,
                                      refine_shapes, unit_column)
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    measure_pooled, model_avar)
@@ -273,19 +273,6 @@ def _hold_test(meas: Measured, base: Fit, held, i: int, t0) -> tuple:
     return lr_raw / phi, lr_raw, phi, hf
 
 
-def _drop_test(meas: Measured, base: Fit, held, i: int, n_model: int) -> tuple:
-    """Likelihood ratio of taking the added effect ``i`` out (its magnitude 0, all else refitted), divided
-    by the sandwich overdispersion under that null in the effect's direction (as when it was added).
-    Returns (lr, fit without it)."""
-    t = base.terms[i]
-    terms = [dict(x) for x in base.terms]
-    terms[i][MAGNITUDE[t["effect"]]] = 0.0
-    shaped = [j for j in range(n_model, len(terms)) if terms[j]["effect"] in SHAPE and j not in held and j != i]
-    hf = refine_shapes(meas, terms, sorted(set(held) | {i}), shaped)
-    phi = lr_inflation(meas, hf, None, direction=[unit_column(t, meas.tau, meas.rate_hz)])
-    return (hf.dev - base.dev) / phi, hf
-
-
 def _params(term) -> dict:
     return {k: v for k, v in term.items() if k != "effect"}
 
@@ -473,29 +460,6 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         alternatives.pop(j, None)
         held.add(j)
         current = [dict(t) for t in x.fit.terms]
-        base = _refit(meas, current, held, len(terms0))
-
-    # 5c. an added effect that later steps made unnecessary is taken out (backward step, the level it was
-    # added at): e.g. a small Gauss-Markov term that patched the residual of a recalibrated K before the
-    # swap above put the ramp in K's place
-    while True:
-        weakest = None
-        for i in range(len(terms0), len(current)):
-            t = current[i]
-            if i in held or t["effect"] == "temperature" or t[MAGNITUDE[t["effect"]]] <= 0:
-                continue
-            lr, hf = _drop_test(meas, base, held, i, len(terms0))
-            if lr <= selection.add_penalty(N_PARAMS[t["effect"]]) and (weakest is None or lr < weakest[0]):
-                weakest = (lr, i, hf)
-        if weakest is None:
-            break
-        _, i, hf = weakest
-        t = current[i]
-        res.notes.append(f"{t['effect']} added at one step no longer passes its level after the later steps "
-                         f"(corrected LR {weakest[0]:.1f}) and is taken out")
-        current = [dict(x) for j, x in enumerate(hf.terms) if j != i]
-        held = {j if j < i else j - 1 for j in held}
-        alternatives = {(j if j < i else j - 1): a for j, a in alternatives.items() if j != i}
         base = _refit(meas, current, held, len(terms0))
 
     final = [dict(t) for t in base.terms]
