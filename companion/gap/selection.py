@@ -48,10 +48,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from companion.allan.filtered_white import aliasing_gain
 from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
                                       fit_with_candidate, gm_rw_direction, lr_inflation, refine_shapes,
                                       unit_column)
-from companion.allan.filtered_white import aliasing_gain
 from companion.gap.likelihood import MODEL_FLOOR, Measured
 
 #: level an added effect must pass (its score's penalty is chi^2_k(1 - ALPHA))
@@ -180,8 +180,7 @@ def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpa
     # (the sensor's own digital low-pass and averaging need not be two-pole)
     # (a free cut-off is kept where the aliasing it implies stays within the 5 % model floor in AVAR: beyond,
     # a fitted filter would raise the long-tau white level and pass for "N is right" when N is not)
-    grid = [(fc0, order)] if fc0 else [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz
-                                       if aliasing_gain(fc, None if integrate else meas.rate_hz, o) <= 1.0 + MODEL_FLOOR]
+    grid = [(fc0, order)] if fc0 else _cutoff_grid(meas, integrate)
     out = []
     for recal in ((), (j,)):
         if recal and j not in recalibratable:
@@ -207,6 +206,30 @@ def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpa
         pen = (RECAL_PENALTY if fc0 else add_penalty(1)) + RECAL_PENALTY * len(recal)
         out.append(Explanation(LOWPASS, tuple(recal), best, state.dev - best.dev, phi, pen, modifies=j))
     return out
+
+
+def _cutoff_grid(meas: Measured, integrate: bool) -> list:
+    """(cut-off, order) pairs a fitted filter is profiled over: LOWPASS_GRID x rate, order 1 and 2, where the
+    aliasing it implies stays within the model floor."""
+    return [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz
+            if aliasing_gain(fc, None if integrate else meas.rate_hz, o) <= 1.0 + MODEL_FLOOR]
+
+
+def refine_cutoff(meas: Measured, terms, fixed, lowpass) -> Fit:
+    """Refit with the fitted cut-off (and order) of the filtered white-noise term re-profiled over the grid
+    in the current state (magnitudes free except ``fixed``): like a Gauss-Markov tau_c, a cut-off fitted
+    before a later addition is no longer the maximum of the likelihood."""
+    integrate = bool(lowpass[2]) if len(lowpass) > 2 else False
+    js = [j for j, t in enumerate(terms) if t["effect"] == "white_noise" and t.get("cutoff_hz")]
+    best = fit_terms(meas, terms, fixed, intervals=False)
+    for j in js:
+        for fc, o in _cutoff_grid(meas, integrate):
+            trial = [dict(t) for t in best.terms]
+            trial[j].update(cutoff_hz=float(fc), order=int(o))
+            f = fit_terms(meas, trial, fixed, intervals=False)
+            if f.dev < best.dev:
+                best = f
+    return best
 
 
 def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None,

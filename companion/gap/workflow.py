@@ -405,6 +405,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         held -= set(chosen.recal)
         if shaped and (chosen.effect is not None):  # earlier shapes re-optimised in the new state
             current = refine_shapes(meas, current, sorted(held), shaped).terms
+        if lp is not None and not lp[0] and chosen.effect not in (None, selection.LOWPASS):
+            # a fitted cut-off is a shape too: a vibration line near the logger's Nyquist frequency, added
+            # after the filter, takes back the short-tau power the cut-off had absorbed
+            current = selection.refine_cutoff(meas, current, sorted(held), lp).terms
         base = _refit(meas, current, held, len(terms0))
 
     # 5. a recalibration that later additions made unnecessary is undone (backward step, same test)
