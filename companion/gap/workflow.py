@@ -55,6 +55,8 @@ NESTED = selection.NESTED
 NOISE_FLOOR_G = 2.0
 #: steps (an effect added, a term recalibrated, or both) before stopping
 MAX_ITER = 6
+#: effects with power at the shortest cluster times, where a fitted low-pass cut-off acts
+SHORT_TAU_EFFECTS = ("quantization", "gauss_markov", "sinusoid")
 SIM_MAX_SAMPLES = 2_000_000
 
 
@@ -405,9 +407,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         held -= set(chosen.recal)
         if shaped and (chosen.effect is not None):  # earlier shapes re-optimised in the new state
             current = refine_shapes(meas, current, sorted(held), shaped).terms
-        if lp is not None and not lp[0] and chosen.effect not in (None, selection.LOWPASS):
-            # a fitted cut-off is a shape too: a vibration line near the logger's Nyquist frequency, added
-            # after the filter, takes back the short-tau power the cut-off had absorbed
+        if lp is not None and not lp[0] and chosen.effect in SHORT_TAU_EFFECTS:
+            # a fitted cut-off is a shape too: an effect with power at the filter's cluster times (a vibration
+            # line near the logger's Nyquist frequency), added after the filter, takes back short-tau power
+            # the cut-off had absorbed; a long-tau effect (ramp, random walk) does not compete with it
             current = selection.refine_cutoff(meas, current, sorted(held), lp).terms
         base = _refit(meas, current, held, len(terms0))
 
