@@ -138,8 +138,19 @@ def _simulate(terms, meas: Measured, seed: int, t_series=None):
     if not terms:
         return None, None
     rng = np.random.default_rng(seed)
-    plain = [t for t in terms if not t.get("cutoff_hz") and t["effect"] != "temperature"]
+    # averaged samples (PX4 sensor_combined): a vibration line is averaged over each interval like the noise
+    # (a 112 Hz line at 248.6 Hz keeps 0.70 of its amplitude; point samples would keep all of it)
+    averaged = any(t.get("integrate") for t in terms)
+    plain = [t for t in terms if not t.get("cutoff_hz") and t["effect"] != "temperature"
+             and not (averaged and t["effect"] == "sinusoid")]
     y = synthesize_axis(plain, meas.rate_hz, n, rng) if plain else np.zeros(n)
+    if averaged:
+        tk = np.arange(n) / meas.rate_hz
+        for t in terms:
+            if t["effect"] == "sinusoid":
+                w, ph = 2.0 * math.pi * t["freq_hz"], rng.uniform(0.0, 2.0 * math.pi)
+                y = y + t["amplitude"] * (np.sin(w * (tk + 1.0 / meas.rate_hz) + ph) - np.sin(w * tk + ph)) \
+                    / (w / meas.rate_hz)
     for t in terms:
         if t.get("cutoff_hz"):  # the autopilot's filter and decimation, simulated at 8x the log's rate
             y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)),
