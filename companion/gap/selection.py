@@ -419,7 +419,11 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
     best, out["nested"], out["alternative"] = resolve(ranked[0])
     best = filter_rule(meas, best, ranked)
     if out["nested"] is None:
-        best = equal_size_rule(best, ranked)
+        same = equal_size_rule(best, ranked)
+        if same is not best and same.effect in NESTED:
+            # a Gauss-Markov term that won on the larger likelihood still has to beat its one-parameter limit
+            same, out["nested"], out["alternative"] = resolve(same)
+        best = same
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best
