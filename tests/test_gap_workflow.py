@@ -333,6 +333,21 @@ def test_ramp_beside_gauss_markov_is_not_absorbed_by_a_recalibrated_k():
     assert r.gap_after <= NOISE_FLOOR_G
 
 
+def test_gauss_markov_preferred_by_likelihood_still_meets_its_limit():
+    """A hard-tier draw (a random walk hidden from a mis-sized white + flicker model): a sinusoid leads the
+    first ranking, the equal-size rule prefers the Gauss-Markov term that fits better (tau_c ~ 260 s), and
+    that term must still beat its random-walk limit (it was named without the nested test before)."""
+    truth = [{"effect": "white_noise", "N": 2.2121e-3}, {"effect": "bias_instability", "B": 6.0009e-4},
+             {"effect": "random_walk", "K": 1.19674e-4}]
+    model = [{"effect": "white_noise", "N": 2.91258e-3}, {"effect": "bias_instability", "B": 6.86633e-4}]
+    y = synthesize_axis(truth, RATE_50, N_50, np.random.default_rng(489328211604001))
+    r = run_gap(y, RATE_50, model, simulate=False)
+    assert [a["effect"] for a in r.added] == ["random_walk"]
+    assert r.added[0]["K"] == pytest.approx(1.19674e-4, rel=0.3)
+    assert r.iterations[0].get("nested", {}).get("limit") == "random_walk"
+    assert r.gap_after <= NOISE_FLOOR_G
+
+
 @pytest.mark.parametrize("seed", [71, 72])
 def test_null_fresh_random_model_adds_nothing(seed):
     """Model == truth with random magnitudes (white/flicker crossover 1-100 s, flicker/random-walk
