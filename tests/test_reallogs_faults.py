@@ -45,11 +45,10 @@ def write(path, gyro, rate, accel_noise=0.03, seed=0):
 
 def lowpassed(rng, n, std, alpha=0.5):
     """Float, low-pass filtered noise (an AR(1) of coefficient alpha) of the given std: DataFlash IMU data."""
+    from scipy.signal import lfilter
+
     w = rng.normal(0.0, 1.0, (n, 3))
-    y = np.empty_like(w)
-    y[0] = w[0]
-    for i in range(1, n):
-        y[i] = alpha * y[i - 1] + w[i]
+    y = lfilter([1.0], [1.0, -alpha], w, axis=0)  # y[i] = alpha y[i-1] + w[i], y[0] = w[0]
     return y * std / np.sqrt(1.0 / (1.0 - alpha * alpha))
 
 

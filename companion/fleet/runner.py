@@ -206,7 +206,9 @@ def open_client(workers: int | None = None, scheduler: str | None = None, timeou
         raise CompanionError(DASK_MISSING) from None
     for name in ("distributed", "distributed.nanny", "distributed.scheduler", "distributed.worker",
                  "distributed.core", "distributed.comm"):
-        logging.getLogger(name).setLevel(logging.ERROR)
+        # shutting down on Ctrl-C, the scheduler and nannies in this process may log a closed connection with
+        # its traceback; what goes wrong with a log comes back as its task's exception and is recorded
+        logging.getLogger(name).setLevel(logging.CRITICAL)
     if scheduler:
         if "://" not in scheduler:
             scheduler = "tcp://" + scheduler
