@@ -1,5 +1,5 @@
-"""The low-pass + decimation AVAR (companion.gap.filtered) against simulation, and the filter named on
-simulated filtered data, not on unfiltered data."""
+"""The low-pass + decimation AVAR (companion.allan.filtered_white) against the gap workflow's simulation of
+it (companion.gap.filtered), and the filter named on simulated filtered data, not on unfiltered data."""
 
 import math
 
@@ -9,8 +9,8 @@ from scipy.integrate import quad
 
 from companion.allan.adev import oavar
 from companion.gap import run_gap
-from companion.gap.filtered import (aliasing_gain, autocovariance, avar_filtered_white,
-                                    synthesize_filtered_white)
+from companion.allan.filtered_white import aliasing_gain, autocovariance, avar_filtered_white
+from companion.gap.filtered import synthesize_filtered_white
 from companion.gap.workflow import NOISE_FLOOR_G
 
 
@@ -84,3 +84,25 @@ def test_temperature_drift_named_and_checked_against_the_channel():
     assert r.gap_after <= NOISE_FLOOR_G
     r0 = run_gap(y - 3e-4 * temp, rate, model, simulate=False, temperature=temp_meas, lowpass=False)
     assert r0.added == []  # no drift: the channel alone adds nothing
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_fitted_cutoff_is_refitted_after_a_line_near_nyquist(seed):
+    """Averaged samples (PX4 sensor_combined) of white noise behind a 42 Hz two-pole filter, plus a 116.5 Hz
+    line near the 125 Hz Nyquist frequency, averaged the same way: both named, and once the line is in, the
+    fitted cut-off is profiled again (it had taken the line's short-tau power: a 50 Hz order-1 filter and the
+    line at 60 % of its amplitude, G above 2), so the line's amplitude is within 30 % and the gap closes."""
+    rate, n, fc, N, f0, A = 250.0, 15000, 42.0, 5.6e-5, 116.5, 6e-4
+    rng = np.random.default_rng(seed)
+    y = synthesize_filtered_white(N, fc, rate, n, rng, integrate=True)
+    t = np.arange(n) / rate
+    ph = rng.uniform(0, 2 * math.pi)
+    w = 2 * math.pi * f0
+    y = y + A * (np.sin(w * (t + 1 / rate) + ph) - np.sin(w * t + ph)) / (w / rate)  # the mean over each interval
+    r = run_gap(y, rate, [{"effect": "white_noise", "N": N}], simulate=False, integrated=True)
+    named = {a["effect"]: a for a in r.added}
+    assert set(named) == {"sinusoid", "lowpass"}
+    assert abs(named["sinusoid"]["freq_hz"] / f0 - 1) < 0.1
+    assert abs(named["sinusoid"]["amplitude"] / A - 1) < 0.3
+    assert abs(named["lowpass"]["cutoff_hz"] / fc - 1) < 0.2
+    assert r.gap_after <= NOISE_FLOOR_G

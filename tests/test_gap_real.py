@@ -68,3 +68,21 @@ def test_ardupilot_bin_against_mpu6000_datasheet(shared_data, tmp_path, capsys):
     assert doc["gap_after"] <= 2.0 < doc["gap_before"]
     assert all(t["tau_c"] >= 3 / doc["measured"]["rate_hz"] for t in doc["terms_after"]
                if t["effect"] == "gauss_markov")
+
+
+@pytest.mark.shared
+def test_px4_ulog_gx_filter_near_the_onchip_setting_and_the_line(shared_data, tmp_path, capsys):
+    """pyulog sample, sensor_combined gx (averaged samples at 248.6 Hz, no cut-off parameter in the log):
+    the 116.5 Hz line the periodogram shows is named, and with it in the model the fitted cut-off is
+    within 20 % of the MPU-6000 driver's 42 Hz on-chip filter (66 Hz before the cut-off was refitted after
+    the line); the gap closes (docs/gap.md)."""
+    out = tmp_path / "px4.json"
+    assert main(["gap", str(shared_data / "px4" / "pyulog_sample.ulg"), "--datasheet", "MPU-6000", "--axis", "gx",
+                 "--json", str(out)]) == 0
+    capsys.readouterr()
+    doc = json.loads(out.read_text())
+    added = {a["effect"]: a for a in doc["added"]}
+    assert "sinusoid" in added and abs(added["sinusoid"]["freq_hz"] / 116.5 - 1) < 0.1
+    assert added["sinusoid"]["spectral"]["confirmed"]
+    assert abs(added["lowpass"]["cutoff_hz"] / 42.0 - 1) <= 0.2
+    assert doc["gap_after"] <= 2.0 < doc["gap_before"]

@@ -302,8 +302,8 @@ def test_issue_ramp_family_names_the_ramp(seed):
 
 
 def test_missized_k_is_chosen_when_it_fits_better():
-    """No ramp, the model's K 3x too small: the recalibrated K is chosen over the ramp by the same score,
-    and the ramp is in the ranking with a lower one."""
+    """No ramp, the model's K 3x too small: the recalibrated K is chosen over the ramp (both one parameter:
+    the larger likelihood), and the ramp is in the ranking with a lower one."""
     truth = [dict(t) for t in ISSUE_MODEL[:2]] + [{"effect": "random_walk", "K": 6.0e-5}]
     y = synthesize_axis(truth, RATE_50, N_50, np.random.default_rng(5))
     r = run_gap(y, RATE_50, ISSUE_MODEL, simulate=False)
@@ -313,6 +313,39 @@ def test_missized_k_is_chosen_when_it_fits_better():
     ranked = _ranked(r)
     assert r.iterations[0]["chosen"] == "recalibrated random_walk K"
     assert ranked["ramp"]["score"] < ranked["recalibrated random_walk K"]["score"]
+    assert ranked["ramp"]["delta_dev"] < ranked["recalibrated random_walk K"]["delta_dev"]
+
+
+def test_ramp_beside_gauss_markov_is_not_absorbed_by_a_recalibrated_k():
+    """A hard-tier draw (mis-sized model, a ramp and a Gauss-Markov term hidden): after the Gauss-Markov
+    term, "random walk K recalibrated" (16x) and the ramp both pass and the ramp fits better; the level of a
+    recalibration (10.8 < 15.1) made K win and the ramp was never named (fails with that rule). Both one
+    parameter: the larger likelihood wins (selection.equal_size_rule, and the swap step)."""
+    truth = [{"effect": "white_noise", "N": 9.8716e-4}, {"effect": "bias_instability", "B": 2.8537e-4},
+             {"effect": "random_walk", "K": 4.8452e-6}, {"effect": "ramp", "R": 1.7908e-6},
+             {"effect": "gauss_markov", "sigma": 2.0629e-3, "tau_c": 28.468}]
+    model = [{"effect": "white_noise", "N": 1.2588e-3}, {"effect": "bias_instability", "B": 2.5630e-4},
+             {"effect": "random_walk", "K": 3.7695e-6}]
+    y = synthesize_axis(truth, RATE_50, N_50, np.random.default_rng(365166856005))
+    r = run_gap(y, RATE_50, model, simulate=False)
+    assert sorted(a["effect"] for a in r.added) == ["gauss_markov", "ramp"]
+    assert r.recalibrated[2]["verdict"] == "consistent"
+    assert r.gap_after <= NOISE_FLOOR_G
+
+
+def test_gauss_markov_preferred_by_likelihood_still_meets_its_limit():
+    """A hard-tier draw (a random walk hidden from a mis-sized white + flicker model): a sinusoid leads the
+    first ranking, the equal-size rule prefers the Gauss-Markov term that fits better (tau_c ~ 260 s), and
+    that term must still beat its random-walk limit (it was named without the nested test before)."""
+    truth = [{"effect": "white_noise", "N": 2.2121e-3}, {"effect": "bias_instability", "B": 6.0009e-4},
+             {"effect": "random_walk", "K": 1.19674e-4}]
+    model = [{"effect": "white_noise", "N": 2.91258e-3}, {"effect": "bias_instability", "B": 6.86633e-4}]
+    y = synthesize_axis(truth, RATE_50, N_50, np.random.default_rng(489328211604001))
+    r = run_gap(y, RATE_50, model, simulate=False)
+    assert [a["effect"] for a in r.added] == ["random_walk"]
+    assert r.added[0]["K"] == pytest.approx(1.19674e-4, rel=0.3)
+    assert r.iterations[0].get("nested", {}).get("limit") == "random_walk"
+    assert r.gap_after <= NOISE_FLOOR_G
 
 
 @pytest.mark.parametrize("seed", [71, 72])

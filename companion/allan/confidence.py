@@ -24,7 +24,7 @@ Two ways to the EDF, both published:
       quantization      G = Q^2 [h = 0]                          (white PM)
       white_noise       G = -N^2 tau0 |h| / 2                     (white FM)
         with filter_hz  G = -D(|h| tau0) / 2, D the phase structure function of the filtered white noise
-                        (companion.allan.terms.phase_structure_white)
+                        (companion.allan.filtered_white.phase_structure_white)
       bias_instability  G = (B^2 tau0^2 / 2 pi) h^2 ln|h|         (flicker FM)
       random_walk       G = K^2 tau0^3 |h|^3 / 12                 (random-walk FM)
       gauss_markov      G = -sigma^2 Tc^2 (u - 1 + e^-u), u = |h| tau0 / Tc
@@ -98,7 +98,7 @@ def _gcov(term: Mapping, h: np.ndarray, tau0: float):
     if e == "white_noise":
         if term.get("filter_hz"):
             # low-pass filtered white noise: G = -D/2 with the phase structure function D of the term
-            from companion.allan.terms import phase_structure_white
+            from companion.allan.filtered_white import phase_structure_white
 
             return -0.5 * phase_structure_white(ah * tau0, term["N"], term["filter_hz"], term.get("sample_hz"))
         return -0.5 * term["N"] ** 2 * tau0 * ah

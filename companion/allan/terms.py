@@ -32,6 +32,8 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from companion.allan.filtered_white import aliasing_gain, avar_filtered_white
+
 EFFECTS = (
     "quantization",
     "white_noise",
@@ -80,7 +82,8 @@ def avar_white_noise(tau, N, filter_hz=None, sample_hz=None):
       of averaged samples at tau = m tau0 equals the continuous-time one).
 
     sigma^2(tau) = (4 D(tau) - D(2 tau)) / (2 tau^2), D(t) = E[(x(t0 + t) - x(t0))^2] the phase structure
-    function (:func:`phase_structure_white`). Equivalently, for two-sided PSD S(f) = N^2 |H(f)|^2,
+    function (:mod:`companion.allan.filtered_white`, the one implementation of filtered white noise).
+    Equivalently, for two-sided PSD S(f) = N^2 |H(f)|^2,
     sigma^2(tau) = 2 int_{-inf}^{inf} S(f) sin^4(pi f tau) / (pi f tau)^2 df (IEEE 952 eq. C.2's general form;
     NIST SP 1065 eq. (65) one-sided), with aliasing of S into [-fs/2, fs/2] for point sampling, which the
     autocovariance form carries exactly. It tends to N^2 / tau for tau >> 1/f_c: N keeps its meaning (the
@@ -89,60 +92,8 @@ def avar_white_noise(tau, N, filter_hz=None, sample_hz=None):
     tau = np.asarray(tau, dtype=float)
     if not filter_hz:
         return N**2 / tau
-    return (4.0 * phase_structure_white(tau, N, filter_hz, sample_hz)
-            - phase_structure_white(2.0 * tau, N, filter_hz, sample_hz)) / (2.0 * tau**2)
-
-
-def phase_structure_white(t, N, filter_hz, sample_hz=None):
-    """Phase (angle) structure function D(t) = E[(x(t0 + t) - x(t0))^2] of white rate noise of two-sided PSD
-    N^2 through a 2-pole Butterworth low-pass of cut-off ``filter_hz`` (|H|^2 = 1 / (1 + (f/f_c)^4)).
-
-    The filtered rate has variance V = N^2 pi f_c / sqrt 2 and autocovariance
-    r(s) = V e^(-a|s|) (cos a s + sin a|s|), a = 2 pi f_c / sqrt 2 (second-order system, zeta = 1/sqrt 2),
-    i.e. r(s) = V Re[(1 - i) e^(-b|s|)], b = a (1 - i). Then
-
-    * averaged samples (continuous phase): D(t) = 2 int_0^t (t - s) r(s) ds
-      = 2 V Re[(1 - i) (t / b - (1 - e^(-b t)) / b^2)];
-    * point samples at fs = ``sample_hz`` (tau0 = 1/fs, h = t fs samples; phase = tau0 cumsum of the rate):
-      D(h) = tau0^2 sum_{|l|<h} (h - |l|) r(l tau0) = tau0^2 V [h + 2 Re((1 - i) (F(h) - h))],
-      F(h) = sum_{l=0}^{h-1} (h - l) z^l = (h (1 - z) - z (1 - z^h)) / (1 - z)^2, z = e^(-b tau0).
-
-    Both tend to N^2 t (white noise) for t >> 1/f_c. Point samples alias the filter's power above fs/2 into
-    the band (+5 % at 50 Hz logging of a 20 Hz filter); D is scaled so that its slope is N^2: ``N`` is the
-    white level of the logged samples (the long-tau N^2 / tau, the plateau of ADEV sqrt(tau)), not the
-    density before the filter.
-    """
-    t = np.abs(np.asarray(t, dtype=float))
-    fc = float(filter_hz)
-    V = N**2 * math.pi * fc / math.sqrt(2.0)
-    a = 2.0 * math.pi * fc / math.sqrt(2.0)
-    b = a * (1.0 - 1.0j)
-    # D is an affine function of t plus a term that decays like e^(-a t); the affine part is evaluated in
-    # real arithmetic everywhere and the complex exponential only where it is above 1e-16 of the rest
-    # (a t < 37): the EDF sums call this for tens of thousands of lags per fit
-    near = a * t < 37.0
-    if not sample_hz:
-        # 2 V Re[(1 - i) (t / b - 1 / b^2 + e^(-b t) / b^2)]
-        d = 2.0 * V * (((1.0 - 1.0j) / b).real * t - ((1.0 - 1.0j) / b**2).real)
-        if near.any():
-            d = np.array(d, dtype=float)
-            d[near] += 2.0 * V * ((1.0 - 1.0j) * np.exp(-b * t[near]) / b**2).real
-        return d
-    tau0 = 1.0 / float(sample_hz)
-    h = t / tau0
-    z = np.exp(-b * tau0)
-    # F(h) - h = h ((1 - z) / (1 - z)^2 - 1) - z / (1 - z)^2 + z z^h / (1 - z)^2, z^h = e^(-b tau0 h)
-    k1 = ((1.0 - 1.0j) * (1.0 / (1.0 - z) - 1.0)).real
-    k0 = ((1.0 - 1.0j) * z / (1.0 - z) ** 2).real
-    # long-t slope: tau0^2 V (1 + 2 Re((1 - i) z / (1 - z))) per sample = N^2 (1 + aliased power) t; scaled so
-    # that the slope is N^2: N is the white level of the logged samples, aliasing included
-    slope = tau0 * V * (1.0 + 2.0 * ((1.0 - 1.0j) * z / (1.0 - z)).real)
-    scale = tau0**2 * V * (N**2 / slope)
-    d = scale * (h * (1.0 + 2.0 * k1) - 2.0 * k0)
-    if near.any():
-        d = np.array(d, dtype=float)
-        d[near] += scale * 2.0 * ((1.0 - 1.0j) * z * np.exp(-b * tau0 * h[near]) / (1.0 - z) ** 2).real
-    return d
+    # the white level of the logged samples is N: the density before the filter is N / sqrt(aliasing gain)
+    return avar_filtered_white(tau, N / math.sqrt(aliasing_gain(filter_hz, sample_hz)), filter_hz, sample_hz)
 
 
 def avar_bias_instability(tau, B, f0=None):

@@ -17,7 +17,7 @@ import numpy as np
 from scipy import special, stats
 
 from companion.allan.terms import avar_term
-from companion.gap.filtered import avar_filtered_white
+from companion.allan.filtered_white import avar_filtered_white
 
 
 @dataclass
@@ -51,7 +51,7 @@ def term_avar(term, tau, rate_hz: float) -> np.ndarray:
     cut-off at the Nyquist frequency rate_hz/2 (thesis eq. (3.16)), which is how
     :func:`companion.sim.synth.flicker` synthesises it; a white_noise term with ``cutoff_hz`` (and
     ``order``) is the sensor's white noise N behind a low-pass filter, sampled at rate_hz
-    (:mod:`companion.gap.filtered`); every other term as in :mod:`companion.allan.terms`."""
+    (:mod:`companion.allan.filtered_white`; ``integrate``: each logged value is the mean over its interval); every other term as in :mod:`companion.allan.terms`."""
     if term["effect"] == "bias_instability" and term.get("f0") is None:
         term = dict(term, f0=rate_hz / 2.0)
     if term["effect"] == "temperature":
@@ -61,9 +61,9 @@ def term_avar(term, tau, rate_hz: float) -> np.ndarray:
         ln = np.interp(np.log(np.asarray(tau, dtype=float)), np.log(t_tau), np.log(np.maximum(t_avar, 1e-300)))
         return term["coef"] ** 2 * np.exp(ln)
     if term["effect"] == "white_noise" and term.get("cutoff_hz"):
-        # the logged white noise behind an autopilot's low-pass filter, sampled (companion.gap.filtered)
-        return avar_filtered_white(tau, term["N"], term["cutoff_hz"], rate_hz, int(term.get("order", 2)),
-                                   bool(term.get("integrate", False)))
+        # the logged white noise behind an autopilot's low-pass filter, sampled or averaged
+        rate = None if term.get("integrate") else rate_hz
+        return avar_filtered_white(tau, term["N"], term["cutoff_hz"], rate, int(term.get("order", 2)))
     return avar_term(term, tau)
 
 

@@ -48,10 +48,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from companion.allan.filtered_white import aliasing_gain
 from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
                                       fit_with_candidate, gm_rw_direction, lr_inflation, refine_shapes,
                                       unit_column)
-from companion.gap.filtered import aliasing_gain
 from companion.gap.likelihood import MODEL_FLOOR, Measured
 
 #: level an added effect must pass (its score's penalty is chi^2_k(1 - ALPHA))
@@ -158,7 +158,7 @@ def _explanation(meas, state: Fit, held, effect, recal, fit, sigma=None) -> Expl
 
 
 def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpass, shaped=(), sigma=None) -> list:
-    """The low-pass filter on the state's white-noise term (:mod:`companion.gap.filtered`): alone (N held
+    """The low-pass filter on the state's white-noise term (:mod:`companion.allan.filtered_white`): alone (N held
     as it stands) and with N recalibrated. ``lowpass`` = (cut-off Hz or None, order[, integrate]): a cut-off from the
     log's parameters is used as it is (a known property of the data: the level of a recalibration,
     chi^2_1(1 - ALPHA_RECAL) = 10.8), else it is fitted by profile likelihood over LOWPASS_GRID x rate (the
@@ -180,8 +180,7 @@ def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpa
     # (the sensor's own digital low-pass and averaging need not be two-pole)
     # (a free cut-off is kept where the aliasing it implies stays within the 5 % model floor in AVAR: beyond,
     # a fitted filter would raise the long-tau white level and pass for "N is right" when N is not)
-    grid = [(fc0, order)] if fc0 else [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz
-                                       if aliasing_gain(fc, meas.rate_hz, o, integrate) <= 1.0 + MODEL_FLOOR]
+    grid = [(fc0, order)] if fc0 else _cutoff_grid(meas, integrate)
     out = []
     for recal in ((), (j,)):
         if recal and j not in recalibratable:
@@ -207,6 +206,30 @@ def lowpass_explanations(meas: Measured, state: Fit, held, recalibratable, lowpa
         pen = (RECAL_PENALTY if fc0 else add_penalty(1)) + RECAL_PENALTY * len(recal)
         out.append(Explanation(LOWPASS, tuple(recal), best, state.dev - best.dev, phi, pen, modifies=j))
     return out
+
+
+def _cutoff_grid(meas: Measured, integrate: bool) -> list:
+    """(cut-off, order) pairs a fitted filter is profiled over: LOWPASS_GRID x rate, order 1 and 2, where the
+    aliasing it implies stays within the model floor."""
+    return [(fc, o) for o in (1, 2) for fc in LOWPASS_GRID * meas.rate_hz
+            if aliasing_gain(fc, None if integrate else meas.rate_hz, o) <= 1.0 + MODEL_FLOOR]
+
+
+def refine_cutoff(meas: Measured, terms, fixed, lowpass) -> Fit:
+    """Refit with the fitted cut-off (and order) of the filtered white-noise term re-profiled over the grid
+    in the current state (magnitudes free except ``fixed``): like a Gauss-Markov tau_c, a cut-off fitted
+    before a later addition is no longer the maximum of the likelihood."""
+    integrate = bool(lowpass[2]) if len(lowpass) > 2 else False
+    js = [j for j, t in enumerate(terms) if t["effect"] == "white_noise" and t.get("cutoff_hz")]
+    best = fit_terms(meas, terms, fixed, intervals=False)
+    for j in js:
+        for fc, o in _cutoff_grid(meas, integrate):
+            trial = [dict(t) for t in best.terms]
+            trial[j].update(cutoff_hz=float(fc), order=int(o))
+            f = fit_terms(meas, trial, fixed, intervals=False)
+            if f.dev < best.dev:
+                best = f
+    return best
 
 
 def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None,
@@ -312,17 +335,20 @@ def nested_test(meas: Measured, best: Explanation, limit: Explanation, i: int) -
 
 
 def equal_size_rule(best: Explanation, ranked) -> Explanation:
-    """Between look-alikes of the same size (the same number of added parameters, the same model terms
-    recalibrated: a ramp or a random walk, a sinusoid or a Gauss-Markov term) that both pass their level,
-    the one with the larger likelihood wins. The overdispersion factor scales each one's evidence against
-    the state (its test), but between two explanations with the same penalty it would only favour the one
-    whose direction is less overdispersed (a deterministic ramp over a stochastic random walk that fits
-    better: the hidden random walk named a ramp)."""
-    if best.score <= 0 or not best.effect or best.effect in (LOWPASS, "temperature"):
+    """Between look-alikes of the same size (the same number of free parameters: a ramp or a random walk, a
+    sinusoid or a Gauss-Markov term, a ramp or the model's random walk K recalibrated) that both pass their
+    level, the one with the larger likelihood wins. The overdispersion factor scales each one's evidence
+    against the state (its test), and the level of a recalibration (10.8) is below that of an added effect
+    (15.1) because a model term is already there; but between two explanations with the same number of
+    parameters, once both pass, either difference would only favour the one that fits worse (a
+    deterministic ramp over a stochastic random walk that fits better: the hidden random walk named a ramp;
+    the model's K recalibrated 7-16x over the ramp that fits better: the hidden ramp absorbed). The filter
+    and the temperature term keep their own rules."""
+    if best.score <= 0 or best.effect in (LOWPASS, "temperature"):
         return best
     for y in ranked:
-        if (y is not best and y.effect and y.effect not in (LOWPASS, "temperature") and y.effect != best.effect
-                and y.k == best.k and y.recal == best.recal and y.score > 0 and y.fit.dev < best.fit.dev):
+        if (y is not best and y.effect not in (LOWPASS, "temperature") and y.changes() != best.changes()
+                and y.k == best.k and y.score > 0 and y.fit.dev < best.fit.dev):
             best = y
     return best
 
@@ -393,7 +419,11 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
     best, out["nested"], out["alternative"] = resolve(ranked[0])
     best = filter_rule(meas, best, ranked)
     if out["nested"] is None:
-        best = equal_size_rule(best, ranked)
+        same = equal_size_rule(best, ranked)
+        if same is not best and same.effect in NESTED:
+            # a Gauss-Markov term that won on the larger likelihood still has to beat its one-parameter limit
+            same, out["nested"], out["alternative"] = resolve(same)
+        best = same
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best

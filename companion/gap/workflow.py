@@ -39,8 +39,8 @@ from scipy import stats
 from companion.allan.adev import oavar
 from companion.allan.lsb import DITHER_RATIO
 from companion.gap import explain, selection
-from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation, refine_shapes,
-                                     unit_column)
+from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation,
+                                     refine_shapes, unit_column)
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    measure_pooled, model_avar)
 from companion.gap._edf import local_slope, oavar_edf
@@ -55,6 +55,8 @@ NESTED = selection.NESTED
 NOISE_FLOOR_G = 2.0
 #: steps (an effect added, a term recalibrated, or both) before stopping
 MAX_ITER = 6
+#: effects with power at the shortest cluster times, where a fitted low-pass cut-off acts
+SHORT_TAU_EFFECTS = ("quantization", "gauss_markov", "sinusoid")
 SIM_MAX_SAMPLES = 2_000_000
 
 
@@ -136,8 +138,19 @@ def _simulate(terms, meas: Measured, seed: int, t_series=None):
     if not terms:
         return None, None
     rng = np.random.default_rng(seed)
-    plain = [t for t in terms if not t.get("cutoff_hz") and t["effect"] != "temperature"]
+    # averaged samples (PX4 sensor_combined): a vibration line is averaged over each interval like the noise
+    # (a 112 Hz line at 248.6 Hz keeps 0.70 of its amplitude; point samples would keep all of it)
+    averaged = any(t.get("integrate") for t in terms)
+    plain = [t for t in terms if not t.get("cutoff_hz") and t["effect"] != "temperature"
+             and not (averaged and t["effect"] == "sinusoid")]
     y = synthesize_axis(plain, meas.rate_hz, n, rng) if plain else np.zeros(n)
+    if averaged:
+        tk = np.arange(n) / meas.rate_hz
+        for t in terms:
+            if t["effect"] == "sinusoid":
+                w, ph = 2.0 * math.pi * t["freq_hz"], rng.uniform(0.0, 2.0 * math.pi)
+                y = y + t["amplitude"] * (np.sin(w * (tk + 1.0 / meas.rate_hz) + ph) - np.sin(w * tk + ph)) \
+                    / (w / meas.rate_hz)
     for t in terms:
         if t.get("cutoff_hz"):  # the autopilot's filter and decimation, simulated at 8x the log's rate
             y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)),
@@ -179,10 +192,10 @@ def _strongest_left(res: GapResult) -> str:
 
 def lowpass_entry(t, cutoff_param, rate_hz, axis, index, terms0) -> dict:
     """The JSON/report entry of a low-pass filter put on the white-noise term ``t``."""
-    from companion.gap.filtered import aliasing_gain
+    from companion.allan.filtered_white import aliasing_gain
 
     fc, order = float(t["cutoff_hz"]), int(t.get("order", 2))
-    gain = aliasing_gain(fc, rate_hz, order, bool(t.get("integrate", False)))
+    gain = aliasing_gain(fc, None if t.get("integrate") else rate_hz, order)
     src = "the log's parameter" if cutoff_param else "fitted"
     entry = {"effect": selection.LOWPASS, "cutoff_hz": fc, "order": order, "source": src, "N": t["N"],
              "on_model_term": index < len(terms0), "aliasing_gain": gain,
@@ -405,6 +418,11 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         held -= set(chosen.recal)
         if shaped and (chosen.effect is not None):  # earlier shapes re-optimised in the new state
             current = refine_shapes(meas, current, sorted(held), shaped).terms
+        if lp is not None and not lp[0] and chosen.effect in SHORT_TAU_EFFECTS:
+            # a fitted cut-off is a shape too: an effect with power at the filter's cluster times (a vibration
+            # line near the logger's Nyquist frequency), added after the filter, takes back short-tau power
+            # the cut-off had absorbed; a long-tau effect (ramp, random walk) does not compete with it
+            current = selection.refine_cutoff(meas, current, sorted(held), lp).terms
         base = _refit(meas, current, held, len(terms0))
 
     # 5. a recalibration that later additions made unnecessary is undone (backward step, same test)
@@ -425,7 +443,8 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
 
     # 5b. a recalibration taken as the rider of another change (e.g. "gauss_markov + random_walk K" when a
     # ramp also hides in the data) is weighed once more against every effect from the state with that term
-    # held: the same score, the recalibration's own (dD - phi x 10.8) against the effect's
+    # held: the same score, the recalibration's own (dD - phi x 10.8) against the effect's; against a
+    # one-parameter effect that passes its level, the larger likelihood (selection.equal_size_rule)
     for j in range(len(terms0)):
         if j in held or len(current) - len(terms0) >= max_iter:
             continue
@@ -434,7 +453,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         shaped = [i for i in range(len(terms0), len(hf.terms)) if hf.terms[i]["effect"] in SHAPE and i not in held]
         step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped, lowpass=lp, thermal=thermal)
         x = step["chosen"]
-        if x is None or x.score <= value:
+        if x is None:
+            continue
+        same_size = x.k == 1 and x.effect not in (selection.LOWPASS, "temperature")
+        if (x.delta_dev <= lr_raw) if same_size else (x.score <= value):
             continue
         ru = step["runner_up"]
         mod = terms0[j]["effect"] + " " + MAGNITUDE[terms0[j]["effect"]]

@@ -360,38 +360,14 @@ class SensorStage:
 
 
 # ---------------------------------------------------------------------------------------------- analytic truth
-def filtered_white_avar(N: float, realism: Realism, log_rate_hz: float, taus: np.ndarray, nfreq: int = 1 << 16):
-    """AVAR of white rate noise (two-sided PSD N^2) drawn at the sensor rate, through the gyro filter and
-    decimated (newest sample) to ``log_rate_hz``: the decimated process' PSD is the filter's |H|^2 N^2
-    folded into the log band (aliasing), and AVAR(tau) = 4 int_0^{fs/2} S_1(f) sin^4(pi f tau)/(pi f tau)^2 df
-    with S_1 the one-sided PSD at the log rate (IEEE 952 C.11, sampled form)."""
-    fs, fl = realism.sensor_rate_hz, float(log_rate_hz)
-    k = int(round(fs / fl))
-    if abs(k * fl - fs) > 1e-6 * fs:
-        raise ValueError("the analytic form needs sensor_rate_hz an integer multiple of the log rate")
-    f = (np.arange(nfreq) + 0.5) * (fl / 2.0) / nfreq  # log band, midpoints
-    ba = realism.filter_ba()
-    S = np.zeros(nfreq)
-    var_s = N * N * fs  # per-sample variance at the sensor rate
-    for m in range(-k, k + 1):  # alias images f + m fl within the sensor band
-        fa = np.abs(f + m * fl)
-        ok = fa <= fs / 2.0
-        if ba is None:
-            h2 = np.ones(nfreq)
-        else:
-            _, h = signal.freqz(ba[0], ba[1], worN=np.minimum(fa, fs / 2.0), fs=fs)
-            h2 = np.abs(h) ** 2
-        S += np.where(ok, h2, 0.0) * var_s / fs  # two-sided density at the sensor rate: var / fs
-    # picking every k-th sample: the two-sided PSD at the log rate is the folded sum (density per Hz kept)
-    S1 = 2.0 * S  # one-sided
-    df = (fl / 2.0) / nfreq
-    taus = np.asarray(taus, dtype=float)
-    x = np.pi * f[None, :] * taus[:, None]
-    # sampled data: the Allan filter's transfer at the log rate is |2 sin^2(pi f tau) / (m sin(pi f / fl))|^2
-    mcl = np.round(taus * fl)
-    den = (mcl[:, None] * np.sin(np.pi * f[None, :] / fl)) ** 2
-    H_allan = 2.0 * np.sin(x) ** 4 / den
-    return (S1[None, :] * H_allan).sum(axis=1) * df
+def filtered_white_avar(N: float, realism: Realism, log_rate_hz: float, taus: np.ndarray) -> np.ndarray:
+    """AVAR of white rate noise (two-sided PSD N^2) drawn at the sensor rate, through the gyro filter (the
+    digital Butterworth of :meth:`Realism.filter_ba`) and decimated (newest sample) to ``log_rate_hz``: the
+    analytic truth of the realistic path (:func:`companion.allan.filtered_white.avar_filtered_white`)."""
+    from companion.allan.filtered_white import avar_filtered_white
+
+    return avar_filtered_white(taus, N, realism.gyro_lpf_hz or None, float(log_rate_hz), realism.lpf_order,
+                               sensor_hz=realism.sensor_rate_hz)
 
 
 def psd_line_amplitude(y: np.ndarray, fs: float, f0: float, width_hz: float = 1.0) -> float:
