@@ -23,6 +23,12 @@ STATUSTEXT is a false alarm.
     python benchmarks/bench_faults.py --quick          # 3 seeds per kind (no B x2), 2 healthy IMU-hours
     python benchmarks/bench_faults.py                  # 20 seeds per kind, 100 healthy IMU-hours
     python benchmarks/bench_faults.py --skip-healthy --seeds 5 --kinds stuck,noise
+    python benchmarks/bench_faults.py --skip-faults --preset copter,plane,rover,px4 --healthy-runs 8 --healthy-hours 1
+
+--preset: the healthy runs use the realistic simulator (companion.sim.realism with the vehicle presets: each
+preset's IMUs, logged rate, gyro low-pass and decimation, vibration per flight phase, IMU timing skew,
+temperature-driven bias with its temperature carried to the pipeline as a log carries it, Gauss-Markov bias,
+sensor LSB), random flights (1.5 per hour) and handlings (2 per hour); IMU-hours = hours x the preset's IMUs.
 """
 
 from __future__ import annotations
@@ -250,6 +256,62 @@ def healthy_run(seed, hours, imus=2):
     return alarms, len(sched.flights), len(sched.handlings), moving
 
 
+def preset_simulator(preset, seed, duration_s, fault=None, schedule=None):
+    """A realistic vehicle (companion.sim.realism, a preset of sim/presets: its noise model, IMUs, logged rate,
+    low-pass and decimation, vibration per flight phase, IMU skew, temperature-driven bias with the logged
+    temperature, Gauss-Markov bias, sensor LSB); a random schedule of flights and handlings unless given.
+    Returns (simulator, LSB of the replayed messages: ArduPilot's int16 mrad/s, None for PX4's floats)."""
+    from companion.sim.preset import load_preset
+
+    P = load_preset(preset)
+    kw = {"max_rate": float(P["vehicle"]["max_rate"])} if "max_rate" in P["vehicle"] else {}
+    sched = schedule if schedule is not None else Schedule.random(duration_s, seed=seed, flights_per_hour=1.5,
+                                                                  handlings_per_hour=2.0, **kw)
+    sim = VehicleSimulator(P["model"], imus=int(P["vehicle"].get("imus", 1)), seed=seed,
+                           rate_hz=P["vehicle"].get("rate_hz"), schedule=sched, fault=fault, realism=P["realism"])
+    return sim, (None if preset == "px4" else LSB)
+
+
+def healthy_preset_run(preset, seed, hours):
+    """One healthy realistic vehicle for ``hours`` through the pipeline (temperature carried like a log's);
+    returns (alarms, IMUs, flights, handlings)."""
+    dur = hours * 3600.0
+    sim, lsb = preset_simulator(preset, seed, dur)
+    p, sink = make_pipeline(baseline_s=600.0)
+    replay_vehicle(sim, p, dur, lsb=lsb, chunk_s=10.0)
+    alarms = [(round(t), text) for t, text in p.transitions
+              if any(w in text for w in FAULT_WORDS) and "cleared" not in text and "back to normal" not in text]
+    return alarms, sim.imus, len(sim.schedule.flights), len(sim.schedule.handlings)
+
+
+def _preset_job(job):
+    preset, seed, hours = job
+    t0 = time.time()
+    alarms, imus, nf, nh = healthy_preset_run(preset, seed, hours)
+    return preset, seed, hours, imus, nf, nh, alarms, time.time() - t0
+
+
+def healthy_presets(presets, runs, hours, first, jobs):
+    """Healthy realistic runs, the presets in turn (run r: preset r mod len, seed r); prints each and the total."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    todo = [(presets[r % len(presets)], r, hours) for r in range(first, first + runs)]
+    t0 = time.time()
+    imu_h, n_alarm, by_preset = 0.0, 0, {}
+    with ProcessPoolExecutor(max_workers=max(1, jobs)) as ex:
+        for preset, seed, h, imus, nf, nh, alarms, wall in ex.map(_preset_job, todo):
+            imu_h += h * imus
+            n_alarm += len(alarms)
+            row = by_preset.setdefault(preset, [0.0, 0])
+            row[0] += h * imus
+            row[1] += len(alarms)
+            print(f"healthy {preset} seed {seed}: {h:g} h x {imus} IMUs, {nf} flights, {nh} handlings: "
+                  f"{len(alarms)} false alarms ({wall:.0f} s wall)" + (f" e.g. {alarms[:3]}" if alarms else ""), flush=True)
+    print("by preset: " + ", ".join(f"{k} {v[1]} in {v[0]:g} IMU-h" for k, v in by_preset.items()))
+    print(f"FALSE ALARMS (realistic presets): {n_alarm} in {imu_h:g} simulated healthy IMU-hours "
+          f"({time.time() - t0:.0f} s wall, {jobs} jobs)")
+
+
 TARGET = {"stuck": 10, "noise": 10, "bias": 15, "drift": None, "spikes": 30, "N2": 30, "N1.5": 120, "saturate": None,
           "flight_stuck2": 10, "flight_bias2": 10, "flight_stuck3": 10, "flight_bias3": 10, "B2": 3600}
 MAX_DELAY = {"stuck": 60, "noise": 60, "bias": 90, "drift": 600, "spikes": 120, "N2": 120, "N1.5": 400, "saturate": 300,
@@ -265,6 +327,10 @@ def main():
     ap.add_argument("--healthy-hours", type=float, default=None, help="hours per healthy run, 2 IMUs each (default 5, quick 1)")
     ap.add_argument("--b2-seeds", type=int, default=3, help="seeds of the B x2 case (each simulates 2 h + 80 min)")
     ap.add_argument("--first-run", type=int, default=0, help="seed of the first healthy run (to split the runs over processes)")
+    ap.add_argument("--preset", default=None, metavar="P[,P...]",
+                    help="healthy runs on the realistic simulator with these presets in turn (copter, plane, rover, px4), "
+                         "their own IMUs and rates, temperature carried through")
+    ap.add_argument("--jobs", type=int, default=1, help="processes for the --preset healthy runs (default 1)")
     ap.add_argument("--skip-healthy", action="store_true")
     ap.add_argument("--skip-faults", action="store_true")
     args = ap.parse_args()
@@ -297,7 +363,9 @@ def main():
                     print(f"{'':>14}   seed {r['seed']}: {r['desc']} on IMU{r['imu']} {r['axis']}: "
                           f"{'MISSED, said: ' + r['text'] if not math.isfinite(r['delay']) else ''}"
                           f"{' EARLY ' + str(r['early']) if r['early'] else ''}", flush=True)
-    if not args.skip_healthy:
+    if not args.skip_healthy and args.preset:
+        healthy_presets([p.strip() for p in args.preset.split(",")], runs, hours, args.first_run, args.jobs)
+    elif not args.skip_healthy:
         t0 = time.time()
         total, n_alarm = 0.0, 0
         for r in range(args.first_run, args.first_run + runs):
