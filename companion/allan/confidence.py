@@ -143,12 +143,14 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     c = np.zeros(l.shape[0])
     taps_a = ((0, 1.0), (m1, -2.0), (2 * m1, 1.0))
     taps_b = ((0, 1.0), (m2, -2.0), (2 * m2, 1.0))
+    # the nine tap pairs in one call per term: offsets q - p and weights a_p b_q
+    shift = np.array([q - p for p, _ in taps_a for q, _ in taps_b], dtype=np.int64)
+    weight = np.array([ap * bq for _, ap in taps_a for _, bq in taps_b])
+    lags = l[None, :] + shift[:, None]
     for term in terms:
-        for p, ap in taps_a:
-            for q, bq in taps_b:
-                g = _gcov(term, l + q - p, tau0)
-                if g is not None:
-                    c += ap * bq * g
+        g = _gcov(term, lags, tau0)
+        if g is not None:
+            c += weight @ g
     # number of (i, j) pairs, 0 <= i < M1, 0 <= j < M2, with j - i = l
     count = np.minimum(M1 - 1, M2 - 1 - l) - np.maximum(0, -l) + 1
     count = np.maximum(count, 0).astype(float)
@@ -161,19 +163,16 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
         for p, ap in taps_a:
             for q, bq in taps_b:
                 spikes[p - q] = spikes.get(p - q, 0.0) + Q2 * ap * bq
-        for lag, cq in spikes.items():
-            if cq == 0.0:
-                continue
-            cnt = max(0, min(M1 - 1, M2 - 1 - lag) - max(0, -lag) + 1)
-            cs = 0.0
-            for term in terms:
-                for p, ap in taps_a:
-                    for q, bq in taps_b:
-                        g = _gcov(term, np.array([lag + q - p]), tau0)
-                        if g is not None:
-                            cs += ap * bq * float(g[0])
-            s2 += cnt * (2.0 * cs * cq + cq * cq)
-            s1 += cnt * cq
+        lag = np.array([k for k, v in spikes.items() if v != 0.0], dtype=np.int64)
+        cq = np.array([spikes[k] for k in lag.tolist()])
+        cnt = np.maximum(0, np.minimum(M1 - 1, M2 - 1 - lag) - np.maximum(0, -lag) + 1).astype(float)
+        cs = np.zeros(lag.shape[0])
+        for term in terms:
+            g = _gcov(term, lag[:, None] + shift[None, :], tau0)
+            if g is not None:
+                cs += g @ weight
+        s2 += float(np.sum(cnt * (2.0 * cs * cq + cq * cq)))
+        s1 += float(np.sum(cnt * cq))
     return s2, s1
 
 
