@@ -196,7 +196,7 @@ class Channel:
         """Queue a still block for the estimators; True when the baseline learning is complete (the caller
         takes :meth:`learned_terms`)."""
         self._blocks["blocks_fed"] += 1
-        self._queue.append(self.thermal_corrected(data))
+        self._queue.append(data)
         duration = data.shape[0] / self.rate_hz
         self.fed_s += duration
         self._queue_s += duration
@@ -210,25 +210,6 @@ class Channel:
         if self._queue_s >= self.cfg.check_s:
             self.flush()
         return False
-
-    def thermal_corrected(self, data: np.ndarray) -> np.ndarray:
-        """A still block less the gyro bias its temperature explains (the bias detectors' bias-temperature
-        slope per axis, companion.health.thermal), so that the Allan terms are judged on the residual too: a
-        warm-up's bias change would otherwise read as rate random walk or bias instability. Unchanged without
-        a temperature or before a slope is learned."""
-        if data.shape[1] <= TEMP_COLUMN:
-            return data
-        temp = data[:, TEMP_COLUMN]
-        ok = np.isfinite(temp)
-        if not ok.any():
-            return data
-        tm = float(temp[ok].mean())
-        corr = np.array([self.faults.axes[ax].bias.thermal.correction(tm) for ax in GYRO_AXES])
-        if not np.any(corr):
-            return data
-        out = data.copy()
-        out[:, 1:4] -= corr
-        return out
 
     def flush(self) -> None:
         """Hand the queued still blocks to the estimators."""
