@@ -23,6 +23,12 @@ STATUSTEXT is a false alarm.
     python benchmarks/bench_faults.py --quick          # 3 seeds per kind (no B x2), 2 healthy IMU-hours
     python benchmarks/bench_faults.py                  # 20 seeds per kind, 100 healthy IMU-hours
     python benchmarks/bench_faults.py --skip-healthy --seeds 5 --kinds stuck,noise
+    python benchmarks/bench_faults.py --skip-faults --preset copter,plane,rover,px4 --healthy-runs 8 --healthy-hours 1
+
+--preset: the healthy runs use the realistic simulator (companion.sim.realism with the vehicle presets: each
+preset's IMUs, logged rate, gyro low-pass and decimation, vibration per flight phase, IMU timing skew,
+temperature-driven bias with its temperature carried to the pipeline as a log carries it, Gauss-Markov bias,
+sensor LSB), random flights (1.5 per hour) and handlings (2 per hour); IMU-hours = hours x the preset's IMUs.
 """
 
 from __future__ import annotations
@@ -101,10 +107,32 @@ def expected_words(kind, imu, axis):
 FAULT_WORDS = ("stuck", "noise", "bias", "spikes", "saturated", "disagrees", "degrading", "rate", "timing")
 
 
-def run_case(kind, seed, max_delay):
-    """One fault case with fresh random parameters; returns a dict (delay, limit, named, text, params)."""
+def preset_sigma(preset):
+    """Per-axis std of one preset IMU's gyro samples at rest (30 s of IMU0 on the ground: the filtered,
+    decimated white noise and the slow terms), the noise scale of the fault sizes; the preset's model and rate."""
+    from companion.sim.preset import load_preset
+
+    P = load_preset(preset)
+    sim = VehicleSimulator(P["model"], imus=1, seed=999, rate_hz=P["vehicle"].get("rate_hz"), realism=P["realism"])
+    g = sim.run(30.0).gyro[0]
+    # the sample-to-sample noise the detectors see (second differences): the autopilot's low-pass makes it
+    # smaller than the samples' spread, and a stuck gyro's dither is drawn against it
+    dd = g[2:] - 2.0 * g[1:-1] + g[:-2]
+    return (P["model"], {a: float(np.std(g[:, j])) for j, a in enumerate(AXES)}, sim.rate_hz,
+            {a: float(np.sqrt(np.mean(dd[:, j] ** 2) / 6.0)) for j, a in enumerate(AXES)})
+
+
+def run_case(kind, seed, max_delay, preset=None):
+    """One fault case with fresh random parameters; returns a dict (delay, limit, named, text, params).
+    ``preset``: on the realistic simulator with that preset's model and rate (the noise scale from
+    :func:`preset_sigma`; the oracle limit then treats the filtered samples as white, a lower bound)."""
     rng = np.random.default_rng(10_000 + seed)
-    model, sig = random_model(rng)
+    rate = RATE
+    if preset is None:
+        model, sig = random_model(rng)
+        white = sig
+    else:
+        model, sig, rate, white = preset_sigma(preset)
     axis = AXES[rng.integers(3)]
     s_tot = total_sigma(sig[axis])
     h = None
@@ -113,33 +141,33 @@ def run_case(kind, seed, max_delay):
     t_f = float(rng.uniform(360.0, 480.0))
     amp = 0.3
     if kind == "stuck":
-        size = float(rng.uniform(0.0, 0.3)) * sig[axis]
+        size = float(rng.uniform(0.0, 0.3)) * white[axis]
         r = max((size * size + LSB * LSB / 12.0 * (size > 0)) / s_tot ** 2, 1e-12)
-        limit = 1.0 / RATE if size == 0 else stuck.H_ON / (RATE * 0.5 * (r - 1 - math.log(r)))
-        desc = f"dither {size / s_tot:.2f} sigma"
+        limit = 1.0 / rate if size == 0 else stuck.H_ON / (rate * 0.5 * (r - 1 - math.log(r)))
+        desc = f"dither {size / (s_tot if preset is None else white[axis]):.2f} sigma"
         fault_kind = "stuck"
     elif kind in ("noise", "N2", "N1.5"):
         size = {"N2": 2.0, "N1.5": 1.5}.get(kind) or float(math.exp(rng.uniform(math.log(3), math.log(100))))
         r = ((size * sig[axis]) ** 2 + LSB ** 2 / 12) / s_tot ** 2
-        limit = noise.H_ON / (RATE * 0.5 * (r - 1 - math.log(r)))
+        limit = noise.H_ON / (rate * 0.5 * (r - 1 - math.log(r)))
         desc = f"x{size:.2f}"
         fault_kind = "noise"
     elif kind == "bias":
         # a step at or above the floor (health.limits.FaultLimits.bias_jump_dps): smaller ones are wander
         size = float(rng.uniform(LIMITS.bias_jump_dps, 2.0)) * DEG * (1 if rng.random() < 0.5 else -1)
-        limit = bias.H_ON / (RATE * size * size / (2 * s_tot ** 2))
+        limit = bias.H_ON / (rate * size * size / (2 * s_tot ** 2))
         desc = f"{size / DEG:+.2f} deg/s"
         fault_kind = "bias"
     elif kind == "drift":
         size = float(rng.uniform(2e-5, 2e-4)) * (1 if rng.random() < 0.5 else -1)
         # oracle: a ramp D t: cumulative KL D^2 fs t^3 / (6 sigma^2) = h
-        limit = (6 * bias.H_ON * s_tot ** 2 / (size * size * RATE)) ** (1 / 3)
+        limit = (6 * bias.H_ON * s_tot ** 2 / (size * size * rate)) ** (1 / 3)
         desc = f"{size / DEG:+.4f} deg/s per s"
         fault_kind = "drift"
     elif kind == "spikes":
         size = float(rng.uniform(0.002, 0.01))
         p0 = spikes.LAMBDA0_FLOOR
-        limit = spikes.H_ON / (RATE * (size * math.log(size / p0) - size + p0))
+        limit = spikes.H_ON / (rate * (size * math.log(size / p0) - size + p0))
         desc = f"{100 * size:.2f} % of {amp} rad/s"
         fault_kind = "spikes"
     elif kind == "saturate":
@@ -154,17 +182,21 @@ def run_case(kind, seed, max_delay):
         sched = Schedule(flights=(Flight(t_f - float(rng.uniform(30, 120)), t_f + 600.0),))
         if "stuck" in kind:
             fault_kind, size = "stuck", 0.0
-            limit = 1.0 / RATE
+            limit = 1.0 / rate
             desc = f"{imus} IMUs, IMU{imu} frozen in flight"
         else:
             # above the disagreement floor: 5 deg/s + 10 % of the flight's rms rate (~0.5 rad/s: 7.9 deg/s)
             fault_kind, size = "bias", float(rng.uniform(10.0, 15.0)) * DEG * (1 if rng.random() < 0.5 else -1)
-            limit = disagreement.H_ON / (RATE * size * size / (2 * 2 * s_tot ** 2))
+            limit = disagreement.H_ON / (rate * size * size / (2 * 2 * s_tot ** 2))
             desc = f"{imus} IMUs, IMU{imu} {size / DEG:+.0f} deg/s in flight"
     else:
         raise ValueError(kind)
     fault = Fault(fault_kind, at=t_f, size=size, imu=imu, axis=axis, amplitude=amp)
-    sim = VehicleSimulator(model, imus=imus, seed=seed, schedule=sched, fault=fault, warmup=WarmUp())
+    lsb = LSB
+    if preset is None:
+        sim = VehicleSimulator(model, imus=imus, seed=seed, schedule=sched, fault=fault, warmup=WarmUp())
+    else:
+        sim, lsb = preset_simulator(preset, seed, 0.0, fault=fault, schedule=sched, imus=imus)
     p, sink = make_pipeline()
     words = expected_words("flight" if kind.startswith("flight") else fault_kind, imu, axis)
     t0 = sim.t_start + t_f
@@ -183,7 +215,7 @@ def run_case(kind, seed, max_delay):
                 found.setdefault("other", (tt, text))
         return False
 
-    replay_vehicle(sim, p, t_f + max_delay, lsb=LSB, on_chunk=watch, chunk_s=1.0)
+    replay_vehicle(sim, p, t_f + max_delay, lsb=lsb, on_chunk=watch, chunk_s=1.0)
     watch(0)
     out = {"kind": kind, "seed": seed, "desc": desc, "limit": limit, "axis": axis, "imu": imu}
     if "hit" in found:
@@ -250,6 +282,62 @@ def healthy_run(seed, hours, imus=2):
     return alarms, len(sched.flights), len(sched.handlings), moving
 
 
+def preset_simulator(preset, seed, duration_s, fault=None, schedule=None, imus=None):
+    """A realistic vehicle (companion.sim.realism, a preset of sim/presets: its noise model, IMUs, logged rate,
+    low-pass and decimation, vibration per flight phase, IMU skew, temperature-driven bias with the logged
+    temperature, Gauss-Markov bias, sensor LSB); a random schedule of flights and handlings unless given.
+    Returns (simulator, LSB of the replayed messages: ArduPilot's int16 mrad/s, None for PX4's floats)."""
+    from companion.sim.preset import load_preset
+
+    P = load_preset(preset)
+    kw = {"max_rate": float(P["vehicle"]["max_rate"])} if "max_rate" in P["vehicle"] else {}
+    sched = schedule if schedule is not None else Schedule.random(duration_s, seed=seed, flights_per_hour=1.5,
+                                                                  handlings_per_hour=2.0, **kw)
+    sim = VehicleSimulator(P["model"], imus=int(imus or P["vehicle"].get("imus", 1)), seed=seed,
+                           rate_hz=P["vehicle"].get("rate_hz"), schedule=sched, fault=fault, realism=P["realism"])
+    return sim, (None if preset == "px4" else LSB)
+
+
+def healthy_preset_run(preset, seed, hours):
+    """One healthy realistic vehicle for ``hours`` through the pipeline (temperature carried like a log's);
+    returns (alarms, IMUs, flights, handlings)."""
+    dur = hours * 3600.0
+    sim, lsb = preset_simulator(preset, seed, dur)
+    p, sink = make_pipeline(baseline_s=600.0)
+    replay_vehicle(sim, p, dur, lsb=lsb, chunk_s=10.0)
+    alarms = [(round(t), text) for t, text in p.transitions
+              if any(w in text for w in FAULT_WORDS) and "cleared" not in text and "back to normal" not in text]
+    return alarms, sim.imus, len(sim.schedule.flights), len(sim.schedule.handlings)
+
+
+def _preset_job(job):
+    preset, seed, hours = job
+    t0 = time.time()
+    alarms, imus, nf, nh = healthy_preset_run(preset, seed, hours)
+    return preset, seed, hours, imus, nf, nh, alarms, time.time() - t0
+
+
+def healthy_presets(presets, runs, hours, first, jobs):
+    """Healthy realistic runs, the presets in turn (run r: preset r mod len, seed r); prints each and the total."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    todo = [(presets[r % len(presets)], r, hours) for r in range(first, first + runs)]
+    t0 = time.time()
+    imu_h, n_alarm, by_preset = 0.0, 0, {}
+    with ProcessPoolExecutor(max_workers=max(1, jobs)) as ex:
+        for preset, seed, h, imus, nf, nh, alarms, wall in ex.map(_preset_job, todo):
+            imu_h += h * imus
+            n_alarm += len(alarms)
+            row = by_preset.setdefault(preset, [0.0, 0])
+            row[0] += h * imus
+            row[1] += len(alarms)
+            print(f"healthy {preset} seed {seed}: {h:g} h x {imus} IMUs, {nf} flights, {nh} handlings: "
+                  f"{len(alarms)} false alarms ({wall:.0f} s wall)" + (f" e.g. {alarms[:3]}" if alarms else ""), flush=True)
+    print("by preset: " + ", ".join(f"{k} {v[1]} in {v[0]:g} IMU-h" for k, v in by_preset.items()))
+    print(f"FALSE ALARMS (realistic presets): {n_alarm} in {imu_h:g} simulated healthy IMU-hours "
+          f"({time.time() - t0:.0f} s wall, {jobs} jobs)")
+
+
 TARGET = {"stuck": 10, "noise": 10, "bias": 15, "drift": None, "spikes": 30, "N2": 30, "N1.5": 120, "saturate": None,
           "flight_stuck2": 10, "flight_bias2": 10, "flight_stuck3": 10, "flight_bias3": 10, "B2": 3600}
 MAX_DELAY = {"stuck": 60, "noise": 60, "bias": 90, "drift": 600, "spikes": 120, "N2": 120, "N1.5": 400, "saturate": 300,
@@ -265,6 +353,13 @@ def main():
     ap.add_argument("--healthy-hours", type=float, default=None, help="hours per healthy run, 2 IMUs each (default 5, quick 1)")
     ap.add_argument("--b2-seeds", type=int, default=3, help="seeds of the B x2 case (each simulates 2 h + 80 min)")
     ap.add_argument("--first-run", type=int, default=0, help="seed of the first healthy run (to split the runs over processes)")
+    ap.add_argument("--preset", default=None, metavar="P[,P...]",
+                    help="healthy runs on the realistic simulator with these presets in turn (copter, plane, rover, px4), "
+                         "their own IMUs and rates, temperature carried through")
+    ap.add_argument("--preset-faults", default=None, metavar="P",
+                    help="the fault cases on the realistic simulator with this preset (its model, rate, filter, "
+                         "vibration, temperature); B2 is skipped")
+    ap.add_argument("--jobs", type=int, default=1, help="processes for the --preset healthy runs (default 1)")
     ap.add_argument("--skip-healthy", action="store_true")
     ap.add_argument("--skip-faults", action="store_true")
     args = ap.parse_args()
@@ -274,14 +369,18 @@ def main():
     hours = args.healthy_hours or (1.0 if args.quick else 5.0)
     t_all = time.time()
     if not args.skip_faults:
-        print(f"detection delay at {RATE:g} Hz, 1 mrad/s rounding, fresh random parameters, {seeds} seeds per kind")
+        if args.preset_faults:
+            kinds = ",".join(k for k in kinds.split(",") if k.strip() != "B2")
+            print(f"detection delay on the realistic simulator, preset {args.preset_faults}, {seeds} seeds per kind")
+        else:
+            print(f"detection delay at {RATE:g} Hz, 1 mrad/s rounding, fresh random parameters, {seeds} seeds per kind")
         print(f"{'kind':>14} {'target':>7} {'median':>8} {'max':>8} {'limit(med)':>11} {'named':>6}  ranges / misses")
         for kind in kinds.split(","):
             kind = kind.strip()
             if kind == "B2":
                 res = [run_b2(s) for s in range(min(seeds, args.b2_seeds))]
             else:
-                res = [run_case(kind, s, MAX_DELAY[kind]) for s in range(seeds)]
+                res = [run_case(kind, s, MAX_DELAY[kind], args.preset_faults) for s in range(seeds)]
             d = np.array([r["delay"] for r in res])
             lim = np.array([r["limit"] for r in res])
             ok = np.isfinite(d)
@@ -297,7 +396,9 @@ def main():
                     print(f"{'':>14}   seed {r['seed']}: {r['desc']} on IMU{r['imu']} {r['axis']}: "
                           f"{'MISSED, said: ' + r['text'] if not math.isfinite(r['delay']) else ''}"
                           f"{' EARLY ' + str(r['early']) if r['early'] else ''}", flush=True)
-    if not args.skip_healthy:
+    if not args.skip_healthy and args.preset:
+        healthy_presets([p.strip() for p in args.preset.split(",")], runs, hours, args.first_run, args.jobs)
+    elif not args.skip_healthy:
         t0 = time.time()
         total, n_alarm = 0.0, 0
         for r in range(args.first_run, args.first_run + runs):

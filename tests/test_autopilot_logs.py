@@ -255,6 +255,35 @@ def test_still_selection_uses_armed_state_and_motion():
     assert win.intervals[0][0] >= 140 and win.intervals[-1][1] <= 190.01
 
 
+def test_still_selection_of_a_record_shorter_than_the_guard():
+    # a 6 s record has 6 windows, fewer than the 7 a 3 s guard spans on each side of a moving window:
+    # the widened motion mask must keep the record's length (it came out one longer and the selection failed)
+    from companion.samples import StreamKey
+    from companion.sources import build_stream
+    from companion.sources.decode import RawStream
+    from companion.sources.still import _dilate
+
+    rng = np.random.default_rng(5)
+    for k in range(0, 9):
+        for n in range(1, 16):
+            m = rng.random(n) < 0.2
+            want = np.array([m[max(0, i - k):i + k + 1].any() for i in range(n)])
+            assert np.array_equal(_dilate(m, k), want), (n, k)
+    t = np.arange(0, 6, 0.01)
+    g = rng.normal(0, 1e-3, (t.size, 3))
+    a = rng.normal(0, 1e-2, (t.size, 3)) + [0, 0, -9.8]
+    g[(t > 2) & (t < 3)] += 0.3  # a turn in the third second
+    st = build_stream(RawStream(StreamKey(0, 0, "IMU", 0), t, g, a, None, True, None, None, 1e-6))
+    sel = select_still([st], {"armed": [(1.0, True)], "has_armed_state": True})
+    assert sel.intervals == [] and sel.moving_s == pytest.approx(6.0)
+    sel = select_still([st], {})  # no armed state: the moving second widened by the guard covers it all
+    assert sel.intervals == [] and sel.moving_s == pytest.approx(6.0)
+    quiet = build_stream(RawStream(StreamKey(0, 0, "IMU", 0), t, rng.normal(0, 1e-3, (t.size, 3)), a, None, True,
+                                   None, None, 1e-6))
+    sel = select_still([quiet], {})  # a short record still throughout is kept whole
+    assert len(sel.intervals) == 1 and sel.still_s > 5.9
+
+
 def _csv(path, t, d):
     with open(path, "w") as f:
         f.write("time_s,gx,gy,gz,ax,ay,az\n")

@@ -19,6 +19,11 @@ Drift. e, an EWMA of x over ``DRIFT_TAU_BLOCKS``, against the bias mu0 of the re
 |e - mu0| - 4 sigma_e > ``DRIFT_TOL`` (0.3 deg/s: 3x the warm-up, far above the bias wander of a
 MEMS gyro between restarts of a few hours) for ``DRIFT_HOLD`` blocks flags a drift; it clears below
 0.7 x the tolerance. A drift of D deg/s per s is flagged about 0.3 / D s after it starts.
+
+Temperature. Where the block carries the IMU temperature (``BlockStats.temperature``), every still-block
+mean is first corrected by the bias the temperature explains (companion.health.thermal: a slope learned
+from pairs of still blocks that differ in temperature, at most ``FaultLimits.bias_temp_dps_per_k``): the
+tests above see the residual, so a warm-up is not a drift while a drift at a steady temperature is.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import numpy as np
 
 from companion.health.faults import FAULT, OK, AxisRef, Cusum, FaultEvent, Observation, debounce
 from companion.health.limits import FaultLimits, capped, floored_mean_llr, wander_var
+from companion.health.thermal import LAG, ThermalBias
 
 DEG = math.pi / 180.0
 DELTA = 0.2 * DEG  # rad/s, mean shift the jump CUSUMs are tuned to
@@ -58,6 +64,8 @@ class BiasDetector:
         self.e = math.nan  # drift EWMA
         self.run: list = []  # offsets x - r since the evidence started
         self.hist: deque = deque(maxlen=HIST_BLOCKS)  # recent still-block means (step or ramp?)
+        self.hist_t: deque = deque(maxlen=HIST_BLOCKS)  # their temperatures (degC; nan: none)
+        self.thermal = ThermalBias(self.limits.bias_temp)
         self.value = math.nan  # jump size (deg/s)
         self.post: list = []  # offsets x - r of the blocks after the jump was flagged (its size, refined)
         self.drift_state = OK
@@ -69,23 +77,41 @@ class BiasDetector:
     def state(self) -> int:
         return FAULT if FAULT in (self.up.state, self.down.state) else OK
 
+    def add_reference(self, x: float, temp: float = math.nan) -> None:
+        """One still block of the reference period (before the tests start): its mean and temperature."""
+        self.hist.append(x)
+        self.hist_t.append(temp)
+        self.thermal.add_reference(temp)
+
+    def _hist_c(self) -> np.ndarray:
+        """The recent still-block means less the bias their temperature explains (the current slope)."""
+        x = np.asarray(self.hist, dtype=float)
+        t = np.asarray(self.hist_t, dtype=float)
+        s, t0 = self.thermal.slope, self.thermal.t0
+        if s == 0.0 or not math.isfinite(t0) or t.shape != x.shape:
+            return x
+        return x - np.where(np.isfinite(t), s * (t - t0), 0.0)
+
     def update(self, obs: Observation) -> list[FaultEvent]:
         """One still block of one axis (its mean and white variance; ``obs.extra_var`` the Allan-predicted
         wander of a block mean); the ``bias_jump`` and ``bias_drift`` changes, in that order."""
         st, j = obs.stats, obs.col
         out = []
-        for kind in self._step(obs.ref, float(st.mean[j]), float(st.v2[j]), st.n, obs.extra_var):
+        temp = float(getattr(st, "temperature", math.nan))
+        for kind in self._step(obs.ref, float(st.mean[j]), float(st.v2[j]), st.n, obs.extra_var, temp):
             if kind == "bias_jump":
                 out.append(obs.event(kind, self.state, self.value))
             else:
                 out.append(obs.event(kind, self.drift_state, self.drift_value))
         return out
 
-    def _step(self, ref: AxisRef, x: float, v2: float, n: int, extra_var: float = 0.0) -> list[str]:
+    def _step(self, ref: AxisRef, x_raw: float, v2: float, n: int, extra_var: float = 0.0,
+              temp: float = math.nan) -> list[str]:
         """One still block; returns the kinds that changed state (``bias_jump``, ``bias_drift``)."""
-        if not (ref.ready and math.isfinite(x) and n > 0):
+        if not (ref.ready and math.isfinite(x_raw) and n > 0):
             return []
         out = []
+        x = x_raw - self.thermal.correction(temp)  # the residual the temperature does not explain
         if math.isnan(self.r):
             self.r = ref.mu
         if math.isnan(self.e):
@@ -100,7 +126,8 @@ class BiasDetector:
         if was == OK and self.up.s == 0.0 and self.down.s == 0.0:
             self.run = []
         self.run.append(d)
-        self.hist.append(x)
+        self.hist.append(x_raw)
+        self.hist_t.append(temp)
         if self.drift_state == OK:  # a drift already flagged is not named again as jumps
             # a step below the floor is wander, not a fault; one knock is not a step (capped evidence)
             hold = lim.bias_hold_blocks
@@ -129,8 +156,10 @@ class BiasDetector:
             self.value = float(np.median(self.post)) / DEG
         quiet = self.state == OK and self.up.s < 0.25 * H_ON and self.down.s < 0.25 * H_ON
         if quiet:
+            if len(self.hist) > LAG and len(self.hist_t) == len(self.hist):
+                self.thermal.add_pair(self.hist[-1] - self.hist[-1 - LAG], self.hist_t[-1] - self.hist_t[-1 - LAG])
             self.r += (x - self.r) / REF_TAU_BLOCKS
-            self.wander = wander_var(self.hist)
+            self.wander = wander_var(self._hist_c())
         # drift against the reference period's bias
         self.e += (x - self.e) / DRIFT_TAU_BLOCKS
         # the EWMA averages the white part down, not a slow wander (correlated over tens of blocks)
@@ -145,7 +174,7 @@ class BiasDetector:
                 self.drift_r = ref.mu
                 out.append("bias_drift")
         else:
-            last = list(self.hist)[-DRIFT_HOLD:]
+            last = list(self._hist_c())[-DRIFT_HOLD:]
             back = abs(off) < 0.7 * tol and abs(sum(last) / len(last) - self.drift_r) < 0.5 * max(DELTA, lim.bias_jump)
             self.drift_state, self.drift_count, changed = debounce(self.drift_state, self.drift_count, False,
                                                                    DRIFT_HOLD, DRIFT_HOLD, good=back)
@@ -157,7 +186,7 @@ class BiasDetector:
         """Step or ramp? Over the recent still-block means, the best single step (two constants) against
         the best hinge (a constant, then a ramp from some block on): a ramp when its Gaussian
         log-likelihood is ``RAMP_NATS`` better."""
-        x = np.asarray(self.hist, dtype=float)
+        x = self._hist_c()
         n = x.size
         if n < 8:
             return False
@@ -181,7 +210,7 @@ class BiasDetector:
         return {"up": self.up.state_dict(), "down": self.down.state_dict(), "r": f(self.r), "e": f(self.e),
                 "value": f(self.value), "drift_state": self.drift_state, "drift_count": self.drift_count,
                 "drift_value": f(self.drift_value), "drift_r": f(self.drift_r), "hist": list(self.hist),
-                "wander": self.wander}
+                "hist_t": [f(v) for v in self.hist_t], "thermal": self.thermal.state_dict(), "wander": self.wander}
 
     def load_state_dict(self, d: Mapping) -> None:
         g = lambda k: math.nan if d.get(k) is None else float(d[k])  # noqa: E731
@@ -192,3 +221,8 @@ class BiasDetector:
         self.drift_r = g("drift_r")
         self.wander = float(d.get("wander", 0.0))
         self.hist = deque((float(v) for v in d.get("hist") or []), maxlen=HIST_BLOCKS)
+        temps = [math.nan if v is None else float(v) for v in d.get("hist_t") or []]
+        if len(temps) != len(self.hist):  # a state saved without temperatures
+            temps = [math.nan] * len(self.hist)
+        self.hist_t = deque(temps, maxlen=HIST_BLOCKS)
+        self.thermal.load_state_dict(d.get("thermal") or {})

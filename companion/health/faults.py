@@ -229,6 +229,7 @@ class BlockStats:
     * ``spikes``: isolated outliers |dd| > SPIKE_K robust sigmas (one count per spike: the local maximum);
       ``spikes_solo``: those not coinciding (+-1 sample) with one on another axis (a shock moves every axis)
     * ``top``: max |y|; ``top_run``: longest run of consecutive samples at exactly +-top
+    * ``temperature``: mean IMU temperature of the block (degC; nan when the source has none)
     * ``changes``: number of consecutive samples that differ (0: every value equal); ``step``: the
       smallest non-zero |y_k - y_{k-1}| (nan without change)
     """
@@ -244,6 +245,7 @@ class BlockStats:
     top_run: np.ndarray
     changes: np.ndarray
     step: np.ndarray
+    temperature: float = math.nan  # the block's mean IMU temperature (degC) where the source has it
 
 
 def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float = SPIKE_K) -> BlockStats:

@@ -44,6 +44,10 @@ class FaultLimits:
       rms rate: ArduPilot's gyro consistency check uses 5 deg/s (pre-arm, AP_Arming), DroneKit-LA 5.73
       deg/s for 0.5 s; in fast manoeuvres healthy pairs differ by up to ~10 % of the rate (each IMU sampled
       and filtered at its own time, percent-level scale factors).
+    * ``bias_temp_dps_per_k``: the largest bias-temperature slope the bias tests accept as explaining a
+      still-bias change where the log carries the IMU temperature (companion.health.thermal): 0.1 deg/s/K,
+      the MPU-6000's datasheet bound (+-20 deg/s over -40..85 degC); typical parts are 0.01-0.05 deg/s/K.
+      0 turns the temperature model off.
     * ``noise_hold_blocks`` / ``bias_hold_blocks`` / ``disagree_hold_blocks``: the least number of blocks
       of evidence before a noise, bias or disagreement fault: one knock or one violent second is not a
       fault (the per-block LLR is capped at h / hold).
@@ -53,6 +57,7 @@ class FaultLimits:
     bias_drift_dps: float = 1.0
     disagree_dps: float = 5.0
     disagree_rel: float = 0.1
+    bias_temp_dps_per_k: float = 0.1
     noise_hold_blocks: int = 3
     bias_hold_blocks: int = 5
     disagree_hold_blocks: int = 3
@@ -64,6 +69,11 @@ class FaultLimits:
     @property
     def bias_drift(self) -> float:
         return self.bias_drift_dps * DEG
+
+    @property
+    def bias_temp(self) -> float:
+        """rad/s per K."""
+        return self.bias_temp_dps_per_k * DEG
 
     @property
     def disagree(self) -> float:

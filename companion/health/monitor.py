@@ -106,7 +106,8 @@ class ImuFaults:
                 if af.stuck.state == OK and af.spikes.state == OK:
                     af.ref.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n,
                                self.ref_blocks)
-                    af.bias.hist.append(float(st.mean[j]))  # the bias wander of the reference period counts too
+                    # the bias wander of the reference period counts too; its temperature is the model's origin
+                    af.bias.add_reference(float(st.mean[j]), float(st.temperature))
                 continue
             if af.stuck.state == FAULT:
                 continue

@@ -34,6 +34,7 @@ from companion.sources.timing import stamp_resolution
 
 FLOAT_MESSAGES = ("HIGHRES_IMU", "CSV")
 COLUMNS = {ax: 1 + i for i, ax in enumerate(GYRO_AXES + ACCEL_AXES)}  # column of each axis in a row
+TEMP_COLUMN = 7  # the IMU temperature (degC, nan where the source has none)
 
 
 class Channel:
@@ -161,7 +162,13 @@ class Channel:
 
     # ------------------------------------------------------------------ blocks
     def stats(self, data: np.ndarray) -> BlockStats:
-        return block_stats(data[:, 1:4], self.faults.dd_scale_ref())
+        st = block_stats(data[:, 1:4], self.faults.dd_scale_ref())
+        if data.shape[1] > TEMP_COLUMN:
+            temp = data[:, TEMP_COLUMN]
+            ok = np.isfinite(temp)
+            if ok.any():
+                st.temperature = float(temp[ok].mean())
+        return st
 
     def is_still(self, data: np.ndarray, st: BlockStats, peers: list[Peer]) -> bool:
         """The motion gate for one block with the other IMUs' latest blocks."""

@@ -107,7 +107,7 @@ class Pipeline:
         s = self._decode(msg, self.scales)
         if s is None or not s.is_imu:
             return False
-        return self.on_sample(s.key, s.t_s, s.gyro, s.accel)
+        return self.on_sample(s.key, s.t_s, s.gyro, s.accel, s.temperature)
 
     def on_heartbeat(self, sysid: int, mav_type: int, autopilot: int, base_mode: int) -> None:
         if autopilot == 8 or mav_type in (6, 18):  # MAV_AUTOPILOT_INVALID, GCS, onboard controller: not the vehicle
@@ -119,20 +119,25 @@ class Pipeline:
             self.log(f"vehicle {'armed' if armed else 'disarmed'}")
         self.armed = armed
 
-    def on_sample(self, key, t: float, gyro, accel) -> bool:
+    def on_sample(self, key, t: float, gyro, accel, temperature: float | None = None) -> bool:
         """One sample: a one-row :meth:`on_samples`."""
-        return self.on_samples(key, np.array([(t, *gyro, *accel)], dtype=float), None, None) > 0
+        temp = math.nan if temperature is None else float(temperature)
+        return self.on_samples(key, np.array([(t, *gyro, *accel, temp)], dtype=float), None, None) > 0
 
-    def on_samples(self, key, t, gyro, accel, tick: bool = True) -> int:
-        """Samples of one IMU in arrival order (arrays (n,), (n, 3), (n, 3)); returns the number used.
-        ``tick=False``: the reporter's clock is left to the caller (:meth:`tick`; a replay interleaving
-        streams), allowed only for samples that close no block (:meth:`quiet_run`)."""
+    def on_samples(self, key, t, gyro, accel, tick: bool = True, temperature=None) -> int:
+        """Samples of one IMU in arrival order (arrays (n,), (n, 3), (n, 3); ``temperature`` (n,) degC or
+        None where the source has none); returns the number used. ``tick=False``: the reporter's clock is
+        left to the caller (:meth:`tick`; a replay interleaving streams), allowed only for samples that
+        close no block (:meth:`quiet_run`). Rows are ``(t, gx, gy, gz, ax, ay, az, temperature)``."""
         self._tick = tick
-        if gyro is None:  # already rows (t, gyro, accel): the one-row call of on_sample
+        if gyro is None:  # already rows: the one-row call of on_sample
             rows = t
         else:
-            rows = np.column_stack([np.asarray(t, dtype=float).reshape(-1), np.asarray(gyro, dtype=float).reshape(-1, 3),
-                                    np.asarray(accel, dtype=float).reshape(-1, 3)])
+            tt = np.asarray(t, dtype=float).reshape(-1)
+            temp = (np.full(tt.shape[0], np.nan) if temperature is None
+                    else np.asarray(temperature, dtype=float).reshape(-1))
+            rows = np.column_stack([tt, np.asarray(gyro, dtype=float).reshape(-1, 3),
+                                    np.asarray(accel, dtype=float).reshape(-1, 3), temp])
         ch = self._route(key, rows.shape[0])
         if ch is None:
             return 0

@@ -83,10 +83,12 @@ def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: Fa
         t = np.asarray(s.t, dtype=float)[r]
         g = np.asarray(s.gyro, dtype=float)[r]
         a = np.asarray(s.accel, dtype=float)[r]
+        temp = getattr(s, "temperature", None)
+        tp = None if temp is None else np.asarray(temp, dtype=float)[r]
         # a sample that is not a clean step under the block cutter's rules (and the one after it) goes alone
         bad = np.flatnonzero(classify_steps(t, None, rules)[1:] != OK) + 1
         irregular = np.unique(np.concatenate([bad, bad + 1]))
-        feeds.append((s.key, pos, t, g, a, irregular))
+        feeds.append((s.key, pos, t, g, a, tp, irregular))
     cur = [0] * len(streams)
     h = 0
     used = 0
@@ -97,7 +99,7 @@ def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: Fa
         # the next position where something happens that others may see
         barrier = int(hb_pos[h]) if h < hb_pos.size else n_events
         lims = []
-        for k, (key, pos, t, g, a, irr) in enumerate(feeds):
+        for k, (key, pos, t, g, a, tp, irr) in enumerate(feeds):
             c = cur[k]
             if c >= pos.size:
                 lims.append(c)
@@ -110,11 +112,12 @@ def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: Fa
                 barrier = min(barrier, int(pos[q]))
         # everything before the barrier, stream by stream; the reporter's clock in file order
         ticks_pos, ticks_t = [], []
-        for k, (key, pos, t, g, a, irr) in enumerate(feeds):
+        for k, (key, pos, t, g, a, tp, irr) in enumerate(feeds):
             c = cur[k]
             e = min(lims[k], int(np.searchsorted(pos, barrier)))
             if e > c:
-                u = pipeline.on_samples(key, t[c:e], g[c:e], a[c:e], tick=False)
+                u = pipeline.on_samples(key, t[c:e], g[c:e], a[c:e], tick=False,
+                                        temperature=None if tp is None else tp[c:e])
                 used += u
                 if u:
                     ticks_pos.append(pos[c:e])
@@ -130,10 +133,11 @@ def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: Fa
             heartbeat(int(hb_row[h]))
             h += 1
             continue
-        for k, (key, pos, t, g, a, irr) in enumerate(feeds):
+        for k, (key, pos, t, g, a, tp, irr) in enumerate(feeds):
             c = cur[k]
             if c < pos.size and pos[c] == barrier:
-                used += pipeline.on_samples(key, t[c:c + 1], g[c:c + 1], a[c:c + 1])
+                used += pipeline.on_samples(key, t[c:c + 1], g[c:c + 1], a[c:c + 1],
+                                            temperature=None if tp is None else tp[c:c + 1])
                 cur[k] = c + 1
                 break
         if pipeline.failed:
@@ -231,7 +235,8 @@ def replay_vehicle(sim, pipeline, duration_s: float, lsb: float | None = None, c
             g = blk.gyro[i]
             if lsb:
                 g = np.round(g / lsb) * lsb
-            pipeline.on_samples(key, blk.t, g, blk.accel[i])
+            pipeline.on_samples(key, blk.t, g, blk.accel[i],
+                                temperature=None if blk.temperature is None else blk.temperature[i])
         fed += blk.n
         if on_chunk is not None and on_chunk(float(blk.t[-1])):
             break

@@ -170,8 +170,10 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
 def _dilate(mask: np.ndarray, k: int) -> np.ndarray:
     if k <= 0 or not mask.any():
         return mask
-    c = np.convolve(mask.astype(np.int64), np.ones(2 * k + 1, dtype=np.int64), mode="same")
-    return c > 0
+    # the full convolution cut to the mask's own length: mode="same" returns max(len(mask), 2k+1)
+    # values, longer than the mask when the record holds fewer windows than the guard's width
+    c = np.convolve(mask.astype(np.int64), np.ones(2 * k + 1, dtype=np.int64), mode="full")
+    return c[k:k + mask.shape[0]] > 0
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
