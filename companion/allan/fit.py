@@ -76,6 +76,9 @@ GM_MIN_SAMPLES = 3.0
 #: filter). Without that region a quantization term only stands in for something else at short tau (an output
 #: line near the Nyquist frequency, a filter's bump) and moves N.
 QUANT_SLOPE = -1.5
+#: iterations of the model covariance (each stops earlier once the coefficients move by less than 0.1 %):
+#: the fixed point is reached geometrically, a factor 2-3 per iteration when a term rests on the last octaves
+MAX_ITER = 12
 #: relative uncertainty of a modelled low-pass filter's shape, per unit of its bend 1 - AVAR tau / N^2
 FILTER_SHAPE_ERROR = 0.25
 
@@ -317,7 +320,7 @@ def quantization_slope(tau, avar) -> bool:
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
-             max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
+             max_iter=MAX_ITER, max_ratio=256, segments=None, select=None, white_filter=None,
              detect_filter=None) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring (and :func:`_fit_avar`
     for the arguments). With ``n`` and ``rate_hz`` (the record is known), a bias-instability or rate
@@ -357,7 +360,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
 
 
 def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
-              max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
+              max_iter=MAX_ITER, max_ratio=256, segments=None, select=None, white_filter=None,
               detect_filter=None) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring.
 
@@ -440,6 +443,22 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         base = [e for e in LINEAR_EFFECTS if e in effects and (e in BASE_EFFECTS or not auto)]
         linear, nonlin, c2 = list(base), [], 0.0
         prev, v_sup = None, v
+        # first the covariance of the base model alone, iterated to its fixed point, before any extra term
+        # may enter: the start weights (the measured points' own) make the points that happen to lie low
+        # look precise, so the first fits run low at long tau (a random walk at half its level) and a
+        # covariance computed from such a fit makes a term that bends the curve down there (a long-tau_c
+        # Gauss-Markov) look strongly supported, after which the covariance computed with it confirms it
+        # (the linear model with every linear candidate: a ramp's rise, which a random walk's
+        # imprecise long-tau points would hide, keeps its own, much smaller, variance)
+        sup0 = [e for e in LINEAR_EFFECTS if e in effects]
+        A_b = _columns(sup0, [], tau, white) if sup0 else None
+        for it in range(max_iter if sup0 else 0):
+            th_b, _ = _Problem(tau, v, cov, white, tau0).solve(A_b)
+            if prev is not None and np.allclose(th_b, prev, rtol=1e-3, atol=1e-12):
+                break
+            prev = th_b
+            cov = covariance(_terms_from(sup0, [], th_b, scale, white), A_b @ th_b, floor)
+        prev = None
         for it in range(max_iter):
             prob = _Problem(tau, v, cov, white, tau0)
             sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
