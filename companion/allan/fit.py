@@ -436,43 +436,45 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
 
     def iterate(floor):
         # start: weights from the measured points (only to get a first model). The covariance is then
-        # computed from a *superset* model (all base effects plus the extras selected so far, NNLS-fitted):
-        # computing it from a model that lacks a term actually present would make the points dominated by
-        # that term look far too precise and trap the iteration.
+        # computed from a *superset* model (every linear candidate plus the nonlinear terms selected so far,
+        # NNLS-fitted) and iterated to its fixed point: the superset's fit under the covariance is the model
+        # the covariance was computed from. Computing it from a model that lacks a term actually present
+        # would make the points dominated by that term look far too precise and trap the iteration (a ramp's
+        # rise, which a random walk's imprecise long-tau points would hide, keeps its own small variance).
+        # The linear superset reaches its fixed point before any nonlinear term may enter: the start weights
+        # make the points that happen to lie low look precise, so the first fits run low at long tau (a
+        # random walk at half its level), and a covariance computed from such a fit makes a term that bends
+        # the curve down there (a long-tau_c Gauss-Markov) look strongly supported, after which the
+        # covariance computed with it confirms it.
         cov = np.diag(2.0 * np.maximum(v, 1e-6 * v.max()) ** 2 / edf_v)
-        base = [e for e in LINEAR_EFFECTS if e in effects and (e in BASE_EFFECTS or not auto)]
-        linear, nonlin, c2 = list(base), [], 0.0
-        prev, v_sup = None, v
-        # first the covariance of the base model alone, iterated to its fixed point, before any extra term
-        # may enter: the start weights (the measured points' own) make the points that happen to lie low
-        # look precise, so the first fits run low at long tau (a random walk at half its level) and a
-        # covariance computed from such a fit makes a term that bends the curve down there (a long-tau_c
-        # Gauss-Markov) look strongly supported, after which the covariance computed with it confirms it
-        # (the linear model with every linear candidate: a ramp's rise, which a random walk's
-        # imprecise long-tau points would hide, keeps its own, much smaller, variance)
-        sup0 = [e for e in LINEAR_EFFECTS if e in effects]
-        A_b = _columns(sup0, [], tau, white) if sup0 else None
-        for it in range(max_iter if sup0 else 0):
-            th_b, _ = _Problem(tau, v, cov, white, tau0).solve(A_b)
-            if prev is not None and np.allclose(th_b, prev, rtol=1e-3, atol=1e-12):
+        sup_lin = [e for e in LINEAR_EFFECTS if e in effects]
+        linear, nonlin, c2 = list(sup_lin), [], 0.0
+        v_sup = v
+        made_from = None  # (nonlinear terms, superset coefficients) the covariance was computed from
+
+        def update(nl) -> bool:
+            """One step towards the fixed point with the nonlinear terms ``nl``; True when already there."""
+            nonlocal cov, made_from, v_sup
+            A_sup = _columns(sup_lin, nl, tau, white)
+            th_sup, _ = _Problem(tau, v, cov, white, tau0).solve(A_sup)
+            v_sup = A_sup @ th_sup
+            if (made_from is not None and [e for e, _ in made_from[0]] == [e for e, _ in nl]
+                    and np.allclose([s for _, s in made_from[0]], [s for _, s in nl], rtol=1e-2)
+                    and np.allclose(th_sup, made_from[1], rtol=5e-3, atol=1e-12)):
+                return True
+            cov = covariance(_terms_from(sup_lin, nl, th_sup, scale, white), v_sup, floor)
+            made_from = (list(nl), th_sup)
+            return False
+
+        for it in range(max_iter if sup_lin else 0):
+            if update([]):
                 break
-            prev = th_b
-            cov = covariance(_terms_from(sup0, [], th_b, scale, white), A_b @ th_b, floor)
-        prev = None
         for it in range(max_iter):
             prob = _Problem(tau, v, cov, white, tau0)
-            sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
-            A_sup = _columns(sup_lin, nonlin, tau, white)
-            th_sup, _ = prob.solve(A_sup)
-            v_sup = A_sup @ th_sup
-            cov = covariance(_terms_from(sup_lin, nonlin, th_sup, scale, white), v_sup, floor)
-            prob = _Problem(tau, v, cov, white, tau0)
             linear, nonlin, c2 = _select(prob, tau, effects, n_pts, auto)
-            theta, c2 = prob.solve(_columns(linear, nonlin, tau, white))
-            key = (tuple(linear), tuple(e for e, _ in nonlin))
-            if prev is not None and key == prev[0] and np.allclose(theta, prev[1], rtol=1e-3, atol=1e-12):
+            if not (nonlin or made_from is None or made_from[0]) or update(nonlin):
                 break
-            prev = (key, theta)
+        theta, c2 = _Problem(tau, v, cov, white, tau0).solve(_columns(linear, nonlin, tau, white))
         return cov, linear, nonlin, c2, v_sup
 
     cov, linear, nonlin, c2, v_sup = iterate(0.0)

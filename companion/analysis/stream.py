@@ -60,23 +60,16 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
 
 
 def stream_sampling(stream) -> str:
-    """How a stream's samples were taken from its filtered signal: "average" for PX4's sensor_combined and
-    vehicle_imu (delta angle / dt over the publication interval), "point" (the latest filtered value) for
-    the rest (DataFlash IMU, sensor_gyro, MAVLink RAW_IMU/SCALED_IMU, CSV)."""
-    return "average" if stream.key.message in ("sensor_combined", "vehicle_imu") else "point"
+    """How a stream's samples were taken from its filtered signal (:func:`companion.sources.filters.sampling`)."""
+    from companion.sources.filters import sampling
+
+    return sampling(stream.key.message)
 
 
 def stream_filters(stream, meta: dict) -> dict:
-    """Low-pass cut-offs (Hz) of a stream's logged data from the log's parameters (empty if unknown)."""
-    params = (meta or {}).get("params") or {}
-    msg = stream.key.message
-    out = {}
-    if meta.get("format") == "dataflash" and msg == "IMU":
-        for k, p in (("gyro", "INS_GYRO_FILTER"), ("accel", "INS_ACCEL_FILTER")):
-            if params.get(p):
-                out[k] = float(params[p])
-    elif meta.get("format") == "ulog" and msg in ("sensor_combined", "sensor_gyro", "vehicle_imu"):
-        for k, p in (("gyro", "IMU_GYRO_CUTOFF"), ("accel", "IMU_ACCEL_CUTOFF")):
-            if params.get(p):
-                out[k] = float(params[p])
-    return out
+    """Low-pass cut-offs (Hz) of a stream's logged data from the log's parameters (empty if unknown): DataFlash
+    and ULog parameters, a tlog's PARAM_VALUE messages (:func:`companion.sources.filters.filters_from_params`)."""
+    from companion.sources.filters import filters_from_params
+
+    meta = meta or {}
+    return filters_from_params(meta.get("params"), stream.key.message, meta.get("format"))
