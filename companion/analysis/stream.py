@@ -48,12 +48,18 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
             entry["axes"][axis] = analyze_axis(None, rate, taus, lsb=lsb, segments=[col[a:b] for a, b in ranges],
                                                white_filter=wf, sampling=samp)
             if online and entry["axes"][axis]["status"] == "ok":
-                from companion.estimators import online_terms
+                from companion.estimators import make_estimator
 
-                a, b = max(ranges, key=lambda r: r[1] - r[0])
-                y = col[a:b]
-                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate,
-                                                             filter_hz=float(fc) if fc else None, sampling=samp)
+                # the online estimator over the same still pieces, pooled as the offline analysis pools them
+                # (no cluster straddles a junction; the report's covariance is the pooled one)
+                est = make_estimator("octave", rate_hz=rate, filter_hz=float(fc) if fc else None, sampling=samp)
+                for a, b in ranges:
+                    y = col[a:b]
+                    y = y[np.isfinite(y)]
+                    if y.size >= 8:  # as the offline analysis: shorter pieces carry no cluster
+                        est.new_segment()
+                        est.update(y)
+                entry["axes"][axis]["online"] = est.terms(full=True)
         if progress:
             progress.step(f"{stream.key.message}[{stream.key.instance}] {axis}")
     return entry
