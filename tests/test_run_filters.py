@@ -126,6 +126,6 @@ def test_tlog_param_value_gives_the_filter_to_run_and_to_analyze(tmp_path):
     ("csv", "CSV", {"INS_GYRO_FILTER": 20.0}, {}),
 ])
 def test_filter_rules(fmt, msg, params, want):
-    from companion.sources.filters import filters_from_params
+    from companion.analysis.filters import filters_from_params
 
     assert filters_from_params(params, msg, fmt) == want

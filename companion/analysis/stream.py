@@ -66,16 +66,16 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
 
 
 def stream_sampling(stream) -> str:
-    """How a stream's samples were taken from its filtered signal (:func:`companion.sources.filters.sampling`)."""
-    from companion.sources.filters import sampling
+    """How a stream's samples were taken from its filtered signal (:func:`companion.analysis.filters.sampling`)."""
+    from companion.analysis.filters import sampling
 
     return sampling(stream.key.message)
 
 
 def stream_filters(stream, meta: dict) -> dict:
     """Low-pass cut-offs (Hz) of a stream's logged data from the log's parameters (empty if unknown): DataFlash
-    and ULog parameters, a tlog's PARAM_VALUE messages (:func:`companion.sources.filters.filters_from_params`)."""
-    from companion.sources.filters import filters_from_params
+    and ULog parameters, a tlog's PARAM_VALUE messages (:func:`companion.analysis.filters.filters_from_params`)."""
+    from companion.analysis.filters import filters_from_params
 
     meta = meta or {}
     return filters_from_params(meta.get("params"), stream.key.message, meta.get("format"))

@@ -30,7 +30,7 @@ from companion.service.baseline_match import units_mismatch
 from companion.service.blocks import RATE_CHANGE, BlockCutter
 from companion.service.config import PipelineConfig
 from companion.service.motion import MotionGate, Peer, noise_ratio
-from companion.sources.filters import sampling
+from companion.analysis.filters import sampling
 from companion.sources.timing import stamp_resolution
 
 FLOAT_MESSAGES = ("HIGHRES_IMU", "CSV")

@@ -99,8 +99,8 @@ class Pipeline:
     def set_params(self, params: Mapping | None, fmt: str | None = None) -> None:
         """The autopilot's parameters as far as known (a log's, or PARAM_VALUE messages so far), ``fmt`` the
         log format their IMU messages come in ("dataflash", "ulog"; None: MAVLink). The filter parameters
-        among them give each channel's low-pass cut-offs (:func:`companion.sources.filters.filters_from_params`)."""
-        from companion.sources.filters import FILTER_PARAMS
+        among them give each channel's low-pass cut-offs (:func:`companion.analysis.filters.filters_from_params`)."""
+        from companion.analysis.filters import FILTER_PARAMS
 
         self.params = {k: float(v) for k, v in (params or {}).items() if k in FILTER_PARAMS}
         self.params_format = fmt
@@ -109,7 +109,7 @@ class Pipeline:
 
     def on_param(self, sysid: int, name: str, value: float) -> None:
         """A PARAM_VALUE of the vehicle: a filter parameter is kept and applied to the channels."""
-        from companion.sources.filters import FILTER_PARAMS
+        from companion.analysis.filters import FILTER_PARAMS
 
         name = str(name).split("\0", 1)[0]
         if name not in FILTER_PARAMS or (self.sysid is not None and sysid != self.sysid):
@@ -119,7 +119,7 @@ class Pipeline:
         self.set_params(dict(self.params, **{name: float(value)}), self.params_format)
 
     def _apply_filters(self, ch: Channel) -> None:
-        from companion.sources.filters import filters_from_params
+        from companion.analysis.filters import filters_from_params
 
         f = filters_from_params(self.params, ch.message, self.params_format)
         if ch.set_filters(f) and f:
