@@ -76,9 +76,6 @@ GM_MIN_SAMPLES = 3.0
 #: filter). Without that region a quantization term only stands in for something else at short tau (an output
 #: line near the Nyquist frequency, a filter's bump) and moves N.
 QUANT_SLOPE = -1.5
-#: iterations of the model covariance (each stops earlier once the coefficients move by less than 0.1 %):
-#: the fixed point is reached geometrically, a factor 2-3 per iteration when a term rests on the last octaves
-MAX_ITER = 12
 #: relative uncertainty of a modelled low-pass filter's shape, per unit of its bend 1 - AVAR tau / N^2
 FILTER_SHAPE_ERROR = 0.25
 
@@ -320,7 +317,7 @@ def quantization_slope(tau, avar) -> bool:
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
-             max_iter=MAX_ITER, max_ratio=256, segments=None, select=None, white_filter=None,
+             max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
              detect_filter=None) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring (and :func:`_fit_avar`
     for the arguments). With ``n`` and ``rate_hz`` (the record is known), a bias-instability or rate
@@ -360,7 +357,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
 
 
 def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
-              max_iter=MAX_ITER, max_ratio=256, segments=None, select=None, white_filter=None,
+              max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
               detect_filter=None) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring.
 
@@ -436,45 +433,27 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
 
     def iterate(floor):
         # start: weights from the measured points (only to get a first model). The covariance is then
-        # computed from a *superset* model (every linear candidate plus the nonlinear terms selected so far,
-        # NNLS-fitted) and iterated to its fixed point: the superset's fit under the covariance is the model
-        # the covariance was computed from. Computing it from a model that lacks a term actually present
-        # would make the points dominated by that term look far too precise and trap the iteration (a ramp's
-        # rise, which a random walk's imprecise long-tau points would hide, keeps its own small variance).
-        # The linear superset reaches its fixed point before any nonlinear term may enter: the start weights
-        # make the points that happen to lie low look precise, so the first fits run low at long tau (a
-        # random walk at half its level), and a covariance computed from such a fit makes a term that bends
-        # the curve down there (a long-tau_c Gauss-Markov) look strongly supported, after which the
-        # covariance computed with it confirms it.
+        # computed from a *superset* model (all base effects plus the extras selected so far, NNLS-fitted):
+        # computing it from a model that lacks a term actually present would make the points dominated by
+        # that term look far too precise and trap the iteration.
         cov = np.diag(2.0 * np.maximum(v, 1e-6 * v.max()) ** 2 / edf_v)
-        sup_lin = [e for e in LINEAR_EFFECTS if e in effects]
-        linear, nonlin, c2 = list(sup_lin), [], 0.0
-        v_sup = v
-        made_from = None  # (nonlinear terms, superset coefficients) the covariance was computed from
-
-        def update(nl) -> bool:
-            """One step towards the fixed point with the nonlinear terms ``nl``; True when already there."""
-            nonlocal cov, made_from, v_sup
-            A_sup = _columns(sup_lin, nl, tau, white)
-            th_sup, _ = _Problem(tau, v, cov, white, tau0).solve(A_sup)
-            v_sup = A_sup @ th_sup
-            if (made_from is not None and [e for e, _ in made_from[0]] == [e for e, _ in nl]
-                    and np.allclose([s for _, s in made_from[0]], [s for _, s in nl], rtol=1e-2)
-                    and np.allclose(th_sup, made_from[1], rtol=5e-3, atol=1e-12)):
-                return True
-            cov = covariance(_terms_from(sup_lin, nl, th_sup, scale, white), v_sup, floor)
-            made_from = (list(nl), th_sup)
-            return False
-
-        for it in range(max_iter if sup_lin else 0):
-            if update([]):
-                break
+        base = [e for e in LINEAR_EFFECTS if e in effects and (e in BASE_EFFECTS or not auto)]
+        linear, nonlin, c2 = list(base), [], 0.0
+        prev, v_sup = None, v
         for it in range(max_iter):
             prob = _Problem(tau, v, cov, white, tau0)
+            sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
+            A_sup = _columns(sup_lin, nonlin, tau, white)
+            th_sup, _ = prob.solve(A_sup)
+            v_sup = A_sup @ th_sup
+            cov = covariance(_terms_from(sup_lin, nonlin, th_sup, scale, white), v_sup, floor)
+            prob = _Problem(tau, v, cov, white, tau0)
             linear, nonlin, c2 = _select(prob, tau, effects, n_pts, auto)
-            if not (nonlin or made_from is None or made_from[0]) or update(nonlin):
+            theta, c2 = prob.solve(_columns(linear, nonlin, tau, white))
+            key = (tuple(linear), tuple(e for e, _ in nonlin))
+            if prev is not None and key == prev[0] and np.allclose(theta, prev[1], rtol=1e-3, atol=1e-12):
                 break
-        theta, c2 = _Problem(tau, v, cov, white, tau0).solve(_columns(linear, nonlin, tau, white))
+            prev = (key, theta)
         return cov, linear, nonlin, c2, v_sup
 
     cov, linear, nonlin, c2, v_sup = iterate(0.0)
