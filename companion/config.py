@@ -36,6 +36,9 @@ ESTIMATOR = {
     "min_edf": Key(1.0, "number"),
     "fit": Key("model", "str", choices=("model", "diag", "gls", "fit_avar")),
     "gls_max_ratio": Key(256, "int"),
+    # the data's 2-pole low-pass cut-off (Hz) when the log or link does not say it (INS_GYRO_FILTER,
+    # IMU_GYRO_CUTOFF); null: the autopilot's parameter when known, else a roll-off the data show
+    "filter_hz": Key(None, "number", none=True),
     "miao": {
         "b": Key(0.99, "number"),
         "x0": Key({}, "mapping"),

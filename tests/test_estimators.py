@@ -54,6 +54,29 @@ def test_full_phases_small_levels_equal_overlapping_avar():
     assert np.allclose(avar[:4], a2, rtol=1e-9)
 
 
+def test_segments_pool_as_the_offline_pooled_avar():
+    """Pieces fed with new_segment() between them: at the fully overlapping levels the bank's AVAR equals the
+    offline pooled AVAR of the same pieces (companion.allan.pooled, computed independently), a junction
+    between pieces with different means adds nothing, and the segment lengths survive a state round trip."""
+    from companion.allan.pooled import pooled_oavar
+
+    rng = np.random.default_rng(6)
+    pieces = [white_rw(rng, k, 50.0, 1e-3, 5e-5) + off for k, off in ((7000, 0.0), (3000, 0.3), (5000, -0.2))]
+    est = OctaveBankEstimator(50.0, phases=8)
+    for p in pieces:
+        est.new_segment()
+        est.update(p)
+    _, avar, _ = est.avar()
+    _, a2, _, _ = pooled_oavar(pieces, 50.0, m=[1, 2, 4, 8])
+    assert np.allclose(avar[:4], a2, rtol=1e-9)
+    assert est.segments() == [7000, 3000, 5000]
+    b = from_state_dict(json.loads(json.dumps(est.state_dict())))
+    assert b.segments() == [7000, 3000, 5000] and np.array_equal(b.avar()[1], avar)
+    joined = OctaveBankEstimator(50.0, phases=8)
+    joined.update(np.concatenate(pieces))  # without the breaks the steps between the means enter the AVAR
+    assert joined.avar()[1][3] > 3 * avar[3]
+
+
 def test_state_roundtrip_json_and_bounded_size():
     rng = np.random.default_rng(5)
     y = white_rw(rng, 30_000, 200.0, 1e-3)

@@ -172,3 +172,24 @@ def test_online_report_models_the_filter_not_a_gauss_markov_term():
             if given:
                 assert wn["N"] == pytest.approx(off["N"], rel=0.01)
     assert hits >= 5
+
+
+def test_local_white_refit_is_unbiased():
+    """The local white-noise refit (used under model misfit, offline and online) on 300 records of pure white
+    noise (66 s at 100 Hz): its mean N is the truth within 0.6 % (3 standard errors). Weights from the
+    measured points (1 / AVAR^2) gave -1.4 % (the points that lie low get the most weight), and 5 % low on one
+    axis of a lossy-link run with a chance bump at 1-3 s."""
+    from companion.allan.adev import oavar
+    from companion.allan.white import local_white_noise
+
+    fs, n, N = 100.0, 6600, 3e-3
+    m = cluster_sizes(n, "octave")
+    edf = edf_simple(n + 1, m, 0)
+    r = []
+    for s in range(300):
+        y = np.random.default_rng(s).normal(0.0, N * math.sqrt(fs), n)
+        tau, av = oavar(y, fs, m=m)[:2]
+        wn = {"effect": "white_noise", "N": N, "ci95": {"N": [0.9 * N, 1.1 * N]}}
+        terms, note = local_white_noise([wn], tau, av, edf, 1.0 / fs)
+        r.append(terms[0]["N"] / N - 1.0)
+    assert abs(np.mean(r)) < 0.006, np.mean(r)

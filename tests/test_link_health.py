@@ -82,8 +82,11 @@ def check_loss_run(out, sim_out, relay, lo, hi):
         n = re.search(rf"  g{ax}: N ([\d.]+) \+- ([\d.]+) ", out)
         assert n, out
         value, sigma = float(n.group(1)), float(n.group(2))
-        # within 5 %, or within twice the 1-sigma the report gives when the online fit widened it (the
-        # filter-aware online fit does so on one axis under 20 % burst loss: 4.6 %); the sigma stays small
+        # within 5 %, or within twice the 1-sigma the report gives when it widened it: under 20 % burst loss
+        # only ~50 s of still blocks are fed, and a chance bump at 1-3 s (2.5 sigma on one axis) makes the fit
+        # declare a misfit; N then comes from the local white-noise refit from 10 tau0 on, whose own scatter
+        # on 50 s is ~3.5 % (reported 4.6 %; measured -1.5 % on that axis, -6.3 % when the refit weighted its
+        # points by 1 / measured AVAR^2, which favours the points that lie low: docs/analysis.md)
         assert abs(value - N_TRUE) <= max(0.05 * N_TRUE, 2.0 * sigma), (ax, value, sigma)
         assert sigma < 0.06 * N_TRUE, (ax, value, sigma)
 

@@ -48,35 +48,34 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
             entry["axes"][axis] = analyze_axis(None, rate, taus, lsb=lsb, segments=[col[a:b] for a, b in ranges],
                                                white_filter=wf, sampling=samp)
             if online and entry["axes"][axis]["status"] == "ok":
-                from companion.estimators import online_terms
+                from companion.estimators import make_estimator
 
-                a, b = max(ranges, key=lambda r: r[1] - r[0])
-                y = col[a:b]
-                entry["axes"][axis]["online"] = online_terms(y[np.isfinite(y)], rate,
-                                                             filter_hz=float(fc) if fc else None, sampling=samp)
+                # the online estimator over the same still pieces, pooled as the offline analysis pools them
+                # (no cluster straddles a junction; the report's covariance is the pooled one)
+                est = make_estimator("octave", rate_hz=rate, filter_hz=float(fc) if fc else None, sampling=samp)
+                for a, b in ranges:
+                    y = col[a:b]
+                    y = y[np.isfinite(y)]
+                    if y.size >= 8:  # as the offline analysis: shorter pieces carry no cluster
+                        est.new_segment()
+                        est.update(y)
+                entry["axes"][axis]["online"] = est.terms(full=True)
         if progress:
             progress.step(f"{stream.key.message}[{stream.key.instance}] {axis}")
     return entry
 
 
 def stream_sampling(stream) -> str:
-    """How a stream's samples were taken from its filtered signal: "average" for PX4's sensor_combined and
-    vehicle_imu (delta angle / dt over the publication interval), "point" (the latest filtered value) for
-    the rest (DataFlash IMU, sensor_gyro, MAVLink RAW_IMU/SCALED_IMU, CSV)."""
-    return "average" if stream.key.message in ("sensor_combined", "vehicle_imu") else "point"
+    """How a stream's samples were taken from its filtered signal (:func:`companion.analysis.filters.sampling`)."""
+    from companion.analysis.filters import sampling
+
+    return sampling(stream.key.message)
 
 
 def stream_filters(stream, meta: dict) -> dict:
-    """Low-pass cut-offs (Hz) of a stream's logged data from the log's parameters (empty if unknown)."""
-    params = (meta or {}).get("params") or {}
-    msg = stream.key.message
-    out = {}
-    if meta.get("format") == "dataflash" and msg == "IMU":
-        for k, p in (("gyro", "INS_GYRO_FILTER"), ("accel", "INS_ACCEL_FILTER")):
-            if params.get(p):
-                out[k] = float(params[p])
-    elif meta.get("format") == "ulog" and msg in ("sensor_combined", "sensor_gyro", "vehicle_imu"):
-        for k, p in (("gyro", "IMU_GYRO_CUTOFF"), ("accel", "IMU_ACCEL_CUTOFF")):
-            if params.get(p):
-                out[k] = float(params[p])
-    return out
+    """Low-pass cut-offs (Hz) of a stream's logged data from the log's parameters (empty if unknown): DataFlash
+    and ULog parameters, a tlog's PARAM_VALUE messages (:func:`companion.analysis.filters.filters_from_params`)."""
+    from companion.analysis.filters import filters_from_params
+
+    meta = meta or {}
+    return filters_from_params(meta.get("params"), stream.key.message, meta.get("format"))

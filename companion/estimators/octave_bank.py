@@ -141,6 +141,8 @@ class OctaveBankEstimator:
         self._pending = [None] * (int(self._u.max()) + 1)  # unpaired block per pyramid level (index u: level-u block)
         self._hist = [np.zeros(0) for _ in range(self.levels)]
         self._S = np.zeros(self.levels)
+        self._cnt = np.zeros(self.levels, dtype=np.int64)  # Allan differences seen per level
+        self._segs: list[int] = []  # lengths (samples) of the segments closed by new_segment()
         self._buf: list[float] = []
         self._cache: dict = {}  # Cholesky factors of the GLS covariance (derived data, not state)
         self._structure = None  # selected model (companion.estimators.report.Structure; derived, not state)
@@ -166,6 +168,24 @@ class OctaveBankEstimator:
         y = np.asarray(y, dtype=float).ravel()
         self._flush()
         self._process(y)
+
+    def new_segment(self) -> None:
+        """The next samples do not follow the previous ones (another still piece of a log): no cluster
+        straddles the junction; the accumulated levels are kept, so the estimates pool the pieces as the
+        offline analysis does (companion.allan.pooled), and the report's covariance is the pooled one."""
+        self._flush()
+        done = self._n - sum(self._segs)
+        if done <= 0:
+            return
+        self._segs.append(int(done))
+        self._pending = [None] * len(self._pending)
+        self._hist = [np.zeros(0) for _ in range(self.levels)]
+
+    def segments(self) -> list[int]:
+        """Sample counts of the pieces behind the estimates (one entry: one continuous record)."""
+        self._flush()
+        last = self._n - sum(self._segs)
+        return self._segs + ([int(last)] if last > 0 else [])
 
     def _flush(self) -> None:
         if self._buf:
@@ -212,6 +232,7 @@ class OctaveBankEstimator:
             if k.size == 0:
                 continue
             d = c[k - (P - 1)] - c[k - (2 * P - 1)]
+            self._cnt[j] += k.size
             x = d * d / (2.0 * self._m[j] ** 2)
             lam = self._lam[j]
             self._S[j] = exp_sum(x, lam, self._S[j])
@@ -219,8 +240,7 @@ class OctaveBankEstimator:
     # ------------------------------------------------------------------ read-out
     def _events(self) -> np.ndarray:
         """Number of Allan differences seen per level."""
-        count = self._n // self._s
-        return np.maximum(count - (2 * self._P - 1), 0)
+        return self._cnt
 
     def avar(self):
         """Current Allan variance per level: ``(tau, avar, edf)`` for levels with at least one difference."""
@@ -321,6 +341,8 @@ class OctaveBankEstimator:
             "pending": list(self._pending),
             "hist": [h.tolist() for h in self._hist],
             "S": self._S.tolist(),
+            "cnt": self._cnt.tolist(),
+            "segments": list(self._segs),
         }
 
     @classmethod
@@ -336,6 +358,11 @@ class OctaveBankEstimator:
         est._pending = [None if v is None else float(v) for v in d["pending"]]
         est._hist = [np.asarray(h, dtype=float) for h in d["hist"]]
         est._S = np.asarray(d["S"], dtype=float)
+        if "cnt" in d:
+            est._cnt = np.asarray(d["cnt"], dtype=np.int64)
+        else:  # a state saved before the count was kept: one continuous record
+            est._cnt = np.maximum(est._n // est._s - (2 * est._P - 1), 0).astype(np.int64)
+        est._segs = [int(x) for x in d.get("segments", [])]
         return est
 
 

@@ -73,7 +73,7 @@ class Structure:
 
 
 def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ratio=256, white_filter=None,
-           detect_filter="point"):
+           detect_filter="point", segments=None):
     """Select the model from the levels with :func:`companion.allan.fit.fit_avar` (automatic selection over
     ``candidates``; the white-noise term's low-pass filter from ``white_filter`` (the log's cut-off) or the data,
     as the offline fit does). Returns ``(FitResult, Structure)``."""
@@ -87,8 +87,10 @@ def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ra
     m = np.round(tau * rate_hz).astype(np.int64)
     n = max(int(n), int(2 * m.max() + 2)) if m.size else int(n)
     edf0 = np.maximum(edf_simple(n + 1, m, 0), 0.5)
+    pooled = segments is not None and len(segments) > 1
     fr = fit_avar(tau, avar, edf0, effects=list(candidates), n=n, rate_hz=rate_hz, m=m, max_ratio=max_ratio,
-                  select=True, white_filter=white_filter, detect_filter=detect_filter)
+                  select=True, white_filter=white_filter, detect_filter=detect_filter,
+                  segments=list(segments) if pooled else None)
     return fr, structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw)
 
 
@@ -250,8 +252,9 @@ def estimator_report(est, candidates=None, full=False):
         fh = getattr(est, "filter_hz", None)
         samp = getattr(est, "sampling", "point")
         wf = {"filter_hz": fh, "sample_hz": est.rate_hz if samp == "point" else None} if fh else None
+        segs = est.segments() if hasattr(est, "segments") and est.forgetting_s is None else None
         _, st = select(tau, avar, edf, n_eff, est.rate_hz, candidates, n_raw=est.n_samples, white_filter=wf,
-                       detect_filter=samp)
+                       detect_filter=samp, segments=segs)
         est._structure = st
         cov = None
     else:

@@ -30,6 +30,7 @@ from companion.service.baseline_match import units_mismatch
 from companion.service.blocks import RATE_CHANGE, BlockCutter
 from companion.service.config import PipelineConfig
 from companion.service.motion import MotionGate, Peer, noise_ratio
+from companion.analysis.filters import sampling
 from companion.sources.timing import stamp_resolution
 
 FLOAT_MESSAGES = ("HIGHRES_IMU", "CSV")
@@ -66,6 +67,9 @@ class Channel:
         self.off_rate: list[float] = []  # block rates of the consecutive blocks off the stream's rate
         self._profiles: list[tuple[float, dict]] = []  # (rate, rate-dependent state) of rates seen before
         self.rate_switches = 0
+        # {"gyro": Hz, "accel": Hz}: the autopilot's low-pass cut-offs of these data (from the log's parameters
+        # or PARAM_VALUE), modelled in the estimators' white-noise term unless the estimator config names one
+        self.filters: dict[str, float] = {}
 
     # ------------------------------------------------------------------ read-only views
     @property
@@ -124,19 +128,46 @@ class Channel:
         return False
 
     # ------------------------------------------------------------------ estimators
-    def make_estimators(self, learning: bool) -> None:
+    def _est_cfg(self, axis: str) -> dict:
+        """The estimator settings of one axis: the configuration, plus the log's filter of that axis's data
+        and how the samples were taken from it (a filter named in the configuration wins)."""
         est = {k: v for k, v in self.cfg.estimator.items() if k != "forgetting_s"}
-        self.fast = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=self.cfg.forgetting_fast_s, **est) for a in self.axes}
-        self.slow = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=self.cfg.forgetting_slow_s, **est) for a in self.axes}
-        self.learn = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=None, **est) for a in self.axes} if learning else {}
+        if est.get("filter_hz") is None:
+            est["filter_hz"] = self.filters.get("gyro" if axis in GYRO_AXES else "accel")
+        est.setdefault("sampling", sampling(self.message))
+        return est
+
+    def make_estimators(self, learning: bool) -> None:
+        self.fast = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=self.cfg.forgetting_fast_s, **self._est_cfg(a))
+                     for a in self.axes}
+        self.slow = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=self.cfg.forgetting_slow_s, **self._est_cfg(a))
+                     for a in self.axes}
+        self.learn = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=None, **self._est_cfg(a))
+                      for a in self.axes} if learning else {}
         self.learned_s = 0.0
         self.fed_s = 0.0
         self._queue, self._queue_s = [], 0.0
 
+    def set_filters(self, filters: dict) -> bool:
+        """The autopilot's low-pass cut-offs ({"gyro": Hz, "accel": Hz}) became known or changed: the
+        estimators that exist (and those kept for other rates) model them from their next report on (the
+        filter shapes only the report's fit, not the accumulated levels). True when something changed."""
+        new = {k: float(v) for k, v in (filters or {}).items() if k in ("gyro", "accel") and v}
+        if new == self.filters:
+            return False
+        self.filters = new
+        if self.cfg.estimator.get("filter_hz") is not None:
+            return True
+        banks = [self.fast, self.slow, self.learn] + [p[k] for _, p in self._profiles for k in ("fast", "slow", "learn")]
+        for bank in banks:
+            for a, est in bank.items():
+                if hasattr(est, "filter_hz"):
+                    est.filter_hz = new.get("gyro" if a in GYRO_AXES else "accel")
+        return True
+
     def relearn(self) -> None:
         """Learn the baseline afresh (estimators without forgetting from now on)."""
-        est = {k: v for k, v in self.cfg.estimator.items() if k != "forgetting_s"}
-        self.learn = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=None, **est) for a in self.axes}
+        self.learn = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=None, **self._est_cfg(a)) for a in self.axes}
         self.learned_s = 0.0
 
     def stop_learning(self) -> None:

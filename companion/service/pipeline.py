@@ -81,6 +81,10 @@ class Pipeline:
         self.failed: str | None = None  # a user-facing error found in the data (the caller reports it)
         self._tick = True
         self._decode = None
+        # the autopilot's filter parameters (INS_GYRO_FILTER, IMU_GYRO_CUTOFF, ...) and the log format they
+        # belong to (None: MAVLink): each channel's estimators model the low-pass cut-off of its data
+        self.params: dict[str, float] = {}
+        self.params_format: str | None = None
 
     # ------------------------------------------------------------------ input
     def raise_if_failed(self) -> None:
@@ -92,11 +96,44 @@ class Pipeline:
 
             raise CompanionError(self.failed)
 
+    def set_params(self, params: Mapping | None, fmt: str | None = None) -> None:
+        """The autopilot's parameters as far as known (a log's, or PARAM_VALUE messages so far), ``fmt`` the
+        log format their IMU messages come in ("dataflash", "ulog"; None: MAVLink). The filter parameters
+        among them give each channel's low-pass cut-offs (:func:`companion.analysis.filters.filters_from_params`)."""
+        from companion.analysis.filters import FILTER_PARAMS
+
+        self.params = {k: float(v) for k, v in (params or {}).items() if k in FILTER_PARAMS}
+        self.params_format = fmt
+        for ch in self.channels.values():
+            self._apply_filters(ch)
+
+    def on_param(self, sysid: int, name: str, value: float) -> None:
+        """A PARAM_VALUE of the vehicle: a filter parameter is kept and applied to the channels."""
+        from companion.analysis.filters import FILTER_PARAMS
+
+        name = str(name).split("\0", 1)[0]
+        if name not in FILTER_PARAMS or (self.sysid is not None and sysid != self.sysid):
+            return
+        if not math.isfinite(float(value)) or self.params.get(name) == float(value):
+            return
+        self.set_params(dict(self.params, **{name: float(value)}), self.params_format)
+
+    def _apply_filters(self, ch: Channel) -> None:
+        from companion.analysis.filters import filters_from_params
+
+        f = filters_from_params(self.params, ch.message, self.params_format)
+        if ch.set_filters(f) and f:
+            self.log(f"IMU{ch.imu}: low-pass " + ", ".join(f"{k} {v:g} Hz" for k, v in sorted(f.items()))
+                     + " (the autopilot's parameter) modelled in the online noise figures")
+
     def handle(self, msg) -> bool:
         """One pymavlink message; returns True when it was an IMU sample of the vehicle that was used."""
         mtype = msg.get_type()
         if mtype == "HEARTBEAT":
             self.on_heartbeat(msg.get_srcSystem(), msg.type, msg.autopilot, msg.base_mode)
+            return False
+        if mtype == "PARAM_VALUE":
+            self.on_param(msg.get_srcSystem(), msg.param_id, msg.param_value)
             return False
         if mtype not in IMU_MESSAGES:
             return False
@@ -195,6 +232,7 @@ class Pipeline:
                 self.scales.lookup(key)[0] if self.scales is not None else 1e-3)
             ch = self.channels[key.instance] = Channel(key.instance, key.message, self.cfg, gyro_lsb=lsb)
             self.log(f"IMU{key.instance}: {key.message} from {key.label()}")
+            self._apply_filters(ch)
         elif ch.message != key.message:
             self.ignored["other_message"] += n
             return None

@@ -56,6 +56,8 @@ def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: F
         r = hb_rec[j]
         pipeline.on_heartbeat(int(index.sysid[hb[j]]), int(r["type"]), int(r["autopilot"]), int(r["base_mode"]))
 
+    # the filter parameters the tlog carries (PARAM_VALUE): the estimators model the low-pass cut-off
+    pipeline.set_params(tlog.param_values(index), None)
     used = feed_in_order(pipeline, streams, order, src, row, heartbeat, stop)
     pipeline.raise_if_failed()
     return {"frames": index.frames, "bad_frames": index.bad_frames, "bad_bytes": index.bad_bytes,
@@ -206,6 +208,9 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
     def heartbeat(j):
         pipeline.on_heartbeat(sysid, 2, autopilot, MAV_MODE_FLAG_SAFETY_ARMED if hb_armed[j] else 0)
 
+    # the log's filter parameters (INS_GYRO_FILTER, IMU_GYRO_CUTOFF): the estimators model the low-pass
+    # cut-off, as `companion analyze` does for the same log
+    pipeline.set_params(res.meta.get("params"), res.meta.get("format"))
     used = feed_in_order(pipeline, streams, order, kind, rows, heartbeat, stop)
     pipeline.raise_if_failed()
     return {"frames": int(res.totals.get("frames", 0)), "bad_frames": int(res.totals.get("bad_frames", 0)),

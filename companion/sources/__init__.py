@@ -88,7 +88,8 @@ def load_tlog(path, config=None, split_periods: float = _timing.SPLIT_PERIODS) -
     streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
     totals = {"frames": index.frames, "bad_bytes": index.bad_bytes, "bad_frames": index.bad_frames,
               "imu_messages": int(sum(r.t.shape[0] for r in raws))}
-    return LoadResult(str(path), streams, totals, dict(index.counts), {"identity": tlog.identity(index)})
+    return LoadResult(str(path), streams, totals, dict(index.counts),
+                      {"identity": tlog.identity(index), "params": tlog.param_values(index)})
 
 
 def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS, time_unit: str | None = None) -> LoadResult:

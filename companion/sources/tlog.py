@@ -246,13 +246,23 @@ def identity(idx: FrameIndex) -> dict:
                 out["board_by_sysid"][int(s)] = f"{int(uid):016x}"
         if out["board_by_sysid"]:
             out["board_id"] = next(iter(out["board_by_sysid"].values()))
+    for name, v in param_values(idx).items():
+        inst = GYRO_ID_PARAMS.get(name)
+        if inst is not None and v != 0:
+            out["imu_ids"][inst] = int(round(v))
+    return out
+
+
+def param_values(idx: FrameIndex) -> dict[str, float]:
+    """{name: value} of the tlog's PARAM_VALUE messages (the last finite value of each name; the value is a
+    float on the wire, integers below 2^24 exact)."""
+    out: dict[str, float] = {}
     sel = np.flatnonzero(idx.msgid == PARAM_VALUE_ID)
     if sel.size:
         pl = idx.payloads(sel, 25)
         names = [bytes(r[8:24]).split(b"\0", 1)[0].decode("ascii", "replace") for r in pl]
         values = pl[:, 0:4].copy().view("<f4").reshape(-1)
         for name, v in zip(names, values):
-            inst = GYRO_ID_PARAMS.get(name)
-            if inst is not None and np.isfinite(v) and v != 0:
-                out["imu_ids"][inst] = int(round(float(v)))
+            if np.isfinite(v):
+                out[name] = float(v)
     return out
