@@ -159,12 +159,10 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     if Q2:
         # white phase: c_Q(l) = Q^2 sum a_p b_q [l = p - q], spikes at nine lags; the smooth part c(l) is
         # evaluated there exactly (cross term 2 c c_Q) and the spikes add c_Q^2.
-        spikes: dict[int, float] = {}
-        for p, ap in taps_a:
-            for q, bq in taps_b:
-                spikes[p - q] = spikes.get(p - q, 0.0) + Q2 * ap * bq
-        lag = np.array([k for k, v in spikes.items() if v != 0.0], dtype=np.int64)
-        cq = np.array([spikes[k] for k in lag.tolist()])
+        # the spikes' lags are the nine -shift (some coincide when m2 is a multiple of m1): weights summed per lag
+        lag, at = np.unique(-shift, return_inverse=True)
+        cq = Q2 * np.bincount(at, weights=weight)
+        lag, cq = lag[cq != 0.0], cq[cq != 0.0]
         cnt = np.maximum(0, np.minimum(M1 - 1, M2 - 1 - lag) - np.maximum(0, -lag) + 1).astype(float)
         cs = np.zeros(lag.shape[0])
         for term in terms:

@@ -176,8 +176,9 @@ def _gser(a: float, x: float) -> float:
         # (the same products in the same order) instead of thousands of Python steps
         k = int(math.sqrt(80.0 * a)) + 60
         terms = np.cumprod(x / (a + np.arange(1.0, k + 1.0))) / a
-        if terms[-1] < _EPS * (1.0 / a + float(terms.sum())) * 1e-3:
-            return (1.0 / a + float(terms.sum())) * math.exp(_log_gamma_prefactor(a, x))
+        total = 1.0 / a + float(terms.sum())
+        if terms[-1] < _EPS * total * 1e-3:
+            return total * math.exp(_log_gamma_prefactor(a, x))
     ap = a
     term = total = 1.0 / a
     for _ in range(100000):
