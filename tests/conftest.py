@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+import companion  # noqa: F401  (first: it sets one BLAS thread per process before numpy loads)
+
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = Path(os.environ.get("COMPANION_SHARED", ROOT.parent / "shared"))
 
