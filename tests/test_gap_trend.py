@@ -79,6 +79,7 @@ def test_hidden_random_walk_under_a_missized_model_is_not_named_a_ramp():
     assert r.added[0]["K"] == pytest.approx(6.8425e-5, rel=0.3)
     rec = r.iterations[0]["trend"]
     assert rec["named"] == "random_walk" and rec["lr"] > 5 * RECAL_PENALTY
+    assert any(n.startswith("ramp or random walk") and "not a straight line" in n for n in r.notes)
     assert r.gap_after <= NOISE_FLOOR_G
 
 
@@ -94,4 +95,5 @@ def test_hidden_ramp_without_a_model_random_walk_stays_a_ramp():
     assert r.added[0]["R"] == pytest.approx(1.40229e-5, rel=0.3)
     rec = r.iterations[0]["trend"]
     assert rec["named"] == "ramp" and rec["lr"] < RECAL_PENALTY and rec["random_walk_score"] > 0
+    assert any(n.startswith("ramp or random walk") and "is a straight line" in n for n in r.notes)
     assert r.gap_after <= NOISE_FLOOR_G

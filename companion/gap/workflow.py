@@ -399,6 +399,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             record["nested"] = step["nested"]
         if step["trend"]:
             record["trend"] = step["trend"]
+            res.notes.append(explain.explain_trend(step["trend"]))
         if top is not None:
             record["test"] = {"effect": top.label(terms0), "lr": top.lr, "lr_raw": top.delta_dev,
                               "inflation": top.inflation, "threshold": top.penalty, "score": top.score}
