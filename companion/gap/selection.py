@@ -37,7 +37,9 @@ One refinement keeps the
 nested rule of a two-parameter effect against its one-parameter limit (Gauss-Markov with tau_c -> infinity
 is a random walk, tau_c -> 0 white noise): the limit is named unless the Gauss-Markov term is
 significantly better than it (:func:`nested_test`), because the score's small cost of a shape parameter
-(18.4 - 15.1) is not a test of lambda = 1/tau_c = 0.
+(18.4 - 15.1) is not a test of lambda = 1/tau_c = 0. A second keeps a ramp and a random walk apart where
+the Allan curve cannot: a winning ramp gives way to a random walk that also passes its level when the
+record with its least-squares line taken out still holds one (:mod:`companion.gap.trend`).
 """
 
 from __future__ import annotations

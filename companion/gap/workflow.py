@@ -477,7 +477,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                "test": {"effect": x.label(terms0), "lr": x.lr, "lr_raw": x.delta_dev,
                                         "inflation": x.inflation, "threshold": x.penalty, "score": x.score},
                                "recalibration_score": value, "chosen": x.label(terms0), "gap_after": x.fit.gap,
-                               "runner_up": ru.as_dict(terms0) if ru is not None else None})
+                               "runner_up": ru.as_dict(terms0) if ru is not None else None,
+                               **({"trend": step["trend"]} if step["trend"] else {})})
+        if step["trend"]:
+            res.notes.append(explain.explain_trend(step["trend"]))
         res.alternatives.append({"iteration": len(res.iterations), "chosen": x.as_dict(terms0),
                                  "runner_up": {"explanation": f"recalibrated {mod}", "delta_dev": lr_raw,
                                                "inflation": phi, "lr": lr_raw / phi,
