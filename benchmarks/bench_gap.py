@@ -22,6 +22,8 @@ Tiers (seed ranges disjoint, printed):
 * two effects at once (two of quantization, ramp, gauss_markov, sinusoid): both named, nothing else.
 * the ramp-under-random-walk family: ramp R around 4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (each x0.8-1.25):
   ramp named vs random walk K recalibrated.
+* ramp or random walk (``--only ramp-rw``, ``--hard-draws`` each): a ramp or a random walk hidden from a mis-sized
+  white + flicker model, both directions of the look-alike rule of companion.gap.trend.
 """
 
 from __future__ import annotations
@@ -588,6 +590,37 @@ def hard_tier(draws, seed0=600_000, cases=None):
     print(f"{'all':28} {_pct(tot[0], tot[3])} {_pct(tot[1], tot[3])} {_pct(tot[2], tot[3])}")
 
 
+def ramp_rw_tier(draws, seed0=700_000):
+    """Ramp or random walk, both directions: a ramp or a rate random walk hidden from a mis-sized (x0.7-1.4)
+    white + flicker model (no random-walk term, so 'random_walk' is a candidate beside 'ramp'). Right = the
+    hidden one named alone and G after <= 2. Also the detrended record's random-walk evidence (corrected LR,
+    companion.gap.trend) wherever a ramp won the Allan ranking against a random walk that passed too."""
+    print(f"\n== ramp or random walk: hidden from a mis-sized white + flicker model, {draws} draws each, seeds {seed0}+ ==")
+    print(f"{'hidden':14} {'right':>15}  detrended random-walk LR where tested (named)  named instead (counts)")
+    tot = [0, 0]
+    for e_i, effect in enumerate(("ramp", "random_walk")):
+        ok_n, lrs, wrong = 0, [], {}
+        for s in range(draws):
+            seed = seed0 + 1000 * e_i + s
+            rng = np.random.default_rng(seed)
+            base = draw_model(rng)[:2]
+            hidden = draw_effect(effect, base, rng)
+            model, _ = _scaled(base, rng)
+            _, r, _ = _run(base + [hidden], model, seed)
+            names = _named(r)
+            ok = names == [effect] and r.gap_after <= NOISE_FLOOR_G
+            ok_n += ok
+            lrs += [f"{it['trend']['lr']:.1f} ({it['trend']['named'][:4]})" for it in r.iterations if it.get("trend")]
+            if not ok:
+                key = "+".join(names) or "(nothing)"
+                wrong[key] = wrong.get(key, 0) + 1
+        tot[0] += ok_n
+        tot[1] += draws
+        w = ", ".join(f"{k} {v}" for k, v in sorted(wrong.items(), key=lambda kv: -kv[1])) or "-"
+        print(f"{effect:14} {_pct(ok_n, draws)}  {', '.join(lrs) or '-'}  {w}", flush=True)
+    print(f"{'all':14} {_pct(tot[0], tot[1])}")
+
+
 def issue_ramp_family(seeds, seed0=500_000):
     """The ramp-under-random-walk case and draws around it: ramp named, and how the random-walk recalibration fared."""
     print(f"\n== ramp-under-random-walk family: ramp ~4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (each x0.8-1.25), "
@@ -618,7 +651,7 @@ def main():
                     "uses the same, the two-effect tier half per pair (default 40)")
     ap.add_argument("--null-seeds", type=int, default=None, help="null draws (default 2.5 x --seeds)")
     ap.add_argument("--quick", action="store_true", help="4 draws per effect, 10 null: a smoke run")
-    ap.add_argument("--only", choices=("single", "null", "missized", "two", "issue", "hard"), help="run one tier")
+    ap.add_argument("--only", choices=("single", "null", "missized", "two", "issue", "hard", "ramp-rw"), help="run one tier")
     ap.add_argument("--fresh", action="store_true", help="fresh random draws: the seed ranges start at a number "
                     "drawn from the OS entropy (printed, so a run can be repeated), not at the fixed defaults")
     ap.add_argument("--hard-draws", type=int, default=10, help="draws per case of the hard tier (default 10)")
@@ -642,7 +675,8 @@ def main():
              "two": lambda: two_effect_tier(max(2, a.seeds // 2), 400_000 + off),
              "issue": lambda: issue_ramp_family(a.seeds, 500_000 + off),
              "hard": lambda: hard_tier(a.hard_draws, 600_000 + off,
-                                       None if not a.hard_cases else {int(x) for x in a.hard_cases.split(",")})}
+                                       None if not a.hard_cases else {int(x) for x in a.hard_cases.split(",")}),
+             "ramp-rw": lambda: ramp_rw_tier(a.hard_draws, 700_000 + off)}
     for name, fn in tiers.items():
         if a.only in (None, name):
             t = time.perf_counter()

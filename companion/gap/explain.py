@@ -197,3 +197,15 @@ def explain_temperature(coef: float, check: dict, axis: str) -> str:
             f"{WHAT['temperature']}. Regression of the rate on the temperature: slope {check['slope'] * k:.3g} "
             f"+- {check['se'] * k:.2g} deg/h per K (t = {check['t']:.1f}); {verdict}. Commonly caused by "
             f"{CAUSES['temperature']}.")
+
+
+def explain_trend(rec: dict) -> str:
+    """Plain words for the ramp-or-random-walk decision (:mod:`companion.gap.trend`)."""
+    head = (f"ramp or random walk: both explain the long-tau rise of the Allan curve (scores "
+            f"{rec['ramp_score']:.1f} and {rec['random_walk_score']:.1f}); with the least-squares line taken out "
+            "of the record")
+    if rec["named"] == "random_walk":
+        return (f"{head} a random walk is still there (LR {rec['lr']:.1f} > {rec['threshold']:.1f}): the rise is not a "
+                "straight line, so the random walk is named")
+    return (f"{head} no random walk is left (LR {rec['lr']:.1f} <= {rec['threshold']:.1f}): the rise is a straight "
+            "line, so the ramp is named")

@@ -37,7 +37,9 @@ One refinement keeps the
 nested rule of a two-parameter effect against its one-parameter limit (Gauss-Markov with tau_c -> infinity
 is a random walk, tau_c -> 0 white noise): the limit is named unless the Gauss-Markov term is
 significantly better than it (:func:`nested_test`), because the score's small cost of a shape parameter
-(18.4 - 15.1) is not a test of lambda = 1/tau_c = 0.
+(18.4 - 15.1) is not a test of lambda = 1/tau_c = 0. A second keeps a ramp and a random walk apart where
+the Allan curve cannot: a winning ramp gives way to a random walk that also passes its level when the
+record with its least-squares line taken out still holds one (:mod:`companion.gap.trend`).
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ from companion.allan.filtered_white import aliasing_gain
 from companion.gap.candidates import (MAGNITUDE, N_PARAMS, SHAPE, Fit, estimate_covariance, fit_terms,
                                       fit_with_candidate, gm_rw_direction, lr_inflation, refine_shapes,
                                       unit_column)
+from companion.gap import trend
 from companion.gap.likelihood import MODEL_FLOOR, Measured
 
 #: level an added effect must pass (its score's penalty is chi^2_k(1 - ALPHA))
@@ -382,13 +385,17 @@ def runner_up(ranked, chosen: Explanation):
 
 
 def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None, shaped=(),
-           lowpass=None, thermal=None) -> dict:
+           lowpass=None, thermal=None, detrended=None) -> dict:
     """One step: rank all explanations, apply the nested rule, return
     {ranked, chosen (Explanation or None), best (top of the ranking, chosen or not), nested, alternative
-    (Gauss-Markov fit the limit won over), runner_up}."""
+    (Gauss-Markov fit the limit won over), runner_up, trend}. ``detrended``: a callable giving the Allan
+    variance of the record with its least-squares line taken out (:mod:`companion.gap.trend`) and the
+    indices of the terms that are no model term and stay fixed (a rate-LSB white term): a winning
+    ramp then gives way to a random walk that also passes its level when the detrended record still holds
+    one (``trend``: that test's record)."""
     ranked = explanations(meas, state, held, recalibratable, combine_top, shaped, lowpass, thermal)
     out = {"ranked": ranked, "chosen": None, "best": ranked[0] if ranked else None, "nested": None,
-           "alternative": None, "runner_up": None}
+           "alternative": None, "runner_up": None, "trend": None}
     if not ranked:
         return out
     def resolve(best):
@@ -424,6 +431,15 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
             # a Gauss-Markov term that won on the larger likelihood still has to beat its one-parameter limit
             same, out["nested"], out["alternative"] = resolve(same)
         best = same
+    if detrended is not None and best.effect == "ramp" and best.score > 0 and \
+            any(x.effect == "random_walk" and x.score > 0 for x in ranked):
+        # ramp or random walk: the record's own time series decides (a ramp is a line, a random walk is not)
+        meas_d, keep = detrended()
+        taken, out["trend"] = trend.ramp_or_random_walk(meas_d, best, ranked, keep, RECAL_PENALTY)
+        if taken is not best:
+            best = taken
+            if out["nested"] is None:  # the random walk may be the limit of a Gauss-Markov term close behind
+                best, out["nested"], out["alternative"] = resolve(best)
     out["best"] = best
     if best.score > 0:
         out["chosen"] = best

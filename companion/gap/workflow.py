@@ -38,7 +38,7 @@ from scipy import stats
 
 from companion.allan.adev import oavar
 from companion.allan.lsb import DITHER_RATIO
-from companion.gap import explain, selection
+from companion.gap import explain, selection, trend
 from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation,
                                      refine_shapes, unit_column)
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
@@ -363,11 +363,19 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     # effect added, a model term recalibrated, both; model terms stay at their values unless freed
     held = set(range(len(terms0))) | set(fixed)
     base = _refit(meas, current, held, len(terms0))
+    cache: dict = {}
+
+    def detrended():
+        """The record with its least-squares line out (measured once, when a ramp first needs the test)."""
+        if "meas" not in cache:
+            cache["meas"] = trend.detrended_measure(y_segs, rate_hz)
+        return cache["meas"], sorted(fixed)
     alternatives: dict[int, dict] = {}  # index of a term -> the Gauss-Markov fit it won over
     for it in range(max_iter):
         recalibratable = [j for j in range(len(terms0)) if j in held]
         shaped = [i for i in range(len(terms0), len(current)) if current[i]["effect"] in SHAPE and i not in held]
-        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp, thermal=thermal)
+        step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp, thermal=thermal,
+                                detrended=detrended)
         ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
         if chosen is None:  # a vibration line the periodogram shows is a known frequency, not a searched one
             chosen, note = _spectral_line(ranked, y, rate_hz)
@@ -389,6 +397,9 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                   "recal_threshold": selection.RECAL_PENALTY}
         if step["nested"]:
             record["nested"] = step["nested"]
+        if step["trend"]:
+            record["trend"] = step["trend"]
+            res.notes.append(explain.explain_trend(step["trend"]))
         if top is not None:
             record["test"] = {"effect": top.label(terms0), "lr": top.lr, "lr_raw": top.delta_dev,
                               "inflation": top.inflation, "threshold": top.penalty, "score": top.score}
@@ -451,7 +462,8 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         _, lr_raw, phi, hf = _hold_test(meas, base, held, j, terms0[j])
         value = lr_raw - phi * selection.RECAL_PENALTY
         shaped = [i for i in range(len(terms0), len(hf.terms)) if hf.terms[i]["effect"] in SHAPE and i not in held]
-        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped, lowpass=lp, thermal=thermal)
+        step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped, lowpass=lp, thermal=thermal,
+                                detrended=detrended)
         x = step["chosen"]
         if x is None:
             continue
@@ -465,7 +477,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                                "test": {"effect": x.label(terms0), "lr": x.lr, "lr_raw": x.delta_dev,
                                         "inflation": x.inflation, "threshold": x.penalty, "score": x.score},
                                "recalibration_score": value, "chosen": x.label(terms0), "gap_after": x.fit.gap,
-                               "runner_up": ru.as_dict(terms0) if ru is not None else None})
+                               "runner_up": ru.as_dict(terms0) if ru is not None else None,
+                               **({"trend": step["trend"]} if step["trend"] else {})})
+        if step["trend"]:
+            res.notes.append(explain.explain_trend(step["trend"]))
         res.alternatives.append({"iteration": len(res.iterations), "chosen": x.as_dict(terms0),
                                  "runner_up": {"explanation": f"recalibrated {mod}", "delta_dev": lr_raw,
                                                "inflation": phi, "lr": lr_raw / phi,
