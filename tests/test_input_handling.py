@@ -239,3 +239,81 @@ def test_random_walk_resolved_only_from_a_long_enough_record():
         long = analyze_axis(_n_k(seed, 1200.0), 20.0)
         k = [t for t in long["terms"] if t["effect"] == "random_walk"]
         assert k and k[0]["K"] == pytest.approx(8e-4, rel=0.3)
+
+
+def test_bin_float_damaged_to_inf_or_nan_is_dropped_and_said(tmp_path):
+    """A gyro float whose exponent bits were flipped (inf, NaN) is a damaged record: dropped and counted."""
+    from companion.analysis.notes import notes
+    from companion.sources import dataflash
+
+    t, g, a = _data(n=400)
+    p = tmp_path / "f.bin"
+    write_imu_log(p, t, g[None], a[None])
+    data = bytearray(p.read_bytes())
+    log = dataflash.index(np.frombuffer(bytes(data), dtype=np.uint8))
+    imu = log.offsets[log.names["IMU"]]
+    gyrx = 3 + 8 + 1  # header, TimeUS (Q), I (B): GyrX (f) follows
+    data[imu[10] + gyrx:imu[10] + gyrx + 4] = np.float32(np.inf).tobytes()
+    data[imu[20] + gyrx + 4:imu[20] + gyrx + 8] = np.float32(np.nan).tobytes()  # GyrY
+    data[imu[30] + gyrx + 12:imu[30] + gyrx + 16] = np.float32(-np.inf).tobytes()  # AccX
+    p.write_bytes(bytes(data))
+    res = load(p)
+    s = res.imu_streams()[0]
+    assert s.samples == 397 and s.timing.damaged == 3
+    assert np.all(np.isfinite(s.gyro)) and np.all(np.isfinite(s.accel))
+    assert s.rate_hz == pytest.approx(100.0)
+    assert any("3 sample(s)" in n and "damaged records" in n for n in notes(res))
+
+
+def _ulog_vehicle_imu(path, dt_us):
+    """A minimal ULog with one vehicle_imu topic whose integration intervals are ``dt_us`` (us, per message)."""
+    import struct
+
+    from companion.sim.ulog_writer import MAGIC, _msg
+
+    spec = ("vehicle_imu:uint64_t timestamp;uint64_t timestamp_sample;float[3] delta_angle;"
+            "float[3] delta_velocity;uint16_t delta_angle_dt;uint16_t delta_velocity_dt;")
+    out = bytearray(MAGIC + bytes([1]) + struct.pack("<Q", 0))
+    out += _msg(b"B", bytes(16) + bytes(24)) + _msg(b"F", spec.encode())
+    out += _msg(b"A", struct.pack("<BH", 0, 0) + b"vehicle_imu")
+    for k, dt in enumerate(dt_us):
+        ts = 1_000_000 + 4000 * k
+        out += _msg(b"D", struct.pack("<HQQ3f3fHH", 0, ts, ts, 0.001, 0.0, 0.0, 0.0, 0.0, -0.0392, dt, dt))
+    path.write_bytes(bytes(out))
+
+
+def test_ulog_zero_integration_interval_is_dropped_and_said(tmp_path):
+    """vehicle_imu with delta_angle_dt 0 (a damaged message) would give an infinite rate: dropped, counted."""
+    p = tmp_path / "v.ulg"
+    dts = [4000] * 50
+    dts[7] = dts[30] = 0
+    _ulog_vehicle_imu(p, dts)
+    s = load(p).imu_streams()[0]
+    assert s.key.message == "vehicle_imu" and s.samples == 48 and s.timing.damaged == 2
+    assert np.allclose(s.gyro[:, 0], 0.25) and np.allclose(s.accel[:, 2], -9.8)
+    assert s.rate_hz == pytest.approx(250.0)
+
+
+def test_batch_burst_without_a_rate_is_dropped_and_said(shared_data, tmp_path):
+    """An ISBH header whose smp_rate was damaged to 0: its burst has no sample times, it is dropped and
+    counted instead of giving NaN times (the other bursts are read)."""
+    from companion.sources import dataflash
+
+    src = shared_data / "ardupilot" / "methodic_backend_log_80k.bin"
+    data = bytearray(src.read_bytes())
+    log = dataflash.index(np.frombuffer(bytes(data), dtype=np.uint8))
+    whole = load(src)
+    before = {s.key.label(): s.samples for s in whole.streams if s.key.message.startswith("ISB")}
+    f = log.formats[log.names["ISBH"]]
+    rate_at = 3 + f.dtype.fields["smp_rate"][1]
+    pos = int(log.offsets[log.names["ISBH"]][0])
+    width = f.dtype["smp_rate"].itemsize
+    data[pos + rate_at:pos + rate_at + width] = bytes(width)
+    p = tmp_path / "isb.bin"
+    p.write_bytes(bytes(data))
+    res = load(p)
+    after = {s.key.label(): s for s in res.streams if s.key.message.startswith("ISB")}
+    damaged = sum(s.timing.damaged for s in after.values())
+    assert damaged > 0
+    assert sum(s.samples for s in after.values()) + damaged == sum(before.values())
+    assert all(np.all(np.isfinite(s.t)) for s in after.values())
