@@ -266,6 +266,8 @@ def main(argv=None) -> int:
             done[ext].update(c)
             cpu[ext] += cs
             for sig, (n, first) in cl.items():
+                if sig not in classes[ext]:
+                    print(f"new class: {ext}: {sig}  (first: --replay {ext}:{':'.join(map(str, first))})", flush=True)
                 m, f0 = classes[ext].get(sig, (0, first))
                 classes[ext][sig] = (m + n, min(f0, first))
             if time.time() - last > 60:
