@@ -225,12 +225,16 @@ def _n_k(seed, seconds, rate=20.0, N=1e-3, K=8e-4):
 
 def test_random_walk_resolved_only_from_a_long_enough_record():
     """N 1e-3, K 8e-4 (SI): K dominates the AVAR from tau = sqrt(3) N / K = 2.2 s, so it needs 10 x 2.2 = 22 s
-    of record: a 15 s record gives a bound and says how long it would need, 20 minutes resolve it."""
-    from companion.allan.fit import record_needed
+    of record, and a long-tau term at least 60 s: a 15 s record gives a bound and says how long it would need,
+    20 minutes resolve it."""
+    from companion.allan.fit import dominates_from, record_needed
     from companion.analysis.axis import analyze_axis
 
-    need = record_needed([{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 8e-4}], 0.05)
-    assert need["random_walk"] == pytest.approx(10 * np.sqrt(3) * 1e-3 / 8e-4, rel=0.01)
+    terms = [{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 8e-4}]
+    assert dominates_from(terms, 0.05)["random_walk"] == pytest.approx(np.sqrt(3) * 1e-3 / 8e-4, rel=0.01)
+    assert record_needed(terms, 0.05)["random_walk"] == pytest.approx(60.0)
+    fast = [{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 8e-5}]  # dominates from 22 s
+    assert record_needed(fast, 0.05)["random_walk"] == pytest.approx(10 * np.sqrt(3) * 1e-3 / 8e-5, rel=0.01)
     for seed in range(3):
         short = analyze_axis(_n_k(seed, 15.0), 20.0)
         assert "random_walk" not in [t["effect"] for t in short["terms"]]
@@ -317,3 +321,23 @@ def test_batch_burst_without_a_rate_is_dropped_and_said(shared_data, tmp_path):
     assert damaged > 0
     assert sum(s.samples for s in after.values()) + damaged == sum(before.values())
     assert all(np.all(np.isfinite(s.t)) for s in after.values())
+
+
+@pytest.mark.parametrize("effect,param,value,rate,seconds", [
+    ("random_walk", "K", 6e-4, 50.0, 33.0),  # a copter's 33 s at rest whose AVAR rises from 1-2 s
+    ("bias_instability", "B", 3e-3, 2000.0, 0.29),  # one batch-sampler burst
+])
+def test_long_tau_term_never_resolved_from_under_a_minute(effect, param, value, rate, seconds):
+    """A long-tau term that dominates early enough for the scale-free 10 x tau rule is still only a bound when
+    the record is under a minute (the issue's 33 s copter still and 0.29 s burst), and the note says 60 s."""
+    from companion.analysis.axis import analyze_axis
+    from companion.sim.synth import synthesize_axis
+
+    terms = [{"effect": "white_noise", "N": 6e-5 if rate == 50.0 else 1e-4}, {"effect": effect, param: value}]
+    for seed in range(3):
+        y = synthesize_axis(terms, rate, int(seconds * rate), np.random.default_rng(seed))
+        out = analyze_axis(y, rate)
+        assert effect not in [t["effect"] for t in out["terms"]]
+        notes = " ".join(out["fit"]["notes"])
+        if effect in [t["effect"] for t in out["bounds"]]:
+            assert f"{effect} not resolved" in notes and "60 s" in notes
