@@ -342,3 +342,25 @@ def test_long_tau_term_never_resolved_from_under_a_minute(effect, param, value, 
         notes = " ".join(out["fit"]["notes"])
         if effect in [t["effect"] for t in out["bounds"]]:
             assert f"{effect} not resolved" in notes and "60 s" in notes
+
+
+def test_blanked_fmt_record_is_skipped_and_said(tmp_path):
+    """An FMT record with its format and columns zeroed (an empty layout) decodes nothing: the type is named
+    as damaged, no zero-size decoding (which raised ValueError when the GPS start time needed IMU times)."""
+    t, g, a = _data(n=300)
+    p = tmp_path / "blank.bin"
+    write_imu_log(p, t, g[None], a[None], messages=["hello"], gps_utc=(0.5, 1.7e9))
+    whole = bytes(p.read_bytes())
+    for name in (b"MSG\0", b"IMU\0"):
+        data = bytearray(whole)
+        i = data.find(name)  # Name (4) of the type's FMT record, then Format (16) and Columns (64)
+        assert i > 0
+        data[i + 4:i + 4 + 16 + 64] = bytes(80)
+        p.write_bytes(bytes(data))
+        if name == b"IMU\0":
+            with pytest.raises(CompanionError, match="no IMU"):
+                load(p)
+            continue
+        res = load(p)
+        assert res.imu_streams()[0].samples == 300 and res.meta["identity"]["start_time"] is not None
+        assert any("MSG not read" in n for n in res.meta["notes"]), res.meta["notes"]
