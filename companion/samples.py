@@ -44,6 +44,7 @@ class TimingReport:
     backwards: int = 0  # timestamps going backwards by a little (dropped)
     resets: int = 0  # timestamps jumping far back: autopilot reboot (starts a new segment)
     jitter_rms: float = 0.0  # rms deviation of intervals from the nominal period, in seconds
+    damaged: int = 0  # samples with a non-finite time, an infinite value or a NaN gyro value (dropped)
 
 
 @dataclass

@@ -292,12 +292,16 @@ def _scaled_chi2_ci(theta, var, level):
 #: interval, tests/test_estimators.py.) The refit without such a term uses only the taus below tau_d.
 RESOLVE_RECORD_FACTOR = 10.0
 RESOLVE_EFFECTS = ("bias_instability", "random_walk")
+#: ... and never from less than a minute of record: the rule above is scale-free, so a short record whose
+#: AVAR rises early (33 s of a copter at rest, a 0.29 s batch-sampler burst) would "resolve" a rate random
+#: walk or a bias instability from cluster times of a second or of milliseconds, where a drift, a slow filter
+#: or temperature look the same; below 60 s the analysis deems even N unusable (analysis.limits.FIT_MIN_SECONDS).
+RESOLVE_MIN_RECORD_S = 60.0
 
 
-def record_needed(terms, tau0: float) -> dict[str, float]:
-    """For each of ``RESOLVE_EFFECTS`` in ``terms`` (fitted, SI): the record length (s) it needs to be
-    resolved, RESOLVE_RECORD_FACTOR x the shortest tau (>= tau0) from which it is at least half of the model
-    AVAR (inf if it never is)."""
+def dominates_from(terms, tau0: float) -> dict[str, float]:
+    """For each of ``RESOLVE_EFFECTS`` in ``terms`` (fitted, SI): the shortest tau (>= tau0) from which it is
+    at least half of the model AVAR (inf if it never is)."""
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in terms]
     grid = np.exp(np.linspace(math.log(tau0), math.log(tau0) + math.log(1e9), 2000))
     total = avar_model(plain, grid)
@@ -306,8 +310,18 @@ def record_needed(terms, tau0: float) -> dict[str, float]:
         if t["effect"] not in RESOLVE_EFFECTS:
             continue
         dom = np.flatnonzero(avar_term(t, grid) >= 0.5 * total)
-        out[t["effect"]] = RESOLVE_RECORD_FACTOR * float(grid[dom[0]]) if dom.size else math.inf
+        out[t["effect"]] = float(grid[dom[0]]) if dom.size else math.inf
     return out
+
+
+def record_needed(terms, tau0: float) -> dict[str, float]:
+    """For each of ``RESOLVE_EFFECTS`` in ``terms`` (fitted, SI): the record length (s) it needs to be
+    resolved, RESOLVE_RECORD_FACTOR x the shortest tau from which it dominates (:func:`dominates_from`;
+    inf if it never does), at least RESOLVE_MIN_RECORD_S."""
+    return {e: max(RESOLVE_RECORD_FACTOR * tau_d, RESOLVE_MIN_RECORD_S)
+            for e, tau_d in dominates_from(terms, tau0).items()}
+
+
 def quantization_slope(tau, avar) -> bool:
     """True when AVAR at the two smallest cluster times falls like quantization noise (log-log slope at most
     QUANT_SLOPE): the region a quantization term needs before it is a candidate of the automatic selection."""
@@ -329,6 +343,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     if n is None or not rate_hz or not res.terms:
         return res
     record = (max(segments) if segments else n) / float(rate_hz)
+    tau_d = dominates_from(res.terms, 1.0 / float(rate_hz))
     needs = record_needed(res.terms, 1.0 / float(rate_hz))
     drop = {e: need for e, need in needs.items() if need > record}
     if not drop:
@@ -339,7 +354,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     # the refit uses only the cluster times below the one from which a dropped term dominates: above it the
     # kept terms cannot explain the curve, and fitting them there would inflate them (N taken up by the rise)
     tau = np.asarray(tau, dtype=float)
-    cut = min((need / RESOLVE_RECORD_FACTOR for need in drop.values() if math.isfinite(need)), default=math.inf)
+    cut = min((tau_d[e] for e in drop if math.isfinite(tau_d[e])), default=math.inf)
     sel = tau < cut
     if np.count_nonzero(sel) < 3:
         sel = np.ones(tau.shape[0], dtype=bool)
@@ -349,8 +364,10 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
                      white_filter=white_filter, detect_filter=detect_filter)
     for e, need in drop.items():
         res2.notes.append(f"{e} not resolved: the record ({record:.3g} s) is shorter than the "
-                          + (f"{need:.3g} s it needs (it dominates the Allan variance only from tau {need / RESOLVE_RECORD_FACTOR:.3g} s, "
-                             f"and needs that tau within a tenth of the record)" if math.isfinite(need)
+                          + (f"{need:.3g} s it needs (it dominates the Allan variance only from tau {tau_d[e]:.3g} s, "
+                             f"and needs that tau within a tenth of the record)"
+                             if math.isfinite(need) and need > RESOLVE_MIN_RECORD_S
+                             else f"{need:.3g} s a long-tau term needs at least" if math.isfinite(need)
                              else "record it needs (it dominates the Allan variance at no tau)")
                           + "; given as an upper bound")
     return res2

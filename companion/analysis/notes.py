@@ -21,6 +21,9 @@ def notes(res) -> list[str]:
         if dead:
             out.append(dead)
         t = s.timing
+        if t.damaged:
+            out.append(f"{lab}: {t.damaged} sample(s) with a non-finite time or an impossible value skipped "
+                       "(damaged records).")
         if t.duplicates or t.backwards or t.resets:
             out.append(f"{lab}: dropped {t.duplicates} duplicate and {t.backwards} backward timestamps; "
                        f"{t.resets} reboot(s) (time reset) -> {len(s.segments)} segments.")

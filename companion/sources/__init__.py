@@ -55,8 +55,18 @@ def load_config(config) -> dict:
 
 
 def build_stream(raw: RawStream, split_periods: float = _timing.SPLIT_PERIODS) -> ImuStream:
-    """Apply the timing rules to decoded samples: drop duplicates/backward steps, segment, report."""
+    """Apply the timing rules to decoded samples: drop duplicates/backward steps, segment, report.
+
+    A sample with a non-finite time, an infinite value, or a NaN gyro value in a stream that has gyro data
+    comes from a damaged record (a flipped float exponent, a zero integration interval, a burst header with
+    no rate): it is dropped before the timing rules and counted in ``timing.damaged``."""
+    bad = _damaged_samples(raw)
+    if bad is not None:
+        raw = RawStream(raw.key, raw.t[~bad], raw.gyro[~bad], raw.accel[~bad],
+                        None if raw.temperature is None else raw.temperature[~bad], raw.is_imu,
+                        raw.gyro_lsb, raw.accel_lsb, raw.time_resolution, raw.notes)
     keep, segments, report = _timing.analyse(raw.t, raw.time_resolution, split_periods)
+    report.damaged = 0 if bad is None else int(bad.sum())
     all_kept = bool(keep.all())
 
     def k(a):
@@ -65,6 +75,19 @@ def build_stream(raw: RawStream, split_periods: float = _timing.SPLIT_PERIODS) -
     return ImuStream(key=raw.key, t=k(raw.t), gyro=k(raw.gyro), accel=k(raw.accel),
                      temperature=k(raw.temperature), is_imu=raw.is_imu, segments=segments, timing=report,
                      gyro_lsb=raw.gyro_lsb, accel_lsb=raw.accel_lsb)
+
+
+def _damaged_samples(raw: RawStream) -> np.ndarray | None:
+    """Mask of the samples of damaged records (see :func:`build_stream`), None when there are none."""
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(raw.t)
+        bad |= np.isinf(raw.gyro).any(axis=1) | np.isinf(raw.accel).any(axis=1)
+        if raw.temperature is not None:
+            bad |= np.isinf(raw.temperature)
+        nan_gyro = np.isnan(raw.gyro).any(axis=1)
+        if not nan_gyro.all():  # a stream without gyro data (an accel-only burst) has NaN there by design
+            bad |= nan_gyro
+    return bad if bad.any() else None
 
 
 def _check_has_imu(res: LoadResult, require_imu: bool) -> LoadResult:
@@ -139,7 +162,8 @@ def load_ulog(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
     from companion.sources import ulog as ul
 
     u = ul.open_ulog(path)
-    raws, counts = ul.raw_streams(u)
+    with np.errstate(all="ignore"):  # casts of a damaged topic's fields: the values are checked in build_stream
+        raws, counts = ul.raw_streams(u)
     streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
     totals = {"frames": int(sum(counts.values())), "bad_bytes": 0, "bad_frames": 0,
               "imu_messages": int(sum(r.t.shape[0] for r in raws))}

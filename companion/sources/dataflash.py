@@ -203,7 +203,7 @@ def _text(b: bytes) -> str:
 
 
 def _dtype(fmt: str, columns: list[str]) -> np.dtype | None:
-    if len(columns) != len(fmt):
+    if not fmt or len(columns) != len(fmt):  # an empty layout (a blanked FMT record) decodes nothing
         return None
     fields = []
     for ch, col in zip(fmt, columns):

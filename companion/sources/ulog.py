@@ -147,7 +147,8 @@ def _time(d) -> np.ndarray:
 
 
 def _vec(d, names) -> np.ndarray:
-    return np.column_stack([d.data[n].astype(np.float64) for n in names])
+    with np.errstate(invalid="ignore", over="ignore"):  # a damaged definition can give odd field types
+        return np.column_stack([d.data[n].astype(np.float64) for n in names])
 
 
 def _nan3(n: int) -> np.ndarray:
