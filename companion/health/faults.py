@@ -129,7 +129,8 @@ class Observation:
     * ``stats``: the block's statistics (``BlockStats``, one column per axis); ``t``: its timestamps (s);
     * ``still``: the motion gate's decision for the block; ``ref``: the axis' still reference (``AxisRef``);
     * ``extra_var``: Allan-predicted variance of a block mean around the bias reference ((rad/s)^2);
-    * pairs of IMUs only: ``y`` and ``other`` the aligned samples (m, 3) of this IMU and of ``other_imu``,
+    * ``y``: the block's samples (n, 3) (per-block detectors: the stuck test reads their codes);
+    * pairs of IMUs: ``y`` and ``other`` the aligned samples (m, 3) of this IMU and of ``other_imu``,
       ``noise_var`` the white variance expected of their difference, ``noise_other`` the other IMU's own.
     """
 

@@ -86,9 +86,11 @@ class ImuFaults:
         """The observation of one block handed to the detectors of this IMU (``at`` narrows it to an axis)."""
         return Observation(self.imu, st, t, still)
 
-    def on_block(self, st: BlockStats, t: np.ndarray, still: bool) -> list[FaultEvent]:
-        """Every block: timing, then per axis stuck, spikes, saturation."""
+    def on_block(self, st: BlockStats, t: np.ndarray, still: bool, y: np.ndarray | None = None) -> list[FaultEvent]:
+        """Every block: timing, then per axis stuck, spikes, saturation. ``y``: the block's gyro samples (n, 3)
+        (the stuck test reads their spread over codes)."""
         obs = self.observe(st, t, still)
+        obs.y = y
         ev = self.timing.update(obs)
         for ax, af in self.axes.items():
             o = obs.at(ax, af.ref)
