@@ -139,3 +139,14 @@ def test_dithered_frozen_copter_gyro_flipping_codes_is_stuck(seed, within):
 def test_healthy_copter_gyro_at_half_an_lsb_is_not_stuck(seed):
     events = detect(copter_blocks(seed, 300.0))
     assert events == []
+
+
+def test_inspect_sentence_of_an_int16_stream_reading_zero_names_both_causes():
+    from companion.health.dead import dead_gyro_text
+
+    text = dead_gyro_text("RAW_IMU[0]", np.zeros((100, 3)), LSB)
+    assert "gyro dead or below resolution: X, Y, Z exactly 0 in all 100 samples" in text
+    assert "1 mrad/s = 0.0573 deg/s" in text and "HIGHRES_IMU" in text
+    # a float stream (DataFlash, ULog, HIGHRES_IMU) reading exactly 0: dead, and a constant: frozen
+    assert "gyro dead: X, Y, Z exactly 0" in dead_gyro_text("IMU[1]", np.zeros((100, 3)))
+    assert "below resolution" not in dead_gyro_text("RAW_IMU[0]", np.full((100, 3), 2 * LSB), LSB)
