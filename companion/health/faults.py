@@ -53,8 +53,8 @@ KIND_CODE = {
     "resolution": 10,
     "dead": 11,
 }
-PRIORITY = ("stuck", "dead", "disagree", "saturation", "noise", "spikes", "resolution", "bias_jump", "bias_drift", "rate",
-            "allan")
+PRIORITY = ("stuck", "dead", "disagree", "saturation", "noise", "spikes", "resolution", "bias_jump", "bias_drift",
+            "rate", "allan")
 #: kinds sent as CRITICAL (MAV_SEVERITY_CRITICAL = 2); in-flight disagreement too (decided by the caller)
 CRITICAL_KINDS = ("stuck",)
 

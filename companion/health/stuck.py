@@ -65,10 +65,6 @@ EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz)
 ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
 
 
-def _phi(z: float) -> float:
-    return 0.5 * math.erfc(-z / math.sqrt(2.0))
-
-
 def two_code_outside(y: np.ndarray, lsb: float) -> int:
     """Samples of a block beyond the two adjacent codes that hold the most of them (0: at most two codes)."""
     c = np.round(np.asarray(y, dtype=float) / lsb)
