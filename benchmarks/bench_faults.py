@@ -104,7 +104,7 @@ def expected_words(kind, imu, axis):
             "flight": [f"IMU{imu} gyro {a} stuck", f"IMU{imu} gyro {a} disagrees"]}[kind]
 
 
-FAULT_WORDS = ("stuck", "noise", "bias", "spikes", "saturated", "disagrees", "degrading", "rate", "timing")
+FAULT_WORDS = ("stuck", "dead", "noise", "bias", "spikes", "saturated", "disagrees", "degrading", "rate", "timing")
 
 
 def preset_sigma(preset):

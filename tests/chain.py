@@ -26,7 +26,7 @@ axes:
   gz: [{effect: white_noise, N: 3e-3}]
 """
 COMPANION = 191  # MAV_COMP_ID_ONBOARD_COMPUTER: the component id the companion sends with
-FAULT_WORDS = ("stuck", "noise", "bias", "spike", "drift", "saturat", "rate", "timing", "disagree", "degrad")
+FAULT_WORDS = ("stuck", "dead", "noise", "bias", "spike", "drift", "saturat", "rate", "timing", "disagree", "degrad")
 
 
 class Listener:

@@ -21,7 +21,7 @@ from sinks import RecordingSink
 
 KEY = StreamKey(1, 1, "RAW_IMU", 0)
 N_SI = 3e-3
-FAULT_WORDS = ("stuck", "noise", "bias", "spike", "drift", "saturat", "timing", "disagree", "degrad")
+FAULT_WORDS = ("stuck", "dead", "noise", "bias", "spike", "drift", "saturat", "timing", "disagree", "degrad")
 
 
 def alternating_times(duration_s, fast_hz=50.0, fast_s=9.0, slow_hz=4.0, slow_s=6.0, t0=1.0):

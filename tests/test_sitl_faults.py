@@ -32,7 +32,7 @@ BASELINE_S = 60.0
 #: the pace without flow control (tests/loopback.py), else only the deadlines
 SPEEDUP = {1: 10.0, 2: 5.0, 3: 4.0}
 #: words of a fault report; a healthy run must show none of them (recoveries excluded: RECOVERY)
-FAULT_WORDS = re.compile(r"degrad|stuck|noise|bias|spike|drift|saturat|clip|disagree", re.I)
+FAULT_WORDS = re.compile(r"degrad|stuck|dead|noise|bias|spike|drift|saturat|clip|disagree", re.I)
 RECOVERY = re.compile(r"cleared|back to normal|recovered", re.I)
 WARNING = 4  # MAV_SEVERITY_WARNING; CRITICAL is 2
 

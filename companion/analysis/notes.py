@@ -17,7 +17,7 @@ def notes(res) -> list[str]:
         if not s.is_imu:
             out.append(f"{lab}: accel and gyro are zero in every sample: a compass-only instance, not an IMU.")
             continue
-        dead = dead_gyro_text(lab, s.gyro)
+        dead = dead_gyro_text(lab, s.gyro, getattr(s, "gyro_lsb", None))
         if dead:
             out.append(dead)
         t = s.timing

@@ -66,7 +66,7 @@ def dead_gyros(streams) -> list[str]:
 
     out = []
     for s in streams:
-        text = dead_gyro_text(s.key.label(), s.gyro)
+        text = dead_gyro_text(s.key.label(), s.gyro, getattr(s, "gyro_lsb", None))
         if text:
             out.append(text)
     return out

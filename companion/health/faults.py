@@ -51,9 +51,10 @@ KIND_CODE = {
     "disagree": 8,
     "allan": 9,
     "resolution": 10,
+    "dead": 11,
 }
-PRIORITY = ("stuck", "disagree", "saturation", "noise", "spikes", "resolution", "bias_jump", "bias_drift", "rate",
-            "allan")
+PRIORITY = ("stuck", "dead", "disagree", "saturation", "noise", "spikes", "resolution", "bias_jump", "bias_drift",
+            "rate", "allan")
 #: kinds sent as CRITICAL (MAV_SEVERITY_CRITICAL = 2); in-flight disagreement too (decided by the caller)
 CRITICAL_KINDS = ("stuck",)
 
@@ -87,13 +88,20 @@ class FaultEvent:
             "disagree": f"disagrees with {self.detail}",
             "allan": self.detail,
             "resolution": f"resolution lost: steps {v:.0f}x LSB",
+            "dead": DEAD_WORDS.get(self.detail, DEAD_WORDS[""]),
         }[self.kind]
         return f"{where} {body}"[:50]
 
 
 KIND_WORDS = {"stuck": "stuck", "noise": "noise", "bias_jump": "bias jump", "bias_drift": "bias drift",
               "spikes": "spikes", "saturation": "saturation", "rate": "timing", "disagree": "disagreement",
-              "allan": "Allan terms", "resolution": "resolution loss"}
+              "allan": "Allan terms", "resolution": "resolution loss", "dead": "zero reading"}
+#: an axis reading exactly 0 in every sample (health/stuck.py): on integer messages (RAW_IMU, SCALED_IMU*:
+#: int16 mrad/s) a gyro whose noise is below the 1 mrad/s step also reads 0 at rest, so the text says both;
+#: a float message (HIGHRES_IMU, DataFlash, ULog) never reads exactly 0 from a live gyro, nor does a gyro
+#: of a moving vehicle
+DEAD_WORDS = {"": "reads 0: dead or below resolution", "float": "reads exactly 0: dead",
+              "moving": "reads 0 while moving: dead"}
 
 
 AXES = ("gx", "gy", "gz")
@@ -121,7 +129,8 @@ class Observation:
     * ``stats``: the block's statistics (``BlockStats``, one column per axis); ``t``: its timestamps (s);
     * ``still``: the motion gate's decision for the block; ``ref``: the axis' still reference (``AxisRef``);
     * ``extra_var``: Allan-predicted variance of a block mean around the bias reference ((rad/s)^2);
-    * pairs of IMUs only: ``y`` and ``other`` the aligned samples (m, 3) of this IMU and of ``other_imu``,
+    * ``y``: the block's samples (n, 3) (per-block detectors: the stuck test reads their codes);
+    * pairs of IMUs: ``y`` and ``other`` the aligned samples (m, 3) of this IMU and of ``other_imu``,
       ``noise_var`` the white variance expected of their difference, ``noise_other`` the other IMU's own.
     """
 

@@ -29,9 +29,9 @@ REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detecto
 
 
 class AxisFaults:
-    def __init__(self, abs_limit: float, limits: FaultLimits | None = None):
+    def __init__(self, abs_limit: float, limits: FaultLimits | None = None, coded_lsb: float | None = None):
         self.ref = AxisRef()
-        self.stuck = StuckDetector()
+        self.stuck = StuckDetector(coded_lsb)
         self.noise = NoiseDetector(limits)
         self.bias = BiasDetector(limits)
         self.spikes = SpikeDetector()
@@ -43,7 +43,7 @@ class AxisFaults:
         self.quiet: tuple[FaultDetector, ...] = (self.resolution, self.noise, self.bias)
 
     def states(self) -> dict[str, int]:
-        return {"stuck": self.stuck.state, "noise": self.noise.state, "bias_jump": self.bias.state,
+        return {self.stuck.kind: self.stuck.state, "noise": self.noise.state, "bias_jump": self.bias.state,
                 "bias_drift": self.bias.drift_state, "spikes": self.spikes.state,
                 "saturation": self.saturation.state, "resolution": self.resolution.state}
 
@@ -64,11 +64,13 @@ class AxisFaults:
 
 class ImuFaults:
     def __init__(self, imu: int, abs_limit: float = math.inf, ref_blocks: int = REF_BLOCKS, stamp_res: float = 0.0,
-                 limits: FaultLimits | None = None):
+                 limits: FaultLimits | None = None, coded_lsb: float | None = None):
+        """``coded_lsb``: the gyro's step (rad/s) on integer messages (RAW_IMU, SCALED_IMU*: 1 mrad/s), None for
+        float messages (how an axis reading exactly 0 is named, health/stuck.py)."""
         self.imu = imu
         self.ref_blocks = int(ref_blocks)
         self.limits = limits or FaultLimits()
-        self.axes = {ax: AxisFaults(abs_limit, self.limits) for ax in AXES}
+        self.axes = {ax: AxisFaults(abs_limit, self.limits, coded_lsb) for ax in AXES}
         self.timing = TimingDetector(stamp_res)
         self.external: dict[tuple[str, str], int] = {}  # (kind, axis) -> state, e.g. ("disagree", "gx")
         self.quiet_blocks = 0
@@ -84,9 +86,11 @@ class ImuFaults:
         """The observation of one block handed to the detectors of this IMU (``at`` narrows it to an axis)."""
         return Observation(self.imu, st, t, still)
 
-    def on_block(self, st: BlockStats, t: np.ndarray, still: bool) -> list[FaultEvent]:
-        """Every block: timing, then per axis stuck, spikes, saturation."""
+    def on_block(self, st: BlockStats, t: np.ndarray, still: bool, y: np.ndarray | None = None) -> list[FaultEvent]:
+        """Every block: timing, then per axis stuck, spikes, saturation. ``y``: the block's gyro samples (n, 3)
+        (the stuck test reads their spread over codes)."""
         obs = self.observe(st, t, still)
+        obs.y = y
         ev = self.timing.update(obs)
         for ax, af in self.axes.items():
             o = obs.at(ax, af.ref)
@@ -152,9 +156,13 @@ class ImuFaults:
         if kind == "rate":
             return self.timing.value
         af = self.axes[axis]
-        return {"stuck": math.nan, "noise": af.noise.value, "bias_jump": af.bias.value,
+        return {"stuck": math.nan, "dead": math.nan, "noise": af.noise.value, "bias_jump": af.bias.value,
                 "bias_drift": af.bias.drift_value, "spikes": af.spikes.value,
                 "saturation": af.saturation.value, "resolution": af.resolution.value}[kind]
+
+    def detail_of(self, kind: str, axis: str) -> str:
+        """The words that go with an active fault beside its value ("float"/"moving" of a zero reading)."""
+        return self.axes[axis].stuck.detail if kind == "dead" and axis in self.axes else ""
 
     def noise_ref(self, axis: str) -> float | None:
         r = self.axes[axis].ref

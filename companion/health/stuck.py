@@ -22,8 +22,27 @@ of white noise, so a healthy coarse gyro's runs of equal codes are not a fault; 
 whose codes always change). The LSB is the smallest non-zero step seen on the axis. A frozen value
 (every code equal) gives ~ n ln(1 / p0) nats: flagged in one block.
 
+A value frozen near a code boundary with a dither far below the step flips between two adjacent codes
+about as often as a healthy gyro of ~0.5 LSB changes code, and its variance is that of the flips: neither
+test sees it. What a frozen value lacks is spread: healthy noise also lands beyond two adjacent codes.
+The larger of the above and the SPRT of the samples beyond the block's two best adjacent codes
+(:func:`two_code_llr`, against the healthy rate with the level on a boundary, the least) is the block's
+evidence. It is thin where the frozen value sits right on a boundary (0.26 nats per 50-sample block at
+0.36 LSB of noise: a minute or more at rest); in motion a live gyro spreads over many codes at once.
+
 Before a reference exists (the first seconds of still data) the PX4-like rule applies: ``equal_blocks``
 consecutive blocks of at least 50 samples with every value equal (no change at all).
+
+Exactly 0 is named for what it is (kind ``dead``, its own code): a float message (HIGHRES_IMU, DataFlash,
+ULog) never reads exactly 0.0 from a live gyro, so that is a dead (absent, never started) sensor. On an
+integer message (RAW_IMU, SCALED_IMU*: int16 mrad/s, ``coded_lsb``) a gyro whose noise is below the
+1 mrad/s step (0.057 deg/s; ArduPilot SITL, a quiet MEMS part) also reads 0 on every axis at rest: the
+plain truth is "dead or below resolution" (WARNING; HIGHRES_IMU carries float rad/s). It becomes
+"reads 0 while moving: dead" (CRITICAL) when the motion gate (accelerometer, other IMUs) sees the vehicle
+move while the axis still reads 0. An axis that changed codes in motion is alive; at rest again it reads 0
+by resolution, so it is named again only after ``ZERO_ALIVE_BLOCKS`` blocks of zeros (one per landing or
+handling otherwise). A value frozen at 0 after a learned reference showed codes changing at rest is
+``stuck``, as a frozen non-zero value is.
 """
 
 from __future__ import annotations
@@ -31,20 +50,63 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
+import numpy as np
+
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 from companion.health.limits import equal_codes_llr, p_equal_codes
 
 R1 = 0.1  # variance collapse the CUSUM is tuned to
+Q_RATIO = 20.0  # the frozen hypothesis' rate of samples beyond two codes: 1/20 of the healthy one
+MAX_CODES = 64  # a block spread over more codes is no frozen value
+MIN_OUTSIDE = 10  # samples beyond two codes seen at rest before that evidence counts (a quiet gyro never does)
 H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
 H_OFF = 10.0
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
+ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
+
+
+def two_code_outside(y: np.ndarray, lsb: float) -> int:
+    """Samples of a block beyond the two adjacent codes that hold the most of them (0: at most two codes)."""
+    c = np.round(np.asarray(y, dtype=float) / lsb)
+    lo = c.min()
+    if c.max() - lo > MAX_CODES:
+        return int(c.shape[0])
+    cnt = np.bincount((c - lo).astype(np.int64), minlength=2)
+    return int(c.shape[0] - (cnt[:-1] + cnt[1:]).max())
+
+
+def two_code_llr(k: int, n: int, q0: float) -> float:
+    """Evidence (nats) of a block's ``k`` samples beyond its two best adjacent codes among ``n``: a value
+    frozen with a dither far below the step (rate q0 / ``Q_RATIO``) against a healthy gyro (rate q0).
+
+    A frozen value with a dither d << LSB rounds to one code, or flips between two adjacent codes when it
+    lies near their boundary; then its repeated codes and its variance look like a healthy gyro's of
+    ~0.5 LSB, and only the spread over codes tells them apart: healthy noise s (LSB) also lands beyond two
+    codes, least often when its level sits on a boundary: q0 = 2 Phi(-1 / s) (0.005 at s = 0.36 LSB), the
+    rate used, so that at any level a healthy gyro's expected LLR is negative. The SPRT LLR
+    k ln(q1 / q0) + (n - k) ln((1 - q1) / (1 - q0)) is about n q0 for a block within two codes (0.26 nats
+    for 50 samples at s = 0.36: the information is thin, a value frozen right on a boundary takes over a
+    minute) and -3 nats for each sample beyond. Off a boundary a frozen value repeats one code and the
+    repeated-codes evidence names it at once."""
+    if n <= 0 or not (0.0 < q0 < 0.5):
+        return 0.0
+    q1 = q0 / Q_RATIO
+    return k * math.log(q1 / q0) + (n - k) * math.log((1.0 - q1) / (1.0 - q0))
 
 
 class StuckDetector:
-    kind = "stuck"
+    """``coded_lsb``: the message's resolution (rad/s) for integer messages (RAW_IMU, SCALED_IMU*), None for
+    float messages; it only decides how an axis reading exactly 0 is named."""
 
-    def __init__(self):
+    def __init__(self, coded_lsb: float | None = None):
+        self.coded_lsb = coded_lsb
+        self.kind = "stuck"  # the kind named for the current fault: "stuck", or "dead" (exactly 0)
+        self.detail = ""  # of a "dead" fault: "" (integer message, at rest), "float", "moving"
+        self.alive = False  # the axis changed codes in a moving block (a live gyro; its zeros at rest are resolution)
+        self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
+        self.out_n = 0
         self.cusum = Cusum(H_ON, H_OFF)
+        self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
         self.equal_run = 0
         self.value = math.nan
         self.lsb = math.inf  # smallest non-zero step seen (the sensor's resolution, or finer)
@@ -52,16 +114,38 @@ class StuckDetector:
 
     @property
     def state(self) -> int:
-        return self.cusum.state
+        return FAULT if FAULT in (self.cusum.state, self.two.state) else OK
 
     def update(self, obs: Observation) -> list[FaultEvent]:
-        """One block of one axis (any motion state); the state change, if any (always critical)."""
-        return [obs.event(self.kind, self.state, critical=True)] if self._step(obs) else []
+        """One block of one axis (any motion state); the state change, if any (critical, except an integer
+        axis reading 0 at rest), or the escalation of such an axis to "dead" when it reads 0 in motion."""
+        st, j = obs.stats, obs.col
+        zero = int(st.changes[j]) == 0 and float(st.top[j]) == 0.0 and st.n >= 2
+        if not self._step(obs):
+            if (self.state == FAULT and self.kind == "dead" and self.detail == "" and zero and not obs.still):
+                self.detail = "moving"
+                return [obs.event("dead", FAULT, detail="moving", critical=True)]
+            return []
+        if self.state == FAULT:
+            self.kind, self.detail = "stuck", ""
+            if zero and (self.coded_lsb is None or not (obs.ref is not None and obs.ref.ready)):
+                self.kind = "dead"
+                self.detail = "float" if self.coded_lsb is None else ("" if obs.still else "moving")
+            return [obs.event(self.kind, FAULT, detail=self.detail,
+                              critical=not (self.kind == "dead" and self.detail == ""))]
+        kind, detail = self.kind, self.detail
+        self.kind, self.detail = "stuck", ""
+        return [obs.event(kind, OK, detail=detail, critical=True)]
 
     def _step(self, obs: Observation) -> bool:
         j, st, ref = obs.col, obs.stats, obs.ref
         v2, changes, n = float(st.v2[j]), int(st.changes[j]), st.n
         self.equal_run = self.equal_run + 1 if (changes == 0 and n >= 50) else 0
+        if not obs.still and n >= 2 and changes >= (n - 1) // 2:
+            self.alive = True
+        # an integer axis seen alive reads 0 at rest by resolution: named again only after a long run
+        zero_coded = self.coded_lsb is not None and changes == 0 and float(st.top[j]) == 0.0
+        equal_blocks = ZERO_ALIVE_BLOCKS if (zero_coded and self.alive) else EQUAL_BLOCKS
         step = float(st.step[j])
         if ref.ready and ref.sigma2 > 0 and math.isfinite(v2):
             u = v2 / ref.sigma2
@@ -78,16 +162,27 @@ class StuckDetector:
                 if self.quantised:
                     p_hat = max(p_hat, p_equal_codes(math.sqrt(max(v2, 0.0)) / self.lsb))
                 llr = min(llr, equal_codes_llr(int(round(p_hat * pairs)), pairs, p0))
+                if self.quantised and changes == 0:
+                    llr = min(llr, self._quiet_cap(ref, n))
             else:
                 llr = min(llr, 0.0)
             if llr <= 0.0 and self.cusum.state == OK and math.isfinite(step) and step > 0:
                 self.lsb = min(self.lsb, step)  # the resolution, learned from blocks without evidence
                 self.quantised = self.quantised or changes < n - 1
-            if self.equal_run >= EQUAL_BLOCKS and self.cusum.state == OK:
+            if self.equal_run >= equal_blocks and self.cusum.state == OK:
                 llr = max(llr, 2.0 * H_ON)
-            return self.cusum.step(llr)
+            before = self.state
+            self.cusum.step(llr)
+            # the spread over codes has its own CUSUM (another alternative: a sum of the two LLRs, or their
+            # larger, would let one's excursions ride on the other's evidence); stuck while either says so
+            two = self._two_codes(obs, ref) if (self.quantised and obs.y is not None) else None
+            if two is not None:
+                self.two.step(two)
+            elif self.two.state == FAULT and self.cusum.state == OK:
+                self.two.state, self.two.s = OK, 0.0
+            return self.state != before
         # no reference yet: only the equal-values rule
-        if self.cusum.state == OK and self.equal_run >= EQUAL_BLOCKS:
+        if self.cusum.state == OK and self.equal_run >= equal_blocks:
             self.cusum.state, self.cusum.s = FAULT, 0.0
             return True
         if self.cusum.state == FAULT and changes > 0.5 * n:
@@ -95,12 +190,51 @@ class StuckDetector:
             return True
         return False
 
+    def _quiet_cap(self, ref, n: int) -> float:
+        """The most evidence a block of one code can give: a healthy gyro whose level sits at the centre of a code keeps
+        every sample in it with probability P^n, P = erf(0.5 / (s sqrt 2)) (s the reference noise in LSB less
+        the rounding's 1/12), so a block of one code is worth at most n ln(1 / P) nats. The repeated-codes
+        rate p_equal_codes averages over the level; at a code's centre a quiet gyro repeats more (at 10 Hz and
+        0.36 LSB one block in six is a single code, and the uncapped 4 nats per block took a healthy
+        simulated plane to 15 of the 20 nats in an hour)."""
+        s_l = math.sqrt(max(ref.sigma2 - self.lsb * self.lsb / 12.0, 0.0)) / self.lsb
+        if s_l <= 0:
+            return math.inf
+        p_one = math.erf(0.5 / (s_l * math.sqrt(2.0)))
+        return -n * math.log(max(p_one, 1e-300)) if p_one < 1.0 else 0.0
+
+    def _two_codes(self, obs: Observation, ref) -> float | None:
+        """A frozen value flipping between two codes near their boundary: the spread over codes. The healthy
+        rate q0 = 2 Phi(-1 / s), s from the reference with the rounding's LSB^2 / 12 taken out (Sheppard: at
+        0.36 LSB within 1 % of the unrounded figure on the realistic presets), and at most the rate this axis
+        showed at rest; counted only once the axis was seen beyond two codes ``MIN_OUTSIDE`` times (below
+        ~0.3 LSB the flips of a quiet gyro on a boundary inflate the rounded variance, so s would be too
+        large: such a gyro never leaves two codes and is never judged by it)."""
+        y = np.asarray(obs.y)[:, obs.col]
+        k, n = two_code_outside(y, self.lsb), y.shape[0]
+        if obs.still and self.state == OK and self.cusum.s == 0.0 and self.two.s == 0.0:
+            self.out_k += k
+            self.out_n += n
+        if self.out_k < MIN_OUTSIDE:
+            return None
+        s_l = math.sqrt(max(ref.sigma2 - self.lsb * self.lsb / 12.0, 0.0)) / self.lsb
+        if s_l <= 0:
+            return None
+        q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), self.out_k / self.out_n, 0.45)
+        return two_code_llr(k, n, q0) if q0 > 0 else None
+
     def state_dict(self) -> dict:
-        return {"cusum": self.cusum.state_dict(), "equal_run": self.equal_run,
-                "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised}
+        return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "equal_run": self.equal_run,
+                "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
+                "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n]}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
+        self.two.load_state_dict(d.get("two", {}))
         self.equal_run = int(d.get("equal_run", 0))
         self.lsb = math.inf if d.get("lsb") is None else float(d["lsb"])
         self.quantised = bool(d.get("quantised", False))
+        self.kind = "dead" if d.get("kind") == "dead" else "stuck"
+        self.detail = str(d.get("detail", ""))
+        self.alive = bool(d.get("alive", False))
+        self.out_k, self.out_n = (int(v) for v in (d.get("out") or [0, 0]))

@@ -20,7 +20,8 @@ name                value                                        unit
 
 ``IMU{i}G_FLT`` (companion.health.faults.KIND_CODE; the most severe active fault of the IMU's gyros):
 0 none, 1 stuck, 2 noise, 3 bias jump, 4 bias drift, 5 spikes, 6 saturation, 7 rate drop / irregular
-timing, 8 disagreement with another IMU, 9 Allan term (N, B, K) above its baseline, 10 resolution loss.
+timing, 8 disagreement with another IMU, 9 Allan term (N, B, K) above its baseline, 10 resolution loss,
+11 an axis reading exactly 0 (dead, or on int16 messages at rest: below the 1 mrad/s resolution).
 ``IMU{i}G_FLM`` has bit k set for every active code k (e.g. 6.0 = stuck and noise together), so faults
 present at the same time are all reported while ``IMU{i}G_FLT`` keeps the most severe.
 

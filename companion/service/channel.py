@@ -34,6 +34,7 @@ from companion.analysis.filters import sampling
 from companion.sources.timing import stamp_resolution
 
 FLOAT_MESSAGES = ("HIGHRES_IMU", "CSV")
+INT16_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3")  # gyro int16 (mrad/s by default)
 COLUMNS = {ax: 1 + i for i, ax in enumerate(GYRO_AXES + ACCEL_AXES)}  # column of each axis in a row
 TEMP_COLUMN = 7  # the IMU temperature (degC, nan where the source has none)
 
@@ -92,8 +93,10 @@ class Channel:
         return Peer(self.last_stats, noise_ratio(self.last_stats, self.faults.still_sigma2()))
 
     def _new_faults(self) -> ImuFaults:
+        # the step of an integer message (RAW_IMU, SCALED_IMU*); DataFlash, ULog, CSV and HIGHRES_IMU are floats
+        coded = self.gyro_lsb if self.message in INT16_MESSAGES else None
         return ImuFaults(self.imu, self.cfg.gyro_limit, max(1, int(round(self.cfg.fault_ref_s / self.cfg.block_s))),
-                         stamp_res=self.time_res, limits=self.cfg.faults)
+                         stamp_res=self.time_res, limits=self.cfg.faults, coded_lsb=coded)
 
     # ------------------------------------------------------------------ rate changes
     def switch_rate(self, new_rate: float, t_block: np.ndarray) -> bool:
@@ -210,7 +213,7 @@ class Channel:
         """Every closed block: remember it (motion consensus, disagreement) and run the per-block detectors."""
         self.last_stats = st
         self.recent.append((data[:, 0].copy(), data[:, 1:4].copy()))
-        return self.faults.on_block(st, data[:, 0], still)
+        return self.faults.on_block(st, data[:, 0], still, data[:, 1:4])
 
     def settle(self, data: np.ndarray, st: BlockStats, still: bool) -> tuple[np.ndarray | None, BlockStats | None]:
         """The look-ahead, for every block once the rate is known: returns the pending still block (and its

@@ -503,7 +503,7 @@ class Pipeline:
             elif kind == "rate":
                 ev = FaultEvent(ch.imu, "", kind, FAULT, ch.faults.value_of(kind, ""), ch.faults.timing.detail)
             else:
-                ev = FaultEvent(ch.imu, ax, kind, FAULT, ch.faults.value_of(kind, ax))
+                ev = FaultEvent(ch.imu, ax, kind, FAULT, ch.faults.value_of(kind, ax), ch.faults.detail_of(kind, ax))
             out.append(ev.text())
         return out
 

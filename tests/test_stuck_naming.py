@@ -1,0 +1,152 @@
+"""A gyro reading exactly 0 is named for what it is, a frozen value is stuck, a frozen value flipping between two
+codes near their boundary is still stuck, a healthy gyro at 0.5 LSB of noise is never stuck.
+
+On RAW_IMU / SCALED_IMU* (int16 mrad/s) a gyro quieter than 1 mrad/s reads exactly 0 at rest (ArduPilot
+SITL): "dead or below resolution" (WARNING); in motion (accelerometer) still 0: dead (CRITICAL); a float
+message never reads exactly 0.0 from a live gyro: dead. Data: arrays with known truth fed to the pipeline
+(the same block path as `companion run`) and the realistic simulator's copter preset (50 Hz, 20 Hz low-pass,
+0.47 LSB of noise from second differences after the 1 mrad/s rounding)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.health.faults import AXES, FAULT, KIND_CODE, OK, AxisRef, Observation, block_stats
+from companion.health.stuck import StuckDetector, two_code_llr, two_code_outside
+from companion.mavlink.reporter import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter
+from companion.samples import StreamKey
+from companion.service.pipeline import Pipeline, PipelineConfig
+from sinks import RecordingSink
+
+LSB = 1e-3
+FS = 50.0
+G = np.array([0.0, 0.0, -9.80665])
+
+
+def feed(message, segments, seed=0):
+    """``segments``: (seconds, gyro std rad/s, accel std m/s^2) in turn; gyro rounded to 1 mrad/s on int16
+    messages (the accelerometer's std is what the motion gate sees)."""
+    rng = np.random.default_rng(seed)
+    sink = RecordingSink()
+    p = Pipeline(PipelineConfig(baseline_s=600.0), Reporter(sink, 1.0))
+    key = StreamKey(1, 1, message, 0)
+    t0 = 1.0
+    for secs, g_std, a_std in segments:
+        n = int(secs * FS)
+        t = t0 + np.arange(n) / FS
+        g = rng.normal(0.0, g_std, (n, 3)) if g_std else np.zeros((n, 3))
+        if message != "HIGHRES_IMU":
+            g = np.round(g / LSB) * LSB
+        a = G + rng.normal(0.0, a_std, (n, 3))
+        p.on_samples(key, t, g, a)
+        t0 = t[-1] + 1.0 / FS
+    return p, [(s, x) for s, x in sink.texts if "learned" not in x], sink
+
+
+def test_sub_lsb_raw_imu_reads_zero_named_dead_or_below_resolution_not_stuck():
+    # 0.1 LSB of noise: every RAW_IMU sample is exactly 0
+    p, texts, sink = feed("RAW_IMU", [(20.0, 0.1 * LSB, 0.02)])
+    assert texts == [(MAV_SEVERITY_WARNING, f"IMU0 gyro {a} reads 0: dead or below resolution") for a in "XYZ"]
+    assert all(len(x) <= 50 for _, x in texts)
+    assert sink.values["IMU0G_FLT"] == KIND_CODE["dead"]
+    assert int(sink.values["IMU0G_FLM"]) == 1 << KIND_CODE["dead"]
+    ch = p.channels[0]
+    assert p.fault_texts(ch)[0] == "IMU0 gyro X reads 0: dead or below resolution"
+
+
+def test_zero_gyro_while_the_vehicle_moves_is_dead_and_a_moving_live_gyro_clears_it():
+    # at rest: dead or below resolution; moving (accel) with the gyro still 0: dead, critical
+    _, texts, _ = feed("RAW_IMU", [(15.0, 0.0, 0.02), (8.0, 0.0, 1.5)])
+    assert (MAV_SEVERITY_CRITICAL, "IMU0 gyro X reads 0 while moving: dead") in texts
+    # SITL: the gyro moves with the vehicle (alive), then reads 0 at rest again: cleared, and not named
+    # again at the next rest (a landing) before a minute of zeros
+    _, texts, _ = feed("RAW_IMU", [(15.0, 0.0, 0.02), (8.0, 0.05, 1.5), (40.0, 0.0, 0.02)])
+    assert texts[3:] == [(MAV_SEVERITY_NOTICE, f"IMU0 gyro {a} zero reading cleared") for a in "XYZ"]
+
+
+def test_float_message_zero_is_dead_and_a_frozen_nonzero_value_is_stuck():
+    _, texts, _ = feed("HIGHRES_IMU", [(10.0, 0.0, 0.02)])
+    assert texts == [(MAV_SEVERITY_CRITICAL, f"IMU0 gyro {a} reads exactly 0: dead") for a in "XYZ"]
+    d = StuckDetector(LSB)
+    frozen = block_stats(np.full((50, 3), 3 * LSB))
+    ev = d.update(Observation(0, frozen, None, True, "gx", AxisRef())) + \
+        d.update(Observation(0, frozen, None, True, "gx", AxisRef()))
+    assert [(e.kind, e.state, e.critical, e.text()) for e in ev] == [("stuck", FAULT, True, "IMU0 gyro X stuck")]
+
+
+def copter_blocks(seed, seconds, fault=None):
+    from companion.sim.preset import load_preset
+    from companion.sim.vehicle import Schedule, VehicleSimulator
+
+    P = load_preset("copter")
+    sim = VehicleSimulator(P["model"], imus=1, seed=seed, rate_hz=P["vehicle"]["rate_hz"], realism=P["realism"],
+                           fault=fault, schedule=Schedule())
+    n = int(round(sim.rate_hz))
+    g = np.round(sim.run(seconds).gyro[0] / LSB) * LSB
+    return [g[b * n:(b + 1) * n] for b in range(g.shape[0] // n)]
+
+
+def detect(blocks, ref_blocks=30):
+    """The stuck detectors of the three axes over the blocks, the references learned from the first
+    ``ref_blocks`` as the pipeline does (block statistics with the reference's spike scale); the events."""
+    refs, dets, events = [AxisRef() for _ in AXES], [StuckDetector(LSB) for _ in AXES], []
+    for b, y in enumerate(blocks):
+        scale = np.array([math.sqrt(6 * r.sigma2) for r in refs]) if all(r.ready for r in refs) else None
+        st = block_stats(y, scale)
+        for j, ax in enumerate(AXES):
+            events += [(b, e) for e in dets[j].update(Observation(0, st, None, True, ax, refs[j], y=y))]
+            if not refs[j].ready:
+                refs[j].add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n, ref_blocks)
+    return events
+
+
+def test_two_code_evidence_a_flipping_frozen_value_against_healthy_noise():
+    rng = np.random.default_rng(3)
+    s = 0.36
+    q0 = math.erfc(1.0 / (s * math.sqrt(2.0)))  # healthy rate beyond two codes on a boundary: 2 Phi(-1/s)
+    # a frozen value 0.02 LSB from a code boundary with a 0.08 LSB dither: two codes, flipping like noise
+    frozen = (0.5 + 0.02) * LSB + rng.normal(0.0, 0.08 * LSB, 50)
+    assert set(np.round(frozen / LSB)) == {0.0, 1.0}
+    assert two_code_outside(frozen, LSB) == 0 and two_code_llr(0, 50, q0) == pytest.approx(0.25, abs=0.03)
+    # healthy noise of that level anywhere on the grid: negative on average, most at a code's centre
+    for level in (0.5, 0.3, 0.0):
+        llr = [two_code_llr(two_code_outside(level * LSB + rng.normal(0.0, s * LSB, 50), LSB), 50, q0)
+               for _ in range(400)]
+        assert np.mean(llr) < -0.1
+    assert two_code_outside(np.array([0.0, 1e-3, 2e-3, 1e-3]), LSB) == 1
+
+
+@pytest.mark.parametrize("seed, within", [(9, 10), (15, 90)])
+def test_dithered_frozen_copter_gyro_flipping_codes_is_stuck(seed, within):
+    # the realistic copter at 0.47 LSB: a value frozen with a 0.17 sigma dither; seed 15 freezes it on a code
+    # boundary, where it flips between two codes about as often as the healthy gyro changes code (neither
+    # the variance nor the repeated codes see it; only the spread over codes does, 0.26 nats a block)
+    from companion.sim.vehicle import Fault
+
+    rng = np.random.default_rng(seed)
+    ax = AXES[rng.integers(3)]
+    blocks = copter_blocks(100 + seed, 60.0 + within + 2.0, Fault("stuck", at=60.0, size=0.17 * 0.47e-3, axis=ax))
+    events = detect(blocks)
+    hits = [b for b, e in events if e.axis == ax and e.state == FAULT and e.kind == "stuck"]
+    assert hits and 59 <= hits[0] <= 60 + within, events
+    assert [e for b, e in events if b < 59] == []
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_healthy_copter_gyro_at_half_an_lsb_is_not_stuck(seed):
+    events = detect(copter_blocks(seed, 300.0))
+    assert events == []
+
+
+def test_inspect_sentence_of_an_int16_stream_reading_zero_names_both_causes():
+    from companion.health.dead import dead_gyro_text
+
+    text = dead_gyro_text("RAW_IMU[0]", np.zeros((100, 3)), LSB)
+    assert "gyro dead or below resolution: X, Y, Z exactly 0 in all 100 samples" in text
+    assert "1 mrad/s = 0.0573 deg/s" in text and "HIGHRES_IMU" in text
+    # a float stream (DataFlash, ULog, HIGHRES_IMU) reading exactly 0: dead, and a constant: frozen
+    assert "gyro dead: X, Y, Z exactly 0" in dead_gyro_text("IMU[1]", np.zeros((100, 3)))
+    assert "below resolution" not in dead_gyro_text("RAW_IMU[0]", np.full((100, 3), 2 * LSB), LSB)
