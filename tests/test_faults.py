@@ -60,6 +60,27 @@ def test_block_stats_white_variance_ignores_smooth_motion_and_spikes():
     assert np.mean(v) == pytest.approx(1e-4, rel=0.07)
 
 
+def test_one_code_flips_of_a_sub_lsb_gyro_are_not_spikes_and_a_real_spike_still_is():
+    # int16 mrad/s: a gyro of 0.2-0.4 LSB of noise whose bias sits near a code boundary flips to the next code
+    # and back at random (a second difference of 2 LSB among zeros); no such flip is a spike, a 10 LSB one is
+    lsb = 1e-3
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        sigma = rng.uniform(0.2, 0.4) * lsb
+        bias = (rng.integers(-3, 3) + 0.5 - rng.uniform(0.1, 0.4)) * lsb  # near a boundary between two codes
+        # the reference scale of the second differences as learned while the gyro sat on one code: ~0
+        ref = np.full(3, 1e-12)
+        flips = spikes = 0
+        for _ in range(60):
+            y = np.round((bias + rng.normal(0, sigma, (FS, 3))) / lsb) * lsb
+            st = block_stats(y, ref)
+            flips += int(np.count_nonzero(np.diff(y, axis=0)))
+            spikes += int(st.spikes.sum())
+            y[25, 1] += 10 * lsb
+            assert block_stats(y, ref).spikes[1] >= 1
+        assert flips > 100 and spikes == 0, (seed, flips, spikes)
+
+
 @pytest.mark.parametrize("sigma_lsb", [0.7, 3.0])
 def test_stuck_caught_fast_with_or_without_dither_and_never_on_healthy_rounded_noise(sigma_lsb):
     sigma = sigma_lsb * LSB

@@ -283,7 +283,11 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     qs = np.array([np.median(a[p], axis=0) / 0.6745 for p in parts])
     qmax = np.maximum(qs, np.maximum(np.vstack([qs[:1], qs[:-1]]), np.vstack([qs[1:], qs[-1:]])))
     local = np.repeat(qmax, [p.size for p in parts], axis=0)
-    scale = np.maximum(scale, local)
+    # and at least the spread rounding gives: a signal rounded to a step q carries rounding error of variance
+    # q^2/12, so its second differences have sd >= q sqrt(6/12) whatever the reference says (a gyro quieter
+    # than the int16 step sits on one code, then flips to the next one or two and back: noise, not spikes)
+    code = np.where(np.isfinite(step), step, 0.0)
+    scale = np.maximum(np.maximum(scale, local), math.sqrt(0.5) * code)
     out = a > k * scale
     prev = np.vstack([np.zeros((1, a.shape[1])), a[:-1]])
     nxt = np.vstack([a[1:], np.zeros((1, a.shape[1]))])
