@@ -146,11 +146,22 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     # the nine tap pairs in one call per term: offsets q - p and weights a_p b_q
     shift = np.array([q - p for p, _ in taps_a for q, _ in taps_b], dtype=np.int64)
     weight = np.array([ap * bq for _, ap in taps_a for _, bq in taps_b])
-    lags = l[None, :] + shift[:, None]
-    for term in terms:
-        g = _gcov(term, lags, tau0)
-        if g is not None:
-            c += weight @ g
+    if np.all(shift % step == 0):
+        # the nine rows of lags l + shift are shifted copies of one grid of spacing `step`: each term is
+        # evaluated once per grid point (a quarter to a ninth of the lags) and the rows gathered from it
+        lo_shift = int(shift.min())
+        grid = np.arange(l[0] + lo_shift, l[-1] + int(shift.max()) + 1, step, dtype=np.int64)
+        at = np.arange(l.shape[0])[None, :] + ((shift - lo_shift) // step)[:, None]
+        for term in terms:
+            g = _gcov(term, grid, tau0)
+            if g is not None:
+                c += weight @ g[at]
+    else:
+        lags = l[None, :] + shift[:, None]
+        for term in terms:
+            g = _gcov(term, lags, tau0)
+            if g is not None:
+                c += weight @ g
     # number of (i, j) pairs, 0 <= i < M1, 0 <= j < M2, with j - i = l
     count = np.minimum(M1 - 1, M2 - 1 - l) - np.maximum(0, -l) + 1
     count = np.maximum(count, 0).astype(float)

@@ -157,9 +157,26 @@ class _Problem:
         return np.linalg.pinv(Aw.T @ Aw)
 
 
+_FILTERED_COLUMNS: dict = {}
+
+
+def _filtered_white_column(tau, white):
+    """The filtered white-noise column at ``tau``, remembered: the model search asks for the same one hundreds
+    of times per fit (each shape-grid point, each candidate set) and each costs a phase-structure evaluation."""
+    key = (np.asarray(tau, dtype=float).tobytes(), white.get("filter_hz"), white.get("sample_hz"))
+    col = _FILTERED_COLUMNS.get(key)
+    if col is None:
+        if len(_FILTERED_COLUMNS) >= 256:
+            _FILTERED_COLUMNS.clear()
+        col = avar_white_noise(tau, 1.0, **white)
+        col.setflags(write=False)
+        _FILTERED_COLUMNS[key] = col
+    return col
+
+
 def _columns(linear, nonlinear, tau, white=None):
     """Design matrix; ``white``: {"filter_hz", "sample_hz"} of a low-pass filter seen by the white noise."""
-    cols = [avar_white_noise(tau, 1.0, **white) if (e == "white_noise" and white) else linear_basis(tau, [e])[:, 0]
+    cols = [_filtered_white_column(tau, white) if (e == "white_noise" and white) else linear_basis(tau, [e])[:, 0]
             for e in linear]
     cols += [_shape_column(e, s, tau) for e, s in nonlinear]
     return np.column_stack(cols) if cols else np.zeros((len(tau), 0))

@@ -178,11 +178,8 @@ def imu_sample_from_message(msg, scales: ScaleTable | None = None) -> ImuSample 
     layout = M.IMU_LAYOUTS.get(name)
     if layout is None:
         return None
-    rec = np.zeros(1, dtype=layout.dtype)
-    for f in layout.dtype.names:
-        rec[f] = getattr(msg, f, 0) or 0
+    rec = np.array([tuple(getattr(msg, f, 0) or 0 for f in layout.dtype.names)], dtype=layout.dtype)
     s = _to_si(layout, StreamKey(int(msg.get_srcSystem()), int(msg.get_srcComponent()), name,
                                  int(_instance(layout, rec)[0])), rec, scales or ScaleTable())
     temp = None if s.temperature is None else float(s.temperature[0])
-    return ImuSample(s.key, float(s.t[0]), tuple(float(v) for v in s.gyro[0]),
-                     tuple(float(v) for v in s.accel[0]), temp, s.is_imu)
+    return ImuSample(s.key, float(s.t[0]), tuple(s.gyro[0].tolist()), tuple(s.accel[0].tolist()), temp, s.is_imu)
