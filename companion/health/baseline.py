@@ -45,6 +45,48 @@ def params_from_terms(terms: Iterable[Mapping]) -> dict[str, tuple[float, float]
     return out
 
 
+def check_params(terms: Iterable[Mapping], side: str = "current") -> dict[str, tuple[float, float]]:
+    """``{param: (value, s)}`` of the resolved linear terms for the degradation test (detector.py), where
+    ``s / value`` is the one-sigma of ln(value) read from the side of the 95 % interval the test looks at.
+
+    The test asks whether the current value's *lower* end is above the baseline's *upper* end. The intervals
+    of B and K from a short window are far from symmetric (scaled chi-square with few degrees of freedom;
+    K 2.6e-3 [0, 7.4e-3] rad/s^1.5 was reported with a 1-sigma of 1.9e-3, and ln(x/b) - 3 sigma_L with that
+    symmetric sigma flagged `K 24.7x` on a healthy gyro), so the one-sigma of ln(x) is taken from the
+    interval's end: ln(value / lo) / 1.96 for the current value (``side="current"``), ln(hi / value) / 1.96
+    for the baseline (``side="baseline"``).
+
+    A current term whose interval reaches 0 is not resolved by the window and is left out (it is no value
+    to compare); such a baseline term is kept with a one-sigma of at least its value, which the detector
+    treats as unresolved (tested against its upper bound). Terms without an interval (the Miao estimator)
+    keep their one-sigma as is; bounds (``"bound": True``) are left out.
+    """
+    out: dict[str, tuple[float, float]] = {}
+    for term in terms or ():
+        p = LINEAR_PARAM.get(term.get("effect"))
+        if not p or term.get("bound") or p not in term:
+            continue
+        v = float(term[p])
+        if not (math.isfinite(v) and v > 0.0):
+            continue
+        ci = (term.get("ci95") or {}).get(p)
+        if ci is None:
+            s = float((term.get("std") or {}).get(p, math.inf))
+            if not math.isnan(s):
+                out[p] = (v, abs(s))
+            continue
+        lo, hi = float(ci[0]), float(ci[1])
+        if side == "current":
+            if lo > 0.0 and lo < v:
+                out[p] = (v, v * math.log(v / lo) / Z95)
+            continue
+        if lo > 0.0 and math.isfinite(hi) and hi > v:
+            out[p] = (v, v * math.log(hi / v) / Z95)
+        else:
+            out[p] = (v, max((hi - lo) / (2.0 * Z95), v))
+    return out
+
+
 class Baseline:
     """Healthy reference per ``(imu, axis)``: ``{param: (value, std)}`` in SI units.
 

@@ -21,7 +21,7 @@ from typing import Mapping
 import numpy as np
 
 from companion.estimators import from_state_dict as estimator_from_state, make_estimator
-from companion.estimators.report import health_params
+from companion.health.baseline import check_params
 from companion.health.detector import DEGRADING, LEARNING, HealthDetector, Transition
 from companion.health.faults import FAULT, OK, BlockStats, FaultEvent, block_stats
 from companion.health.monitor import ImuFaults
@@ -265,7 +265,7 @@ class Channel:
     def learned_terms(self) -> dict[str, dict[str, tuple[float, float]]]:
         """The learned baseline per axis ``{param: (value, std)}``; learning stops."""
         self.flush()
-        out = {ax: health_params(est.terms(full=True) if est.kind == "octave" else est.terms())
+        out = {ax: check_params(est.terms(full=True) if est.kind == "octave" else est.terms(), side="baseline")
                for ax, est in self.learn.items()}
         self.learn = {}
         return out
@@ -282,8 +282,10 @@ class Channel:
         return fast + slow
 
     def current_params(self, ax: str, terms=None) -> dict[str, tuple[float, float]]:
-        """``{param: (value, std)}`` of the resolved parameters (a bound is not compared with a baseline)."""
-        return health_params(self.report_terms(ax) if terms is None else terms)
+        """``{param: (value, s)}`` of the parameters the window resolves (a bound, or a term whose 95 % interval
+        reaches 0, is not compared with a baseline); s / value is the one-sigma of ln(value) from the interval's
+        lower end (health.baseline.check_params)."""
+        return check_params(self.report_terms(ax) if terms is None else terms, side="current")
 
     def check_due(self, t: float) -> bool:
         return self.next_check_t is not None and t >= self.next_check_t
