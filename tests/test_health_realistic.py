@@ -119,3 +119,27 @@ def test_allan_check_still_flags_a_resolved_k_four_times_the_baseline():
     det = HealthDetector(0)
     for _ in range(5):
         assert det.check("gz", check_params([_term("random_walk", "K", 4.0e-4, 1.4e-4, 9.0e-4)]), base) == []
+
+
+def _white_plus_rrw(rng, n, fs, N, K):
+    """White rate noise N (rad/s/sqrt(Hz), sample std N sqrt(fs)) plus a rate random walk K (rad/s^1.5)."""
+    return N * math.sqrt(fs) * rng.standard_normal(n) + np.cumsum(K * math.sqrt(1.0 / fs) * rng.standard_normal(n))
+
+
+def test_a_coefficient_the_allan_curve_does_not_support_is_not_compared():
+    """Independent truth: simulated white noise + rate random walk, the octave bank's Allan curve (no fit).
+    The true K is supported, 10x it is not (the GLS of a misfitting model once put K 25x above a curve that
+    could not hold it); on a gyro whose K really is 4x, that 4x value is supported. 3 seeds, 3 h at 10 Hz."""
+    from companion.estimators import make_estimator
+    from companion.health.baseline import supported_params
+
+    fs, N, K = 10.0, 5e-4, 2e-5
+    for seed in range(3):
+        rng = np.random.default_rng(400 + seed)
+        for k_true in (K, 4 * K):
+            est = make_estimator("octave", rate_hz=fs, forgetting_s=7200.0)
+            est.update(_white_plus_rrw(rng, int(3 * 3600 * fs), fs, N, k_true))
+            tau, avar, edf = est.avar()
+            assert "K" in supported_params({"K": (k_true, 0.1 * k_true), "N": (N, 0.01 * N)}, tau, avar, edf)
+            assert "N" in supported_params({"N": (N, 0.01 * N)}, tau, avar, edf)
+            assert supported_params({"K": (10 * k_true, k_true), "N": (10 * N, N)}, tau, avar, edf) == {}

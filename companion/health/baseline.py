@@ -14,7 +14,9 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping
 
-from companion.allan.terms import LINEAR_PARAM
+import numpy as np
+
+from companion.allan.terms import LINEAR_PARAM, avar_term
 
 #: parameter -> effect, for the linear terms (Miao 2014 eq. (3.5): x = [Q N B K R]).
 PARAM_EFFECT = {p: e for e, p in LINEAR_PARAM.items()}
@@ -84,6 +86,46 @@ def check_params(terms: Iterable[Mapping], side: str = "current") -> dict[str, t
             out[p] = (v, v * math.log(hi / v) / Z95)
         else:
             out[p] = (v, max((hi - lo) / (2.0 * Z95), v))
+    return out
+
+
+#: cluster times below this are not used to judge whether the Allan curve supports a coefficient: there the
+#: autopilot's low-pass filter bends the white-noise curve below N^2 / tau (a bound from them would be too low)
+SUPPORT_MIN_TAU_S = 1.0
+
+
+def supported_params(params: Mapping[str, tuple[float, float]], tau, avar, edf, z: float = 3.0,
+                     min_tau: float = SUPPORT_MIN_TAU_S) -> dict[str, tuple[float, float]]:
+    """The entries of ``params`` (``{param: (value, s)}``) whose own Allan variance the measured curve supports.
+
+    A term's contribution p^2 basis(tau) cannot exceed the Allan variance measured at any cluster time: the
+    other terms only add to it. With ``edf`` chi-square degrees of freedom per level, the true AVAR is below
+    avar edf / chi2_lo(edf) at z sigma (Wilson-Hilferty quantile; no limit where that is undefined, i.e.
+    for levels with few degrees of freedom). A coefficient above that at some level tau >= ``min_tau`` is a
+    fit that left the data (the GLS of a misfitting model with strongly correlated levels can put a
+    coefficient far outside every measured point: K 3.0e-3 rad/s^1.5 on a curve whose ADEV at 262 s was
+    3.1e-4 rad/s, where K alone gives 0.028) and is not compared with the baseline. A real rise of the
+    term raises the measured curve with it, so it stays supported.
+    """
+    tau, avar, edf = (np.asarray(x, float) for x in (tau, avar, edf))
+    use = (tau >= min_tau) & (avar > 0) & (edf > 0)
+    if not use.any():
+        return dict(params)
+    tau, avar, edf = tau[use], avar[use], edf[use]
+    a = 2.0 / (9.0 * edf)
+    q = 1.0 - a - z * np.sqrt(a)  # Wilson-Hilferty: chi2_lo / edf = q^3
+    upper = np.where(q > 0, avar / np.maximum(q, 1e-12) ** 3, np.inf)
+    out = {}
+    for p, (v, s) in params.items():
+        effect = PARAM_EFFECT.get(p)
+        if effect is None:
+            out[p] = (v, s)
+            continue
+        basis = avar_term({"effect": effect, p: 1.0}, tau)
+        ok = basis > 0
+        cap2 = float(np.min(upper[ok] / basis[ok])) if ok.any() else math.inf
+        if v * v <= cap2:
+            out[p] = (v, s)
     return out
 
 
