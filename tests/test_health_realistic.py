@@ -143,3 +143,21 @@ def test_a_coefficient_the_allan_curve_does_not_support_is_not_compared():
             assert "K" in supported_params({"K": (k_true, 0.1 * k_true), "N": (N, 0.01 * N)}, tau, avar, edf)
             assert "N" in supported_params({"N": (N, 0.01 * N)}, tau, avar, edf)
             assert supported_params({"K": (10 * k_true, k_true), "N": (10 * N, N)}, tau, avar, edf) == {}
+
+
+def test_the_copter_n_that_left_its_own_allan_curve_is_not_compared():
+    """A realistic copter hour (`companion simulate --vehicle --preset copter --duration 3600 --seed 11 --arm-at
+    900 --disarm-at 1500 --handle-at 2400 --warmup-deg-s 0.1`, replayed) raised `IMU0 gyro Y degrading: N 19.3x`
+    (33.2x with the interval rule): at 2122 s the fast estimator's model was re-selected as white noise plus a
+    Gauss-Markov term at the 3-sample bound (tau_c 0.06 s, the 20 Hz filter's look-alike) and the GLS put
+    N at 2.96e-3 [2.94e-3, 2.96e-3] rad/s/sqrt(Hz). Its Allan curve at that check (the estimator's levels,
+    recorded) cannot hold that N (2.6e-3 rad/s at 1.28 s against 1.03e-4 measured); the baseline's N can."""
+    from companion.health.baseline import supported_params
+
+    tau = [0.02, 0.04, 0.08, 0.16, 0.32, 0.64, 1.28, 2.56, 5.12, 10.24, 20.48, 40.96, 81.92, 163.84, 327.68, 655.36]
+    adev = [4.894e-4, 3.777e-4, 2.747e-4, 2.017e-4, 1.506e-4, 1.18e-4, 1.032e-4, 1.014e-4, 1.134e-4, 1.38e-4,
+            1.545e-4, 1.65e-4, 1.809e-4, 2.112e-4, 3.805e-4, 7.669e-4]
+    edf = [51100, 25600, 12800, 6390, 3200, 1600, 798, 399, 199, 99.3, 49.4, 24.4, 11.9, 5.57, 2.29, 0.37]
+    avar = np.square(adev)
+    assert supported_params({"N": (2.96e-3, 1.0e-5)}, tau, avar, edf) == {}
+    assert supported_params({"N": (8.92e-5, 1.6e-6)}, tau, avar, edf) == {"N": (8.92e-5, 1.6e-6)}
