@@ -24,6 +24,9 @@ STATUSTEXT is a false alarm.
     python benchmarks/bench_faults.py                  # 20 seeds per kind, 100 healthy IMU-hours
     python benchmarks/bench_faults.py --skip-healthy --seeds 5 --kinds stuck,noise
     python benchmarks/bench_faults.py --skip-faults --preset copter,plane,rover,px4 --healthy-runs 8 --healthy-hours 1
+    python benchmarks/bench_faults.py --skip-faults --preset plane,rover,copter,px4 --healthy-runs 8 --first-run 8 \
+        --healthy-hours 1 --jobs 2 --log soak.jsonl       # pieces append to one file ...
+    python benchmarks/bench_faults.py --summary soak.jsonl  # ... and add up
 
 --preset: the healthy runs use the realistic simulator (companion.sim.realism with the vehicle presets: each
 preset's IMUs, logged rate, gyro low-pass and decimation, vibration per flight phase, IMU timing skew,
@@ -317,8 +320,11 @@ def _preset_job(job):
     return preset, seed, hours, imus, nf, nh, alarms, time.time() - t0
 
 
-def healthy_presets(presets, runs, hours, first, jobs):
-    """Healthy realistic runs, the presets in turn (run r: preset r mod len, seed r); prints each and the total."""
+def healthy_presets(presets, runs, hours, first, jobs, log=None):
+    """Healthy realistic runs, the presets in turn (run r: preset r mod len, seed r); prints each (every alarm
+    with its time) as it ends and the total; ``log``: also one JSON line per run appended to that file, so that
+    pieces run at different times (``--first-run``) add up (``--summary FILE``)."""
+    import json
     from concurrent.futures import ProcessPoolExecutor
 
     todo = [(presets[r % len(presets)], r, hours) for r in range(first, first + runs)]
@@ -332,10 +338,37 @@ def healthy_presets(presets, runs, hours, first, jobs):
             row[0] += h * imus
             row[1] += len(alarms)
             print(f"healthy {preset} seed {seed}: {h:g} h x {imus} IMUs, {nf} flights, {nh} handlings: "
-                  f"{len(alarms)} false alarms ({wall:.0f} s wall)" + (f" e.g. {alarms[:3]}" if alarms else ""), flush=True)
+                  f"{len(alarms)} false alarms ({wall:.0f} s wall)" + (f": {alarms}" if alarms else ""), flush=True)
+            if log:
+                with open(log, "a") as f:
+                    f.write(json.dumps({"preset": preset, "seed": seed, "hours": h, "imus": imus, "flights": nf,
+                                        "handlings": nh, "alarms": alarms, "wall_s": round(wall)}) + "\n")
     print("by preset: " + ", ".join(f"{k} {v[1]} in {v[0]:g} IMU-h" for k, v in by_preset.items()))
     print(f"FALSE ALARMS (realistic presets): {n_alarm} in {imu_h:g} simulated healthy IMU-hours "
           f"({time.time() - t0:.0f} s wall, {jobs} jobs)")
+
+
+def summarize(path):
+    """The total of the healthy runs logged with --log: IMU-hours and false alarms per preset, each alarm."""
+    import json
+
+    rows = [json.loads(x) for x in Path(path).read_text().splitlines() if x.strip()]
+    seen, by = set(), {}
+    for r in rows:
+        if (r["preset"], r["seed"], r["hours"]) in seen:  # a run logged twice counts once
+            continue
+        seen.add((r["preset"], r["seed"], r["hours"]))
+        b = by.setdefault(r["preset"], {"runs": 0, "imu_h": 0.0, "alarms": [], "flights": 0, "handlings": 0})
+        b["runs"] += 1
+        b["imu_h"] += r["hours"] * r["imus"]
+        b["flights"] += r["flights"]
+        b["handlings"] += r["handlings"]
+        b["alarms"] += [(r["seed"], t, text) for t, text in r["alarms"]]
+    for k, b in by.items():
+        print(f"{k}: {b['runs']} runs, {b['imu_h']:g} IMU-h, {b['flights']} flights, {b['handlings']} handlings, "
+              f"{len(b['alarms'])} false alarms" + (f": {b['alarms']}" if b["alarms"] else ""))
+    print(f"FALSE ALARMS (realistic presets): {sum(len(b['alarms']) for b in by.values())} in "
+          f"{sum(b['imu_h'] for b in by.values()):g} simulated healthy IMU-hours ({len(seen)} runs)")
 
 
 TARGET = {"stuck": 10, "noise": 10, "bias": 15, "drift": None, "spikes": 30, "N2": 30, "N1.5": 120, "saturate": None,
@@ -360,9 +393,16 @@ def main():
                     help="the fault cases on the realistic simulator with this preset (its model, rate, filter, "
                          "vibration, temperature); B2 is skipped")
     ap.add_argument("--jobs", type=int, default=1, help="processes for the --preset healthy runs (default 1)")
+    ap.add_argument("--log", default=None, metavar="FILE",
+                    help="--preset runs: append one JSON line per healthy run to FILE (pieces add up)")
+    ap.add_argument("--summary", default=None, metavar="FILE",
+                    help="print the total of the JSON lines of --log FILE (per preset, every alarm) and exit")
     ap.add_argument("--skip-healthy", action="store_true")
     ap.add_argument("--skip-faults", action="store_true")
     args = ap.parse_args()
+    if args.summary:
+        summarize(args.summary)
+        return
     seeds = args.seeds or (3 if args.quick else 20)
     kinds = args.kinds or ",".join(k for k in TARGET if not (args.quick and k == "B2"))
     runs = args.healthy_runs or (1 if args.quick else 10)
@@ -397,7 +437,7 @@ def main():
                           f"{'MISSED, said: ' + r['text'] if not math.isfinite(r['delay']) else ''}"
                           f"{' EARLY ' + str(r['early']) if r['early'] else ''}", flush=True)
     if not args.skip_healthy and args.preset:
-        healthy_presets([p.strip() for p in args.preset.split(",")], runs, hours, args.first_run, args.jobs)
+        healthy_presets([p.strip() for p in args.preset.split(",")], runs, hours, args.first_run, args.jobs, args.log)
     elif not args.skip_healthy:
         t0 = time.time()
         total, n_alarm = 0.0, 0

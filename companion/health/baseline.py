@@ -14,7 +14,9 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping
 
-from companion.allan.terms import LINEAR_PARAM
+import numpy as np
+
+from companion.allan.terms import LINEAR_PARAM, avar_term
 
 #: parameter -> effect, for the linear terms (Miao 2014 eq. (3.5): x = [Q N B K R]).
 PARAM_EFFECT = {p: e for e, p in LINEAR_PARAM.items()}
@@ -42,6 +44,88 @@ def params_from_terms(terms: Iterable[Mapping]) -> dict[str, tuple[float, float]
             std = (float(hi) - float(lo)) / (2.0 * Z95)
         if math.isfinite(value) and value >= 0.0 and not math.isnan(std):
             out[p] = (value, abs(std))
+    return out
+
+
+def check_params(terms: Iterable[Mapping], side: str = "current") -> dict[str, tuple[float, float]]:
+    """``{param: (value, s)}`` of the resolved linear terms for the degradation test (detector.py), where
+    ``s / value`` is the one-sigma of ln(value) read from the side of the 95 % interval the test looks at.
+
+    The test asks whether the current value's *lower* end is above the baseline's *upper* end. The intervals
+    of B and K from a short window are far from symmetric (scaled chi-square with few degrees of freedom;
+    K 2.6e-3 [0, 7.4e-3] rad/s^1.5 was reported with a 1-sigma of 1.9e-3, and ln(x/b) - 3 sigma_L with that
+    symmetric sigma flagged `K 24.7x` on a healthy gyro), so the one-sigma of ln(x) is taken from the
+    interval's end: ln(value / lo) / 1.96 for the current value (``side="current"``), ln(hi / value) / 1.96
+    for the baseline (``side="baseline"``).
+
+    A current term whose interval reaches 0 is not resolved by the window and is left out (it is no value
+    to compare); such a baseline term is kept with a one-sigma of at least its value, which the detector
+    treats as unresolved (tested against its upper bound). Terms without an interval (the Miao estimator)
+    keep their one-sigma as is; bounds (``"bound": True``) are left out.
+    """
+    out: dict[str, tuple[float, float]] = {}
+    for term in terms or ():
+        p = LINEAR_PARAM.get(term.get("effect"))
+        if not p or term.get("bound") or p not in term:
+            continue
+        v = float(term[p])
+        if not (math.isfinite(v) and v > 0.0):
+            continue
+        ci = (term.get("ci95") or {}).get(p)
+        if ci is None:
+            s = float((term.get("std") or {}).get(p, math.inf))
+            if not math.isnan(s):
+                out[p] = (v, abs(s))
+            continue
+        lo, hi = float(ci[0]), float(ci[1])
+        if side == "current":
+            if lo > 0.0 and lo < v:
+                out[p] = (v, v * math.log(v / lo) / Z95)
+            continue
+        if lo > 0.0 and math.isfinite(hi) and hi > v:
+            out[p] = (v, v * math.log(hi / v) / Z95)
+        else:
+            out[p] = (v, max((hi - lo) / (2.0 * Z95), v))
+    return out
+
+
+#: cluster times below this are not used to judge whether the Allan curve supports a coefficient: there the
+#: autopilot's low-pass filter bends the white-noise curve below N^2 / tau (a bound from them would be too low)
+SUPPORT_MIN_TAU_S = 1.0
+
+
+def supported_params(params: Mapping[str, tuple[float, float]], tau, avar, edf, z: float = 3.0,
+                     min_tau: float = SUPPORT_MIN_TAU_S) -> dict[str, tuple[float, float]]:
+    """The entries of ``params`` (``{param: (value, s)}``) whose own Allan variance the measured curve supports.
+
+    A term's contribution p^2 basis(tau) cannot exceed the Allan variance measured at any cluster time: the
+    other terms only add to it. With ``edf`` chi-square degrees of freedom per level, the true AVAR is below
+    avar edf / chi2_lo(edf) at z sigma (Wilson-Hilferty quantile; no limit where that is undefined, i.e.
+    for levels with few degrees of freedom). A coefficient above that at some level tau >= ``min_tau`` is a
+    fit that left the data (the GLS of a misfitting model with strongly correlated levels can put a
+    coefficient far outside every measured point: K 3.0e-3 rad/s^1.5 on a curve whose ADEV at 262 s was
+    3.1e-4 rad/s, where K alone gives 0.028) and is not compared with the baseline. A real rise of the
+    term raises the measured curve with it, so it stays supported.
+    """
+    tau, avar, edf = (np.asarray(x, float) for x in (tau, avar, edf))
+    use = (tau >= min_tau) & (avar > 0) & (edf > 0)
+    if not use.any():
+        return dict(params)
+    tau, avar, edf = tau[use], avar[use], edf[use]
+    a = 2.0 / (9.0 * edf)
+    q = 1.0 - a - z * np.sqrt(a)  # Wilson-Hilferty: chi2_lo / edf = q^3
+    upper = np.where(q > 0, avar / np.maximum(q, 1e-12) ** 3, np.inf)
+    out = {}
+    for p, (v, s) in params.items():
+        effect = PARAM_EFFECT.get(p)
+        if effect is None:
+            out[p] = (v, s)
+            continue
+        basis = avar_term({"effect": effect, p: 1.0}, tau)
+        ok = basis > 0
+        cap2 = float(np.min(upper[ok] / basis[ok])) if ok.any() else math.inf
+        if v * v <= cap2:
+            out[p] = (v, s)
     return out
 
 

@@ -21,7 +21,7 @@ from typing import Mapping
 import numpy as np
 
 from companion.estimators import from_state_dict as estimator_from_state, make_estimator
-from companion.estimators.report import health_params
+from companion.health.baseline import check_params, supported_params
 from companion.health.detector import DEGRADING, LEARNING, HealthDetector, Transition
 from companion.health.faults import FAULT, OK, BlockStats, FaultEvent, block_stats
 from companion.health.monitor import ImuFaults
@@ -268,7 +268,7 @@ class Channel:
     def learned_terms(self) -> dict[str, dict[str, tuple[float, float]]]:
         """The learned baseline per axis ``{param: (value, std)}``; learning stops."""
         self.flush()
-        out = {ax: health_params(est.terms(full=True) if est.kind == "octave" else est.terms())
+        out = {ax: check_params(est.terms(full=True) if est.kind == "octave" else est.terms(), side="baseline")
                for ax, est in self.learn.items()}
         self.learn = {}
         return out
@@ -285,8 +285,23 @@ class Channel:
         return fast + slow
 
     def current_params(self, ax: str, terms=None) -> dict[str, tuple[float, float]]:
-        """``{param: (value, std)}`` of the resolved parameters (a bound is not compared with a baseline)."""
-        return health_params(self.report_terms(ax) if terms is None else terms)
+        """``{param: (value, s)}`` of the parameters the window resolves (a bound, or a term whose 95 % interval
+        reaches 0, is not compared with a baseline); s / value is the one-sigma of ln(value) from the interval's
+        lower end (health.baseline.check_params)."""
+        return check_params(self.report_terms(ax) if terms is None else terms, side="current")
+
+    def supported(self, ax: str, params: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        """The current parameters the estimators' own Allan curves support (health.baseline.supported_params):
+        Q and N against the fast estimator's levels, B, K and R against the slow one's."""
+        out = {}
+        for bank, ps in ((self.fast, ("Q", "N")), (self.slow, ("B", "K", "R"))):
+            sub = {p: params[p] for p in ps if p in params}
+            est = bank.get(ax)
+            if sub and est is not None and hasattr(est, "avar"):
+                tau, avar, edf = est.avar()
+                sub = supported_params(sub, tau, avar, edf, z=self.cfg.health.z)
+            out.update(sub)
+        return out
 
     def check_due(self, t: float) -> bool:
         return self.next_check_t is not None and t >= self.next_check_t
@@ -304,6 +319,7 @@ class Channel:
             terms = self.report_terms(ax)
             cur = self.current_params(ax, terms)
             self.current[ax] = cur
+            cur = self.supported(ax, cur)
             reported[ax] = terms
             base = baseline.get(self.imu, ax) if baseline is not None else None
             if base is None or self.learn:
