@@ -3,6 +3,8 @@ the CSV time unit can be given, absurd rates are refused, NBS14 read as a 1 Hz C
 
 from __future__ import annotations
 
+import math
+
 import json
 import sys
 from pathlib import Path
@@ -222,6 +224,25 @@ def _n_k(seed, seconds, rate=20.0, N=1e-3, K=8e-4):
     rng = np.random.default_rng(seed)
     n = int(seconds * rate)
     return rng.normal(0, N * np.sqrt(rate), n) + np.cumsum(rng.normal(0, K / np.sqrt(rate), n))
+
+
+def test_a_bias_instability_between_white_noise_and_a_random_walk_is_resolved_where_its_share_peaks(repo_root):
+    """The shipped sample's gx (N 3.5e-4, B 1.5e-4, K 6e-5 SI, 20 min at 50 Hz): B is never half of the AVAR
+    (white noise, then K, lead), yet its share peaks at a tau the record covers ten times over; it is resolved,
+    and K's interval covers the truth (K took B's share and missed the truth when B had to be half)."""
+    from companion.allan.fit import dominates_from, record_needed
+    from companion.analysis.source import analyze_source
+
+    terms = [{"effect": "white_noise", "N": 3.5e-4}, {"effect": "bias_instability", "B": 1.5e-4},
+             {"effect": "random_walk", "K": 6e-5}]
+    assert math.isfinite(dominates_from(terms, 0.02)["bias_instability"])
+    assert record_needed(terms, 0.02)["bias_instability"] < 1200.0
+    entries, _ = analyze_source(str(repo_root / "tlogs" / "sample.tlog"), ["gx"], "octave")
+    got = {t["effect"]: t for t in entries[0]["axes"]["gx"]["terms"]}
+    lo, hi = got["bias_instability"]["ci95"]["B"]
+    assert lo <= 1.5e-4 <= hi
+    lo, hi = got["random_walk"]["ci95"]["K"]
+    assert lo <= 6e-5 <= hi
 
 
 def test_random_walk_resolved_only_from_a_long_enough_record():
