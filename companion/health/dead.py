@@ -40,5 +40,5 @@ def dead_gyro_text(label: str, gyro: np.ndarray, lsb: float | None = None) -> st
                 f"message's step is {lsb * 1e3:.3g} mrad/s = {np.degrees(lsb):.3g} deg/s: a gyro quieter than that "
                 "reads 0 at rest; HIGHRES_IMU carries float rad/s): nothing can be estimated from it")
     what = "exactly 0" if vals == {0.0} else "constant (" + ", ".join(f"{v:.6g}" for v in sorted(vals)) + " rad/s)"
-    return (f"{label}: gyro dead: {', '.join(AXIS_NAMES[a] for a in axes)} {what} in all {g.shape[0]} samples "
+    return (f"{label}: gyro dead: {names} {what} in all {g.shape[0]} samples "
             "(sensor absent, not started or frozen): nothing can be estimated from it")

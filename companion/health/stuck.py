@@ -190,6 +190,10 @@ class StuckDetector:
             return True
         return False
 
+    def _noise_lsb(self, ref) -> float:
+        """The reference noise in LSB with the rounding's LSB^2 / 12 taken out (Sheppard's correction)."""
+        return math.sqrt(max(ref.sigma2 - self.lsb * self.lsb / 12.0, 0.0)) / self.lsb
+
     def _quiet_cap(self, ref, n: int) -> float:
         """The most evidence a block of one code can give: a healthy gyro whose level sits at the centre of a code keeps
         every sample in it with probability P^n, P = erf(0.5 / (s sqrt 2)) (s the reference noise in LSB less
@@ -197,7 +201,7 @@ class StuckDetector:
         rate p_equal_codes averages over the level; at a code's centre a quiet gyro repeats more (at 10 Hz and
         0.36 LSB one block in six is a single code, and the uncapped 4 nats per block took a healthy
         simulated plane to 15 of the 20 nats in an hour)."""
-        s_l = math.sqrt(max(ref.sigma2 - self.lsb * self.lsb / 12.0, 0.0)) / self.lsb
+        s_l = self._noise_lsb(ref)
         if s_l <= 0:
             return math.inf
         p_one = math.erf(0.5 / (s_l * math.sqrt(2.0)))
@@ -217,7 +221,7 @@ class StuckDetector:
             self.out_n += n
         if self.out_k < MIN_OUTSIDE:
             return None
-        s_l = math.sqrt(max(ref.sigma2 - self.lsb * self.lsb / 12.0, 0.0)) / self.lsb
+        s_l = self._noise_lsb(ref)
         if s_l <= 0:
             return None
         q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), self.out_k / self.out_n, 0.45)

@@ -31,10 +31,12 @@ from companion.service.blocks import RATE_CHANGE, BlockCutter
 from companion.service.config import PipelineConfig
 from companion.service.motion import MotionGate, Peer, noise_ratio
 from companion.analysis.filters import sampling
+from companion.sources.messages import IMU_LAYOUTS
 from companion.sources.timing import stamp_resolution
 
 FLOAT_MESSAGES = ("HIGHRES_IMU", "CSV")
-INT16_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3")  # gyro int16 (mrad/s by default)
+# the MAVLink messages whose gyro is an integer (int16, mrad/s by default), from their layouts
+INT16_MESSAGES = tuple(name for name, lay in IMU_LAYOUTS.items() if lay.dtype["xgyro"].kind == "i")
 COLUMNS = {ax: 1 + i for i, ax in enumerate(GYRO_AXES + ACCEL_AXES)}  # column of each axis in a row
 TEMP_COLUMN = 7  # the IMU temperature (degC, nan where the source has none)
 
