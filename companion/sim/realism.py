@@ -46,7 +46,6 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
-from scipy import signal
 
 from companion.errors import CompanionError
 
@@ -201,6 +200,8 @@ class Realism:
         """(b, a) of the gyro low-pass at the sensor rate, or None without a filter."""
         if not self.gyro_lpf_hz:
             return None
+        from scipy import signal  # here, not at the top: a simulator without a filter starts 1-2 s sooner
+
         return signal.butter(self.lpf_order, self.gyro_lpf_hz, fs=self.sensor_rate_hz)
 
 
@@ -345,6 +346,8 @@ class SensorStage:
     def _filter(self, x, i, white):
         if self.ba is None:
             return x
+        from scipy import signal
+
         b, a = self.ba
         store = "zi_white" if white else "zi"
         zi_all = getattr(self, store)
