@@ -246,3 +246,37 @@ def test_config_errors_are_one_line(tmp_path, cfg, expect):
     bad_yaml.write_text("streams: [\n")
     with pytest.raises(CompanionError, match="invalid YAML"):
         load(path, config=bad_yaml)
+
+
+def test_live_decode_scalar_path_equals_the_array_path():
+    """The int16 messages' scalar path gives the array path's samples bit for bit (scale overrides,
+    compass-only rows, temperature 0 = none, extreme codes)."""
+    import os
+
+    os.environ.setdefault("MAVLINK20", "1")
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from companion.sources.decode import ScaleTable, _instance, _to_si
+
+    mav = mavlink.MAVLink(None, srcSystem=3, srcComponent=7)
+    rng = np.random.default_rng(11)
+    scales = ScaleTable([{"message": "SCALED_IMU2", "gyro_scale": 8.7266e-4, "accel_scale": 0.0326561}])
+    for _ in range(300):
+        v = [int(x) for x in rng.integers(-32768, 32768, 9)]
+        if rng.random() < 0.2:
+            v[:6] = [0] * 6
+        temp = int(rng.choice([0, int(rng.integers(-32768, 32768))]))
+        name = str(rng.choice(["RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3"]))
+        if name == "RAW_IMU":
+            msg = mav.raw_imu_encode(int(rng.integers(0, 2**63)), *v, int(rng.integers(0, 256)), temp)
+        else:
+            msg = getattr(mav, name.lower() + "_encode")(int(rng.integers(0, 2**32)), *v, temp)
+        msg = mav.decode(bytearray(msg.pack(mav)))
+        got = imu_sample_from_message(msg, scales)
+        layout = M.IMU_LAYOUTS[name]
+        rec = np.array([tuple(getattr(msg, f) for f in layout.dtype.names)], dtype=layout.dtype)
+        key = StreamKey(3, 7, name, int(_instance(layout, rec)[0]))
+        ref = _to_si(layout, key, rec, scales)
+        assert got.key == key and got.is_imu == ref.is_imu
+        assert got.t_s == ref.t[0] and got.gyro == tuple(ref.gyro[0]) and got.accel == tuple(ref.accel[0])
+        assert got.temperature == (None if ref.temperature is None else ref.temperature[0])

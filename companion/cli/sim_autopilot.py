@@ -113,6 +113,26 @@ def _imu_ints(blk, i):
     return a, g
 
 
+def _send_block(conn, blk, sending, hb_times, hb_armed, counts, count_keys) -> None:
+    """Send a block's IMU messages and HEARTBEATs as frames built at once, one datagram/write each."""
+    from companion.mavlink.imu_frames import block_frames
+
+    mav = conn.mav
+    buf, starts, kind = block_frames(blk.t, blk.gyro, blk.accel, blk.temperature, sending, hb_times, hb_armed,
+                                     mav.seq, mav.srcSystem, mav.srcComponent)
+    write = mav.file.write
+    bounds = starts.tolist()
+    for j in range(len(bounds) - 1):
+        write(buf[bounds[j]:bounds[j + 1]])
+    total = len(bounds) - 1
+    mav.seq = (mav.seq + total) % 256
+    mav.total_packets_sent += total
+    mav.total_bytes_sent += len(buf)
+    for i, key in enumerate(count_keys[:len(sending)]):
+        counts[key] += int(np.count_nonzero(kind == i))
+    counts["heartbeat"] += len(hb_times)
+
+
 def _describe(sim) -> str:
     names = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")[:sim.imus]
     parts = [f"{sim.imus} IMU(s) ({', '.join(names)}) at {sim.rate_hz:g} Hz"]
@@ -210,6 +230,10 @@ def run(args) -> int:
                lambda ti, a, g, c: mav.scaled_imu2_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, c),
                lambda ti, a, g, c: mav.scaled_imu3_send(int(round(ti * 1e3)), *a, *g, 0, 0, 0, c))
     count_keys = ("raw_imu", "scaled_imu2", "scaled_imu3")
+    # whole blocks packed with numpy (the same bytes as pymavlink's *_send); a signed or MAVLink 1 link
+    # keeps pymavlink's per-message path
+    dialect = sys.modules.get(type(mav).__module__)
+    fast = getattr(dialect, "WIRE_PROTOCOL_VERSION", "") == "2.0" and not mav.signing.sign_outgoing
 
     def heartbeat(armed: bool) -> None:
         base_mode = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
@@ -239,25 +263,29 @@ def run(args) -> int:
                 if args.duration is not None:
                     t_sim = min(t_sim, 1.0 + args.duration)
                 blk = sim.take_until(t_sim)
-                t = blk.t.tolist()
-                ints = [_imu_ints(blk, i) for i in range(sim.imus)]
-                temps = [[4200] * blk.n if blk.temperature is None else
-                         np.clip(np.rint(blk.temperature[i] * 100.0), -32768, 32767).astype(int).tolist()
-                         for i in range(sim.imus)]
                 hb_times = []
                 while next_hb <= t_sim:
                     hb_times.append(next_hb)
                     next_hb += 1.0
-                k = 0
-                for th in hb_times + [math.inf]:
-                    while k < len(t) and t[k] < th:
-                        for i, mid in enumerate(IMU_MSG_IDS[:sim.imus]):
-                            if sending[mid]:
-                                senders[i](t[k], ints[i][0][k], ints[i][1][k], temps[i][k])
-                                counts[count_keys[i]] += 1
-                        k += 1
-                    if th != math.inf:
-                        heartbeat(bool(sim.armed_at(th)))
+                if fast:
+                    _send_block(conn, blk, [sending[mid] for mid in IMU_MSG_IDS[:sim.imus]], hb_times,
+                                [bool(sim.armed_at(th)) for th in hb_times], counts, count_keys)
+                else:
+                    t = blk.t.tolist()
+                    ints = [_imu_ints(blk, i) for i in range(sim.imus)]
+                    temps = [[4200] * blk.n if blk.temperature is None else
+                             np.clip(np.rint(blk.temperature[i] * 100.0), -32768, 32767).astype(int).tolist()
+                             for i in range(sim.imus)]
+                    k = 0
+                    for th in hb_times + [math.inf]:
+                        while k < len(t) and t[k] < th:
+                            for i, mid in enumerate(IMU_MSG_IDS[:sim.imus]):
+                                if sending[mid]:
+                                    senders[i](t[k], ints[i][0][k], ints[i][1][k], temps[i][k])
+                                    counts[count_keys[i]] += 1
+                            k += 1
+                        if th != math.inf:
+                            heartbeat(bool(sim.armed_at(th)))
             while True:
                 msg = conn.recv_match(blocking=False)
                 if msg is None:
