@@ -175,6 +175,8 @@ class Reporter:
         """Send what is due at message time ``t_s``; return the number of messages sent."""
         if self._next_t is None or t_s < self._next_t - self.period_s:  # first call, or time went back
             self._next_t = t_s
+        elif t_s < self._next_t:  # nothing due (most calls: one per sample)
+            return 0
         names = sorted(self.values)
         if not names:
             return 0
