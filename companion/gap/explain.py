@@ -203,9 +203,12 @@ def explain_trend(rec: dict) -> str:
     """Plain words for the ramp-or-random-walk decision (:mod:`companion.gap.trend`)."""
     head = (f"ramp or random walk: both explain the long-tau rise of the Allan curve (scores "
             f"{rec['ramp_score']:.1f} and {rec['random_walk_score']:.1f}); with the least-squares line taken out "
-            "of the record")
+            f"of the record, a random walk of K {rec['K_walk']:.3g} would leave most of its Allan variance "
+            f"(deviance {rec['dev_walk']:.1f}) and a ramp none ({rec['dev_line']:.1f}); with the raw curve's "
+            f"deviance difference ({rec['raw']:+.1f}, random walk minus ramp), the evidence is {abs(rec['evidence']):.1f} for the "
+            f"{'random walk' if rec['named'] == 'random_walk' else 'ramp'}")
     if rec["named"] == "random_walk":
-        return (f"{head} a random walk is still there (LR {rec['lr']:.1f} > {rec['threshold']:.1f}): the rise is not a "
-                "straight line, so the random walk is named")
-    return (f"{head} no random walk is left (LR {rec['lr']:.1f} <= {rec['threshold']:.1f}): the rise is a straight "
-            "line, so the ramp is named")
+        return (f"{head}: the rise is not a straight line (a free random walk in the detrended record: LR "
+                f"{rec['lr']:.1f}), so the random walk is named")
+    return (f"{head}: the rise is a straight line (a free random walk in the detrended record: LR {rec['lr']:.1f}), "
+            "so the ramp is named")

@@ -366,10 +366,10 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     cache: dict = {}
 
     def detrended():
-        """The record with its least-squares line out (measured once, when a ramp first needs the test)."""
+        """The record with its least-squares line out (measured once, when a ramp and a random walk first compete)."""
         if "meas" not in cache:
             cache["meas"] = trend.detrended_measure(y_segs, rate_hz)
-        return cache["meas"], sorted(fixed)
+        return cache["meas"], sorted(fixed), [len(s) / rate_hz for s in y_segs]
     alternatives: dict[int, dict] = {}  # index of a term -> the Gauss-Markov fit it won over
     for it in range(max_iter):
         recalibratable = [j for j in range(len(terms0)) if j in held]
