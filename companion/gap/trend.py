@@ -12,8 +12,8 @@ line through a Brownian path has variance 6 K^2 / (5 T)), and the rest stays in 
 So the test, asked whenever a ramp and a random walk both pass their level on the Allan curve (whichever of
 the two leads the ranking): each explanation predicts the Allan variance of the detrended record (one
 slope, an intercept per segment). The ramp says nothing of the rise is left; the random walk of the Allan
-fit (its K) says its detrended share is left, K^2 tau / 3 - tau x cov(line, increment) + tau^2 var(slope) / 2
-(:func:`detrended_walk_avar`; K^2 tau / 3 (1 - 1.2 tau / T) on one segment). Each prediction's deviance on
+fit (its K) says its detrended share is left, K^2 tau / 3 - tau cov(Dx, slope) + tau^2 var(slope) / 2
+(:func:`detrended_walk_avar`, exact in continuous time; K^2 tau / 3 (1 - 1.2 tau / T) at short tau). Each prediction's deviance on
 the detrended record (the terms under the rise with their magnitudes free: the question is the form of the
 rise, not the model's sizes; a held mis-sized flicker term could otherwise hide a random walk or fake one)
 is added to the explanation's own on the raw record (deviance + penalty), and the smaller total wins: the
@@ -84,17 +84,26 @@ def detrended_walk_avar(K: float, tau, lengths_s) -> np.ndarray:
     """Expected overlapping AVAR of a rate random walk K after :func:`detrend` (one common slope, an intercept
     per segment of ``lengths_s`` seconds), in continuous time. With Dx the difference of adjacent cluster
     means and b the fitted slope, the residual's difference is Dx - b tau, so
-    E = E[Dx^2] - 2 tau E[Dx b] + tau^2 E[b^2] (halved). For Brownian W on segments T_s:
-    b = sum_s n_s / den, n_s = int (t - mean) W dt, den = sum_s T_s^3 / 12, var(n_s) = K^2 T_s^5 / 120;
-    cov(Dx, n_s) averaged over positions = K^2 tau T_s^2 / 12. One segment: K^2 tau / 3 (1 - 1.2 tau / T)."""
-    tau = np.asarray(tau, dtype=float)
-    T = np.asarray([float(x) for x in lengths_s if x > 0], dtype=float)
+    AVAR = (E[Dx^2] - 2 tau E[Dx b] + tau^2 E[b^2]) / 2, averaged over the cluster positions. For Brownian
+    W on a segment of length T: b = sum_s n_s / den, n_s = int (t - T/2) W dt (only the segment's own
+    increments enter), den = sum_s T_s^3 / 12, var(n_s) = K^2 T_s^5 / 120, cov(W(s), n) = K^2 g(s) with
+    g(s) = T s^2 / 4 - s^3 / 6, whose double integral H(s) = T s^4 / 48 - s^5 / 120 gives cov(Dx, n) averaged
+    over the positions u in [0, T - 2 tau] in closed form. Short tau: K^2 tau / 3 (1 - 1.2 tau / T)."""
+    tau = np.asarray(tau, dtype=float)[:, None]
+    T = np.asarray([float(x) for x in lengths_s if x > 0], dtype=float)[None, :]
     den = float(np.sum(T ** 3)) / 12.0
     var_b = float(np.sum(T ** 5)) / 120.0 / den ** 2
-    w = np.maximum(T[None, :] - 2.0 * tau[:, None], 0.0)  # cluster pairs per segment (pooling weights)
-    wsum = np.maximum(w.sum(axis=1), 1e-300)
-    cross = (w * (T[None, :] ** 2)).sum(axis=1) / wsum * tau / (12.0 * den)
-    out = tau / 3.0 - tau * cross + 0.5 * tau ** 2 * var_b
+
+    def H(s):
+        return T * s ** 4 / 48.0 - s ** 5 / 120.0
+
+    L = np.maximum(T - 2.0 * tau, 0.0)  # cluster positions per segment (the pooling weights)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov_n = (H(T) - H(2 * tau) - 2.0 * (H(L + tau) - H(tau)) + H(L)) / (tau * L)
+    cov_n = np.where(L > 0, cov_n, 0.0)
+    cross = (L * cov_n).sum(axis=1) / np.maximum(L.sum(axis=1), 1e-300) / den
+    t1 = tau[:, 0]
+    out = t1 / 3.0 - t1 * cross + 0.5 * t1 ** 2 * var_b
     return K ** 2 * np.maximum(out, 0.0)
 
 
