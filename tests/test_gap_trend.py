@@ -138,3 +138,23 @@ def test_hidden_ramp_is_a_ramp_where_the_random_walk_led_the_allan_ranking():
     assert rec["led"] == "random_walk" and rec["named"] == "ramp" and rec["evidence"] < 0
     assert rec["dev_walk"] > rec["dev_line"]
     assert r.gap_after <= NOISE_FLOOR_G
+
+
+def test_gap_over_the_resolved_cluster_times_leaves_out_the_octaves_beyond_a_tenth_of_the_record():
+    """An Allan curve equal to the model up to a tenth of the record and 5x above it beyond: G over all
+    octaves is far above the noise floor, over the resolved ones (tau <= T/10) exactly 0."""
+    from companion.gap.compare import measure
+    from companion.gap.likelihood import gap_metric, model_avar
+    from companion.gap.workflow import GapResult, _resolved_gap
+
+    rate, n = 50.0, 1600
+    terms = [{"effect": "white_noise", "N": 1e-3}]
+    meas = measure(np.random.default_rng(0).normal(0.0, 1e-3 * np.sqrt(rate), n), rate)
+    s = model_avar(terms, meas.tau, rate)
+    meas.avar = np.where(meas.tau <= n / rate / 10, s, 5.0 * s)
+    res = GapResult(axis="gx", measured=meas, terms_before=terms, terms_after=terms, gap_before=0.0,
+                    gap_after=gap_metric(meas, s))
+    _resolved_gap(res, meas, n / rate)
+    assert res.resolved_tau_max == pytest.approx(3.2)
+    assert meas.tau[-1] > 3.2 and res.gap_after > 2.0
+    assert res.gap_after_resolved == pytest.approx(0.0, abs=1e-9)
