@@ -593,8 +593,10 @@ def hard_tier(draws, seed0=600_000, cases=None):
 def ramp_rw_tier(draws, seed0=700_000):
     """Ramp or random walk, both directions: a ramp or a rate random walk hidden from a mis-sized (x0.7-1.4)
     white + flicker model (no random-walk term, so 'random_walk' is a candidate beside 'ramp'). Right = the
-    hidden one named alone and G after <= 2. Also the detrended record's random-walk evidence (corrected LR,
-    companion.gap.trend) wherever a ramp won the Allan ranking against a random walk that passed too."""
+    hidden one named alone and G after <= 2. Also, wherever a ramp and a random walk both passed on the Allan
+    curve, the ramp-or-random-walk rule's record (companion.gap.trend): the evidence for the random walk (its
+    prediction of the detrended record against the ramp's, > 0: the random walk), the free random walk's
+    corrected LR in the detrended record, and which of the two led the Allan ranking and which was named."""
     print(f"\n== ramp or random walk: hidden from a mis-sized white + flicker model, {draws} draws each, seeds {seed0}+ ==")
     print(f"{'hidden':14} {'right':>15}  where tested: evidence for the random walk / free detrended random-walk LR "
           f"(led -> named)  named instead (counts)")
