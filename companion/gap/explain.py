@@ -201,14 +201,15 @@ def explain_temperature(coef: float, check: dict, axis: str) -> str:
 
 def explain_trend(rec: dict) -> str:
     """Plain words for the ramp-or-random-walk decision (:mod:`companion.gap.trend`)."""
-    head = (f"ramp or random walk: both explain the long-tau rise of the Allan curve (scores "
-            f"{rec['ramp_score']:.1f} and {rec['random_walk_score']:.1f}); with the least-squares line taken out "
-            f"of the record, a random walk of K {rec['K_walk']:.3g} would leave most of its Allan variance "
-            f"(deviance {rec['dev_walk']:.1f}) and a ramp none ({rec['dev_line']:.1f}); with the raw curve's "
-            f"deviance difference ({rec['raw']:+.1f}, random walk minus ramp), the evidence is {abs(rec['evidence']):.1f} for the "
-            f"{'random walk' if rec['named'] == 'random_walk' else 'ramp'}")
-    if rec["named"] == "random_walk":
-        return (f"{head}: the rise is not a straight line (a free random walk in the detrended record: LR "
-                f"{rec['lr']:.1f}), so the random walk is named")
-    return (f"{head}: the rise is a straight line (a free random walk in the detrended record: LR {rec['lr']:.1f}), "
-            "so the ramp is named")
+    walk = rec["named"] == "random_walk"
+    head = (f"ramp or random walk: both explain the long-tau rise of the Allan curve (scores {rec['ramp_score']:.1f} "
+            f"for the ramp, {rec['random_walk_score']:.1f} for the random walk); the record with its least-squares "
+            f"line taken out fits what a random walk of K {rec['K_walk']:.3g} would leave there (deviance "
+            f"{rec['dev_walk']:.1f}) {'better' if rec['dev_walk'] < rec['dev_line'] else 'worse'} than nothing left, "
+            f"as after a ramp ({rec['dev_line']:.1f}); with the raw curve's difference ({rec['raw']:+.1f}, random "
+            f"walk minus ramp) the evidence is {abs(rec['evidence']):.1f} for the {'random walk' if walk else 'ramp'}")
+    if walk:
+        return (f"{head}: the rise is not a straight line, so the random walk is named (a free random walk in the "
+                f"detrended record: LR {rec['lr']:.1f})")
+    return (f"{head}: the rise is a straight line, so the ramp is named (a free random walk in the detrended "
+            f"record: LR {rec['lr']:.1f})")
