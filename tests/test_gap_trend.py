@@ -103,8 +103,8 @@ def test_hidden_ramp_without_a_model_random_walk_stays_a_ramp():
 def test_detrended_random_walk_keeps_the_predicted_share_of_its_allan_variance(lengths):
     """The random-walk prediction the ramp-or-random-walk rule compares: the mean Allan variance of detrended
     random walks (one common slope, an intercept per segment; 400 simulated records) matches
-    detrended_walk_avar within 10 % at every octave from 8 samples to a quarter of the longest segment (1000 records: within 4 %), where
-    the plain K^2 tau / 3 is off by more than 20 % at the longest."""
+    detrended_walk_avar within 10 % at every octave from 8 samples to a quarter of the longest segment (1000
+    records: within 4 %), where the plain K^2 tau / 3 is off by more than 20 % at the longest."""
     from companion.allan.pooled import pooled_oavar
     from companion.gap.trend import detrended_walk_avar
 

@@ -13,9 +13,10 @@ So the test, asked whenever a ramp and a random walk both pass their level on th
 the two leads the ranking): each explanation predicts the Allan variance of the detrended record (one
 slope, an intercept per segment). The ramp says nothing of the rise is left; the random walk of the Allan
 fit (its K) says its detrended share is left, K^2 tau / 3 - tau cov(Dx, slope) + tau^2 var(slope) / 2
-(:func:`detrended_walk_avar`, exact in continuous time; K^2 tau / 3 (1 - 1.2 tau / T) at short tau). Each prediction's deviance on
-the detrended record (the terms under the rise with their magnitudes free: the question is the form of the
-rise, not the model's sizes; a held mis-sized flicker term could otherwise hide a random walk or fake one)
+(:func:`detrended_walk_avar`, exact in continuous time; K^2 tau / 3 (1 - 1.2 tau / T) at short tau).
+Each prediction's deviance on the detrended record (the terms under the rise with their magnitudes free:
+the question is the form of the rise, not the model's sizes; a held mis-sized flicker term could otherwise
+hide a random walk or fake one)
 is added to the explanation's own on the raw record (deviance + penalty), and the smaller total wins: the
 larger likelihood, the rule between look-alikes of the same size. Both explanations make a definite
 prediction, so the rule is symmetric: no default, no threshold (a threshold on "a random walk is left"
