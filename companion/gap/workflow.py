@@ -372,7 +372,8 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     cache: dict = {}
 
     def detrended():
-        """The record with its least-squares line out (measured once, when a ramp and a random walk first compete)."""
+        """The record with its least-squares line out (measured once, when a ramp and a random walk first
+        compete), the fixed terms' indices and the segments' lengths (s)."""
         if "meas" not in cache:
             cache["meas"] = trend.detrended_measure(y_segs, rate_hz)
         return cache["meas"], sorted(fixed), [len(s) / rate_hz for s in y_segs]
@@ -593,7 +594,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     if changed and res.gap_after > NOISE_FLOOR_G:
         res.notes.append(f"a gap remains above the noise floor (G = {res.gap_after:.2f} > {NOISE_FLOOR_G}): "
                          "the data hold something none of the seven effects describes well" + _strongest_left(res)
-                         + _resolved_text(res, meas, rate_hz))
+                         + _resolved_text(res, meas))
     return res
 
 
@@ -614,7 +615,7 @@ def _resolved_gap(res: GapResult, meas: Measured, record_s: float) -> None:
     res.resolved_tau_max = float(tau_max)
 
 
-def _resolved_text(res: GapResult, meas: Measured, rate_hz: float) -> str:
+def _resolved_text(res: GapResult, meas: Measured) -> str:
     if res.gap_after_resolved is None:
         return ""
     out = meas.tau > res.resolved_tau_max
