@@ -593,10 +593,13 @@ def hard_tier(draws, seed0=600_000, cases=None):
 def ramp_rw_tier(draws, seed0=700_000):
     """Ramp or random walk, both directions: a ramp or a rate random walk hidden from a mis-sized (x0.7-1.4)
     white + flicker model (no random-walk term, so 'random_walk' is a candidate beside 'ramp'). Right = the
-    hidden one named alone and G after <= 2. Also the detrended record's random-walk evidence (corrected LR,
-    companion.gap.trend) wherever a ramp won the Allan ranking against a random walk that passed too."""
+    hidden one named alone and G after <= 2. Also, wherever a ramp and a random walk both passed on the Allan
+    curve, the ramp-or-random-walk rule's record (companion.gap.trend): the evidence for the random walk (its
+    prediction of the detrended record against the ramp's, > 0: the random walk), the free random walk's
+    corrected LR in the detrended record, and which of the two led the Allan ranking and which was named."""
     print(f"\n== ramp or random walk: hidden from a mis-sized white + flicker model, {draws} draws each, seeds {seed0}+ ==")
-    print(f"{'hidden':14} {'right':>15}  detrended random-walk LR where tested (named)  named instead (counts)")
+    print(f"{'hidden':14} {'right':>15}  where tested: evidence for the random walk / free detrended random-walk LR "
+          f"(led -> named)  named instead (counts)")
     tot = [0, 0]
     for e_i, effect in enumerate(("ramp", "random_walk")):
         ok_n, lrs, wrong = 0, [], {}
@@ -610,7 +613,8 @@ def ramp_rw_tier(draws, seed0=700_000):
             names = _named(r)
             ok = names == [effect] and r.gap_after <= NOISE_FLOOR_G
             ok_n += ok
-            lrs += [f"{it['trend']['lr']:.1f} ({it['trend']['named'][:4]})" for it in r.iterations if it.get("trend")]
+            lrs += [f"{it['trend']['evidence']:+.0f}/{it['trend']['lr']:.1f} ({it['trend']['led'][:4]}->"
+                    f"{it['trend']['named'][:4]})" for it in r.iterations if it.get("trend")]
             if not ok:
                 key = "+".join(names) or "(nothing)"
                 wrong[key] = wrong.get(key, 0) + 1
@@ -654,6 +658,7 @@ def main():
     ap.add_argument("--only", choices=("single", "null", "missized", "two", "issue", "hard", "ramp-rw"), help="run one tier")
     ap.add_argument("--fresh", action="store_true", help="fresh random draws: the seed ranges start at a number "
                     "drawn from the OS entropy (printed, so a run can be repeated), not at the fixed defaults")
+    ap.add_argument("--offset", type=int, help="the seed offset / 10^6 of an earlier --fresh run, to repeat it")
     ap.add_argument("--hard-draws", type=int, default=10, help="draws per case of the hard tier (default 10)")
     ap.add_argument("--hard-cases", help="comma-separated indices of HARD_CASES to run (default all; to run "
                     "the cases in parallel processes)")
@@ -667,7 +672,10 @@ def main():
     null_seeds = a.null_seeds if a.null_seeds is not None else (10 if a.quick else int(2.5 * a.seeds))
     t0 = time.perf_counter()
     off = 0
-    if a.fresh:
+    if a.offset is not None:
+        off = a.offset * 10**6
+        print(f"every tier's seeds offset by {off}")
+    elif a.fresh:
         off = int(np.random.SeedSequence().entropy % 10**9) * 10**6
         print(f"fresh draws: every tier's seeds offset by {off} (repeat with the same offset to reproduce)")
     tiers = {"single": lambda: single_tier(a.seeds, 100_000 + off), "null": lambda: null_fresh(null_seeds, 200_000 + off),

@@ -71,6 +71,23 @@ def test_ardupilot_bin_against_mpu6000_datasheet(shared_data, tmp_path, capsys):
 
 
 @pytest.mark.shared
+def test_ardupilot_gz_short_record_gap_over_the_resolved_cluster_times(shared_data, tmp_path, capsys):
+    """dronekit log171 IMU[0], gz (33 s at rest): the filter is named from the log's parameter and nothing else
+    reaches its level; the gap left (G 2.47, docs/gap.md) sits in the two octaves beyond a tenth of the record
+    (5.2 and 10.3 s, EDF 6 and 2: a slow bias wander the record cannot resolve); over tau <= 3.3 s it is within
+    the noise floor."""
+    out = tmp_path / "gz.json"
+    assert main(["gap", str(shared_data / "ardupilot" / "dronekit_log171.bin"), "--datasheet", "MPU-6000",
+                 "--imu", "0", "--axis", "gz", "--json", str(out)]) == 0
+    capsys.readouterr()
+    doc = json.loads(out.read_text())
+    assert [a["effect"] for a in doc["added"]] == ["lowpass"] and doc["added"][0]["cutoff_hz"] == 20.0
+    assert doc["resolved_tau_max"] == pytest.approx(3.3, rel=0.02)
+    assert doc["gap_after_resolved"] <= 2.0 < doc["gap_after"]
+    assert any("over the cluster times the record resolves" in n and "2 longer octave(s)" in n for n in doc["notes"])
+
+
+@pytest.mark.shared
 def test_px4_ulog_gx_filter_near_the_onchip_setting_and_the_line(shared_data, tmp_path, capsys):
     """pyulog sample, sensor_combined gx (averaged samples at 248.6 Hz, no cut-off parameter in the log):
     the 116.5 Hz line the periodogram shows is named, and with it in the model the fitted cut-off is

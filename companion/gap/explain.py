@@ -201,11 +201,15 @@ def explain_temperature(coef: float, check: dict, axis: str) -> str:
 
 def explain_trend(rec: dict) -> str:
     """Plain words for the ramp-or-random-walk decision (:mod:`companion.gap.trend`)."""
-    head = (f"ramp or random walk: both explain the long-tau rise of the Allan curve (scores "
-            f"{rec['ramp_score']:.1f} and {rec['random_walk_score']:.1f}); with the least-squares line taken out "
-            "of the record")
-    if rec["named"] == "random_walk":
-        return (f"{head} a random walk is still there (LR {rec['lr']:.1f} > {rec['threshold']:.1f}): the rise is not a "
-                "straight line, so the random walk is named")
-    return (f"{head} no random walk is left (LR {rec['lr']:.1f} <= {rec['threshold']:.1f}): the rise is a straight "
-            "line, so the ramp is named")
+    walk = rec["named"] == "random_walk"
+    head = (f"ramp or random walk: both explain the long-tau rise of the Allan curve (scores {rec['ramp_score']:.1f} "
+            f"for the ramp, {rec['random_walk_score']:.1f} for the random walk); the record with its least-squares "
+            f"line taken out fits what a random walk of K {rec['K_walk']:.3g} would leave there (deviance "
+            f"{rec['dev_walk']:.1f}) {'better' if rec['dev_walk'] < rec['dev_line'] else 'worse'} than nothing left, "
+            f"as after a ramp ({rec['dev_line']:.1f}); with the raw curve's difference ({rec['raw']:+.1f}, random "
+            f"walk minus ramp) the evidence is {abs(rec['evidence']):.1f} for the {'random walk' if walk else 'ramp'}")
+    if walk:
+        return (f"{head}: the rise is not a straight line, so the random walk is named (a free random walk in the "
+                f"detrended record: LR {rec['lr']:.1f})")
+    return (f"{head}: the rise is a straight line, so the ramp is named (a free random walk in the detrended "
+            f"record: LR {rec['lr']:.1f})")

@@ -38,8 +38,8 @@ nested rule of a two-parameter effect against its one-parameter limit (Gauss-Mar
 is a random walk, tau_c -> 0 white noise): the limit is named unless the Gauss-Markov term is
 significantly better than it (:func:`nested_test`), because the score's small cost of a shape parameter
 (18.4 - 15.1) is not a test of lambda = 1/tau_c = 0. A second keeps a ramp and a random walk apart where
-the Allan curve cannot: a winning ramp gives way to a random walk that also passes its level when the
-record with its least-squares line taken out still holds one (:mod:`companion.gap.trend`).
+the Allan curve cannot: when both pass their level, whichever leads, the one whose prediction of the
+record with its least-squares line taken out is the likelier is taken (:mod:`companion.gap.trend`).
 """
 
 from __future__ import annotations
@@ -389,10 +389,10 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
     """One step: rank all explanations, apply the nested rule, return
     {ranked, chosen (Explanation or None), best (top of the ranking, chosen or not), nested, alternative
     (Gauss-Markov fit the limit won over), runner_up, trend}. ``detrended``: a callable giving the Allan
-    variance of the record with its least-squares line taken out (:mod:`companion.gap.trend`) and the
-    indices of the terms that are no model term and stay fixed (a rate-LSB white term): a winning
-    ramp then gives way to a random walk that also passes its level when the detrended record still holds
-    one (``trend``: that test's record)."""
+    variance of the record with its least-squares line taken out (:mod:`companion.gap.trend`), the
+    indices of the terms that are no model term and stay fixed (a rate-LSB white term) and the segments'
+    lengths (s): when a ramp and a random walk both pass their level, whichever leads, the detrended record
+    decides between them (``trend``: that test's record)."""
     ranked = explanations(meas, state, held, recalibratable, combine_top, shaped, lowpass, thermal)
     out = {"ranked": ranked, "chosen": None, "best": ranked[0] if ranked else None, "nested": None,
            "alternative": None, "runner_up": None, "trend": None}
@@ -431,14 +431,18 @@ def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | 
             # a Gauss-Markov term that won on the larger likelihood still has to beat its one-parameter limit
             same, out["nested"], out["alternative"] = resolve(same)
         best = same
-    if detrended is not None and best.effect == "ramp" and best.score > 0 and \
-            any(x.effect == "random_walk" and x.score > 0 for x in ranked):
-        # ramp or random walk: the record's own time series decides (a ramp is a line, a random walk is not)
-        meas_d, keep = detrended()
-        taken, out["trend"] = trend.ramp_or_random_walk(meas_d, best, ranked, keep, RECAL_PENALTY)
+    other = {"ramp": "random_walk", "random_walk": "ramp"}.get(best.effect)
+    if detrended is not None and other and best.score > 0 and \
+            any(x.effect == other and x.score > 0 for x in ranked):
+        # ramp or random walk: the record's own time series decides (a ramp is a line, a random walk is not),
+        # whichever of the two led on the Allan curve
+        meas_d, keep, lengths = detrended()
+        taken, out["trend"] = trend.ramp_or_random_walk(meas_d, best, ranked, keep, RECAL_PENALTY, lengths)
         if taken is not best:
             best = taken
-            if out["nested"] is None:  # the random walk may be the limit of a Gauss-Markov term close behind
+            if taken.effect == "ramp":  # a Gauss-Markov fit the random walk stood for is no alternative now
+                out["nested"], out["alternative"] = None, None
+            elif out["nested"] is None:  # the random walk may be the limit of a Gauss-Markov term close behind
                 best, out["nested"], out["alternative"] = resolve(best)
     out["best"] = best
     if best.score > 0:

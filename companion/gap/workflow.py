@@ -87,6 +87,10 @@ class GapResult:
     notes: list = field(default_factory=list)
     quantization: dict | None = None
     alternatives: list = field(default_factory=list)  # per chosen step: its runner-up and the margin
+    #: G after over the cluster times the record resolves (tau <= a tenth of the longest segment: the
+    #: analysis' rule, companion.allan.fit.RESOLVE_RECORD_FACTOR), when longer ones were measured
+    gap_after_resolved: float | None = None
+    resolved_tau_max: float | None = None
 
     def to_dict(self) -> dict:
         m = self.measured
@@ -96,6 +100,8 @@ class GapResult:
             "gap_after": self.gap_after,
             "gap_metric": "G = mean_i nu_i (a_i/s_i - 1 - ln(a_i/s_i)) / E0(nu_i); 1 on average when the model is right",
             "noise_floor": NOISE_FLOOR_G,
+            "gap_after_resolved": self.gap_after_resolved,
+            "resolved_tau_max": self.resolved_tau_max,
             "gap_sim_before": self.gap_sim_before,
             "gap_sim_after": self.gap_sim_after,
             "sim_check_before": self.sim_check_before,
@@ -366,10 +372,11 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     cache: dict = {}
 
     def detrended():
-        """The record with its least-squares line out (measured once, when a ramp first needs the test)."""
+        """The record with its least-squares line out (measured once, when a ramp and a random walk first
+        compete), the fixed terms' indices and the segments' lengths (s)."""
         if "meas" not in cache:
             cache["meas"] = trend.detrended_measure(y_segs, rate_hz)
-        return cache["meas"], sorted(fixed)
+        return cache["meas"], sorted(fixed), [len(s) / rate_hz for s in y_segs]
     alternatives: dict[int, dict] = {}  # index of a term -> the Gauss-Markov fit it won over
     for it in range(max_iter):
         recalibratable = [j for j in range(len(terms0)) if j in held]
@@ -583,7 +590,36 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         else:
             res.sim_avar_after, res.gap_sim_after, res.sim_check_after = _sim_checks(res.terms_after, meas,
                                                                                      seed + 1, t_series)
+    _resolved_gap(res, meas, max(len(s_) for s_ in y_segs) / rate_hz)
     if changed and res.gap_after > NOISE_FLOOR_G:
         res.notes.append(f"a gap remains above the noise floor (G = {res.gap_after:.2f} > {NOISE_FLOOR_G}): "
-                         "the data hold something none of the seven effects describes well" + _strongest_left(res))
+                         "the data hold something none of the seven effects describes well" + _strongest_left(res)
+                         + _resolved_text(res, meas))
     return res
+
+
+def _resolved_gap(res: GapResult, meas: Measured, record_s: float) -> None:
+    """G after over the cluster times the record resolves: tau up to a tenth of the longest segment, where
+    an Allan variance still has an EDF of about 5 or more whatever the noise (the analysis' rule for a
+    long-tau term, companion.allan.fit.RESOLVE_RECORD_FACTOR). Longer octaves are measured and used by the
+    fits, but a gap carried by them alone is one the record cannot tell from noise of a few EDF."""
+    from companion.allan.fit import RESOLVE_RECORD_FACTOR
+
+    tau_max = record_s / RESOLVE_RECORD_FACTOR
+    keep = meas.tau <= tau_max * (1.0 + 1e-9)
+    if keep.all() or np.count_nonzero(keep) < 3:
+        return
+    sub = Measured(tau=meas.tau[keep], avar=meas.avar[keep], m=meas.m[keep], nu=meas.nu[keep],
+                   rate_hz=meas.rate_hz, n=meas.n, nu_raw=meas.nu_raw[keep])
+    res.gap_after_resolved = gap_metric(sub, model_avar(res.terms_after, sub.tau, meas.rate_hz))
+    res.resolved_tau_max = float(tau_max)
+
+
+def _resolved_text(res: GapResult, meas: Measured) -> str:
+    if res.gap_after_resolved is None:
+        return ""
+    out = meas.tau > res.resolved_tau_max
+    edf = ", ".join(f"{v:.0f}" for v in meas.nu_raw[out])
+    return (f"; over the cluster times the record resolves (tau <= {res.resolved_tau_max:.3g} s, a tenth of the "
+            f"record) G = {res.gap_after_resolved:.2f}: the rest sits in {int(out.sum())} longer octave(s) of EDF "
+            f"{edf}")
