@@ -120,3 +120,30 @@ def test_quantization_only_where_its_slope_is(seed):
     fq = fit(q)
     assert fq.term("quantization") is not None
     assert fq.term("quantization")["Q"] == pytest.approx(1e-3, rel=0.2)
+
+
+def test_flicker_shape_widens_n_only_where_b_reaches_the_short_taus(monkeypatch):
+    """Noise-free AVAR of N + B (1 h at 50 Hz): with white noise meeting the flicker floor at 0.6 s the flicker's
+    uncertain shape at the first cluster times widens N's interval by more than half; at 20 s it leaves it
+    within 3 %. The estimates do not move."""
+    import companion.allan.fit as fit_mod
+    from companion.allan.terms import avar_model
+
+    fs, n = 50.0, int(3600 * 50)
+    m = cluster_sizes(n, "octave")
+    tau = m / fs
+    edf = edf_simple(n + 1, m, 0)
+    widths = {}
+    for t_nb in (0.6, 20.0):
+        terms = [{"effect": "white_noise", "N": 1e-3}, {"effect": "bias_instability", "B": 1e-3 / math.sqrt(0.4413 * t_nb)}]
+        av = avar_model(terms, tau)
+        out = []
+        for k in (0.0, 1.0):
+            monkeypatch.setattr(fit_mod, "FLICKER_SHAPE_ERROR", k)
+            r = fit_avar(tau, av, edf, ["white_noise", "bias_instability"], n=n, rate_hz=fs, m=m)
+            lo, hi = r.term("white_noise")["ci95"]["N"]
+            out.append((r.term("white_noise")["N"], hi - lo))
+        assert out[0][0] == pytest.approx(out[1][0], rel=1e-9)
+        widths[t_nb] = out[1][1] / out[0][1]
+    assert widths[0.6] > 1.5
+    assert 1.0 <= widths[20.0] < 1.03

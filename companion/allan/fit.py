@@ -36,7 +36,10 @@ scaled chi-square with nu_j = 2 theta_j^2 / var(theta_j) degrees of freedom (Sat
 a barely identified term, the normal interval theta +- z sd truncated at 0); parameters are the square
 roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1); sigma and amplitude: the
 envelope of their conditional intervals over that range (they are correlated with the shape parameter).
-Coverage is measured in benchmarks/bench_fit.py.
+With a bias-instability term the covariance of the AVAR points used for these intervals also holds the
+flicker's uncertain shape at the first cluster times (:func:`_flicker_shape_cov`): it looks like white noise
+there, so it widens N's interval where B reaches the short taus. Coverage is measured in
+benchmarks/bench_fit.py.
 
 Model misfit (real sensors: an internal low-pass filter bends the ADEV at a few tau0, temperature drifts
 are no IEEE 952 term): when chi^2 exceeds dof + 3 sqrt(2 dof), a relative model error e (same for every
@@ -54,7 +57,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.allan.confidence import oavar_covariance
+from companion.allan.confidence import flicker_sampling_excess, oavar_covariance
 from companion.allan.lsq import nnls
 from companion.allan.special import brentq, chi2_ppf, minimize_scalar_bounded
 from companion.allan.terms import (BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term,
@@ -78,6 +81,10 @@ GM_MIN_SAMPLES = 3.0
 QUANT_SLOPE = -1.5
 #: relative uncertainty of a modelled low-pass filter's shape, per unit of its bend 1 - AVAR tau / N^2
 FILTER_SHAPE_ERROR = 0.25
+#: uncertainty of the bias-instability (flicker) AVAR at the first cluster times, in units of the excess a
+#: sampled flicker without anti-alias filter has over the plateau (:func:`flicker_sampling_excess`: +19 % at
+#: tau0, +9 % at 2 tau0, +3 % at 4 tau0); fully correlated over tau (one unknown shape)
+FLICKER_SHAPE_ERROR = 1.0
 
 
 @dataclass
@@ -543,9 +550,15 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     A = _columns(linear, nonlin, tau, white)
     theta, c2 = prob.solve(A)
     active = theta > 0
+    # the intervals of the linear terms also carry the flicker's shape at the first cluster times
+    # (:func:`_flicker_shape_cov`); the selection and the estimates do not use it
+    prob_ci = prob
+    if full and "bias_instability" in linear and theta[linear.index("bias_instability")] > 0:
+        b_si = {"effect": "bias_instability", "B": math.sqrt(theta[linear.index("bias_instability")] * scale)}
+        prob_ci = _Problem(tau, v, cov + _flicker_shape_cov(b_si, m, tau) / scale**2, white, tau0)
     cov_t = np.zeros((len(theta), len(theta)))
     if np.any(active):
-        cov_t[np.ix_(active, active)] = prob.cov_theta(A[:, active])
+        cov_t[np.ix_(active, active)] = prob_ci.cov_theta(A[:, active])
     terms = []
     for j, e in enumerate(linear + [e for e, _ in nonlin]):
         if theta[j] <= 0:
@@ -587,7 +600,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
                 th2, _ = prob.solve(A2)
                 if th2[j] > 0:
                     act = th2 > 0
-                    ct = prob.cov_theta(A2[:, act])
+                    ct = prob_ci.cov_theta(A2[:, act])
                     l2, h2 = _scaled_chi2_ci(th2[j], ct[int(np.count_nonzero(act[:j]))][int(np.count_nonzero(act[:j]))], level)
                     lo_n, hi_n = min(lo_n, math.sqrt(l2 * scale)), max(hi_n, math.sqrt(h2 * scale))
             wt["ci95"]["N"] = [lo_n, hi_n]
@@ -597,6 +610,21 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
                      criterion="bic", score=c2 + kk * math.log(n_pts),
                      covariance_mode="full" if full else "diagonal", avar_cov=cov * scale**2, notes=notes,
                      model_error=floor, filter=_filter_summary(white, filter_info))
+
+
+def _flicker_shape_cov(bias_term, m, tau) -> np.ndarray:
+    """Covariance (SI) of the fitted AVAR's bias-instability share from the uncertain shape of the flicker at the
+    first cluster times. The plateau (2 ln2 / pi) B^2 holds only from a few tau0 on: how a sensor samples its
+    flicker (aliasing folds power in, a filter takes it out) moves the first points by up to ~20 %
+    (:func:`companion.allan.confidence.flicker_sampling_excess`, +19 % at tau0 for a flicker sampled without
+    anti-alias filter). Those points carry most of N's information (EDF ~ 10^5 on hours of data) and the
+    departure falls roughly like 1/tau there -- the white-noise shape -- so no fit can tell it from N: where B
+    reaches the short taus (white noise meets the flicker floor within a few seconds) it moved N by 1-3 of N's
+    standard deviations and N's interval covered the truth in 88 % of random draws. One shape error of
+    FLICKER_SHAPE_ERROR x that excess, fully correlated over tau (a rank-one term), widens N's interval by what
+    it can move N, and by nothing where B is negligible at tau0."""
+    sh = FLICKER_SHAPE_ERROR * flicker_sampling_excess(m) * avar_term(bias_term, tau)
+    return np.outer(sh, sh)
 
 
 def _filter_summary(white, info):
