@@ -14,8 +14,11 @@ Further modes (docs/analysis.md quotes them):
                                                coverage of N's 95 % interval on white noise through a 2-pole
                                                low-pass, point-sampled (50 Hz, f_c 20 Hz) or averaged (250 Hz,
                                                f_c 30 Hz): cut-off from the log, or found in the data
-    python benchmarks/bench_fit.py draws [draws=100]
-                                               random N/B/K (2 h at 50 Hz): every term found, coverage
+    python benchmarks/bench_fit.py draws [draws=100] [set=0]
+                                               random N/B/K (2 h at 50 Hz): every term found, coverage;
+                                               a term left out: whether its 95 % upper bound holds
+    python benchmarks/bench_fit.py draws null [draws=100] [set=0]
+                                               the same N/B draws with K = 0: how often a K is invented
 """
 
 import sys

@@ -211,17 +211,30 @@ def run_draws(args):
     """Random N/B/K, each with a region where it dominates (N log-uniform 2e-4..3e-3 rad/s/sqrt(Hz), the AVAR
     crossings N-B at 0.5-20 s and B-K at max(15 x that, 50)-600 s), 2 h at 50 Hz: terms found and coverage of
     the 95 % intervals (a missing term counts as not covered), also split by the term's expected evidence
-    (:func:`_evidence`: a K whose B-K crossing is past ~300 s rests on the last 2-3 octaves, lambda ~ 2-4)."""
+    (:func:`_evidence`: a K whose B-K crossing is past ~300 s rests on the last 2-3 octaves, lambda ~ 2-4).
+    A term the fit leaves out gets a 95 % upper bound: the fit's (:func:`companion.allan.fit.upper_bounds`,
+    the covariance evaluated at the bound) and the online report's rule
+    (:func:`companion.estimators.report.bounds_for_fit`, evaluated at the fitted model); the benchmark says
+    whether each holds.
+    ``draws null [draws=100]``: the same N and B with K = 0: how often a random walk is invented. A third
+    argument ``fresh`` (an integer, default 0) draws a different set: parameters from seed 22 + fresh, records
+    from 10000 + 1000 fresh + d."""
+    from companion.allan.fit import upper_bounds
+    from companion.estimators.report import bounds_for_fit
     from companion.sim.synth import synthesize_axis
 
+    null = bool(args) and args[0] == "null"
+    args = args[1:] if null else args
     draws = int(args[0]) if args else 100
+    fresh = int(args[1]) if len(args) > 1 else 0
     fs, n = 50.0, int(2 * 3600 * 50)
     m = cluster_sizes(n, "octave")
     edf = edf_simple(n + 1, m, 0)
-    rng = np.random.default_rng(22)
+    rng = np.random.default_rng(22 + fresh)
     names = {"N": "white_noise", "B": "bias_instability", "K": "random_walk"}
     found = {p: 0 for p in names}
     inside = {p: 0 for p in names}
+    held = {p: [0, 0, 0] for p in names}  # missing terms: count, fit's / report rule's bound above the truth
     missing = []
     strong = {p: [0, 0, 0] for p in names}  # draws with lambda >= 9: count, found, covered
     for d in range(draws):
@@ -232,29 +245,54 @@ def run_draws(args):
         Bv = Nv / math.sqrt(0.4413 * t_nb)
         t_bk = 10 ** rng.uniform(math.log10(max(15 * t_nb, 50.0)), math.log10(600.0))
         truth = {"N": Nv, "B": Bv, "K": math.sqrt(3 * 0.4413) * Bv / math.sqrt(t_bk)}
+        if null:
+            truth.pop("K")
         terms = [{"effect": names[p], p: v} for p, v in truth.items()]
-        y = synthesize_axis(terms, fs, n, np.random.default_rng(10_000 + d))
+        y = synthesize_axis(terms, fs, n, np.random.default_rng(10_000 + 1000 * fresh + d))
         tau, av = oavar(y, fs, m=m)[:2]
         fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m)
+        if null:
+            found["K"] += fr.term("random_walk") is not None
+            for p in ("N", "B"):
+                t = fr.term(names[p])
+                found[p] += t is not None
+                inside[p] += t is not None and t["ci95"][p][0] <= truth[p] <= t["ci95"][p][1]
+            continue
+        bounds = None
         for p, e in names.items():
             t = fr.term(e)
             lam = _evidence(terms, e, tau, m, n, fs)
             strong[p][0] += lam >= 9.0
             if t is None:
+                if bounds is None:
+                    bounds = (upper_bounds(fr, tau, av, n=n, rate_hz=fs, m=m), bounds_for_fit(fr, tau, av, edf, fs, n))
+                b, b_rep = (next((x for x in bs if x["effect"] == e), None) for bs in bounds)
+                held[p][0] += 1
+                held[p][1] += b is not None and truth[p] <= b[p]
+                held[p][2] += b_rep is not None and truth[p] <= b_rep[p]
                 missing.append((d, p, {k: f"{v:.2g}" for k, v in truth.items()}, f"t_BK {t_bk:.0f} s",
-                                f"lambda {lam:.1f}"))
+                                f"lambda {lam:.1f}", "bound " + ("-" if b is None else f"{b[p] / truth[p]:.2f} x truth")
+                                + " (report rule " + ("-" if b_rep is None else f"{b_rep[p] / truth[p]:.2f}") + ")"))
                 continue
             found[p] += 1
             strong[p][1] += lam >= 9.0
             lo, hi = t["ci95"][p]
             inside[p] += lo <= truth[p] <= hi
             strong[p][2] += lam >= 9.0 and lo <= truth[p] <= hi
-    print(f"{draws} random N/B/K draws, 2 h at 50 Hz")
+    if null:
+        print(f"{draws} draws of N and B with K = 0 (set {fresh}), 2 h at 50 Hz")
+        print(f"  K invented in {found['K']}/{draws}")
+        for p in ("N", "B"):
+            print(f"  {p}: found {found[p]}/{draws}, 95 % interval covers the truth in {inside[p]}/{draws}")
+        return
+    print(f"{draws} random N/B/K draws (set {fresh}), 2 h at 50 Hz")
     for p in names:
         print(f"  {p}: found {found[p]}/{draws}, 95 % interval covers the truth in {inside[p]}/{draws} "
               f"({100 * inside[p] / draws:.0f} %); where its expected evidence lambda >= 9: found "
-              f"{strong[p][1]}/{strong[p][0]}, covers {strong[p][2]}/{strong[p][0]}")
-    for x in missing[:20]:
+              f"{strong[p][1]}/{strong[p][0]}, covers {strong[p][2]}/{strong[p][0]}"
+              + (f"; left out in {held[p][0]}, its 95 % upper bound above the truth in {held[p][1]} "
+                 f"(the online report's rule: {held[p][2]})" if held[p][0] else ""))
+    for x in missing[:30]:
         print("  missing:", x)
 
 

@@ -65,3 +65,19 @@ def test_ci_coverage_white_noise():
         lo, hi = adev_ci(np.sqrt(av), edf)
         hits += (lo <= truth) & (truth <= hi)
     assert np.all(hits / 1000 > 0.93) and np.all(hits / 1000 < 0.975), hits / 1000
+
+
+def test_flicker_sampling_excess_matches_the_synthesised_flicker():
+    """The sampled flicker's AVAR over the plateau at the first cluster sizes: the formula against the mean of
+    simulated flicker records (companion.sim.synth, spectral shaping to the Nyquist frequency)."""
+    from companion.allan.confidence import flicker_sampling_excess
+    from companion.sim.synth import flicker
+
+    m = np.array([1, 2, 4])
+    ex = flicker_sampling_excess(m)
+    plateau = 2.0 * np.log(2.0) / np.pi
+    sim = np.mean([oavar(flicker(1.0, 1.0, 1 << 16, np.random.default_rng(s)), 1.0, m=m)[1] for s in range(6)],
+                  axis=0) / plateau - 1.0
+    assert ex[0] == pytest.approx(0.189, abs=0.002) and ex[1] == pytest.approx(0.0887, abs=0.002)
+    assert sim == pytest.approx(ex, abs=0.012)  # the simulated mean scatters by ~0.005
+    assert flicker_sampling_excess([200])[0] == 0.0 and np.all(np.diff(ex) < 0)

@@ -227,3 +227,32 @@ def edf_model(terms: Iterable[Mapping], m, n: int, rate_hz: float) -> np.ndarray
 
 def _var_one(terms, m: int, n: int, rate_hz: float) -> float:
     return float(oavar_covariance(terms, [m], n, rate_hz)[0, 0])
+
+
+_FLICKER_EXCESS: dict[int, float] = {}
+
+
+def flicker_sampling_excess(m) -> np.ndarray:
+    """Relative departure of a *sampled* flicker rate noise's AVAR from the plateau (2 ln2 / pi) B^2 at cluster
+    size ``m``: the discrete sequence whose two-sided PSD is (B^2 / 2 pi) / |f| up to the Nyquist frequency
+    (the power above it folded in, as sampling without an anti-alias filter does) has
+    sigma^2(m) = int_{-1/2}^{1/2} S(f) 2 sin^4(pi f m) / (m^2 sin^2(pi f)) df (fs = 1): +18.9 % at m = 1,
+    +8.9 % at 2, +2.9 % at 4, +0.9 % at 8, below 0.1 % past 64 (taken as 0 there). A flicker band-limited
+    below the Nyquist frequency (a filter) lies below the plateau at the same m instead, so the fit counts
+    this excess as the size of an uncertain shape, not as a correction."""
+    m = np.atleast_1d(np.asarray(m, dtype=np.int64))
+    out = np.zeros(m.shape[0])
+    for i, mi in enumerate(m):
+        mi = int(mi)
+        if mi < 1 or mi > 64:
+            continue
+        r = _FLICKER_EXCESS.get(mi)
+        if r is None:
+            # midpoint rule, 2000 points per lobe of sin^4(pi f m): the integrand is smooth (~ f near 0)
+            k = 2000 * mi
+            f = (np.arange(k) + 0.5) * (0.5 / k)
+            g = (1.0 / (2.0 * math.pi * f)) * 4.0 * np.sin(math.pi * f * mi) ** 4 / (mi * mi * np.sin(math.pi * f) ** 2)
+            r = float(g.sum() * (0.5 / k)) / (2.0 * math.log(2.0) / math.pi) - 1.0
+            _FLICKER_EXCESS[mi] = r
+        out[i] = r
+    return out

@@ -36,7 +36,10 @@ scaled chi-square with nu_j = 2 theta_j^2 / var(theta_j) degrees of freedom (Sat
 a barely identified term, the normal interval theta +- z sd truncated at 0); parameters are the square
 roots. tau_c and freq_hz: profile likelihood, chi^2 <= chi^2_min + chi2_level(1); sigma and amplitude: the
 envelope of their conditional intervals over that range (they are correlated with the shape parameter).
-Coverage is measured in benchmarks/bench_fit.py.
+With a bias-instability term the covariance of the AVAR points used for these intervals also holds the
+flicker's uncertain shape at the first cluster times (:func:`_flicker_shape_cov`): it looks like white noise
+there, so it widens N's interval where B reaches the short taus. Coverage is measured in
+benchmarks/bench_fit.py.
 
 Model misfit (real sensors: an internal low-pass filter bends the ADEV at a few tau0, temperature drifts
 are no IEEE 952 term): when chi^2 exceeds dof + 3 sqrt(2 dof), a relative model error e (same for every
@@ -54,7 +57,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.allan.confidence import oavar_covariance
+from companion.allan.confidence import flicker_sampling_excess, oavar_covariance
 from companion.allan.lsq import nnls
 from companion.allan.special import brentq, chi2_ppf, minimize_scalar_bounded
 from companion.allan.terms import (BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term,
@@ -78,6 +81,10 @@ GM_MIN_SAMPLES = 3.0
 QUANT_SLOPE = -1.5
 #: relative uncertainty of a modelled low-pass filter's shape, per unit of its bend 1 - AVAR tau / N^2
 FILTER_SHAPE_ERROR = 0.25
+#: uncertainty of the bias-instability (flicker) AVAR at the first cluster times, in units of the excess a
+#: sampled flicker without anti-alias filter has over the plateau (:func:`flicker_sampling_excess`: +19 % at
+#: tau0, +9 % at 2 tau0, +3 % at 4 tau0); fully correlated over tau (one unknown shape)
+FLICKER_SHAPE_ERROR = 1.0
 
 
 @dataclass
@@ -543,9 +550,15 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     A = _columns(linear, nonlin, tau, white)
     theta, c2 = prob.solve(A)
     active = theta > 0
+    # the intervals of the linear terms also carry the flicker's shape at the first cluster times
+    # (:func:`_flicker_shape_cov`); the selection and the estimates do not use it
+    prob_ci = prob
+    if full and "bias_instability" in linear and theta[linear.index("bias_instability")] > 0:
+        b_si = {"effect": "bias_instability", "B": math.sqrt(theta[linear.index("bias_instability")] * scale)}
+        prob_ci = _Problem(tau, v, cov + _flicker_shape_cov(b_si, m, tau) / scale**2, white, tau0)
     cov_t = np.zeros((len(theta), len(theta)))
     if np.any(active):
-        cov_t[np.ix_(active, active)] = prob.cov_theta(A[:, active])
+        cov_t[np.ix_(active, active)] = prob_ci.cov_theta(A[:, active])
     terms = []
     for j, e in enumerate(linear + [e for e, _ in nonlin]):
         if theta[j] <= 0:
@@ -587,7 +600,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
                 th2, _ = prob.solve(A2)
                 if th2[j] > 0:
                     act = th2 > 0
-                    ct = prob.cov_theta(A2[:, act])
+                    ct = prob_ci.cov_theta(A2[:, act])
                     l2, h2 = _scaled_chi2_ci(th2[j], ct[int(np.count_nonzero(act[:j]))][int(np.count_nonzero(act[:j]))], level)
                     lo_n, hi_n = min(lo_n, math.sqrt(l2 * scale)), max(hi_n, math.sqrt(h2 * scale))
             wt["ci95"]["N"] = [lo_n, hi_n]
@@ -597,6 +610,21 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
                      criterion="bic", score=c2 + kk * math.log(n_pts),
                      covariance_mode="full" if full else "diagonal", avar_cov=cov * scale**2, notes=notes,
                      model_error=floor, filter=_filter_summary(white, filter_info))
+
+
+def _flicker_shape_cov(bias_term, m, tau) -> np.ndarray:
+    """Covariance (SI) of the fitted AVAR's bias-instability share from the uncertain shape of the flicker at the
+    first cluster times. The plateau (2 ln2 / pi) B^2 holds only from a few tau0 on: how a sensor samples its
+    flicker (aliasing folds power in, a filter takes it out) moves the first points by up to ~20 %
+    (:func:`companion.allan.confidence.flicker_sampling_excess`, +19 % at tau0 for a flicker sampled without
+    anti-alias filter). Those points carry most of N's information (EDF ~ 10^5 on hours of data) and the
+    departure falls roughly like 1/tau there -- the white-noise shape -- so no fit can tell it from N: where B
+    reaches the short taus (white noise meets the flicker floor within a few seconds) it moved N by 1-3 of N's
+    standard deviations and N's interval covered the truth in 88 % of random draws. One shape error of
+    FLICKER_SHAPE_ERROR x that excess, fully correlated over tau (a rank-one term), widens N's interval by what
+    it can move N, and by nothing where B is negligible at tau0."""
+    sh = FLICKER_SHAPE_ERROR * flicker_sampling_excess(m) * avar_term(bias_term, tau)
+    return np.outer(sh, sh)
 
 
 def _filter_summary(white, info):
@@ -667,3 +695,76 @@ def _profile_ci(prob, effect, shape, linear, others, tau, c2min, level):
     lo_v = math.exp(brentq(f, lg[i0 - 1], lg[i0], xtol=1e-4)) if i0 > 0 else float(grid[0])
     hi_v = math.exp(brentq(f, lg[i1], lg[i1 + 1], xtol=1e-4)) if i1 < len(grid) - 1 else float(grid[-1])
     return float(min(lo_v, shape)), float(max(hi_v, shape))
+
+
+#: one-sided 95 % normal quantile of an upper bound
+_Z95 = 1.6448536269514722
+
+
+def upper_bounds(fr: FitResult, tau, avar, *, n, rate_hz, m=None, segments=None,
+                 effects=("white_noise", "bias_instability", "random_walk"), max_iter=8) -> list[dict]:
+    """95 % upper bounds of the ``effects`` the fit ``fr`` left out, each the value the data would reject at
+    the one-sided 5 % level: the term is added to the fitted model, theta_u = theta_hat + z sd, with the AVAR
+    points' covariance evaluated *at the bound* (the fitted terms as they are, the left-out one at theta_u)
+    and iterated to the fixed point (a test inversion). Evaluated at the fitted value instead (0 or low for a
+    term the selection left out), the points where the term would show look too precise and the bound falls
+    below the truth: a rate random walk left out of 2-h records with moderate evidence (lambda 2-6) was
+    bounded below its truth in 3 of 5 draws (benchmarks/bench_fit.py draws). ``tau``, ``avar``: the points
+    the fit saw (``fr.tau``). Report format: {"effect", P: bound, "std": {P: bound / z}, "ci95": {P: [0,
+    bound]}, "bound": True}."""
+    tau = np.asarray(tau, dtype=float)
+    avar = np.asarray(avar, dtype=float)
+    have = {t["effect"] for t in fr.terms}
+    missing = [e for e in effects if e not in have and e in LINEAR_PARAM]
+    if not missing or not fr.terms or tau.size < 3:
+        return []
+    m = np.round(tau * rate_hz).astype(np.int64) if m is None else np.asarray(m, dtype=np.int64)
+    white = ({"filter_hz": fr.filter["filter_hz"], "sample_hz": fr.filter.get("sample_hz")}
+             if fr.filter else None)
+    plain = [{k: v for k, v in t.items() if k != "ci95"} for t in fr.terms]
+    linear = [t["effect"] for t in plain if t["effect"] in LINEAR_EFFECTS]
+    nonlin = [(t["effect"], float(t[_NL_SHAPE[t["effect"]]])) for t in plain if t["effect"] in NONLINEAR_EFFECTS]
+    scale = float(np.median(avar[avar > 0]))
+    v = avar / scale
+
+    def cov_at(terms):
+        if segments is not None and len(segments) > 1:
+            from companion.allan.pooled import pooled_oavar_covariance
+
+            c = pooled_oavar_covariance(terms, m, segments, rate_hz)
+        else:
+            c = oavar_covariance(terms, m, n, rate_hz)
+        c = c / scale**2
+        model = avar_model(terms, tau) / scale
+        if white:
+            wt = next((t for t in terms if t["effect"] == "white_noise"), None)
+            if wt is not None:
+                bend = 1.0 - avar_white_noise(tau, 1.0, **white) * tau
+                c = c + np.diag((FILTER_SHAPE_ERROR * np.maximum(bend, 0.0) * avar_term(wt, tau) / scale) ** 2)
+        return c + np.diag((fr.model_error * model) ** 2)
+
+    out = []
+    for e in missing:
+        p = LINEAR_PARAM[e]
+        lin = [x for x in LINEAR_EFFECTS if x in linear or x == e]
+        A = _columns(lin, nonlin, tau, white)
+        j = lin.index(e)
+        ub = None
+        for _ in range(max_iter):
+            terms = [t for t in plain if t["effect"] != e]
+            if ub:
+                terms = terms + [{"effect": e, p: math.sqrt(ub * scale)}]
+            prob = _Problem(tau, v, cov_at(terms), white, 1.0 / rate_hz)
+            theta, _ = prob.solve(A)
+            # the term's variance with it freed from the bound 0 (the others as the NNLS left them)
+            act = (theta > 0) | (np.arange(len(theta)) == j)
+            ct = prob.cov_theta(A[:, act])
+            k = int(np.count_nonzero(act[:j]))
+            new = max(float(theta[j]), 0.0) + _Z95 * math.sqrt(max(float(ct[k, k]), 0.0))
+            if ub is not None and abs(new - ub) <= 1e-3 * ub:
+                ub = new
+                break
+            ub = new
+        b = math.sqrt(max(ub, 0.0) * scale)
+        out.append({"effect": e, p: b, "std": {p: b / _Z95}, "ci95": {p: [0.0, b]}, "bound": True})
+    return out
