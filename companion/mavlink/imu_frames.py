@@ -13,10 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from companion.mavlink.tlog_writer import encode_frames, heartbeat_payload, imu_payloads
+from companion.sim.vehicle import IMU_MESSAGES  # IMU0, IMU1, IMU2 as ArduPilot sends them
 from companion.sources import messages as M
 
-#: IMU0, IMU1, IMU2 as ArduPilot sends them
-IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
 DEFAULT_TEMPERATURE_C = 42.0
 
 
