@@ -11,6 +11,7 @@ numpy only; no I/O here except plain dicts (the caller reads JSON/YAML).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Iterable, Mapping
 
@@ -126,6 +127,37 @@ def supported_params(params: Mapping[str, tuple[float, float]], tau, avar, edf, 
         cap2 = float(np.min(upper[ok] / basis[ok])) if ok.any() else math.inf
         if v * v <= cap2:
             out[p] = (v, s)
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def _ceiling(s0_lsb: float) -> float:
+    """quantized_ceiling, remembered: a baseline's N is the same at every check (a 40-step bisection)."""
+    from companion.health.noise import quantized_ceiling
+
+    return quantized_ceiling(s0_lsb)
+
+
+def rounding_ceiling(base: Mapping[str, tuple[float, float]] | None, rate_hz: float | None,
+                     lsb: float | None) -> Mapping[str, tuple[float, float]] | None:
+    """The baseline of a rounded (int16) gyro axis as the degradation test must read it: N raised to the
+    largest white level the rounding can give a gyro of that noise (the noise detector's rule,
+    :func:`companion.health.noise.quantized_ceiling`).
+
+    A gyro whose noise is below about half an LSB per sample (ArduPilot SITL over RAW_IMU: 0.2 LSB) shows
+    an N that depends on where its bias sits between two codes: near a code's centre it rarely leaves it,
+    near a boundary it flips between two; a bias drifting across the code grid moves N by up to the square
+    root of that ceiling (2.3x at 0.21 LSB) with no change of the gyro. The per-sample std in LSB is
+    N sqrt(rate) / LSB (IEEE 952 two-sided density); above 0.75 LSB the factor is 1 and the baseline is
+    returned as it is. Float data (``lsb`` None) likewise."""
+    if not base or "N" not in base or not lsb or not rate_hz:
+        return base
+    n, s = base["N"]
+    c = _ceiling(n * math.sqrt(rate_hz) / lsb)
+    if c <= 1.0:
+        return base
+    out = dict(base)
+    out["N"] = (n * math.sqrt(c), s * math.sqrt(c))
     return out
 
 

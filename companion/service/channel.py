@@ -21,7 +21,7 @@ from typing import Mapping
 import numpy as np
 
 from companion.estimators import from_state_dict as estimator_from_state, make_estimator
-from companion.health.baseline import check_params, supported_params
+from companion.health.baseline import check_params, rounding_ceiling, supported_params
 from companion.health.detector import DEGRADING, LEARNING, HealthDetector, Transition
 from companion.health.faults import FAULT, OK, BlockStats, FaultEvent, block_stats
 from companion.health.monitor import ImuFaults
@@ -330,6 +330,8 @@ class Channel:
             if bad:
                 return reported, transitions, (f"baseline {baseline.source} does not match IMU{self.imu} {ax}: "
                                                f"{bad}; use a baseline of this stream or --baseline-force")
+            if ax in GYRO_AXES:
+                base = rounding_ceiling(base, self.rate_hz, self.gyro_lsb)
             for tr in self.detector.check(ax, cur, base):
                 transitions.append(tr)
                 if ax in GYRO_AXES:
