@@ -221,6 +221,7 @@ def gauss_mean_llr(x: float, sigma: float, delta: float) -> float:
 
 # --------------------------------------------------------------------------------------------- block statistics
 SPIKE_K = 6.0  # outlier threshold in robust sigmas of the second differences (see spikes.py)
+LOCAL_MIN = 8  # second differences per quarter of a block before the quarter's own scale is used
 #: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
 #: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
 DD_NU_PER_SAMPLE = 2.0 / (140.0 / 36.0)
@@ -277,12 +278,17 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     scale = np.median(a, axis=0) / 0.6745
     floor = 0.5 * np.sqrt(np.mean(dd * dd, axis=0))  # only matters where the median is 0 (coarse rounding)
     scale = np.maximum(scale, floor if dd_scale_ref is None else np.maximum(dd_scale_ref, 1e-12))
-    # local scale: the MAD of each quarter and its neighbours (vibration that starts mid-block is not a spike)
+    # local scale: the MAD of each quarter and its neighbours (vibration that starts mid-block is not a spike);
+    # only where a quarter holds enough second differences for a median (LOCAL_MIN each): in a short block
+    # (10 Hz: 8) a quarter of two holds the spike's own -2A and A, and the spike would set its own bar
     m = a.shape[0]
-    parts = np.array_split(np.arange(m), min(4, m))  # four near-equal quarters (no short remainder)
-    qs = np.array([np.median(a[p], axis=0) / 0.6745 for p in parts])
-    qmax = np.maximum(qs, np.maximum(np.vstack([qs[:1], qs[:-1]]), np.vstack([qs[1:], qs[-1:]])))
-    local = np.repeat(qmax, [p.size for p in parts], axis=0)
+    if m >= 4 * LOCAL_MIN:
+        parts = np.array_split(np.arange(m), 4)  # four near-equal quarters (no short remainder)
+        qs = np.array([np.median(a[p], axis=0) / 0.6745 for p in parts])
+        qmax = np.maximum(qs, np.maximum(np.vstack([qs[:1], qs[:-1]]), np.vstack([qs[1:], qs[-1:]])))
+        local = np.repeat(qmax, [p.size for p in parts], axis=0)
+    else:
+        local = np.zeros_like(a)
     # and at least the spread rounding gives: a signal rounded to a step q carries rounding error of variance
     # q^2/12, so its second differences have sd >= q sqrt(6/12) whatever the reference says (a gyro quieter
     # than the int16 step sits on one code, then flips to the next one or two and back: noise, not spikes)
