@@ -62,6 +62,7 @@ MIN_OUTSIDE = 10  # samples beyond two codes seen at rest before that evidence c
 H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
 H_OFF = 10.0
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
+VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
 ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
 
 
@@ -107,6 +108,7 @@ class StuckDetector:
         self.out_n = 0
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
+        self.vib = Cusum(H_ON, H_OFF)  # the variance collapse while the accelerometer's vibration did not fall
         self.equal_run = 0
         self.value = math.nan
         self.lsb = math.inf  # smallest non-zero step seen (the sensor's resolution, or finer)
@@ -114,7 +116,7 @@ class StuckDetector:
 
     @property
     def state(self) -> int:
-        return FAULT if FAULT in (self.cusum.state, self.two.state) else OK
+        return FAULT if FAULT in (self.cusum.state, self.two.state, self.vib.state) else OK
 
     def update(self, obs: Observation) -> list[FaultEvent]:
         """One block of one axis (any motion state); the state change, if any (critical, except an integer
@@ -180,6 +182,9 @@ class StuckDetector:
                 self.two.step(two)
             elif self.two.state == FAULT and self.cusum.state == OK:
                 self.two.state, self.two.s = OK, 0.0
+            vib = self._vibration_llr(obs, ref, u)
+            if vib is not None:
+                self.vib.step(vib)
             return self.state != before
         # no reference yet: only the equal-values rule
         if self.cusum.state == OK and self.equal_run >= equal_blocks:
@@ -189,6 +194,20 @@ class StuckDetector:
             self.cusum.state, self.cusum.s = OK, 0.0
             return True
         return False
+
+    def _vibration_llr(self, obs: Observation, ref, u: float) -> float | None:
+        """The variance collapse of a gyro whose codes do not repeat (floats: DataFlash, ULog, HIGHRES_IMU, or
+        noise far above the step) judged against what the rest of the IMU sees: the chi-square LLR of u,
+        counted while the accelerometer's vibration is at least ``VIB_KEEP`` of its still reference; while it
+        fell (an engine stopped: a healthy gyro's noise falls with it, as on real parked planes) only its
+        evidence for healthy counts. None before the accelerometer's reference, or without one, and for
+        quantised data, where a healthy quiet gyro at a code's centre gives blocks of one code (u = 0) by
+        nature: there the repeated-codes evidence above is the honest one (at 10 Hz and 0.36 LSB a block of
+        one code is worth at most 1.8 nats, not the 5 of the chi-square)."""
+        if self.quantised or not math.isfinite(obs.vibration):
+            return None
+        llr = chi2_llr(u, ref.nu, R1)
+        return llr if obs.vibration >= VIB_KEEP else min(llr, 0.0)
 
     def _noise_lsb(self, ref) -> float:
         """The reference noise in LSB with the rounding's LSB^2 / 12 taken out (Sheppard's correction)."""
@@ -228,13 +247,15 @@ class StuckDetector:
         return two_code_llr(k, n, q0) if q0 > 0 else None
 
     def state_dict(self) -> dict:
-        return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "equal_run": self.equal_run,
+        return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
+                "equal_run": self.equal_run,
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
                 "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n]}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
         self.two.load_state_dict(d.get("two", {}))
+        self.vib.load_state_dict(d.get("vib", {}))
         self.equal_run = int(d.get("equal_run", 0))
         self.lsb = math.inf if d.get("lsb") is None else float(d["lsb"])
         self.quantised = bool(d.get("quantised", False))
