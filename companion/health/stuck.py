@@ -76,7 +76,7 @@ def two_code_outside(y: np.ndarray, lsb: float) -> int:
     return int(c.shape[0] - (cnt[:-1] + cnt[1:]).max())
 
 
-def two_code_llr(k: int, n: int, q0: float) -> float:
+def two_code_llr(k: float, n: float, q0: float) -> float:
     """Evidence (nats) of a block's ``k`` samples beyond its two best adjacent codes among ``n``: a value
     frozen with a dither far below the step (rate q0 / ``Q_RATIO``) against a healthy gyro (rate q0).
 
@@ -106,6 +106,7 @@ class StuckDetector:
         self.alive = False  # the axis changed codes in a moving block (a live gyro; its zeros at rest are resolution)
         self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
         self.out_n = 0
+        self.spread = [0.0, 0]  # the still blocks' sample variance (times samples) and samples, while healthy
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
         self.vib = Cusum(H_ON, H_OFF)  # the variance collapse while the accelerometer's vibration did not fall
@@ -238,19 +239,37 @@ class StuckDetector:
         if obs.still and self.state == OK and self.cusum.s == 0.0 and self.two.s == 0.0:
             self.out_k += k
             self.out_n += n
+            if n >= 2:
+                self.spread[0] += float(np.var(y)) * n
+                self.spread[1] += n
         if self.out_k < MIN_OUTSIDE:
             return None
         s_l = self._noise_lsb(ref)
         if s_l <= 0:
             return None
-        q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), self.out_k / self.out_n, 0.45)
-        return two_code_llr(k, n, q0) if q0 > 0 else None
+        rate = self.out_k / self.out_n
+        q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), rate, 0.45)
+        llr = two_code_llr(k, n, q0) if q0 > 0 else None
+        # a gyro low-passed well below its logged rate (the rover: 5 Hz at 50 Hz) spreads its samples over
+        # codes far beyond its sample-to-sample noise: the healthy rate beyond two codes then follows the
+        # samples' own spread s_b at rest (q = 2 Phi(-1 / s_b), on a boundary), over the block's n v_dd / v_b
+        # equivalent independent samples (the share of its variance that changes from sample to sample)
+        if self.spread[1] > 0 and llr is not None:
+            v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
+            v_dd = ref.sigma2 / (self.lsb * self.lsb)
+            s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
+            if v_b > v_dd and s_b > s_l:
+                q_b = min(math.erfc(1.0 / (s_b * math.sqrt(2.0))), rate, 0.45)
+                n_eff = n * v_dd / v_b
+                llr = max(llr, two_code_llr(k * n_eff / n, n_eff, q_b))
+        return llr
 
     def state_dict(self) -> dict:
         return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
                 "equal_run": self.equal_run,
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
-                "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n]}
+                "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n],
+                "spread": self.spread}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
@@ -263,3 +282,5 @@ class StuckDetector:
         self.detail = str(d.get("detail", ""))
         self.alive = bool(d.get("alive", False))
         self.out_k, self.out_n = (int(v) for v in (d.get("out") or [0, 0]))
+        sp = d.get("spread") or [0.0, 0]
+        self.spread = [float(sp[0]), int(sp[1])]
