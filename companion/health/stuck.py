@@ -54,6 +54,7 @@ import numpy as np
 
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 from companion.health.limits import equal_codes_llr, p_equal_codes
+from companion.health.noise import quantized_var
 
 R1 = 0.1  # variance collapse the CUSUM is tuned to
 Q_RATIO = 20.0  # the frozen hypothesis' rate of samples beyond two codes: 1/20 of the healthy one
@@ -106,6 +107,7 @@ class StuckDetector:
         self.alive = False  # the axis changed codes in a moving block (a live gyro; its zeros at rest are resolution)
         self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
         self.out_n = 0
+        self._low = (math.nan, math.nan)  # (a variance in LSB^2, the least white noise consistent with it)
         self.spread = [0.0, 0]  # the still blocks' sample variance (times samples) and samples, while healthy
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
@@ -214,6 +216,26 @@ class StuckDetector:
         """The reference noise in LSB with the rounding's LSB^2 / 12 taken out (Sheppard's correction)."""
         return math.sqrt(max(ref.sigma2 - self.lsb * self.lsb / 12.0, 0.0)) / self.lsb
 
+    def _least_sigma(self, v0: float) -> float:
+        """The least white noise (LSB) whose rounded samples can have the variance ``v0`` (LSB^2): the sigma
+        whose rounded variance on a code boundary (the most it can give, health.noise.quantized_var) is v0;
+        0 below 0.25 LSB^2 (a level resting on a boundary flips that much with no noise at all). Above 0.75
+        LSB the offset no longer matters (Sheppard: v0 - 1/12)."""
+        if not (v0 > 0.0):
+            return 0.0
+        if v0 > 0.75 ** 2 + 1.0 / 12.0:
+            return math.sqrt(v0 - 1.0 / 12.0)
+        if self._low[0] != v0:
+            lo, hi = 0.0, math.sqrt(v0) + 1.0
+            for _ in range(30):
+                mid = 0.5 * (lo + hi)
+                if float(quantized_var(mid).max()) < v0:
+                    lo = mid
+                else:
+                    hi = mid
+            self._low = (v0, lo)
+        return self._low[1]
+
     def _quiet_cap(self, ref, n: int) -> float:
         """The most evidence a block of one code can give: a healthy gyro whose level sits at the centre of a code keeps
         every sample in it with probability P^n, P = erf(0.5 / (s sqrt 2)) (s the reference noise in LSB less
@@ -229,11 +251,9 @@ class StuckDetector:
 
     def _two_codes(self, obs: Observation, ref) -> float | None:
         """A frozen value flipping between two codes near their boundary: the spread over codes. The healthy
-        rate q0 = 2 Phi(-1 / s), s from the reference with the rounding's LSB^2 / 12 taken out (Sheppard: at
-        0.36 LSB within 1 % of the unrounded figure on the realistic presets), and at most the rate this axis
-        showed at rest; counted only once the axis was seen beyond two codes ``MIN_OUTSIDE`` times (below
-        ~0.3 LSB the flips of a quiet gyro on a boundary inflate the rounded variance, so s would be too
-        large: such a gyro never leaves two codes and is never judged by it)."""
+        rate q0 = 2 Phi(-1 / s), s the least noise consistent with the samples' spread at rest (below), at
+        most the rate this axis showed at rest; counted only once the axis was seen beyond two codes
+        ``MIN_OUTSIDE`` times (a quiet gyro that never leaves two codes is never judged by it)."""
         y = np.asarray(obs.y)[:, obs.col]
         k, n = two_code_outside(y, self.lsb), y.shape[0]
         if obs.still and self.state == OK and self.cusum.s == 0.0 and self.two.s == 0.0:
@@ -242,27 +262,24 @@ class StuckDetector:
             if n >= 2:
                 self.spread[0] += float(np.var(y)) * n
                 self.spread[1] += n
-        if self.out_k < MIN_OUTSIDE:
+        if self.out_k < MIN_OUTSIDE or self.spread[1] == 0:
             return None
-        s_l = self._noise_lsb(ref)
-        if s_l <= 0:
-            return None
-        rate = self.out_k / self.out_n
-        q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), rate, 0.45)
-        llr = two_code_llr(k, n, q0) if q0 > 0 else None
-        # a gyro low-passed well below its logged rate (the rover: 5 Hz at 50 Hz) spreads its samples over
-        # codes far beyond its sample-to-sample noise: the healthy rate beyond two codes then follows the
-        # samples' own spread s_b at rest (q = 2 Phi(-1 / s_b), on a boundary), over the block's n v_dd / v_b
-        # equivalent independent samples (the share of its variance that changes from sample to sample)
-        if self.spread[1] > 0 and llr is not None:
-            v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
-            v_dd = ref.sigma2 / (self.lsb * self.lsb)
-            s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
-            if v_b > v_dd and s_b > s_l:
-                q_b = min(math.erfc(1.0 / (s_b * math.sqrt(2.0))), rate, 0.45)
-                n_eff = n * v_dd / v_b
-                llr = max(llr, two_code_llr(k * n_eff / n, n_eff, q_b))
-        return llr
+        # What lands beyond two codes is the samples' own spread at rest (their within-block variance v_b),
+        # not the second-difference figure v_dd: a gyro low-passed well below its logged rate (the rover: 5 Hz
+        # at 50 Hz) spreads its samples over codes far beyond its sample-to-sample noise, and a decimated one
+        # with energy near its Nyquist rate (the plane at 10 Hz) less than that figure says (taken from v_dd, a
+        # healthy plane resting on a boundary for a minute was named stuck). The noise is the least consistent
+        # with v_b (:meth:`_least_sigma`, a level on a boundary), its rate q0 = 2 Phi(-1 / s) at most the rate
+        # seen at rest; a correlated block counts as n min(1, v_dd / v_b) independent samples (the share of its
+        # variance that changes from sample to sample).
+        v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
+        v_dd = ref.sigma2 / (self.lsb * self.lsb)
+        s_b = self._least_sigma(v_b)
+        q0 = min(math.erfc(1.0 / (s_b * math.sqrt(2.0))), self.out_k / self.out_n, 0.45) if s_b > 0 else 0.0
+        if q0 <= 0:
+            return 0.0  # a level resting on a boundary could give all of it: no evidence either way
+        n_eff = n * min(1.0, v_dd / v_b) if v_b > 0 else n
+        return two_code_llr(k * n_eff / n, n_eff, q0)
 
     def state_dict(self) -> dict:
         return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
