@@ -54,7 +54,6 @@ import numpy as np
 
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 from companion.health.limits import equal_codes_llr, p_equal_codes
-from companion.health.noise import quantized_var
 
 R1 = 0.1  # variance collapse the CUSUM is tuned to
 Q_RATIO = 20.0  # the frozen hypothesis' rate of samples beyond two codes: 1/20 of the healthy one
@@ -107,7 +106,6 @@ class StuckDetector:
         self.alive = False  # the axis changed codes in a moving block (a live gyro; its zeros at rest are resolution)
         self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
         self.out_n = 0
-        self._low = (math.nan, math.nan)  # (a variance in LSB^2, the least white noise consistent with it)
         self.spread = [0.0, 0]  # the still blocks' sample variance (times samples) and samples, while healthy
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
@@ -216,26 +214,6 @@ class StuckDetector:
         """The reference noise in LSB with the rounding's LSB^2 / 12 taken out (Sheppard's correction)."""
         return math.sqrt(max(ref.sigma2 - self.lsb * self.lsb / 12.0, 0.0)) / self.lsb
 
-    def _least_sigma(self, v0: float) -> float:
-        """The least white noise (LSB) whose rounded samples can have the variance ``v0`` (LSB^2): the sigma
-        whose rounded variance on a code boundary (the most it can give, health.noise.quantized_var) is v0;
-        0 below 0.25 LSB^2 (a level resting on a boundary flips that much with no noise at all). Above 0.75
-        LSB the offset no longer matters (Sheppard: v0 - 1/12)."""
-        if not (v0 > 0.0):
-            return 0.0
-        if v0 > 0.75 ** 2 + 1.0 / 12.0:
-            return math.sqrt(v0 - 1.0 / 12.0)
-        if self._low[0] != v0:
-            lo, hi = 0.0, math.sqrt(v0) + 1.0
-            for _ in range(30):
-                mid = 0.5 * (lo + hi)
-                if float(quantized_var(mid).max()) < v0:
-                    lo = mid
-                else:
-                    hi = mid
-            self._low = (v0, lo)
-        return self._low[1]
-
     def _quiet_cap(self, ref, n: int) -> float:
         """The most evidence a block of one code can give: a healthy gyro whose level sits at the centre of a code keeps
         every sample in it with probability P^n, P = erf(0.5 / (s sqrt 2)) (s the reference noise in LSB less
@@ -251,7 +229,7 @@ class StuckDetector:
 
     def _two_codes(self, obs: Observation, ref) -> float | None:
         """A frozen value flipping between two codes near their boundary: the spread over codes. The healthy
-        rate q0 = 2 Phi(-1 / s), s the least noise consistent with the samples' spread at rest (below), at
+        rate q0 = 2 Phi(-1 / s), s the noise of the samples' own spread at rest (below), at
         most the rate this axis showed at rest; counted only once the axis was seen beyond two codes
         ``MIN_OUTSIDE`` times (a quiet gyro that never leaves two codes is never judged by it)."""
         y = np.asarray(obs.y)[:, obs.col]
@@ -268,13 +246,13 @@ class StuckDetector:
         # not the second-difference figure v_dd: a gyro low-passed well below its logged rate (the rover: 5 Hz
         # at 50 Hz) spreads its samples over codes far beyond its sample-to-sample noise, and a decimated one
         # with energy near its Nyquist rate (the plane at 10 Hz) less than that figure says (taken from v_dd, a
-        # healthy plane resting on a boundary for a minute was named stuck). The noise is the least consistent
-        # with v_b (:meth:`_least_sigma`, a level on a boundary), its rate q0 = 2 Phi(-1 / s) at most the rate
-        # seen at rest; a correlated block counts as n min(1, v_dd / v_b) independent samples (the share of its
-        # variance that changes from sample to sample).
+        # healthy plane resting on a boundary for a minute was named stuck). The noise s = sqrt(v_b - 1/12)
+        # (Sheppard), its rate on a boundary q0 = 2 Phi(-1 / s) at most the rate seen at rest; a correlated
+        # block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that changes
+        # from sample to sample).
         v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
         v_dd = ref.sigma2 / (self.lsb * self.lsb)
-        s_b = self._least_sigma(v_b)
+        s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
         q0 = min(math.erfc(1.0 / (s_b * math.sqrt(2.0))), self.out_k / self.out_n, 0.45) if s_b > 0 else 0.0
         if q0 <= 0:
             return 0.0  # a level resting on a boundary could give all of it: no evidence either way
