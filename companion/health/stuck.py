@@ -30,6 +30,13 @@ The larger of the above and the SPRT of the samples beyond the block's two best 
 evidence. It is thin where the frozen value sits right on a boundary (0.26 nats per 50-sample block at
 0.36 LSB of noise: a minute or more at rest); in motion a live gyro spreads over many codes at once.
 
+The healthy rate beyond two codes comes from the samples' own spread at rest (a gyro low-passed well below
+its logged rate spreads its samples far beyond its sample-to-sample noise, the rover's 5 Hz at 50 Hz), over
+the block's equivalent independent samples. A gyro whose codes do not repeat (floats) has a third CUSUM:
+its variance collapse, counted while the same IMU's accelerometer vibrates at least half as much as at the
+reference (:meth:`StuckDetector._vibration_llr`): a parked plane's engine stop lowers both, a frozen gyro
+only its own.
+
 Before a reference exists (the first seconds of still data) the PX4-like rule applies: ``equal_blocks``
 consecutive blocks of at least 50 samples with every value equal (no change at all).
 
