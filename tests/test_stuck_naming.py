@@ -119,11 +119,12 @@ def test_two_code_evidence_a_flipping_frozen_value_against_healthy_noise():
     assert two_code_outside(np.array([0.0, 1e-3, 2e-3, 1e-3]), LSB) == 1
 
 
-@pytest.mark.parametrize("seed, within", [(9, 10), (15, 90)])
+@pytest.mark.parametrize("seed, within", [(9, 10), (15, 45)])
 def test_dithered_frozen_copter_gyro_flipping_codes_is_stuck(seed, within):
     # the realistic copter at 0.47 LSB: a value frozen with a 0.17 sigma dither; seed 15 freezes it on a code
     # boundary, where it flips between two codes about as often as the healthy gyro changes code (neither
-    # the variance nor the repeated codes see it; only the spread over codes does, 0.26 nats a block)
+    # the variance nor the repeated codes see it; only the spread over codes does, about 0.6 nats a block
+    # from the samples' own spread at rest: named after 33 s)
     from companion.sim.vehicle import Fault
 
     rng = np.random.default_rng(seed)
@@ -150,3 +151,32 @@ def test_inspect_sentence_of_an_int16_stream_reading_zero_names_both_causes():
     # a float stream (DataFlash, ULog, HIGHRES_IMU) reading exactly 0: dead, and a constant: frozen
     assert "gyro dead: X, Y, Z exactly 0" in dead_gyro_text("IMU[1]", np.zeros((100, 3)))
     assert "below resolution" not in dead_gyro_text("RAW_IMU[0]", np.full((100, 3), 2 * LSB), LSB)
+
+
+def lowpassed_blocks(seed, seconds, frozen_from=None):
+    """A gyro low-passed at 5 Hz and logged at 50 Hz like the rover's (2nd-order Butterworth on 1 kHz white noise,
+    every 20th sample), 1.2 LSB of sample spread but 0.3 LSB from sample to sample, rounded to 1 mrad/s; from
+    ``frozen_from`` s on axis X frozen exactly on the boundary between codes 0 and 1 with a 0.05 LSB dither."""
+    from scipy.signal import butter, lfilter
+
+    rng = np.random.default_rng(seed)
+    b, a = butter(2, 5.0 / 500.0)
+    n = int(seconds * FS)
+    raw = lfilter(b, a, rng.normal(0.0, 1.0, (n * 20 + 2000, 3)), axis=0)[2000::20][:n]
+    g = raw / raw.std(axis=0) * 1.2 * LSB + 0.3 * LSB
+    if frozen_from is not None:
+        k = int(frozen_from * FS)
+        g[k:, 0] = 0.5 * LSB + rng.normal(0.0, 0.05 * LSB, n - k)
+    g = np.round(g / LSB) * LSB
+    m = int(FS)
+    return [g[i * m:(i + 1) * m] for i in range(n // m)]
+
+
+def test_lowpassed_gyro_frozen_between_two_codes_is_stuck_and_the_healthy_one_is_not():
+    blocks = lowpassed_blocks(1, 60.0, frozen_from=40.0)
+    assert {int(v) for v in np.round(np.concatenate(blocks[41:])[:, 0] / LSB)} == {0, 1}
+    events = detect(blocks)
+    hits = [b for b, e in events if e.axis == "gx" and e.state == FAULT and e.kind == "stuck"]
+    assert hits and 40 <= hits[0] <= 52, events  # 20 s of healthy spread beyond two codes, then 1-12 s
+    assert [e for b, e in events if b < 40] == []
+    assert detect(lowpassed_blocks(2, 120.0)) == []

@@ -131,7 +131,9 @@ class Observation:
     * ``extra_var``: Allan-predicted variance of a block mean around the bias reference ((rad/s)^2);
     * ``y``: the block's samples (n, 3) (per-block detectors: the stuck test reads their codes);
     * pairs of IMUs: ``y`` and ``other`` the aligned samples (m, 3) of this IMU and of ``other_imu``,
-      ``noise_var`` the white variance expected of their difference, ``noise_other`` the other IMU's own.
+      ``noise_var`` the white variance expected of their difference, ``noise_other`` the other IMU's own;
+    * ``vibration``: the same IMU's accelerometer second-difference variance over its still reference (three
+      axes pooled; nan before the reference or without an accelerometer): what the rest of the sensor sees.
     """
 
     imu: int = 0
@@ -146,6 +148,7 @@ class Observation:
     other_imu: int = -1
     noise_var: float | None = None
     noise_other: float | None = None
+    vibration: float = math.nan
 
     @property
     def col(self) -> int:
@@ -221,6 +224,7 @@ def gauss_mean_llr(x: float, sigma: float, delta: float) -> float:
 
 # --------------------------------------------------------------------------------------------- block statistics
 SPIKE_K = 6.0  # outlier threshold in robust sigmas of the second differences (see spikes.py)
+LOCAL_MIN = 8  # second differences per quarter of a block before the quarter's own scale is used
 #: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
 #: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
 DD_NU_PER_SAMPLE = 2.0 / (140.0 / 36.0)
@@ -286,17 +290,41 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     # and at least the spread rounding gives: a signal rounded to a step q carries rounding error of variance
     # q^2/12, so its second differences have sd >= q sqrt(6/12) whatever the reference says (a gyro quieter
     # than the int16 step sits on one code, then flips to the next one or two and back: noise, not spikes)
-    code = np.where(np.isfinite(step), step, 0.0)
-    scale = np.maximum(np.maximum(scale, local), math.sqrt(0.5) * code)
-    out = a > k * scale
+    code = math.sqrt(0.5) * np.where(np.isfinite(step), step, 0.0)
+    out = a > k * np.maximum(np.maximum(scale, local), code)
+    # a spike is looked for against a bar it does not raise itself: in a short block (10 Hz: 8 second
+    # differences) a quarter of two holds the spike's own -2A and A, so there, once the still reference
+    # exists, the quarters are left out (LOCAL_MIN per quarter) and the isolation test below does their work
+    # There the block's own smallest step is no floor when it is itself an outlier against the reference
+    # (which holds the learned resolution, ImuFaults.dd_scale_ref): a gyro resting on one code whose only
+    # change is the spike has the spike for its step.
+    if m >= 4 * LOCAL_MIN or dd_scale_ref is None:
+        cand = out
+    else:
+        ref = np.asarray(dd_scale_ref, dtype=float)
+        cand = a > k * np.maximum(scale, np.where((ref > 1e-9) & (code > k * ref), 0.0, code))
     prev = np.vstack([np.zeros((1, a.shape[1])), a[:-1]])
     nxt = np.vstack([a[1:], np.zeros((1, a.shape[1]))])
-    peak = out & (a >= prev) & (a > nxt)
+    peak = cand & (a >= prev) & (a > nxt)
+    if cand is not out:
+        # without the quarters, only the whole shape of a spike inside the block counts: -2A flanked by A
+        # and A of the other sign (a motion that starts at the block's end rises on one side only)
+        pd = np.vstack([np.zeros((1, a.shape[1])), dd[:-1]])
+        nd = np.vstack([dd[1:], np.zeros((1, a.shape[1]))])
+        half_p = (pd * dd < 0) & (np.abs(pd) > 0.25 * a) & (np.abs(pd) < 0.75 * a)
+        half_n = (nd * dd < 0) & (np.abs(nd) > 0.25 * a) & (np.abs(nd) < 0.75 * a)
+        shape = half_p & half_n
+        shape[0], shape[-1] = half_n[0], half_p[-1]  # at the block's edges the one flank inside it
+        peak &= shape
     # isolated: nothing above half the peak 2-5 samples away (a spike is -2A flanked by A, then noise)
     for j, c in zip(*np.nonzero(peak)):
         around = np.concatenate([a[max(j - 5, 0):max(j - 1, 0), c], a[j + 2:j + 6, c]])
         if around.size and around.max() >= 0.5 * a[j, c]:
             peak[j, c] = False
+    if cand is not out:  # the spike's second differences (its -2A, the A either side) are not noise
+        out = out | peak
+        out[1:] |= peak[:-1]
+        out[:-1] |= peak[1:]
     spikes = np.count_nonzero(peak, axis=0)
     near = peak.copy()
     near[1:] |= peak[:-1]

@@ -74,23 +74,50 @@ class ImuFaults:
         self.timing = TimingDetector(stamp_res)
         self.external: dict[tuple[str, str], int] = {}  # (kind, axis) -> state, e.g. ("disagree", "gx")
         self.quiet_blocks = 0
+        self.accel_ref = math.nan  # pooled accel second-difference variance of still blocks ((m/s^2)^2)
+        self._accel = [0.0, 0]  # its sum and block count while it is learned
 
     # ------------------------------------------------------------------ inputs
     def dd_scale_ref(self) -> np.ndarray | None:
+        """The still second differences' scale per axis (block_stats' outlier bar), at least what the learned
+        resolution's rounding gives (sqrt(1/2) LSB): a healthy flip between two codes is no spike."""
         refs = [a.ref for a in self.axes.values()]
         if not all(r.ready for r in refs):
             return None
-        return np.array([math.sqrt(6.0 * r.sigma2) for r in refs])
+        return np.array([max(math.sqrt(6.0 * a.ref.sigma2), math.sqrt(0.5) * a.stuck.lsb if math.isfinite(a.stuck.lsb)
+                             else 0.0) for a in self.axes.values()])
 
     def observe(self, st: BlockStats, t: np.ndarray | None = None, still: bool = True) -> Observation:
         """The observation of one block handed to the detectors of this IMU (``at`` narrows it to an axis)."""
         return Observation(self.imu, st, t, still)
 
-    def on_block(self, st: BlockStats, t: np.ndarray, still: bool, y: np.ndarray | None = None) -> list[FaultEvent]:
+    def vibration(self, accel: np.ndarray | None, still: bool) -> float:
+        """The block's accelerometer second-difference variance (three axes pooled) over that of the first
+        ``ref_blocks`` still blocks (learned meanwhile, like the gyro references): 1 while the vehicle
+        vibrates as it did then, below 1 when the vibration fell (an engine stopped), nan when unknown."""
+        if accel is None or accel.shape[0] < 5:
+            return math.nan
+        dd = accel[2:] - 2.0 * accel[1:-1] + accel[:-2]
+        v = float(np.mean(dd * dd)) * 3.0 / 6.0
+        if not math.isfinite(v):
+            return math.nan
+        if not math.isfinite(self.accel_ref):
+            if still:
+                self._accel[0] += v
+                self._accel[1] += 1
+                if self._accel[1] >= self.ref_blocks and self._accel[0] > 0:
+                    self.accel_ref = self._accel[0] / self._accel[1]
+            return math.nan
+        return v / self.accel_ref
+
+    def on_block(self, st: BlockStats, t: np.ndarray, still: bool, y: np.ndarray | None = None,
+                 accel: np.ndarray | None = None) -> list[FaultEvent]:
         """Every block: timing, then per axis stuck, spikes, saturation. ``y``: the block's gyro samples (n, 3)
-        (the stuck test reads their spread over codes)."""
+        (the stuck test reads their spread over codes); ``accel``: the accelerometer's (n, 3) (the vibration the
+        stuck test weighs a gyro's quiet against)."""
         obs = self.observe(st, t, still)
         obs.y = y
+        obs.vibration = self.vibration(accel, still)
         ev = self.timing.update(obs)
         for ax, af in self.axes.items():
             o = obs.at(ax, af.ref)
@@ -170,7 +197,8 @@ class ImuFaults:
 
     def state_dict(self) -> dict:
         return {"axes": {ax: af.state_dict() for ax, af in self.axes.items()}, "timing": self.timing.state_dict(),
-                "external": [[k, a] for (k, a) in self.external], "quiet_blocks": self.quiet_blocks}
+                "external": [[k, a] for (k, a) in self.external], "quiet_blocks": self.quiet_blocks,
+                "accel_ref": self.accel_ref if math.isfinite(self.accel_ref) else None, "accel_learn": self._accel}
 
     def load_state_dict(self, d: Mapping) -> None:
         for ax, s in (d.get("axes") or {}).items():
@@ -179,3 +207,5 @@ class ImuFaults:
         self.timing.load_state_dict(d.get("timing", {}))
         self.external = {(k, a): FAULT for k, a in d.get("external", [])}
         self.quiet_blocks = int(d.get("quiet_blocks", 0))
+        self.accel_ref = math.nan if d.get("accel_ref") is None else float(d["accel_ref"])
+        self._accel = [float(v) for v in (d.get("accel_learn") or [0.0, 0])]

@@ -30,6 +30,13 @@ The larger of the above and the SPRT of the samples beyond the block's two best 
 evidence. It is thin where the frozen value sits right on a boundary (0.26 nats per 50-sample block at
 0.36 LSB of noise: a minute or more at rest); in motion a live gyro spreads over many codes at once.
 
+The healthy rate beyond two codes comes from the samples' own spread at rest (a gyro low-passed well below
+its logged rate spreads its samples far beyond its sample-to-sample noise, the rover's 5 Hz at 50 Hz), over
+the block's equivalent independent samples. A gyro whose codes do not repeat (floats) has a third CUSUM:
+its variance collapse, counted while the same IMU's accelerometer vibrates at least half as much as at the
+reference (:meth:`StuckDetector._vibration_llr`): a parked plane's engine stop lowers both, a frozen gyro
+only its own.
+
 Before a reference exists (the first seconds of still data) the PX4-like rule applies: ``equal_blocks``
 consecutive blocks of at least 50 samples with every value equal (no change at all).
 
@@ -62,6 +69,7 @@ MIN_OUTSIDE = 10  # samples beyond two codes seen at rest before that evidence c
 H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
 H_OFF = 10.0
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
+VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
 ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
 
 
@@ -75,7 +83,7 @@ def two_code_outside(y: np.ndarray, lsb: float) -> int:
     return int(c.shape[0] - (cnt[:-1] + cnt[1:]).max())
 
 
-def two_code_llr(k: int, n: int, q0: float) -> float:
+def two_code_llr(k: float, n: float, q0: float) -> float:
     """Evidence (nats) of a block's ``k`` samples beyond its two best adjacent codes among ``n``: a value
     frozen with a dither far below the step (rate q0 / ``Q_RATIO``) against a healthy gyro (rate q0).
 
@@ -105,8 +113,10 @@ class StuckDetector:
         self.alive = False  # the axis changed codes in a moving block (a live gyro; its zeros at rest are resolution)
         self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
         self.out_n = 0
+        self.spread = [0.0, 0]  # the still blocks' sample variance (times samples) and samples, while healthy
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
+        self.vib = Cusum(H_ON, H_OFF)  # the variance collapse while the accelerometer's vibration did not fall
         self.equal_run = 0
         self.value = math.nan
         self.lsb = math.inf  # smallest non-zero step seen (the sensor's resolution, or finer)
@@ -114,7 +124,7 @@ class StuckDetector:
 
     @property
     def state(self) -> int:
-        return FAULT if FAULT in (self.cusum.state, self.two.state) else OK
+        return FAULT if FAULT in (self.cusum.state, self.two.state, self.vib.state) else OK
 
     def update(self, obs: Observation) -> list[FaultEvent]:
         """One block of one axis (any motion state); the state change, if any (critical, except an integer
@@ -180,6 +190,9 @@ class StuckDetector:
                 self.two.step(two)
             elif self.two.state == FAULT and self.cusum.state == OK:
                 self.two.state, self.two.s = OK, 0.0
+            vib = self._vibration_llr(obs, ref, u)
+            if vib is not None:
+                self.vib.step(vib)
             return self.state != before
         # no reference yet: only the equal-values rule
         if self.cusum.state == OK and self.equal_run >= equal_blocks:
@@ -189,6 +202,20 @@ class StuckDetector:
             self.cusum.state, self.cusum.s = OK, 0.0
             return True
         return False
+
+    def _vibration_llr(self, obs: Observation, ref, u: float) -> float | None:
+        """The variance collapse of a gyro whose codes do not repeat (floats: DataFlash, ULog, HIGHRES_IMU, or
+        noise far above the step) judged against what the rest of the IMU sees: the chi-square LLR of u,
+        counted while the accelerometer's vibration is at least ``VIB_KEEP`` of its still reference; while it
+        fell (an engine stopped: a healthy gyro's noise falls with it, as on real parked planes) only its
+        evidence for healthy counts. None before the accelerometer's reference, or without one, and for
+        quantised data, where a healthy quiet gyro at a code's centre gives blocks of one code (u = 0) by
+        nature: there the repeated-codes evidence above is the honest one (at 10 Hz and 0.36 LSB a block of
+        one code is worth at most 1.8 nats, not the 5 of the chi-square)."""
+        if self.quantised or not math.isfinite(obs.vibration):
+            return None
+        llr = chi2_llr(u, ref.nu, R1)
+        return llr if obs.vibration >= VIB_KEEP else min(llr, 0.0)
 
     def _noise_lsb(self, ref) -> float:
         """The reference noise in LSB with the rounding's LSB^2 / 12 taken out (Sheppard's correction)."""
@@ -209,32 +236,47 @@ class StuckDetector:
 
     def _two_codes(self, obs: Observation, ref) -> float | None:
         """A frozen value flipping between two codes near their boundary: the spread over codes. The healthy
-        rate q0 = 2 Phi(-1 / s), s from the reference with the rounding's LSB^2 / 12 taken out (Sheppard: at
-        0.36 LSB within 1 % of the unrounded figure on the realistic presets), and at most the rate this axis
-        showed at rest; counted only once the axis was seen beyond two codes ``MIN_OUTSIDE`` times (below
-        ~0.3 LSB the flips of a quiet gyro on a boundary inflate the rounded variance, so s would be too
-        large: such a gyro never leaves two codes and is never judged by it)."""
+        rate q0 = 2 Phi(-1 / s), s the noise of the samples' own spread at rest (below), at
+        most the rate this axis showed at rest; counted only once the axis was seen beyond two codes
+        ``MIN_OUTSIDE`` times (a quiet gyro that never leaves two codes is never judged by it)."""
         y = np.asarray(obs.y)[:, obs.col]
         k, n = two_code_outside(y, self.lsb), y.shape[0]
         if obs.still and self.state == OK and self.cusum.s == 0.0 and self.two.s == 0.0:
             self.out_k += k
             self.out_n += n
-        if self.out_k < MIN_OUTSIDE:
+            if n >= 2:
+                self.spread[0] += float(np.var(y)) * n
+                self.spread[1] += n
+        if self.out_k < MIN_OUTSIDE or self.spread[1] == 0:
             return None
-        s_l = self._noise_lsb(ref)
-        if s_l <= 0:
-            return None
-        q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), self.out_k / self.out_n, 0.45)
-        return two_code_llr(k, n, q0) if q0 > 0 else None
+        # What lands beyond two codes is the samples' own spread at rest (their within-block variance v_b),
+        # not the second-difference figure v_dd: a gyro low-passed well below its logged rate (the rover: 5 Hz
+        # at 50 Hz) spreads its samples over codes far beyond its sample-to-sample noise, and a decimated one
+        # with energy near its Nyquist rate (the plane at 10 Hz) less than that figure says (taken from v_dd, a
+        # healthy plane resting on a boundary for a minute was named stuck). The noise s = sqrt(v_b - 1/12)
+        # (Sheppard), its rate on a boundary q0 = 2 Phi(-1 / s) at most the rate seen at rest; a correlated
+        # block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that changes
+        # from sample to sample).
+        v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
+        v_dd = ref.sigma2 / (self.lsb * self.lsb)
+        s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
+        q0 = min(math.erfc(1.0 / (s_b * math.sqrt(2.0))), self.out_k / self.out_n, 0.45) if s_b > 0 else 0.0
+        if q0 <= 0:
+            return 0.0  # a level resting on a boundary could give all of it: no evidence either way
+        n_eff = n * min(1.0, v_dd / v_b) if v_b > 0 else n
+        return two_code_llr(k * n_eff / n, n_eff, q0)
 
     def state_dict(self) -> dict:
-        return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "equal_run": self.equal_run,
+        return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
+                "equal_run": self.equal_run,
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
-                "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n]}
+                "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n],
+                "spread": self.spread}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
         self.two.load_state_dict(d.get("two", {}))
+        self.vib.load_state_dict(d.get("vib", {}))
         self.equal_run = int(d.get("equal_run", 0))
         self.lsb = math.inf if d.get("lsb") is None else float(d["lsb"])
         self.quantised = bool(d.get("quantised", False))
@@ -242,3 +284,5 @@ class StuckDetector:
         self.detail = str(d.get("detail", ""))
         self.alive = bool(d.get("alive", False))
         self.out_k, self.out_n = (int(v) for v in (d.get("out") or [0, 0]))
+        sp = d.get("spread") or [0.0, 0]
+        self.spread = [float(sp[0]), int(sp[1])]

@@ -215,7 +215,7 @@ class Channel:
         """Every closed block: remember it (motion consensus, disagreement) and run the per-block detectors."""
         self.last_stats = st
         self.recent.append((data[:, 0].copy(), data[:, 1:4].copy()))
-        return self.faults.on_block(st, data[:, 0], still, data[:, 1:4])
+        return self.faults.on_block(st, data[:, 0], still, data[:, 1:4], data[:, 4:7])
 
     def settle(self, data: np.ndarray, st: BlockStats, still: bool) -> tuple[np.ndarray | None, BlockStats | None]:
         """The look-ahead, for every block once the rate is known: returns the pending still block (and its
