@@ -19,6 +19,10 @@ Report. For every linear candidate (Q, N, B, K, R):
   information of the GLS; at theta = 0 the marginal with theta freed):
   ``{"effect", p: ub, "std": {p: ...}, "ci95": {p: [0, ub]}, "bound": True}``.
 
+A bias instability or random walk the record is too short to resolve (fit_avar's record rule) stays in the
+model as a nuisance column (``Structure.nuisance``) and is reported as its bound: left out, its share went
+into N.
+
 The white-noise term carries the low-pass filter of the logged data as the offline fit models it (the
 estimator's ``filter_hz`` from the log, or a roll-off the data show; ``filter_hz`` in the reported term),
 so a filter never becomes a Gauss-Markov term (whose tau_c is at least 3 sample periods) nor pulls N's
