@@ -379,7 +379,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     # the record rule decides what is reported, not what is modelled: the dropped term stays in the model
     # (its share of the curve is there, resolved or not) as a nuisance term, and the kept terms keep their
     # values and intervals from that model. Refitted without it, the kept terms take up its share wherever
-    # it is not negligible: a bias instability at 40 % of the AVAR from 1 to 300 s (a copter at 50 Hz,
+    # it is not negligible: a bias instability at 20-45 % of the AVAR from 1 to 330 s (a copter at 50 Hz,
     # 20 min of record) went into N (1.4-1.6x the truth, +-0.5 %) or, through a Gauss-Markov term moved to
     # the 3-sample edge where it mimics the low-pass filter, into a model that left the curve altogether
     res2 = replace(res, terms=[t for t in res.terms if t["effect"] not in drop],
