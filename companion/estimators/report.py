@@ -177,13 +177,16 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     # selection uncertainty: the interval of a resolved term is the envelope of its intervals in the selected
     # model and in the model with every base effect (N, B, K) forced in -- a base effect the selection left
     # out (e.g. a bias instability hidden under a Gauss-Markov hump) can otherwise shift N beyond its interval
+    # (solved only when that model has more terms: the selected one with N, B and K in is the same model)
     sup = [x for x in LINEAR_EFFECTS if x in mod or (x in BASE_EFFECTS and x in candidates)]
-    A_s = _columns(sup, st.nonlin, tau, st.white)
-    th_s, _ = prob.solve(A_s)
-    cov_s = np.zeros((len(th_s), len(th_s)))
-    act_s = th_s > 0
-    if act_s.any():
-        cov_s[np.ix_(act_s, act_s)] = prob.cov_theta(A_s[:, act_s])
+    forced = set(sup) != set(mod)
+    if forced:
+        A_s = _columns(sup, st.nonlin, tau, st.white)
+        th_s, _ = prob.solve(A_s)
+        cov_s = np.zeros((len(th_s), len(th_s)))
+        act_s = th_s > 0
+        if act_s.any():
+            cov_s[np.ix_(act_s, act_s)] = prob.cov_theta(A_s[:, act_s])
     resolved = {}
     for j, e in enumerate(st.linear):
         if theta[j] <= 0:
@@ -192,7 +195,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
         if lo > 0:
             p = LINEAR_PARAM[e]
             k = sup.index(e)
-            if th_s[k] > 0 and set(sup) != set(mod):
+            if forced and th_s[k] > 0:
                 lo_s, hi_s = _scaled_chi2_ci(th_s[k], cov_s[k, k], level)
                 lo, hi = min(lo, lo_s), max(hi, hi_s)
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
