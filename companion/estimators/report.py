@@ -19,6 +19,10 @@ Report. For every linear candidate (Q, N, B, K, R):
   information of the GLS; at theta = 0 the marginal with theta freed):
   ``{"effect", p: ub, "std": {p: ...}, "ci95": {p: [0, ub]}, "bound": True}``.
 
+A bias instability or random walk the record is too short to resolve (fit_avar's record rule) stays in the
+model as a nuisance column (``Structure.nuisance``) and is reported as its bound: left out, its share went
+into N.
+
 The white-noise term carries the low-pass filter of the logged data as the offline fit models it (the
 estimator's ``filter_hz`` from the log, or a roll-off the data show; ``filter_hz`` in the reported term),
 so a filter never becomes a Gauss-Markov term (whose tau_c is at least 3 sample periods) nor pulls N's
@@ -70,6 +74,9 @@ class Structure:
     model_error: float = 0.0
     nl_ci: dict | None = None  # profile intervals of the nonlinear terms from the selection fit
     white: dict | None = None  # low-pass filter of the white-noise term ({"filter_hz", "sample_hz"}), as fitted
+    # linear effects the model holds that the record is too short to resolve (fit_avar's record rule): in every
+    # solve, never resolved (their bound is reported), so that the others do not take up their share
+    nuisance: tuple = ()
 
 
 def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ratio=256, white_filter=None,
@@ -107,8 +114,9 @@ def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure
     nl_ci = {t["effect"]: t.get("ci95", {}) for t in fr.terms if t["effect"] in NL_PARAMS}
     white = ({"filter_hz": fr.filter["filter_hz"], "sample_hz": fr.filter.get("sample_hz")}
              if getattr(fr, "filter", None) else None)
+    nuisance = tuple(t["effect"] for t in getattr(fr, "nuisance", ()) if t["effect"] in LINEAR_EFFECTS)
     return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
-                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci, white)
+                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci, white, nuisance)
 
 
 def bounds_for_fit(fr, tau, avar, edf0, rate_hz, n, effects=("white_noise", "bias_instability", "random_walk")):
@@ -124,6 +132,11 @@ def bounds_for_fit(fr, tau, avar, edf0, rate_hz, n, effects=("white_noise", "bia
         return []
     return [t for t in report(np.asarray(tau, float)[keep], np.asarray(avar, float)[keep], st, missing)
             if t.get("bound")]
+
+
+def _model_effects(st: Structure) -> list:
+    """The linear columns of the structure's model: the selected effects, then the nuisance ones."""
+    return list(st.linear) + [e for e in st.nuisance if e not in st.linear]
 
 
 def _problem(tau, avar, cov):
@@ -154,7 +167,8 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     if tau.size == 0 or not np.any(avar > 0):
         return out
     prob, scale = _problem(tau, avar, cov)
-    A = _columns(st.linear, st.nonlin, tau, st.white)
+    mod = _model_effects(st)
+    A = _columns(mod, st.nonlin, tau, st.white)
     theta, _ = prob.solve(A) if A.shape[1] else (np.zeros(0), 0.0)
     cov_t = np.zeros((len(theta), len(theta)))
     act = theta > 0
@@ -163,13 +177,16 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     # selection uncertainty: the interval of a resolved term is the envelope of its intervals in the selected
     # model and in the model with every base effect (N, B, K) forced in -- a base effect the selection left
     # out (e.g. a bias instability hidden under a Gauss-Markov hump) can otherwise shift N beyond its interval
-    sup = [x for x in LINEAR_EFFECTS if x in st.linear or (x in BASE_EFFECTS and x in candidates)]
-    A_s = _columns(sup, st.nonlin, tau, st.white)
-    th_s, _ = prob.solve(A_s)
-    cov_s = np.zeros((len(th_s), len(th_s)))
-    act_s = th_s > 0
-    if act_s.any():
-        cov_s[np.ix_(act_s, act_s)] = prob.cov_theta(A_s[:, act_s])
+    # (solved only when that model has more terms: the selected one with N, B and K in is the same model)
+    sup = [x for x in LINEAR_EFFECTS if x in mod or (x in BASE_EFFECTS and x in candidates)]
+    forced = set(sup) != set(mod)
+    if forced:
+        A_s = _columns(sup, st.nonlin, tau, st.white)
+        th_s, _ = prob.solve(A_s)
+        cov_s = np.zeros((len(th_s), len(th_s)))
+        act_s = th_s > 0
+        if act_s.any():
+            cov_s[np.ix_(act_s, act_s)] = prob.cov_theta(A_s[:, act_s])
     resolved = {}
     for j, e in enumerate(st.linear):
         if theta[j] <= 0:
@@ -178,7 +195,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
         if lo > 0:
             p = LINEAR_PARAM[e]
             k = sup.index(e)
-            if th_s[k] > 0 and list(sup) != list(st.linear):
+            if forced and th_s[k] > 0:
                 lo_s, hi_s = _scaled_chi2_ci(th_s[k], cov_s[k, k], level)
                 lo, hi = min(lo, lo_s), max(hi, hi_s)
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
@@ -193,7 +210,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
             out.append(resolved[e])
             continue
         p = LINEAR_PARAM[e]
-        lin = [x for x in LINEAR_EFFECTS if x == e or (x in st.linear and x != e)]
+        lin = [x for x in LINEAR_EFFECTS if x == e or (x in mod and x != e)]
         A2 = _columns(lin, st.nonlin, tau, st.white)
         th2, _ = prob.solve(A2)
         i = lin.index(e)
@@ -204,7 +221,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
         sd_p = math.sqrt((th_i + math.sqrt(max(var, 0.0))) * scale) - math.sqrt(th_i * scale)
         out.append({"effect": e, p: ub_p, "std": {p: sd_p}, "ci95": {p: [0.0, ub_p]}, "bound": True})
     for k, (e, shape) in enumerate(st.nonlin):
-        j = len(st.linear) + k
+        j = len(mod) + k
         if theta[j] <= 0:
             continue
         lp, sp = NL_PARAMS[e]
@@ -223,7 +240,7 @@ def rescaled_cov(st: Structure, tau, avar, n):
     from companion.allan.fit import _columns
 
     prob, scale = _problem(tau, avar, st.cov * (st.n / max(float(n), 1.0)))
-    A = _columns(st.linear, st.nonlin, tau, st.white)
+    A = _columns(_model_effects(st), st.nonlin, tau, st.white)
     if A.shape[1] == 0:
         return st.cov
     theta, _ = prob.solve(A)
