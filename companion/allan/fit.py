@@ -349,8 +349,11 @@ def record_needed(terms, tau0: float) -> dict[str, float]:
     """For each of ``RESOLVE_EFFECTS`` in ``terms`` (fitted, SI): the record length (s) it needs to be
     resolved, RESOLVE_RECORD_FACTOR x the shortest tau from which it dominates (:func:`dominates_from`;
     inf if it never does), at least RESOLVE_MIN_RECORD_S."""
-    return {e: max(RESOLVE_RECORD_FACTOR * tau_d, RESOLVE_MIN_RECORD_S)
-            for e, tau_d in dominates_from(terms, tau0).items()}
+    return _record_for(dominates_from(terms, tau0))
+
+
+def _record_for(tau_d: dict[str, float]) -> dict[str, float]:
+    return {e: max(RESOLVE_RECORD_FACTOR * t, RESOLVE_MIN_RECORD_S) for e, t in tau_d.items()}
 
 
 def quantization_slope(tau, avar) -> bool:
@@ -376,7 +379,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
         return res
     record = (max(segments) if segments else n) / float(rate_hz)
     tau_d = dominates_from(res.terms, 1.0 / float(rate_hz))
-    needs = record_needed(res.terms, 1.0 / float(rate_hz))
+    needs = _record_for(tau_d)
     drop = {e: need for e, need in needs.items() if need > record}
     if not drop:
         return res
@@ -459,23 +462,12 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         inflate = 2.0 * max(1.0, dens)
 
     def covariance(terms_si, v_model, floor):
-        if full and terms_si and segments is not None and len(segments) > 1:
-            from companion.allan.pooled import pooled_oavar_covariance
-
-            c = pooled_oavar_covariance(terms_si, m, segments, rate_hz, max_ratio=max_ratio) / scale**2
-        elif full and terms_si:
-            c = oavar_covariance(terms_si, m, n, rate_hz, max_ratio=max_ratio) / scale**2
+        if full and terms_si:
+            c = _points_cov(terms_si, m, n, rate_hz, segments, scale, max_ratio)
         else:
             base = v_model if np.all(v_model > 0) else np.maximum(v_model, 1e-6 * np.max(v))
             c = np.diag(2.0 * base**2 / edf_v * (1.0 if full else inflate))
-        wt = next((t for t in terms_si if t["effect"] == "white_noise"), None) if white else None
-        if wt is not None:
-            # a real filter chain is no exact 2-pole Butterworth at exactly f_c: the modelled shape is uncertain
-            # in proportion to how far it bends the point (FILTER_SHAPE_ERROR of the bend), so the bent points
-            # count less as the record grows -- the soft form of leaving them out
-            bend = 1.0 - avar_white_noise(tau, 1.0, **white) * tau
-            c = c + np.diag((FILTER_SHAPE_ERROR * np.maximum(bend, 0.0) * avar_term(wt, tau) / scale) ** 2)
-        return c + np.diag((floor * v_model) ** 2)
+        return _with_shape_errors(c, terms_si, tau, scale, white, floor, v_model)
 
     def iterate(floor):
         # start: weights from the measured points (only to get a first model). The covariance is then
@@ -613,6 +605,30 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
                      model_error=floor, filter=_filter_summary(white, filter_info))
 
 
+def _points_cov(terms_si, m, n, rate_hz, segments, scale, max_ratio=256) -> np.ndarray:
+    """Model covariance of the AVAR points (in units of ``scale``^2) for noise made of ``terms_si``: the
+    overlapping estimator's (:func:`~companion.allan.confidence.oavar_covariance`), pooled over ``segments``
+    when there are several."""
+    if segments is not None and len(segments) > 1:
+        from companion.allan.pooled import pooled_oavar_covariance
+
+        return pooled_oavar_covariance(terms_si, m, segments, rate_hz, max_ratio=max_ratio) / scale**2
+    return oavar_covariance(terms_si, m, n, rate_hz, max_ratio=max_ratio) / scale**2
+
+
+def _with_shape_errors(c, terms_si, tau, scale, white, floor, v_model) -> np.ndarray:
+    """``c`` plus the model's own uncertainty: the modelled filter's shape and the relative model error
+    ``floor`` (of the model AVAR ``v_model``, in units of ``scale``)."""
+    wt = next((t for t in terms_si if t["effect"] == "white_noise"), None) if white else None
+    if wt is not None:
+        # a real filter chain is no exact 2-pole Butterworth at exactly f_c: the modelled shape is uncertain
+        # in proportion to how far it bends the point (FILTER_SHAPE_ERROR of the bend), so the bent points
+        # count less as the record grows -- the soft form of leaving them out
+        bend = 1.0 - avar_white_noise(tau, 1.0, **white) * tau
+        c = c + np.diag((FILTER_SHAPE_ERROR * np.maximum(bend, 0.0) * avar_term(wt, tau) / scale) ** 2)
+    return c + np.diag((floor * v_model) ** 2)
+
+
 def _flicker_shape_cov(bias_term, m, tau) -> np.ndarray:
     """Covariance (SI) of the fitted AVAR's bias-instability share from the uncertain shape of the flicker at the
     first cluster times. The plateau (2 ln2 / pi) B^2 holds only from a few tau0 on: how a sensor samples its
@@ -729,20 +745,8 @@ def upper_bounds(fr: FitResult, tau, avar, *, n, rate_hz, m=None, segments=None,
     v = avar / scale
 
     def cov_at(terms):
-        if segments is not None and len(segments) > 1:
-            from companion.allan.pooled import pooled_oavar_covariance
-
-            c = pooled_oavar_covariance(terms, m, segments, rate_hz)
-        else:
-            c = oavar_covariance(terms, m, n, rate_hz)
-        c = c / scale**2
-        model = avar_model(terms, tau) / scale
-        if white:
-            wt = next((t for t in terms if t["effect"] == "white_noise"), None)
-            if wt is not None:
-                bend = 1.0 - avar_white_noise(tau, 1.0, **white) * tau
-                c = c + np.diag((FILTER_SHAPE_ERROR * np.maximum(bend, 0.0) * avar_term(wt, tau) / scale) ** 2)
-        return c + np.diag((fr.model_error * model) ** 2)
+        return _with_shape_errors(_points_cov(terms, m, n, rate_hz, segments, scale), terms, tau, scale, white,
+                                  fr.model_error, avar_model(terms, tau) / scale)
 
     out = []
     for e in missing:
