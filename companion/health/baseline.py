@@ -11,13 +11,13 @@ numpy only; no I/O here except plain dicts (the caller reads JSON/YAML).
 
 from __future__ import annotations
 
-import functools
 import math
 from typing import Iterable, Mapping
 
 import numpy as np
 
 from companion.allan.terms import LINEAR_PARAM, avar_term
+from companion.health.noise import quantized_ceiling
 
 #: parameter -> effect, for the linear terms (Miao 2014 eq. (3.5): x = [Q N B K R]).
 PARAM_EFFECT = {p: e for e, p in LINEAR_PARAM.items()}
@@ -130,14 +130,6 @@ def supported_params(params: Mapping[str, tuple[float, float]], tau, avar, edf, 
     return out
 
 
-@functools.lru_cache(maxsize=256)
-def _ceiling(s0_lsb: float) -> float:
-    """quantized_ceiling, remembered: a baseline's N is the same at every check (a 40-step bisection)."""
-    from companion.health.noise import quantized_ceiling
-
-    return quantized_ceiling(s0_lsb)
-
-
 def rounding_ceiling(base: Mapping[str, tuple[float, float]] | None, rate_hz: float | None,
                      lsb: float | None) -> Mapping[str, tuple[float, float]] | None:
     """The baseline of a rounded (int16) gyro axis as the degradation test must read it: N raised to the
@@ -153,7 +145,7 @@ def rounding_ceiling(base: Mapping[str, tuple[float, float]] | None, rate_hz: fl
     if not base or "N" not in base or not lsb or not rate_hz:
         return base
     n, s = base["N"]
-    c = _ceiling(n * math.sqrt(rate_hz) / lsb)
+    c = quantized_ceiling(n * math.sqrt(rate_hz) / lsb)
     if c <= 1.0:
         return base
     out = dict(base)

@@ -170,7 +170,6 @@ class ImuSample:
 
 
 _DEFAULT_TABLE = None
-_INT16_RANGE = range(-32768, 32768)
 
 
 def imu_sample_from_message(msg, scales: ScaleTable | None = None) -> ImuSample | None:
@@ -197,7 +196,7 @@ def imu_sample_from_message(msg, scales: ScaleTable | None = None) -> ImuSample 
         v = [getattr(msg, f, 0) or 0 for f in layout.dtype.names]
         g = v[1:10]
         if (type(sum(v)) is int and v[0] >= 0 and min(g) >= -32768 and max(g) <= 32767  # all ints, in range
-                and v[-1] in _INT16_RANGE and (name != "RAW_IMU" or 0 <= v[-2] <= 255)):
+                and -32768 <= v[-1] <= 32767 and (name != "RAW_IMU" or 0 <= v[-2] <= 255)):
             return _int16_sample(layout, msg, v, scales)
     rec = np.array([tuple(getattr(msg, f, 0) or 0 for f in layout.dtype.names)], dtype=layout.dtype)
     s = _to_si(layout, StreamKey(int(msg.get_srcSystem()), int(msg.get_srcComponent()), name,
