@@ -132,57 +132,106 @@ def _tail(terms, m2: int, tau0: float) -> int:
     return t
 
 
+#: the magnitude each term's G is proportional to (G of a term is its magnitude^2 times G of the unit term)
+_MAGNITUDE = {"white_noise": "N", "bias_instability": "B", "random_walk": "K", "gauss_markov": "sigma",
+              "sinusoid": "amplitude"}
+#: pair sums per (pair geometry, term shapes): a fit asks for the same ones many times (each iteration, each
+#: re-selection of the online report as the record grows); bounded, cleared when full
+_PAIR_FORMS: dict = {}
+_PAIR_FORMS_MAX = 8192
+
+
 def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div: int = 32):
-    """(sum_ij c(j-i)^2, sum_ij c(j-i)) for cluster sizes m1 <= m2 (Riemann sum with step ~ m1/step_div)."""
-    tail = _tail(terms, m2, tau0) if m2 <= 16 * m1 else 0  # long-memory tails: only near pairs correlate
-    lo = -(2 * m2 + tail)
-    hi = 2 * m1 + tail
-    lo, hi = max(lo, -(M1 - 1)), min(hi, M2 - 1)
+    """(sum_ij c(j-i)^2, sum_ij c(j-i)) for cluster sizes m1 <= m2 (Riemann sum with step ~ m1/step_div).
+
+    c is linear in the terms' squared magnitudes a_k (c = sum a_k c_k, c_k of the unit term), and the number
+    of pairs at lag l is M1 + f(l) with f fixed by m1 and m2 (M1 - M2 = 2 (m2 - m1)) while the lags stay
+    within the record; so both sums are quadratic / linear forms in a with M1 as a factor:
+    s2 = step (M1 a'G0 a + a'Gf a), s1 = step (M1 h0'a + hf'a). The forms depend only on the pair's geometry
+    and the terms' shapes (filter, tau_c, frequency) and are remembered. Lags clipped by a short record
+    (the longest cluster sizes) are summed with their own counts and not remembered."""
+    kern = [t for t in terms if t["effect"] in _MAGNITUDE]
+    Q2 = sum(t["Q"] ** 2 for t in terms if t["effect"] == "quantization")
+    a = np.array([float(t[_MAGNITUDE[t["effect"]]]) ** 2 for t in kern] + ([Q2] if Q2 else []))
+    if a.size == 0:
+        return 0.0, 0.0
+    tail = _tail(kern, m2, tau0) if m2 <= 16 * m1 else 0  # long-memory tails: only near pairs correlate
+    lo0, hi0 = -(2 * m2 + tail), 2 * m1 + tail
+    lo, hi = max(lo0, -(M1 - 1)), min(hi0, M2 - 1)
+    inside = lo == lo0 and hi == hi0
+    key = None
+    if inside:
+        shapes = tuple((t["effect"], t.get("filter_hz"), t.get("sample_hz"), t.get("tau_c"), t.get("freq_hz"))
+                       for t in kern)
+        key = (m1, m2, M1 - M2, lo, hi, tau0, step_div, shapes, bool(Q2))
+        forms = _PAIR_FORMS.get(key)
+    else:
+        forms = None
+    if forms is None:
+        forms = _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div, inside)
+        if key is not None:
+            if len(_PAIR_FORMS) >= _PAIR_FORMS_MAX:
+                _PAIR_FORMS.clear()
+            _PAIR_FORMS[key] = forms
+    G0, Gf, h0, hf = forms
+    mm = float(M1) if inside else 0.0
+    return float(mm * (a @ G0 @ a) + a @ Gf @ a), float(mm * (h0 @ a) + hf @ a)
+
+
+def _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside):
+    """(G0, Gf, h0, hf) of :func:`_pair_sums` for the unit terms ``kern`` (+ a unit quantization term last
+    when ``has_q``) over lags lo..hi; with ``inside`` False the counts are the record's own and G0, h0 zero."""
     step = max(1, m1 // step_div)
     l = np.arange(lo, hi + 1, step, dtype=np.int64)
-    c = np.zeros(l.shape[0])
     taps_a = ((0, 1.0), (m1, -2.0), (2 * m1, 1.0))
     taps_b = ((0, 1.0), (m2, -2.0), (2 * m2, 1.0))
     # the nine tap pairs in one call per term: offsets q - p and weights a_p b_q
     shift = np.array([q - p for p, _ in taps_a for q, _ in taps_b], dtype=np.int64)
     weight = np.array([ap * bq for _, ap in taps_a for _, bq in taps_b])
+    unit = [dict(t, **{_MAGNITUDE[t["effect"]]: 1.0}) for t in kern]
+    k = len(unit) + (1 if has_q else 0)
+    C = np.zeros((k, l.shape[0]))
     if np.all(shift % step == 0):
         # the nine rows of lags l + shift are shifted copies of one grid of spacing `step`: each term is
         # evaluated once per grid point (a quarter to a ninth of the lags) and the rows gathered from it
         lo_shift = int(shift.min())
         grid = np.arange(l[0] + lo_shift, l[-1] + int(shift.max()) + 1, step, dtype=np.int64)
         at = np.arange(l.shape[0])[None, :] + ((shift - lo_shift) // step)[:, None]
-        for term in terms:
-            g = _gcov(term, grid, tau0)
-            if g is not None:
-                c += weight @ g[at]
+        for i, term in enumerate(unit):
+            C[i] = weight @ _gcov(term, grid, tau0)[at]
     else:
         lags = l[None, :] + shift[:, None]
-        for term in terms:
-            g = _gcov(term, lags, tau0)
-            if g is not None:
-                c += weight @ g
-    # number of (i, j) pairs, 0 <= i < M1, 0 <= j < M2, with j - i = l
-    count = np.minimum(M1 - 1, M2 - 1 - l) - np.maximum(0, -l) + 1
-    count = np.maximum(count, 0).astype(float)
-    s2, s1 = step * float(np.sum(count * c * c)), step * float(np.sum(count * c))
-    Q2 = sum(t["Q"] ** 2 for t in terms if t["effect"] == "quantization")
-    if Q2:
+        for i, term in enumerate(unit):
+            C[i] = weight @ _gcov(term, lags, tau0)
+    # pairs (i, j), 0 <= i < M1, 0 <= j < M2, with j - i = l: M1 + f(l) within the record
+    count = (np.minimum(M1 - 1, M2 - 1 - l) - np.maximum(0, -l) + 1).astype(float)
+    f = count - M1 if inside else np.maximum(count, 0.0)
+    G0 = step * (C @ C.T) if inside else np.zeros((k, k))
+    Gf = step * ((C * f) @ C.T)
+    h0 = step * C.sum(axis=1) if inside else np.zeros(k)
+    hf = step * (C @ f)
+    if has_q:
         # white phase: c_Q(l) = Q^2 sum a_p b_q [l = p - q], spikes at nine lags; the smooth part c(l) is
-        # evaluated there exactly (cross term 2 c c_Q) and the spikes add c_Q^2.
+        # evaluated there exactly (cross term 2 c c_Q) and the spikes add c_Q^2 -- in place of the Riemann
+        # sum's row for Q (which is zero: _gcov has no smooth part for quantization).
         # the spikes' lags are the nine -shift (some coincide when m2 is a multiple of m1): weights summed per lag
         lag, at = np.unique(-shift, return_inverse=True)
-        cq = Q2 * np.bincount(at, weights=weight)
+        cq = np.bincount(at, weights=weight)
         lag, cq = lag[cq != 0.0], cq[cq != 0.0]
-        cnt = np.maximum(0, np.minimum(M1 - 1, M2 - 1 - lag) - np.maximum(0, -lag) + 1).astype(float)
-        cs = np.zeros(lag.shape[0])
-        for term in terms:
-            g = _gcov(term, lag[:, None] + shift[None, :], tau0)
-            if g is not None:
-                cs += g @ weight
-        s2 += float(np.sum(cnt * (2.0 * cs * cq + cq * cq)))
-        s1 += float(np.sum(cnt * cq))
-    return s2, s1
+        cnt = (np.minimum(M1 - 1, M2 - 1 - lag) - np.maximum(0, -lag) + 1).astype(float)
+        fq = cnt - M1 if inside else np.maximum(cnt, 0.0)
+        cs = np.zeros((k - 1, lag.shape[0]))
+        for i, term in enumerate(unit):
+            cs[i] = _gcov(term, lag[:, None] + shift[None, :], tau0) @ weight
+        q = k - 1
+        if inside:
+            G0[q, :q] = G0[:q, q] = cs @ cq
+            G0[q, q] = cq @ cq
+            h0[q] = cq.sum()
+        Gf[q, :q] = Gf[:q, q] = cs @ (fq * cq)
+        Gf[q, q] = (fq * cq) @ cq
+        hf[q] = fq @ cq
+    return G0, Gf, h0, hf
 
 
 def oavar_covariance(terms: Iterable[Mapping], m, n: int, rate_hz: float, max_ratio: int = 256) -> np.ndarray:
