@@ -37,11 +37,29 @@ SHAPE = {"gauss_markov": "tau_c", "sinusoid": "freq_hz"}
 N_PARAMS = {e: 1 + (e in SHAPE) for e in MAGNITUDE}
 
 
+_UNIT_COLUMNS: dict = {}
+
+
 def unit_column(term, tau, rate_hz):
-    """AVAR of ``term`` with its magnitude set to 1 (the column of A)."""
+    """AVAR of ``term`` with its magnitude set to 1 (the column of A). Remembered by the term's shape: a
+    workflow's profiles and tests ask for the same base columns tens of thousands of times."""
     t = dict(term)
-    t[MAGNITUDE[t["effect"]]] = 1.0
-    return term_avar(t, tau, rate_hz)
+    mag = MAGNITUDE[t["effect"]]
+    t[mag] = 1.0
+    shape = tuple(sorted((k, v) for k, v in t.items() if k != mag))
+    try:
+        key = (shape, np.asarray(tau, dtype=float).tobytes(), float(rate_hz))
+        hash(key)
+    except TypeError:  # a term carrying arrays (the temperature record): computed each time
+        return term_avar(t, tau, rate_hz)
+    col = _UNIT_COLUMNS.get(key)
+    if col is None:
+        if len(_UNIT_COLUMNS) >= 4096:
+            _UNIT_COLUMNS.clear()
+        col = term_avar(t, tau, rate_hz)
+        col.setflags(write=False)
+        _UNIT_COLUMNS[key] = col
+    return col
 
 
 @dataclass
@@ -65,17 +83,21 @@ def fit_magnitudes(meas: Measured, A: np.ndarray, s_fixed: np.ndarray, iters: in
     if k == 0:
         s = np.maximum(s_fixed, floor)
         return np.zeros(0), s, deviance(meas, s)
+    # the loop runs tens of thousands of times per workflow on a few dozen points: what does not change
+    # between iterations is computed once, and the deviance inline (the same operations as deviance())
+    sq_nu, rhs = np.sqrt(nu), a - s_fixed
     s = a.copy()
     best = (np.inf, None, None)
     for _ in range(iters):
-        w = np.sqrt(nu) / s
+        w = sq_nu / s
         M = w[:, None] * A
-        norms = np.linalg.norm(M, axis=0)
+        norms = np.sqrt(np.add.reduce(M * M, axis=0))  # np.linalg.norm(M, axis=0)
         norms[norms == 0] = 1.0
-        c, _ = nnls(M / norms, w * (a - s_fixed), maxiter=50 * k)
+        c, _ = nnls(M / norms, w * rhs, maxiter=50 * k)
         c = c / norms
         s_new = np.maximum(s_fixed + A @ c, floor)
-        d = deviance(meas, s_new)
+        r = a / np.maximum(s_new, 1e-300)
+        d = float(np.sum(nu * (r - 1.0 - np.log(r))))
         if d < best[0]:
             best = (d, c, s_new)
         if np.max(np.abs(s_new - s) / s) < 1e-9:
