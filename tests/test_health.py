@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from companion.estimators import make_estimator
-from companion.health.baseline import Baseline, params_from_terms
+from companion.health.baseline import Baseline, check_params, params_from_terms
 from companion.health.detector import (DEGRADING, HEALTHY, DetectorConfig, HealthDetector, ParamDetector,
                                        log_ratio_bound)
 
@@ -71,7 +71,17 @@ def test_baseline_round_trip_and_analyze_report():
         {"effect": "gauss_markov", "sigma": 1e-4, "tau_c": 10.0}]}}}]}
     b3 = Baseline.from_dict(report)
     v, s = b3.get(1, "gy")["N"]
-    assert v == 2e-3 and s == pytest.approx(0.2e-3 / (2 * 1.959964))
+    # the one-sigma of ln(N) from the interval's upper end, as for a learned baseline
+    assert v == 2e-3 and s == pytest.approx(2e-3 * math.log(2.1 / 2.0) / 1.959964)
+    # a short record's K: its interval is far from symmetric (scaled chi-square of few EDF), and one whose
+    # interval reaches 0 is unresolved (one-sigma at least its value); both as check_params reads a learned one
+    terms = [{"effect": "white_noise", "N": 2e-3, "ci95": {"N": [1.9e-3, 2.1e-3]}},
+             {"effect": "bias_instability", "B": 3e-5, "ci95": {"B": [0.0, 9e-5]}},
+             {"effect": "random_walk", "K": 1e-4, "ci95": {"K": [0.6e-4, 3.1e-4]}}]
+    b4 = Baseline.from_dict({"streams": [{"message": "RAW_IMU", "instance": 0, "axes": {"gx": {"terms": terms}}}]})
+    assert b4.get(0, "gx") == check_params(terms, side="baseline")
+    assert b4.get(0, "gx")["K"][1] == pytest.approx(1e-4 * math.log(3.1) / 1.959964)
+    assert b4.get(0, "gx")["B"][1] >= 3e-5
     with pytest.raises(ValueError):
         Baseline.from_dict({"something": "else"})
 

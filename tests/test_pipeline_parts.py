@@ -135,3 +135,29 @@ def test_a_baseline_in_other_units_stops_the_pipeline_with_one_line():
     assert p.failed and "does not match IMU0" in p.failed and "not SI units" in p.failed
     assert "\n" not in p.failed and used > 0
     assert p.on_samples(key, t[-1:] + 1.0, g[-1:], a[-1:]) == 0  # stopped: input ignored
+
+
+def test_only_int16_messages_are_rounded_and_an_analyze_baseline_of_a_float_log_matches():
+    """DataFlash IMU, ULog sensor_combined, HIGHRES_IMU and CSV carry float gyros (as the decoders read them,
+    ImuStream.gyro_lsb None): a baseline from `analyze` of such a log (which records no LSB) matches the
+    stream (it was refused: 'gyro LSB none (float) vs stream 0.001 rad/s'); an int16 stream against it
+    is still refused."""
+    from companion.health.baseline import Baseline
+
+    rng = np.random.default_rng(2)
+    n = 100 * 30
+    t = 1.0 + np.arange(n) / 100.0
+    g = rng.normal(0, 2e-3, (n, 3))
+    a = np.array([0.0, 0.0, -9.80665]) + rng.normal(0.0, 0.02, (n, 3))
+    for message, refused in (("IMU", False), ("sensor_combined", False), ("HIGHRES_IMU", False), ("RAW_IMU", True)):
+        base = Baseline("report.json")
+        for ax in ("gx", "gy", "gz"):
+            base.set_axis(0, ax, {"N": (2e-4, 1e-5)})
+        base.meta[0] = {"message": message, "rate_hz": 100.0, "gyro_lsb": None, "units": "SI"}  # analyze's record
+        p = Pipeline(PipelineConfig(min_report_s=10.0), Reporter(RecordingSink(), 1.0), baseline=base)
+        gg = np.round(g / LSB) * LSB if message == "RAW_IMU" else g
+        p.on_samples(StreamKey(1, 1, message, 0), t, gg, a)
+        if refused:
+            assert p.failed and "gyro LSB none (float) vs stream 0.001 rad/s" in p.failed
+        else:
+            assert p.failed is None, (message, p.failed)

@@ -212,6 +212,9 @@ class Baseline:
     @classmethod
     def _from_analyze(cls, data: Mapping) -> "Baseline":
         """Walk an ``analyze`` report: any mapping with an axis name (gx, gy, gz) whose value holds ``terms``.
+        Each term's one-sigma is read as a learned baseline's is (:func:`check_params`, ``side="baseline"``:
+        from the upper end of its 95 % interval), so that a baseline from a file and one learned from the same
+        data are tested alike.
 
         The IMU index is taken from the nearest enclosing ``instance`` key (StreamKey.instance), else 0.
         """
@@ -237,12 +240,12 @@ def _walk_analyze(node, b: Baseline, imu: int) -> None:
             if k in ("gx", "gy", "gz") and isinstance(v, (Mapping, list)):
                 terms = v.get("terms") if isinstance(v, Mapping) else v
                 if isinstance(terms, list):
-                    params = params_from_terms(t for t in terms if isinstance(t, Mapping))
+                    params = check_params([t for t in terms if isinstance(t, Mapping)], side="baseline")
                     if params:
                         b.set_axis(imu, k, params)
                         continue
             if isinstance(node.get("axis"), str) and k == "terms" and isinstance(v, list):
-                params = params_from_terms(t for t in v if isinstance(t, Mapping))
+                params = check_params([t for t in v if isinstance(t, Mapping)], side="baseline")
                 if params and node["axis"] in ("gx", "gy", "gz"):
                     b.set_axis(imu, node["axis"], params)
                 continue

@@ -34,7 +34,6 @@ from companion.analysis.filters import sampling
 from companion.sources.messages import IMU_LAYOUTS
 from companion.sources.timing import stamp_resolution
 
-FLOAT_MESSAGES = ("HIGHRES_IMU", "CSV")
 # the MAVLink messages whose gyro is an integer (int16, mrad/s by default), from their layouts
 INT16_MESSAGES = tuple(name for name, lay in IMU_LAYOUTS.items() if lay.dtype["xgyro"].kind == "i")
 COLUMNS = {ax: 1 + i for i, ax in enumerate(GYRO_AXES + ACCEL_AXES)}  # column of each axis in a row
@@ -46,7 +45,10 @@ class Channel:
         self.imu, self.message, self.cfg = imu, message, cfg
         self.time_res = stamp_resolution(message)  # 1 ms for time_boot_ms: 400 Hz comes as 2 and 3 ms steps
         # the LSB of the gyro (stored with a learned baseline); by default 1 mrad/s unless a float message
-        self.gyro_lsb = (None if message in FLOAT_MESSAGES else 1e-3) if gyro_lsb == "default" else gyro_lsb
+        # only the int16 MAVLink messages are rounded (mrad/s unless the scales say otherwise): HIGHRES_IMU, a
+        # CSV, DataFlash IMU and ULog sensor_combined carry floats (as `analyze` reads them: a baseline from
+        # its report then matches the stream)
+        self.gyro_lsb = (1e-3 if message in INT16_MESSAGES else None) if gyro_lsb == "default" else gyro_lsb
         self.axes = GYRO_AXES + (ACCEL_AXES if cfg.accel else ())
         self.cutter = BlockCutter(cfg.block_s, cfg.reset_s, cfg.gap_s, self.time_res)
         self.gate = MotionGate(cfg)

@@ -43,7 +43,7 @@ from companion.health.faults import FAULT, FaultEvent
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
 from companion.service.baseline_match import check_baseline, stream_meta
-from companion.service.channel import FLOAT_MESSAGES, Channel
+from companion.service.channel import INT16_MESSAGES, Channel
 from companion.service.config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
 from companion.service.blocks import RATE_CHANGE
 from companion.service.imu_group import ImuGroup
@@ -228,7 +228,7 @@ class Pipeline:
             return None
         ch = self.channels.get(key.instance)
         if ch is None:
-            lsb = None if key.message in FLOAT_MESSAGES else (
+            lsb = None if key.message not in INT16_MESSAGES else (
                 self.scales.lookup(key)[0] if self.scales is not None else 1e-3)
             ch = self.channels[key.instance] = Channel(key.instance, key.message, self.cfg, gyro_lsb=lsb)
             self.log(f"IMU{key.instance}: {key.message} from {key.label()}")
