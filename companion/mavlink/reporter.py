@@ -105,6 +105,7 @@ class Reporter:
         self.sink = sink
         self.period_s = float(period_s)
         self.values: dict[str, float] = {}
+        self._names: list[str] | None = None  # sorted(values), kept until a name comes or goes
         self._slot = 0
         self._next_t: float | None = None
         self.sent = 0
@@ -115,8 +116,11 @@ class Reporter:
         if not NAME_RE.match(name):
             raise ValueError(f"NAMED_VALUE_FLOAT name {name!r} is not <= 10 characters of [A-Z0-9_]")
         if value is None or not math.isfinite(value):
-            self.values.pop(name, None)
+            if self.values.pop(name, None) is not None:
+                self._names = None
         else:
+            if name not in self.values:
+                self._names = None
             self.values[name] = float(value)
 
     def set_terms(self, imu: int, axis: str, params_si: Mapping[str, float]) -> None:
@@ -152,6 +156,7 @@ class Reporter:
         prefix = value_name(imu, axis, "N")[:-1]
         for name in [k for k in self.values if k.startswith(prefix) and k not in new]:
             self.values.pop(name, None)
+            self._names = None
         for name, v in new.items():
             self.set_value(name, v)
 
@@ -177,7 +182,9 @@ class Reporter:
             self._next_t = t_s
         elif t_s < self._next_t:  # nothing due (most calls: one per sample)
             return 0
-        names = sorted(self.values)
+        if self._names is None:
+            self._names = sorted(self.values)
+        names = self._names
         if not names:
             return 0
         step = self.period_s / len(names)
