@@ -284,7 +284,10 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     # local scale: the MAD of each quarter and its neighbours (vibration that starts mid-block is not a spike)
     m = a.shape[0]
     parts = np.array_split(np.arange(m), min(4, m))  # four near-equal quarters (no short remainder)
-    qs = np.array([np.median(a[p], axis=0) / 0.6745 for p in parts])
+    if m % len(parts) == 0:  # equal quarters: one median call (the same values)
+        qs = np.median(a.reshape(len(parts), m // len(parts), a.shape[1]), axis=1) / 0.6745
+    else:
+        qs = np.array([np.median(a[p], axis=0) / 0.6745 for p in parts])
     qmax = np.maximum(qs, np.maximum(np.vstack([qs[:1], qs[:-1]]), np.vstack([qs[1:], qs[-1:]])))
     local = np.repeat(qmax, [p.size for p in parts], axis=0)
     # and at least the spread rounding gives: a signal rounded to a step q carries rounding error of variance
