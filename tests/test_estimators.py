@@ -77,6 +77,27 @@ def test_segments_pool_as_the_offline_pooled_avar():
     assert joined.avar()[1][3] > 3 * avar[3]
 
 
+
+def test_with_forgetting_the_segment_list_keeps_the_last_twenty_memories():
+    """``run`` starts a segment at every still piece, for hours: with forgetting the list stays bounded (a piece
+    followed by 20 memories of samples weighs e^-20), the pieces it keeps are the newest ones with their true
+    lengths, through a state round trip too; without forgetting every piece is kept."""
+    rng = np.random.default_rng(8)
+    a = OctaveBankEstimator(50.0, phases=8, forgetting_s=10.0)  # 20 memories: 10,000 samples
+    b = OctaveBankEstimator(50.0, phases=8)
+    lengths = [int(x) for x in rng.integers(300, 1500, 40)]
+    for k, n in enumerate(lengths):
+        for est in (a, b):
+            est.new_segment()
+            est.update(white_rw(rng, n, 50.0, 1e-3))
+        if k == 20:
+            a = from_state_dict(json.loads(json.dumps(a.state_dict())))
+    assert b.segments() == lengths
+    kept = a.segments()
+    closed = kept[:-1]  # the current piece is not closed yet: trimmed at the next new_segment()
+    assert kept == lengths[-len(kept):] and sum(closed[1:]) <= 10_000 < sum(closed)
+
+
 def test_state_roundtrip_json_and_bounded_size():
     rng = np.random.default_rng(5)
     y = white_rw(rng, 30_000, 200.0, 1e-3)

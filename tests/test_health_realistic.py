@@ -5,6 +5,8 @@
   exact Gaussian-rounding probabilities and a Monte-Carlo, then the detector on rounded blocks;
 * the Allan-term test on a coefficient whose 95 % interval reaches 0 (a 250 Hz PX4 gyro raised
   `K 24.7x baseline` from K 2.6e-3 [0, 7.4e-3] rad/s^1.5, reported with a symmetric 1-sigma of 1.9e-3).
+* still data on both sides of a flight fed to the estimators as one record (a 250 Hz PX4 gyro whose
+  bias moved by 2.65e-3 rad/s while it warmed up in a 291 s flight raised `K 2.1x baseline`).
 """
 
 from __future__ import annotations
@@ -161,3 +163,51 @@ def test_the_copter_n_that_left_its_own_allan_curve_is_not_compared():
     avar = np.square(adev)
     assert supported_params({"N": (2.96e-3, 1.0e-5)}, tau, avar, edf) == {}
     assert supported_params({"N": (8.92e-5, 1.6e-6)}, tau, avar, edf) == {"N": (8.92e-5, 1.6e-6)}
+
+
+def _still_with_a_junction(gap_s: float, seed: int = 3):
+    """One gyro axis through the live channel (companion.service.channel.Channel, 1 s blocks, its checks every
+    10 s): 700 s still (the first 600 s learn the baseline), then -- after ``gap_s`` of motion whose blocks
+    are not fed -- 200 s still with the bias 2.5e-3 rad/s higher (what a warming IMU does in a flight).
+    White noise N 6e-5 rad/s/sqrt(Hz) and a rate random walk K 2e-5 rad/s^1.5 at 50 Hz. Returns (baseline
+    K, the check's K at the end, the transitions)."""
+    from companion.health.baseline import Baseline
+    from companion.service.channel import Channel
+    from companion.service.config import PipelineConfig
+    from companion.sim.synth import synthesize_axis
+
+    fs = 50.0
+    rng = np.random.default_rng(seed)
+    n1, n2 = int(700 * fs), int(200 * fs)
+    y = synthesize_axis([{"effect": "white_noise", "N": 6e-5}, {"effect": "random_walk", "K": 2e-5}], fs, n1 + n2, rng)
+    y[n1:] += 2.5e-3
+    t = np.arange(n1 + n2) / fs
+    t[n1:] += gap_s
+    ch = Channel(0, "HIGHRES_IMU", PipelineConfig())
+    ch.cutter.rate_hz = fs
+    ch.axes = ("gx",)
+    ch.make_estimators(learning=True)
+    base, trans = None, []
+    for k in range(0, t.size, int(fs)):
+        data = np.zeros((int(fs), 7))
+        data[:, 0], data[:, 1] = t[k:k + int(fs)], y[k:k + int(fs)]
+        if ch.feed(data):
+            base = Baseline()
+            base.set_axis(0, "gx", ch.learned_terms()["gx"])
+        if base is not None and ch.check_due(float(data[-1, 0])):
+            trans += ch.check(float(data[-1, 0]), base, False)[1]
+    return base.get(0, "gx")["K"][0], ch.current["gx"].get("K", (math.nan,))[0], trans
+
+
+def test_a_bias_step_across_a_flight_is_not_read_as_a_random_walk():
+    """The still data after the flight start a new segment of the estimators (no Allan cluster straddles the
+    junction): K stays at the truth (2e-5) and nothing is raised. Fed as one record (no time between the
+    pieces: what the channel did with every junction), the step alone raises every level by about
+    step^2 tau / record, K reads 4-5x and `K ...x baseline` is raised: the data are strong enough to fail."""
+    k_base, k_now, trans = _still_with_a_junction(300.0)
+    assert k_base == pytest.approx(2e-5, rel=0.3) and k_now == pytest.approx(2e-5, rel=0.3)
+    assert trans == []
+    _, k_joined, trans = _still_with_a_junction(0.0)
+    assert k_joined > 3.0 * 2e-5
+    assert len(trans) == 1 and trans[0].param == "K" and trans[0].state == DEGRADING
+    assert trans[0].text().startswith("IMU0 gyro X degrading: K")

@@ -143,6 +143,7 @@ class OctaveBankEstimator:
         self._S = np.zeros(self.levels)
         self._cnt = np.zeros(self.levels, dtype=np.int64)  # Allan differences seen per level
         self._segs: list[int] = []  # lengths (samples) of the segments closed by new_segment()
+        self._seg_base = 0  # samples of the closed segments no longer listed (forgotten: see new_segment)
         self._buf: list[float] = []
         self._cache: dict = {}  # Cholesky factors of the GLS covariance (derived data, not state)
         self._structure = None  # selected model (companion.estimators.report.Structure; derived, not state)
@@ -174,17 +175,22 @@ class OctaveBankEstimator:
         straddles the junction; the accumulated levels are kept, so the estimates pool the pieces as the
         offline analysis does (companion.allan.pooled), and the report's covariance is the pooled one."""
         self._flush()
-        done = self._n - sum(self._segs)
+        done = self._n - self._seg_base - sum(self._segs)
         if done <= 0:
             return
         self._segs.append(int(done))
+        if self.forgetting_s is not None:
+            # with forgetting the list stays bounded: a segment followed by 20 memories of samples weighs e^-20
+            old = 20.0 * self.forgetting_s * self.rate_hz
+            while len(self._segs) > 1 and sum(self._segs[1:]) > old:
+                self._seg_base += self._segs.pop(0)
         self._pending = [None] * len(self._pending)
         self._hist = [np.zeros(0) for _ in range(self.levels)]
 
     def segments(self) -> list[int]:
         """Sample counts of the pieces behind the estimates (one entry: one continuous record)."""
         self._flush()
-        last = self._n - sum(self._segs)
+        last = self._n - self._seg_base - sum(self._segs)
         return self._segs + ([int(last)] if last > 0 else [])
 
     def _flush(self) -> None:
@@ -326,7 +332,8 @@ class OctaveBankEstimator:
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict:
-        """JSON-serialisable state; its size depends on the configuration only, not on the run length."""
+        """JSON-serialisable state; its size depends on the configuration only, not on the run length (but for
+        one count per still segment: without forgetting all of them, with forgetting those of the last 20 memories)."""
         self._flush()
         return {
             "kind": self.kind,
@@ -343,6 +350,7 @@ class OctaveBankEstimator:
             "S": self._S.tolist(),
             "cnt": self._cnt.tolist(),
             "segments": list(self._segs),
+            "segments_base": self._seg_base,
         }
 
     @classmethod
@@ -363,6 +371,7 @@ class OctaveBankEstimator:
         else:  # a state saved before the count was kept: one continuous record
             est._cnt = np.maximum(est._n // est._s - (2 * est._P - 1), 0).astype(np.int64)
         est._segs = [int(x) for x in d.get("segments", [])]
+        est._seg_base = int(d.get("segments_base", 0))
         return est
 
 

@@ -9,7 +9,11 @@ Estimators per axis (companion.estimators.make_estimator): a *fast* one (exponen
 ``forgetting_fast_s``) for Q and N, a *slow* one (``forgetting_slow_s``) for B, K and R, and while
 learning a third one without forgetting whose terms become the baseline after ``baseline_s`` seconds of
 still data. Still blocks are queued and handed over in batches of about ``check_s`` (the estimators'
-block updates are split-invariant: the same result, far fewer calls).
+block updates are split-invariant: the same result, far fewer calls). A still block that does not follow the
+last one fed (motion, a handling, a flight or a time gap between them) starts a new segment of the estimators
+(no Allan cluster straddles the junction, as in the offline analysis' pooled still segments): the bias moves
+while the vehicle is not still (warm-up, temperature, Gauss-Markov wander), and a step at a junction read as
+part of one record raises every level by about step^2 tau / record, the shape of a rate random walk (K).
 """
 
 from __future__ import annotations
@@ -61,6 +65,9 @@ class Channel:
         self.fed_s = 0.0
         self._queue: list = []
         self._queue_s = 0.0
+        self._junctions: set[int] = set()  # queue indices whose block does not follow the one before (new segment)
+        self._fed_end_t: float | None = None  # time of the last sample queued for the estimators
+        self._junction = False  # the next queued block starts a new segment whatever its time (other estimators)
         self.next_check_t: float | None = None
         self.pending: np.ndarray | None = None  # still block waiting for the look-ahead
         self.pending_stats: BlockStats | None = None
@@ -127,7 +134,8 @@ class Channel:
             _, p = self._profiles.pop(i)
             self.fast, self.slow, self.learn = p["fast"], p["slow"], p["learn"]
             self.learned_s, self.fed_s, self.faults = p["learned_s"], p["fed_s"], p["faults"]
-            self._queue, self._queue_s = [], 0.0
+            self._queue, self._queue_s, self._junctions = [], 0.0, set()
+            self._junction = True  # their last samples are of another time
             return True
         learning = bool(self.learn)
         self.make_estimators(learning=learning)
@@ -153,7 +161,7 @@ class Channel:
                       for a in self.axes} if learning else {}
         self.learned_s = 0.0
         self.fed_s = 0.0
-        self._queue, self._queue_s = [], 0.0
+        self._queue, self._queue_s, self._junctions = [], 0.0, set()
 
     def set_filters(self, filters: dict) -> bool:
         """The autopilot's low-pass cut-offs ({"gyro": Hz, "accel": Hz}) became known or changed: the
@@ -241,6 +249,13 @@ class Channel:
         """Queue a still block for the estimators; True when the baseline learning is complete (the caller
         takes :meth:`learned_terms`)."""
         self._blocks["blocks_fed"] += 1
+        # a block between this one and the last fed one was not fed (moving, settling, a gap): the junction
+        # is at least half a block long; consecutive fed blocks are one sample period apart
+        t0 = float(data[0, 0])
+        if self._junction or (self._fed_end_t is not None and t0 - self._fed_end_t > 0.5 * self.cfg.block_s):
+            self._junctions.add(len(self._queue))
+        self._junction = False
+        self._fed_end_t = float(data[-1, 0])
         self._queue.append(data)
         duration = data.shape[0] / self.rate_hz
         self.fed_s += duration
@@ -260,14 +275,19 @@ class Channel:
         """Hand the queued still blocks to the estimators."""
         if not self._queue:
             return
-        data = np.concatenate(self._queue) if len(self._queue) > 1 else self._queue[0]
-        self._queue, self._queue_s = [], 0.0
-        for ax in self.axes:
-            y = np.ascontiguousarray(data[:, COLUMNS[ax]])
-            self.fast[ax].update(y)
-            self.slow[ax].update(y)
-            if self.learn:
-                self.learn[ax].update(y)
+        cuts = sorted(self._junctions | {0, len(self._queue)})
+        queue, junctions = self._queue, self._junctions
+        self._queue, self._queue_s, self._junctions = [], 0.0, set()
+        banks = [self.fast, self.slow] + ([self.learn] if self.learn else [])
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            data = np.concatenate(queue[a:b]) if b - a > 1 else queue[a]
+            for ax in self.axes:
+                y = np.ascontiguousarray(data[:, COLUMNS[ax]])
+                for bank in banks:
+                    est = bank[ax]
+                    if a in junctions and hasattr(est, "new_segment"):
+                        est.new_segment()
+                    est.update(y)
 
     def learned_terms(self) -> dict[str, dict[str, tuple[float, float]]]:
         """The learned baseline per axis ``{param: (value, std)}``; learning stops."""
@@ -374,6 +394,7 @@ class Channel:
         if set(ch.fast) != set(ch.axes) or set(ch.slow) != set(ch.axes) or (ch.learn and set(ch.learn) != set(ch.axes)):
             raise ValueError("state holds other axes than configured")
         ch.fed_s, ch.learned_s = float(c["fed_s"]), float(c["learned_s"])
+        ch._junction = True  # the next still data do not follow what the estimators saw before the restart
         ch.detector.load_state_dict(c["detector"])
         if c.get("faults") is not None:
             ch.faults.load_state_dict(c["faults"])
