@@ -58,6 +58,7 @@ import math
 from typing import Mapping
 
 import numpy as np
+from scipy.special import ndtr, ndtri
 
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 from companion.health.limits import equal_codes_llr, p_equal_codes
@@ -102,6 +103,41 @@ def two_code_llr(k: float, n: float, q0: float) -> float:
     return k * math.log(q1 / q0) + (n - k) * math.log((1.0 - q1) / (1.0 - q0))
 
 
+def codes_glr(lo: int, counts: np.ndarray, s: float, q1: float) -> float:
+    """Evidence (nats) of the counts of codes ``lo``, ``lo`` + 1, ... (samples) for a value frozen near a
+    code boundary against a healthy gyro of noise ``s`` (LSB), each hypothesis at its best parameter.
+
+    Frozen: the samples flip between two adjacent codes k, k + 1 with some probability p (any p: the dither
+    and the distance to the boundary are unknown), and land beyond them at a rate ``q1`` per sample. Healthy:
+    the codes of a level mu plus noise s, P_c(mu) = Phi((c + 1/2 - mu) / s) - Phi((c - 1/2 - mu) / s). The
+    log-likelihood ratio max_{k,p} - max_mu: the split between the two codes tells where a healthy level
+    would be, and there its rate beyond two codes (least on the boundary: 2 Phi(-1/s), more off it) is what
+    the frozen value lacks. A split of 23:77 puts a healthy level of 0.47 LSB noise 0.35 LSB off the
+    boundary, where 8.6 % of its samples leave the two codes (3.3 % on the boundary). About n q0 per sample
+    on a boundary, as the count beyond two codes alone; each sample beyond two codes costs ln(P_c / q1)."""
+    counts = np.asarray(counts, dtype=float)
+    tot = float(counts.sum())
+    if tot <= 0 or s <= 0 or not (0.0 < q1 < 1.0):
+        return 0.0
+    c = lo + np.arange(counts.shape[0], dtype=float)
+    nz = counts > 0
+    # frozen: the best adjacent pair and its split
+    pair = counts[:-1] + counts[1:] if counts.shape[0] > 1 else counts
+    j = int(np.argmax(pair))
+    n2 = float(pair[j])
+    frozen = (tot - n2) * math.log(q1)
+    for m in (counts[j:j + 2] if counts.shape[0] > 1 else counts):
+        if m > 0:
+            frozen += float(m) * math.log(m / n2)
+    # healthy: the profile over the level, on a grid fine against the noise (the log-likelihood is concave)
+    step = min(0.02, 0.1 * s)
+    mu = np.arange(c[0] - 0.5, c[-1] + 0.5 + step, step)
+    z = (c[nz][None, :] - mu[:, None]) / s
+    pc = ndtr(z + 0.5 / s) - ndtr(z - 0.5 / s)
+    healthy = float(np.max(np.log(np.maximum(pc, 1e-300)) @ counts[nz]))
+    return frozen - healthy
+
+
 class StuckDetector:
     """``coded_lsb``: the message's resolution (rad/s) for integer messages (RAW_IMU, SCALED_IMU*), None for
     float messages; it only decides how an axis reading exactly 0 is named."""
@@ -114,6 +150,8 @@ class StuckDetector:
         self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
         self.out_n = 0
         self.spread = [0.0, 0]  # the still blocks' sample variance (times samples) and samples, while healthy
+        self.pend = [0, 0, 0.0, 0]  # the same of the current run of codes, kept once it ends healthy
+        self.run: tuple[int, np.ndarray] | None = None  # the codes since the two-code CUSUM stood at 0
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
         self.vib = Cusum(H_ON, H_OFF)  # the variance collapse while the accelerometer's vibration did not fall
@@ -235,43 +273,86 @@ class StuckDetector:
         return -n * math.log(max(p_one, 1e-300)) if p_one < 1.0 else 0.0
 
     def _two_codes(self, obs: Observation, ref) -> float | None:
-        """A frozen value flipping between two codes near their boundary: the spread over codes. The healthy
-        rate q0 = 2 Phi(-1 / s), s the noise of the samples' own spread at rest (below), at
-        most the rate this axis showed at rest; counted only once the axis was seen beyond two codes
-        ``MIN_OUTSIDE`` times (a quiet gyro that never leaves two codes is never judged by it)."""
+        """A frozen value flipping between two codes near their boundary: the codes since the CUSUM last stood at
+        0 (:func:`codes_glr`, the evidence of all of them at the best split and level), so that the step is that
+        run's evidence less the CUSUM's value. The healthy noise s is the samples' own spread at rest (below),
+        its rate beyond two codes on a boundary 2 Phi(-1 / s) at most the rate this axis showed at rest;
+        counted only once the axis was seen beyond two codes ``MIN_OUTSIDE`` times (a quiet gyro that never
+        leaves two codes is never judged by it). What is learned at rest is kept only once the run it
+        belongs to ended healthy (the evidence fell back to 0): a frozen value's first blocks never teach
+        the healthy rate. While stuck, each block's count beyond two codes clears it (:func:`two_code_llr`)."""
         y = np.asarray(obs.y)[:, obs.col]
+        c = np.round(y / self.lsb)
         k, n = two_code_outside(y, self.lsb), y.shape[0]
-        if obs.still and self.state == OK and self.cusum.s == 0.0 and self.two.s == 0.0:
-            self.out_k += k
-            self.out_n += n
-            if n >= 2:
-                self.spread[0] += float(np.var(y)) * n
-                self.spread[1] += n
+        if obs.still and self.state == OK and self.cusum.s == 0.0 and n >= 2:
+            self.pend[0] += k
+            self.pend[1] += n
+            self.pend[2] += float(np.var(y)) * n
+            self.pend[3] += n
         if self.out_k < MIN_OUTSIDE or self.spread[1] == 0:
+            self._end_run(commit=True)
             return None
         # What lands beyond two codes is the samples' own spread at rest (their within-block variance v_b),
         # not the second-difference figure v_dd: a gyro low-passed well below its logged rate (the rover: 5 Hz
         # at 50 Hz) spreads its samples over codes far beyond its sample-to-sample noise, and a decimated one
         # with energy near its Nyquist rate (the plane at 10 Hz) less than that figure says (taken from v_dd, a
         # healthy plane resting on a boundary for a minute was named stuck). The noise s = sqrt(v_b - 1/12)
-        # (Sheppard), its rate on a boundary q0 = 2 Phi(-1 / s) at most the rate seen at rest; a correlated
-        # block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that changes
-        # from sample to sample).
+        # (Sheppard), less if the axis left two codes at rest less often than s on a boundary would; a
+        # correlated block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that
+        # changes from sample to sample).
         v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
         v_dd = ref.sigma2 / (self.lsb * self.lsb)
         s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
-        q0 = min(math.erfc(1.0 / (s_b * math.sqrt(2.0))), self.out_k / self.out_n, 0.45) if s_b > 0 else 0.0
-        if q0 <= 0:
+        seen = self.out_k / self.out_n
+        if s_b <= 0 or seen <= 0:
+            self._end_run(commit=True)
             return 0.0  # a level resting on a boundary could give all of it: no evidence either way
-        n_eff = n * min(1.0, v_dd / v_b) if v_b > 0 else n
-        return two_code_llr(k * n_eff / n, n_eff, q0)
+        s_l = min(s_b, -1.0 / float(ndtri(0.5 * min(seen, 0.9))))
+        q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), 0.45)
+        f = min(1.0, v_dd / v_b) if v_b > 0 else 1.0
+        if self.two.state == FAULT:
+            self._end_run(commit=False)
+            return two_code_llr(k * f, n * f, q0)
+        if c.max() - c.min() > MAX_CODES:
+            self._end_run(commit=True)
+            return -self.two.s - 1.0
+        lo, hi = int(c.min()), int(c.max())
+        if self.run is None:
+            self.run = (lo, np.zeros(hi - lo + 1))
+        r_lo, cnt = self.run
+        n_lo, n_hi = min(lo, r_lo), max(hi, r_lo + cnt.shape[0] - 1)
+        if n_hi - n_lo > MAX_CODES:
+            self._end_run(commit=True)
+            return -self.two.s - 1.0
+        if (n_lo, n_hi) != (r_lo, r_lo + cnt.shape[0] - 1):
+            grown = np.zeros(n_hi - n_lo + 1)
+            grown[r_lo - n_lo:r_lo - n_lo + cnt.shape[0]] = cnt
+            r_lo, cnt = n_lo, grown
+        cnt = cnt + np.bincount((c - r_lo).astype(np.int64), minlength=cnt.shape[0])
+        self.run = (r_lo, cnt)
+        g = f * codes_glr(r_lo, cnt, s_l, q0 / Q_RATIO)
+        if g <= 0.0:
+            self._end_run(commit=True)
+            return -self.two.s - 1.0
+        return g - self.two.s
+
+    def _end_run(self, commit: bool) -> None:
+        """The run of codes ends: what it taught at rest is kept if it ended healthy (``commit``)."""
+        if commit:
+            self.out_k += int(self.pend[0])
+            self.out_n += int(self.pend[1])
+            self.spread[0] += self.pend[2]
+            self.spread[1] += int(self.pend[3])
+        self.pend = [0, 0, 0.0, 0]
+        self.run = None
 
     def state_dict(self) -> dict:
         return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
                 "equal_run": self.equal_run,
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
                 "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n],
-                "spread": self.spread}
+                "spread": self.spread, "pend": self.pend,
+                "run": None if self.run is None else [self.run[0], self.run[1].tolist()]}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
@@ -286,3 +367,7 @@ class StuckDetector:
         self.out_k, self.out_n = (int(v) for v in (d.get("out") or [0, 0]))
         sp = d.get("spread") or [0.0, 0]
         self.spread = [float(sp[0]), int(sp[1])]
+        pd = d.get("pend") or [0, 0, 0.0, 0]
+        self.pend = [int(pd[0]), int(pd[1]), float(pd[2]), int(pd[3])]
+        run = d.get("run")
+        self.run = None if not run else (int(run[0]), np.asarray(run[1], dtype=float))
