@@ -127,16 +127,22 @@ def test_two_code_evidence_a_flipping_frozen_value_against_healthy_noise():
 def test_codes_evidence_reads_the_split_and_the_spread_at_the_best_healthy_level():
     s = 0.47
     q0 = math.erfc(1.0 / (s * math.sqrt(2.0)))  # 2 Phi(-1/s): healthy samples beyond two codes on a boundary
-    # two codes in equal shares: a healthy level on the boundary, evidence -ln(1 - q0) per sample
-    assert codes_glr(0, np.array([25.0, 25.0]), s, q0 / 20) == pytest.approx(-50 * math.log(1 - q0), rel=0.02)
+    # two codes in equal shares: a healthy level on the boundary, evidence ln((1 - q1) / (1 - q0)) per sample
+    on = 50 * math.log((1 - q0 / 20) / (1 - q0))
+    assert codes_glr(0, np.array([25.0, 25.0]), s, q0 / 20) == pytest.approx(on, rel=0.01)
     # a 23:77 split puts a healthy level 0.35 LSB off the boundary, where 8.6 % of the samples leave the two
     # codes: the same samples are worth about 2.5x as much
     off = codes_glr(0, np.array([11.5, 38.5]), s, q0 / 20)
-    assert 2.0 < off / (-50 * math.log(1 - q0)) < 3.0
+    assert 2.0 < off / on < 3.0
     # one code: what a healthy level at the code's centre keeps in it, n ln(1 / P), P = erf(0.5 / (s sqrt 2))
-    assert codes_glr(3, np.array([50.0]), s, q0 / 20) == pytest.approx(-50 * math.log(math.erf(0.5 / (s * 2 ** 0.5))))
-    # a sample beyond two codes costs about ln(P_c / q1): negative
-    assert codes_glr(0, np.array([25.0, 25.0, 1.0]), s, q0 / 20) < 0
+    assert codes_glr(3, np.array([50.0]), s, q0 / 20) == pytest.approx(
+        -50 * math.log(math.erf(0.5 / (s * 2 ** 0.5))), rel=0.01)
+    # a sample beyond two codes costs about ln(q1 / q0) = -3 nats, wherever it lands
+    assert codes_glr(0, np.array([25.0, 25.0, 1.0]), s, q0 / 20) < on - 2.5
+    assert codes_glr(-20, np.r_[1.0, np.zeros(18), 25.0, 25.0], s, q0 / 20) < on - 2.5
+    # a gyro spread far beyond its learned noise (real logs: vibration, a noisier period) is no frozen value
+    wide = np.random.default_rng(1).normal(0.0, 8.0, 50).round().astype(int)
+    assert codes_glr(int(wide.min()), np.bincount(wide - wide.min()).astype(float), 4.0, 0.45 / 20) < -50
     # healthy noise anywhere on the grid: negative on average (runs of 200 samples)
     rng = np.random.default_rng(5)
     for level in (0.5, 0.3, 0.0):

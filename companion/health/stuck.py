@@ -71,6 +71,8 @@ H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
 H_OFF = 10.0
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
 VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
+RUN_BLOCKS = 256  # blocks of a run of codes kept (the windows of its evidence end there)
+WINDOWS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256, 1 << 30)  # the run's last blocks weighed
 ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
 
 
@@ -105,37 +107,47 @@ def two_code_llr(k: float, n: float, q0: float) -> float:
 
 def codes_glr(lo: int, counts: np.ndarray, s: float, q1: float) -> float:
     """Evidence (nats) of the counts of codes ``lo``, ``lo`` + 1, ... (samples) for a value frozen near a
-    code boundary against a healthy gyro of noise ``s`` (LSB), each hypothesis at its best parameter.
+    code boundary against a healthy gyro of noise ``s`` (LSB) at its most likely level.
 
-    Frozen: the samples flip between two adjacent codes k, k + 1 with some probability p (any p: the dither
-    and the distance to the boundary are unknown), and land beyond them at a rate ``q1`` per sample. Healthy:
-    the codes of a level mu plus noise s, P_c(mu) = Phi((c + 1/2 - mu) / s) - Phi((c - 1/2 - mu) / s). The
-    log-likelihood ratio max_{k,p} - max_mu: the split between the two codes tells where a healthy level
-    would be, and there its rate beyond two codes (least on the boundary: 2 Phi(-1/s), more off it) is what
-    the frozen value lacks. A split of 23:77 puts a healthy level of 0.47 LSB noise 0.35 LSB off the
-    boundary, where 8.6 % of its samples leave the two codes (3.3 % on the boundary). About n q0 per sample
-    on a boundary, as the count beyond two codes alone; each sample beyond two codes costs ln(P_c / q1)."""
+    Healthy: the codes of a level mu plus noise s, P_c(mu) = Phi((c + 1/2 - mu) / s) - Phi((c - 1/2 - mu) / s),
+    mu at its maximum likelihood. Frozen: the samples flip between two adjacent codes k, k + 1 with some
+    probability p (any p: the dither and the distance to the boundary are unknown; k, p at their maximum
+    likelihood) and land beyond them at a rate ``q1`` per sample, spread over the other codes as the healthy
+    gyro's are (so that a sample beyond two codes weighs ln(q1 / Q) against the healthy share Q beyond them,
+    whatever its code). The split between the two codes tells where a healthy level would be, and there its
+    rate beyond two codes (least on the boundary: 2 Phi(-1/s), more off it) is what the frozen value lacks:
+    a split of 23:77 puts a healthy level of 0.47 LSB noise 0.35 LSB off the boundary, where 8.6 % of its
+    samples leave the two codes (3.3 % on the boundary). About -ln(1 - q0) per sample on a boundary, as
+    the count beyond two codes alone gives."""
     counts = np.asarray(counts, dtype=float)
     tot = float(counts.sum())
     if tot <= 0 or s <= 0 or not (0.0 < q1 < 1.0):
         return 0.0
     c = lo + np.arange(counts.shape[0], dtype=float)
     nz = counts > 0
-    # frozen: the best adjacent pair and its split
+    # healthy: the profile over the level (its log-likelihood is concave in mu): a grid, then finer around its best
+    step = min(0.1, 0.25 * s)
+    mu = np.arange(c[0] - 0.5, c[-1] + 0.5 + step, step)
+    for _ in range(2):
+        z = (c[nz][None, :] - mu[:, None]) / s
+        ll = np.log(np.maximum(ndtr(z + 0.5 / s) - ndtr(z - 0.5 / s), 1e-300)) @ counts[nz]
+        best = int(np.argmax(ll))
+        mu_hat = float(mu[best])
+        mu = mu_hat + np.linspace(-step, step, 21)
+        step *= 0.1
+    # frozen: the best adjacent pair and its split, the rest beyond it as above
     pair = counts[:-1] + counts[1:] if counts.shape[0] > 1 else counts
     j = int(np.argmax(pair))
     n2 = float(pair[j])
-    frozen = (tot - n2) * math.log(q1)
-    for m in (counts[j:j + 2] if counts.shape[0] > 1 else counts):
+    two = counts[j:j + 2]
+    cc = c[j:j + 2]
+    p_h = ndtr((cc + 0.5 - mu_hat) / s) - ndtr((cc - 0.5 - mu_hat) / s)
+    out = max(1.0 - float(p_h.sum()), 1e-300)
+    g = (tot - n2) * math.log(q1 / out)
+    for m, ph in zip(two, p_h):
         if m > 0:
-            frozen += float(m) * math.log(m / n2)
-    # healthy: the profile over the level, on a grid fine against the noise (the log-likelihood is concave)
-    step = min(0.02, 0.1 * s)
-    mu = np.arange(c[0] - 0.5, c[-1] + 0.5 + step, step)
-    z = (c[nz][None, :] - mu[:, None]) / s
-    pc = ndtr(z + 0.5 / s) - ndtr(z - 0.5 / s)
-    healthy = float(np.max(np.log(np.maximum(pc, 1e-300)) @ counts[nz]))
-    return frozen - healthy
+            g += float(m) * math.log((m / n2) * (1.0 - q1) / max(float(ph), 1e-300))
+    return g
 
 
 class StuckDetector:
@@ -151,7 +163,7 @@ class StuckDetector:
         self.out_n = 0
         self.spread = [0.0, 0]  # the still blocks' sample variance (times samples) and samples, while healthy
         self.pend = [0, 0, 0.0, 0]  # the same of the current run of codes, kept once it ends healthy
-        self.run: tuple[int, np.ndarray] | None = None  # the codes since the two-code CUSUM stood at 0
+        self.run: list[tuple[int, np.ndarray]] = []  # each block's codes (lowest, counts) since the two-code CUSUM stood at 0
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
         self.vib = Cusum(H_ON, H_OFF)  # the variance collapse while the accelerometer's vibration did not fall
@@ -316,25 +328,32 @@ class StuckDetector:
         if c.max() - c.min() > MAX_CODES:
             self._end_run(commit=True)
             return -self.two.s - 1.0
-        lo, hi = int(c.min()), int(c.max())
-        if self.run is None:
-            self.run = (lo, np.zeros(hi - lo + 1))
-        r_lo, cnt = self.run
-        n_lo, n_hi = min(lo, r_lo), max(hi, r_lo + cnt.shape[0] - 1)
-        if n_hi - n_lo > MAX_CODES:
-            self._end_run(commit=True)
-            return -self.two.s - 1.0
-        if (n_lo, n_hi) != (r_lo, r_lo + cnt.shape[0] - 1):
-            grown = np.zeros(n_hi - n_lo + 1)
-            grown[r_lo - n_lo:r_lo - n_lo + cnt.shape[0]] = cnt
-            r_lo, cnt = n_lo, grown
-        cnt = cnt + np.bincount((c - r_lo).astype(np.int64), minlength=cnt.shape[0])
-        self.run = (r_lo, cnt)
-        g = f * codes_glr(r_lo, cnt, s_l, q0 / Q_RATIO)
+        lo = int(c.min())
+        self.run.append((lo, np.bincount((c - lo).astype(np.int64)).astype(float)))
+        del self.run[:-RUN_BLOCKS]
+        g = f * self._best_window(s_l, q0 / Q_RATIO)
         if g <= 0.0:
             self._end_run(commit=True)
             return -self.two.s - 1.0
         return g - self.two.s
+
+    def _best_window(self, s_l: float, q1: float) -> float:
+        """The largest :func:`codes_glr` of the run's last 1, 2, 3, 4, 6, 8, 12, ... blocks and of all of it
+        (the change may have come inside the run: a frozen value's codes after healthy ones)."""
+        m = len(self.run)
+        lo = min(b[0] for b in self.run)
+        hi = max(b[0] + b[1].shape[0] for b in self.run)
+        if hi - lo > MAX_CODES:
+            return -1.0
+        cnt = np.zeros(hi - lo)
+        best, k = -math.inf, 0
+        for i, (b_lo, b_cnt) in enumerate(reversed(self.run)):
+            cnt[b_lo - lo:b_lo - lo + b_cnt.shape[0]] += b_cnt
+            if i + 1 == WINDOWS[k] or i + 1 == m:
+                k += i + 1 == WINDOWS[k]
+                nz = np.nonzero(cnt)[0]
+                best = max(best, codes_glr(lo + int(nz[0]), cnt[nz[0]:nz[-1] + 1], s_l, q1))
+        return best
 
     def _end_run(self, commit: bool) -> None:
         """The run of codes ends: what it taught at rest is kept if it ended healthy (``commit``)."""
@@ -344,7 +363,7 @@ class StuckDetector:
             self.spread[0] += self.pend[2]
             self.spread[1] += int(self.pend[3])
         self.pend = [0, 0, 0.0, 0]
-        self.run = None
+        self.run = []
 
     def state_dict(self) -> dict:
         return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
@@ -352,7 +371,7 @@ class StuckDetector:
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
                 "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n],
                 "spread": self.spread, "pend": self.pend,
-                "run": None if self.run is None else [self.run[0], self.run[1].tolist()]}
+                "run": [[lo, c.tolist()] for lo, c in self.run]}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
@@ -369,5 +388,4 @@ class StuckDetector:
         self.spread = [float(sp[0]), int(sp[1])]
         pd = d.get("pend") or [0, 0, 0.0, 0]
         self.pend = [int(pd[0]), int(pd[1]), float(pd[2]), int(pd[3])]
-        run = d.get("run")
-        self.run = None if not run else (int(run[0]), np.asarray(run[1], dtype=float))
+        self.run = [(int(lo), np.asarray(c, dtype=float)) for lo, c in (d.get("run") or [])]
