@@ -12,7 +12,10 @@ Delay: from the fault to the first STATUSTEXT that names the right IMU, axis and
 wrong counts as a miss and is printed). The information limit beside it is the delay of an oracle CUSUM
 that knows the fault exactly, with the same threshold h: h / (fs * KL per sample) (Lorden 1971):
 variance ratio r: KL = (r - 1 - ln r) / 2; mean step d on white noise sigma: d^2 / (2 sigma^2);
-spikes at a rate p against the healthy outlier rate: p ln(p / p0) - p + p0; a frozen output: one sample.
+spikes at a rate p against the healthy outlier rate: p ln(p / p0) - p + p0; a frozen output: one sample;
+a value frozen with a dither on rounded data (--preset-faults of an ArduPilot preset): the divergence of
+its codes from a healthy gyro's at the same level (quantised_stuck_limit; on a code boundary the variance
+ratio is no bound: the flips between two codes have the healthy gyro's variance).
 
 False alarms: runs of H hours with two IMUs (every IMU-hour counts), each with warm-up drift (0.1 deg/s,
 exponential, tau 200 s: 95 % within 10 min), random flights (arm, take-off, manoeuvres up to ~1.5

@@ -140,6 +140,10 @@ def test_codes_evidence_reads_the_split_and_the_spread_at_the_best_healthy_level
     # a sample beyond two codes costs about ln(q1 / q0) = -3 nats, wherever it lands
     assert codes_glr(0, np.array([25.0, 25.0, 1.0]), s, q0 / 20) < on - 2.5
     assert codes_glr(-20, np.r_[1.0, np.zeros(18), 25.0, 25.0], s, q0 / 20) < on - 2.5
+    # a block in which motion starts: half of it on two codes, the rest spread over 25 (the healthy model at one
+    # level fits none of it well, and that must not make it frozen)
+    start = np.r_[np.full(12, 3), np.full(13, 4), np.round(np.linspace(-6.0, 19.0, 25))].astype(int)
+    assert codes_glr(-6, np.bincount(start + 6).astype(float), s, q0 / 20) < -50
     # a gyro spread far beyond its learned noise (real logs: vibration, a noisier period) is no frozen value
     wide = np.random.default_rng(1).normal(0.0, 8.0, 50).round().astype(int)
     assert codes_glr(int(wide.min()), np.bincount(wide - wide.min()).astype(float), 4.0, 0.45 / 20) < -50

@@ -24,15 +24,18 @@ whose codes always change). The LSB is the smallest non-zero step seen on the ax
 
 A value frozen near a code boundary with a dither far below the step flips between two adjacent codes
 about as often as a healthy gyro of ~0.5 LSB changes code, and its variance is that of the flips: neither
-test sees it. What a frozen value lacks is spread: healthy noise also lands beyond two adjacent codes.
-The larger of the above and the SPRT of the samples beyond the block's two best adjacent codes
-(:func:`two_code_llr`, against the healthy rate with the level on a boundary, the least) is the block's
-evidence. It is thin where the frozen value sits right on a boundary (0.26 nats per 50-sample block at
-0.36 LSB of noise: a minute or more at rest); in motion a live gyro spreads over many codes at once.
+test sees it. What a frozen value lacks is spread: healthy noise also lands beyond two adjacent codes, and
+how often depends on where its level sits, which the split between the two codes tells. A second CUSUM
+weighs the codes of its run (since it last stood at 0; the largest over the run's last 1, 2, 3, 4, 6, ...
+blocks) by :func:`codes_glr`: the best split between two adjacent codes against the best healthy level
+(its rate beyond two codes is least on the boundary, 2 Phi(-1/s), and grows off it). It is thin where the
+frozen value sits right on a boundary (about 1.2 nats per 50-sample block at 0.47 LSB of noise: 15-25 s at
+rest); the other evidence there is small (the low-pass correlation of the healthy flips, ~0.1 nats a block
+on the copter; the bias wander, less); in motion a live gyro spreads over many codes at once.
 
-The healthy rate beyond two codes comes from the samples' own spread at rest (a gyro low-passed well below
-its logged rate spreads its samples far beyond its sample-to-sample noise, the rover's 5 Hz at 50 Hz), over
-the block's equivalent independent samples. A gyro whose codes do not repeat (floats) has a third CUSUM:
+The healthy noise comes from the samples' own spread at rest (a gyro low-passed well below its logged rate
+spreads its samples far beyond its sample-to-sample noise, the rover's 5 Hz at 50 Hz), over the block's
+equivalent independent samples. A gyro whose codes do not repeat (floats) has a third CUSUM:
 its variance collapse, counted while the same IMU's accelerometer vibrates at least half as much as at the
 reference (:meth:`StuckDetector._vibration_llr`): a parked plane's engine stop lowers both, a frozen gyro
 only its own.
@@ -107,47 +110,45 @@ def two_code_llr(k: float, n: float, q0: float) -> float:
 
 def codes_glr(lo: int, counts: np.ndarray, s: float, q1: float) -> float:
     """Evidence (nats) of the counts of codes ``lo``, ``lo`` + 1, ... (samples) for a value frozen near a
-    code boundary against a healthy gyro of noise ``s`` (LSB) at its most likely level.
+    code boundary against a healthy gyro of noise ``s`` (LSB), each at its most likely parameter.
 
-    Healthy: the codes of a level mu plus noise s, P_c(mu) = Phi((c + 1/2 - mu) / s) - Phi((c - 1/2 - mu) / s),
-    mu at its maximum likelihood. Frozen: the samples flip between two adjacent codes k, k + 1 with some
-    probability p (any p: the dither and the distance to the boundary are unknown; k, p at their maximum
-    likelihood) and land beyond them at a rate ``q1`` per sample, spread over the other codes as the healthy
-    gyro's are (so that a sample beyond two codes weighs ln(q1 / Q) against the healthy share Q beyond them,
-    whatever its code). The split between the two codes tells where a healthy level would be, and there its
-    rate beyond two codes (least on the boundary: 2 Phi(-1/s), more off it) is what the frozen value lacks:
-    a split of 23:77 puts a healthy level of 0.47 LSB noise 0.35 LSB off the boundary, where 8.6 % of its
-    samples leave the two codes (3.3 % on the boundary). About -ln(1 - q0) per sample on a boundary, as
-    the count beyond two codes alone gives."""
+    The samples are read as three counts: in the two adjacent codes k, k + 1 that hold the most of them,
+    and beyond them. Frozen: they flip between k and k + 1 with some probability p (any p: the dither and
+    the distance to the boundary are unknown) and land beyond them at a rate ``q1``. Healthy: a level mu
+    plus noise s puts P_k(mu), P_k+1(mu) (P_c = Phi((c + 1/2 - mu) / s) - Phi((c - 1/2 - mu) / s)) and the
+    rest, Q(mu), beyond them. The split between the two codes tells where a healthy level would be, and
+    there its share beyond them (least on the boundary: 2 Phi(-1/s), more off it) is what the frozen
+    value lacks: a split of 23:77 puts a healthy level of 0.47 LSB noise 0.35 LSB off the boundary, where
+    8.6 % of its samples leave the two codes (3.3 % on the boundary). About ln((1 - q1) / (1 - q0)) per
+    sample on a boundary, as the count beyond two codes alone gives; n ln(1 / P_k) for a single code (a
+    healthy level at the code's centre). Which codes the samples beyond the pair hit is not used: a block
+    the healthy model does not fit (motion starting, a noisier period) must not count as frozen."""
     counts = np.asarray(counts, dtype=float)
     tot = float(counts.sum())
     if tot <= 0 or s <= 0 or not (0.0 < q1 < 1.0):
         return 0.0
-    c = lo + np.arange(counts.shape[0], dtype=float)
-    nz = counts > 0
-    # healthy: the profile over the level (its log-likelihood is concave in mu): a grid, then finer around its best
-    step = min(0.1, 0.25 * s)
-    mu = np.arange(c[0] - 0.5, c[-1] + 0.5 + step, step)
-    for _ in range(2):
-        z = (c[nz][None, :] - mu[:, None]) / s
-        ll = np.log(np.maximum(ndtr(z + 0.5 / s) - ndtr(z - 0.5 / s), 1e-300)) @ counts[nz]
-        best = int(np.argmax(ll))
-        mu_hat = float(mu[best])
-        mu = mu_hat + np.linspace(-step, step, 21)
-        step *= 0.1
-    # frozen: the best adjacent pair and its split, the rest beyond it as above
     pair = counts[:-1] + counts[1:] if counts.shape[0] > 1 else counts
     j = int(np.argmax(pair))
-    n2 = float(pair[j])
-    two = counts[j:j + 2]
-    cc = c[j:j + 2]
-    p_h = ndtr((cc + 0.5 - mu_hat) / s) - ndtr((cc - 0.5 - mu_hat) / s)
-    out = max(1.0 - float(p_h.sum()), 1e-300)
-    g = (tot - n2) * math.log(q1 / out)
-    for m, ph in zip(two, p_h):
+    k = lo + j
+    n_a = float(counts[j])
+    n_b = float(counts[j + 1]) if counts.shape[0] > 1 else 0.0
+    n_o = tot - n_a - n_b
+    frozen = n_o * math.log(q1) + (n_a + n_b) * math.log(1.0 - q1)
+    for m in (n_a, n_b):
         if m > 0:
-            g += float(m) * math.log((m / n2) * (1.0 - q1) / max(float(ph), 1e-300))
-    return g
+            frozen += m * math.log(m / (n_a + n_b))
+    # healthy: the profile over the level, a grid over where the pair can be most likely, then finer
+    step = min(0.05, 0.25 * s)
+    mu = np.arange(k - 1.0, k + 2.0 + step, step)
+    for _ in range(2):
+        pa = ndtr((k + 0.5 - mu) / s) - ndtr((k - 0.5 - mu) / s)
+        pb = ndtr((k + 1.5 - mu) / s) - ndtr((k + 0.5 - mu) / s)
+        ll = n_a * np.log(np.maximum(pa, 1e-300)) + n_b * np.log(np.maximum(pb, 1e-300))
+        ll = ll + n_o * np.log(np.maximum(1.0 - pa - pb, 1e-300))
+        best = int(np.argmax(ll))
+        mu = mu[best] + np.linspace(-step, step, 21)
+        step *= 0.1
+    return frozen - float(ll[best])
 
 
 class StuckDetector:
