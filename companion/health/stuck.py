@@ -26,8 +26,8 @@ A value frozen near a code boundary with a dither far below the step flips betwe
 about as often as a healthy gyro of ~0.5 LSB changes code, and its variance is that of the flips: neither
 test sees it. What a frozen value lacks is spread: healthy noise also lands beyond two adjacent codes, and
 how often depends on where its level sits, which the split between the two codes tells. A second CUSUM
-weighs the codes of its run (since it last stood at 0; the largest over the run's last 1, 2, 3, 4, 6, ...
-blocks) by :func:`codes_glr`: the best split between two adjacent codes against the best healthy level
+weighs the codes of its run (since it last stood at 0; the largest over the run's last 1, 2, ..., 32,
+48, 64, ... blocks) by :func:`codes_glr`: the best split between two adjacent codes against the best healthy level
 (its rate beyond two codes is least on the boundary, 2 Phi(-1/s), and grows off it). It is thin where the
 frozen value sits right on a boundary (about 1.2 nats per 50-sample block at 0.47 LSB of noise: 15-25 s at
 rest); the other evidence there is small (the low-pass correlation of the healthy flips, ~0.1 nats a block
@@ -75,7 +75,7 @@ H_OFF = 10.0
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
 VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
 RUN_BLOCKS = 256  # blocks of a run of codes kept (the windows of its evidence end there)
-WINDOWS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256, 1 << 30)  # the run's last blocks weighed
+WINDOWS = tuple(range(1, 33)) + (48, 64, 96, 128, 192, 256, 1 << 30)  # the run's last blocks weighed
 ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
 
 
@@ -339,8 +339,9 @@ class StuckDetector:
         return g - self.two.s
 
     def _best_window(self, s_l: float, q1: float) -> float:
-        """The largest :func:`codes_glr` of the run's last 1, 2, 3, 4, 6, 8, 12, ... blocks and of all of it
-        (the change may have come inside the run: a frozen value's codes after healthy ones)."""
+        """The largest :func:`codes_glr` of the run's last 1, 2, ..., 32, 48, 64, ... blocks and of all of it
+        (the change may have come inside the run: a frozen value's codes after healthy ones, or after one of
+        its own rare flips to the next code)."""
         m = len(self.run)
         lo = min(b[0] for b in self.run)
         hi = max(b[0] + b[1].shape[0] for b in self.run)
