@@ -57,6 +57,7 @@ handling otherwise). A value frozen at 0 after a learned reference showed codes 
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Mapping
 
@@ -123,32 +124,43 @@ def codes_glr(lo: int, counts: np.ndarray, s: float, q1: float) -> float:
     sample on a boundary, as the count beyond two codes alone gives; n ln(1 / P_k) for a single code (a
     healthy level at the code's centre). Which codes the samples beyond the pair hit is not used: a block
     the healthy model does not fit (motion starting, a noisier period) must not count as frozen."""
-    counts = np.asarray(counts, dtype=float)
-    tot = float(counts.sum())
-    if tot <= 0 or s <= 0 or not (0.0 < q1 < 1.0):
+    if s <= 0 or not (0.0 < q1 < 1.0):
         return 0.0
-    pair = counts[:-1] + counts[1:] if counts.shape[0] > 1 else counts
-    j = int(np.argmax(pair))
-    k = lo + j
-    n_a = float(counts[j])
-    n_b = float(counts[j + 1]) if counts.shape[0] > 1 else 0.0
-    n_o = tot - n_a - n_b
-    frozen = n_o * math.log(q1) + (n_a + n_b) * math.log(1.0 - q1)
-    for m in (n_a, n_b):
-        if m > 0:
-            frozen += m * math.log(m / (n_a + n_b))
-    # healthy: the profile over the level, a grid over where the pair can be most likely, then finer
-    step = min(0.05, 0.25 * s)
-    mu = np.arange(k - 1.0, k + 2.0 + step, step)
-    for _ in range(2):
-        pa = ndtr((k + 0.5 - mu) / s) - ndtr((k - 0.5 - mu) / s)
-        pb = ndtr((k + 1.5 - mu) / s) - ndtr((k + 0.5 - mu) / s)
-        ll = n_a * np.log(np.maximum(pa, 1e-300)) + n_b * np.log(np.maximum(pb, 1e-300))
-        ll = ll + n_o * np.log(np.maximum(1.0 - pa - pb, 1e-300))
-        best = int(np.argmax(ll))
-        mu = mu[best] + np.linspace(-step, step, 21)
-        step *= 0.1
-    return frozen - float(ll[best])
+    return float(_glr(np.asarray([_three_counts(np.asarray(counts, dtype=float))]), s, q1)[0])
+
+
+def _three_counts(counts: np.ndarray) -> tuple[float, float, float]:
+    """(in code k, in code k + 1, beyond them) for the two adjacent codes holding the most samples."""
+    if counts.shape[0] < 2:
+        return float(counts.sum()), 0.0, 0.0
+    j = int(np.argmax(counts[:-1] + counts[1:]))
+    n_a, n_b = float(counts[j]), float(counts[j + 1])
+    return n_a, n_b, float(counts.sum()) - n_a - n_b
+
+
+@functools.lru_cache(maxsize=64)
+def _level_logs(s: float) -> np.ndarray:
+    """ln P_k, ln P_k+1 and ln of the rest for a healthy level on the grid of :func:`_glr` (3, levels): the
+    noise is learned slowly, so the same few values recur (rounded to 0.001 LSB)."""
+    mu = np.arange(-1.0, 2.0 + 1e-9, 0.005)
+    pa = ndtr((0.5 - mu) / s) - ndtr((-0.5 - mu) / s)
+    pb = ndtr((1.5 - mu) / s) - ndtr((0.5 - mu) / s)
+    logs = np.log(np.maximum(np.vstack([pa, pb, 1.0 - pa - pb]), 1e-300))
+    logs.flags.writeable = False
+    return logs
+
+
+def _glr(n: np.ndarray, s: float, q1: float) -> np.ndarray:
+    """:func:`codes_glr` of rows of three counts (n_k, n_k+1, beyond). The healthy level is profiled on a
+    grid relative to code k (0.005 LSB from 1 LSB below it to 2 above: where the pair can be the most
+    likely; off the grid the healthy shares only fall), the same grid for every row."""
+    healthy = np.max(n @ _level_logs(round(s, 3)), axis=1)
+    n2 = n[:, 0] + n[:, 1]
+    frozen = n[:, 2] * math.log(q1) + n2 * math.log(1.0 - q1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for col in (0, 1):
+            frozen = frozen + np.where(n[:, col] > 0, n[:, col] * np.log(n[:, col] / np.maximum(n2, 1e-300)), 0.0)
+    return np.where(n.sum(axis=1) > 0, frozen - healthy, 0.0)
 
 
 class StuckDetector:
@@ -348,14 +360,13 @@ class StuckDetector:
         if hi - lo > MAX_CODES:
             return -1.0
         cnt = np.zeros(hi - lo)
-        best, k = -math.inf, 0
+        rows, k = [], 0
         for i, (b_lo, b_cnt) in enumerate(reversed(self.run)):
             cnt[b_lo - lo:b_lo - lo + b_cnt.shape[0]] += b_cnt
             if i + 1 == WINDOWS[k] or i + 1 == m:
                 k += i + 1 == WINDOWS[k]
-                nz = np.nonzero(cnt)[0]
-                best = max(best, codes_glr(lo + int(nz[0]), cnt[nz[0]:nz[-1] + 1], s_l, q1))
-        return best
+                rows.append(_three_counts(cnt))
+        return float(np.max(_glr(np.asarray(rows), s_l, q1)))
 
     def _end_run(self, commit: bool) -> None:
         """The run of codes ends: what it taught at rest is kept if it ended healthy (``commit``)."""
