@@ -29,8 +29,8 @@ how often depends on where its level sits, which the split between the two codes
 weighs the codes of its run (since it last stood at 0; the largest over the run's last 1, 2, ..., 32,
 48, 64, ... blocks) by :func:`codes_glr`: the best split between two adjacent codes against the best healthy level
 (its rate beyond two codes is least on the boundary, 2 Phi(-1/s), and grows off it). It is thin where the
-frozen value sits right on a boundary (about 1.2 nats per 50-sample block at 0.47 LSB of noise: 15-25 s at
-rest); the other evidence there is small (the low-pass correlation of the healthy flips, ~0.1 nats a block
+frozen value sits right on a boundary (about 0.9 nats per 50-sample block at the copter preset's 0.43 LSB
+of noise: 15-30 s at rest); the other evidence there is small (the low-pass correlation of the healthy flips, ~0.1 nats a block
 on the copter; the bias wander, less); in motion a live gyro spreads over many codes at once.
 
 The healthy noise comes from the samples' own spread at rest (a gyro low-passed well below its logged rate
