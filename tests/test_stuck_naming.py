@@ -186,8 +186,9 @@ def test_copter_gyro_frozen_between_two_codes_off_their_boundary_is_stuck_within
 def test_dithered_frozen_copter_gyro_flipping_codes_is_stuck(seed, within):
     # a 0.17 sigma dither; seeds 15 and 31 freeze the value on a code boundary (41:59 and 59:41 between two
     # codes), where it flips about as often as the healthy gyro changes code: neither the variance nor the
-    # repeated codes see it, only what a healthy gyro there would add beyond two codes (2 Phi(-1/s), 3.3 % of
-    # its samples, about 1.2 equivalent nats a block against h = 20: named in 16-22 s)
+    # repeated codes see it, only what a healthy gyro there would add beyond two codes (2 Phi(-1/s) at the
+    # Sheppard-corrected s = 0.43 LSB: 2 % of its samples, about 0.9 equivalent nats a block against h = 20:
+    # 22 blocks expected; named in 16-22 s)
     ax, codes, hit, early = frozen_copter_delay(seed, 0.17, within)
     assert early == []
     assert hit is not None and 59 <= hit <= 60 + within

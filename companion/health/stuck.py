@@ -92,7 +92,8 @@ def two_code_outside(y: np.ndarray, lsb: float) -> int:
 
 def two_code_llr(k: float, n: float, q0: float) -> float:
     """Evidence (nats) of a block's ``k`` samples beyond its two best adjacent codes among ``n``: a value
-    frozen with a dither far below the step (rate q0 / ``Q_RATIO``) against a healthy gyro (rate q0).
+    frozen with a dither far below the step (rate q0 / ``Q_RATIO``) against a healthy gyro (rate q0). What
+    clears a stuck axis (each sample beyond two codes is -3 nats); :func:`codes_glr` names it.
 
     A frozen value with a dither d << LSB rounds to one code, or flips between two adjacent codes when it
     lies near their boundary; then its repeated codes and its variance look like a healthy gyro's of
