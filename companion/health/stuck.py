@@ -300,8 +300,8 @@ class StuckDetector:
 
     def _two_codes(self, obs: Observation, ref) -> float | None:
         """A frozen value flipping between two codes near their boundary: the codes since the CUSUM last stood at
-        0 (:func:`codes_glr`, the evidence of all of them at the best split and level), so that the step is that
-        run's evidence less the CUSUM's value. The healthy noise s is the samples' own spread at rest (below),
+        0, weighed by :func:`codes_glr` over the run's last blocks (:meth:`_best_window`), so that the step is
+        that evidence less the CUSUM's value; the run ends when no window's evidence is above 0. The healthy noise s is the samples' own spread at rest (below),
         its rate beyond two codes on a boundary 2 Phi(-1 / s) at most the rate this axis showed at rest;
         counted only once the axis was seen beyond two codes ``MIN_OUTSIDE`` times (a quiet gyro that never
         leaves two codes is never judged by it). What is learned at rest is kept only once the run it
