@@ -12,7 +12,10 @@ Delay: from the fault to the first STATUSTEXT that names the right IMU, axis and
 wrong counts as a miss and is printed). The information limit beside it is the delay of an oracle CUSUM
 that knows the fault exactly, with the same threshold h: h / (fs * KL per sample) (Lorden 1971):
 variance ratio r: KL = (r - 1 - ln r) / 2; mean step d on white noise sigma: d^2 / (2 sigma^2);
-spikes at a rate p against the healthy outlier rate: p ln(p / p0) - p + p0; a frozen output: one sample.
+spikes at a rate p against the healthy outlier rate: p ln(p / p0) - p + p0; a frozen output: one sample;
+a value frozen with a dither on rounded data (--preset-faults of an ArduPilot preset): the divergence of
+its codes from a healthy gyro's at the same level (quantised_stuck_limit; on a code boundary the variance
+ratio is no bound: the flips between two codes have the healthy gyro's variance).
 
 False alarms: runs of H hours with two IMUs (every IMU-hour counts), each with warm-up drift (0.1 deg/s,
 exponential, tau 200 s: 95 % within 10 min), random flights (arm, take-off, manoeuvres up to ~1.5
@@ -220,6 +223,9 @@ def run_case(kind, seed, max_delay, preset=None):
 
     replay_vehicle(sim, p, t_f + max_delay, lsb=lsb, on_chunk=watch, chunk_s=1.0)
     watch(0)
+    if kind == "stuck" and preset is not None and lsb:
+        limit, where = quantised_stuck_limit(sim, sig[axis] / lsb, size / lsb, lsb, rate)
+        desc += where
     out = {"kind": kind, "seed": seed, "desc": desc, "limit": limit, "axis": axis, "imu": imu}
     if "hit" in found:
         out["delay"] = found["hit"][0] - t0
@@ -230,6 +236,31 @@ def run_case(kind, seed, max_delay, preset=None):
     out["early"] = found.get("early")
     out["other"] = found.get("other")
     return out
+
+
+def quantised_stuck_limit(sim, s_lsb, d_lsb, lsb, rate):
+    """The oracle limit of a value frozen with a dither of d LSB on rounded data: h / (fs KL) with KL the
+    divergence of the frozen value's codes from a healthy gyro's at the same level (sample spread s LSB),
+    both per sample and white. The Gaussian variance ratio of the other limits ((d^2 + 1/12) / s^2) is no
+    bound there: a value frozen on a code boundary flips between two codes with a variance up to 1/4 LSB^2,
+    as much as the healthy gyro's, and what tells them apart is only the healthy samples beyond those two
+    codes. Returns (limit s, where the value froze: its distance from the nearest boundary in LSB)."""
+    from scipy.special import ndtr
+
+    frozen = sim._frozen if sim._frozen is not None else (sim._blk_frozen or (0, math.nan))[1]
+    v = float(frozen) / lsb
+    if not math.isfinite(v):
+        return math.nan, ""
+    c = np.arange(math.floor(v) - 8, math.floor(v) + 10, dtype=float)
+    healthy = ndtr((c + 0.5 - v) / s_lsb) - ndtr((c - 0.5 - v) / s_lsb)
+    if d_lsb > 0:
+        f = ndtr((c + 0.5 - v) / d_lsb) - ndtr((c - 0.5 - v) / d_lsb)
+    else:
+        f = (np.abs(c - v) <= 0.5).astype(float)
+    m = f > 1e-12
+    kl = float(np.sum(f[m] * np.log(f[m] / np.maximum(healthy[m], 1e-300))))
+    off = abs((v - math.floor(v)) - 0.5)
+    return (stuck.H_ON / (rate * kl) if kl > 0 else math.inf), f", {off:.2f} LSB from a code boundary"
 
 
 def run_b2(seed, max_delay=3600.0):
@@ -397,6 +428,7 @@ def main():
                     help="--preset runs: append one JSON line per healthy run to FILE (pieces add up)")
     ap.add_argument("--summary", default=None, metavar="FILE",
                     help="print the total of the JSON lines of --log FILE (per preset, every alarm) and exit")
+    ap.add_argument("--per-seed", action="store_true", help="print every fault case's delay and limit")
     ap.add_argument("--skip-healthy", action="store_true")
     ap.add_argument("--skip-faults", action="store_true")
     args = ap.parse_args()
@@ -432,6 +464,8 @@ def main():
             print(f"{kind:>14} {(str(tgt) + ' s') if tgt else '-':>7} {med:>8} {mx:>8} {lm:>11} {ok.sum():>3}/{len(res)}"
                   f"  e.g. {res[0]['desc']}; {res[0]['text']}" + (f"; {late} over target" if late else ""), flush=True)
             for r in res:
+                if args.per_seed:
+                    print(f"{'':>14}   seed {r['seed']}: {r['desc']}: {r['delay']:.1f} s (limit {r['limit']:.2f} s)")
                 if not math.isfinite(r["delay"]) or r["early"]:
                     print(f"{'':>14}   seed {r['seed']}: {r['desc']} on IMU{r['imu']} {r['axis']}: "
                           f"{'MISSED, said: ' + r['text'] if not math.isfinite(r['delay']) else ''}"

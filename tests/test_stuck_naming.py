@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from companion.health.faults import AXES, FAULT, KIND_CODE, OK, AxisRef, Observation, block_stats
-from companion.health.stuck import StuckDetector, two_code_llr, two_code_outside
+from companion.health.stuck import StuckDetector, codes_glr, two_code_llr, two_code_outside
 from companion.mavlink.reporter import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
@@ -77,7 +77,9 @@ def test_float_message_zero_is_dead_and_a_frozen_nonzero_value_is_stuck():
     assert [(e.kind, e.state, e.critical, e.text()) for e in ev] == [("stuck", FAULT, True, "IMU0 gyro X stuck")]
 
 
-def copter_blocks(seed, seconds, fault=None):
+def copter_blocks(seed, seconds, fault=None, on_boundary=False):
+    """The realistic copter's IMU0 at rest in 1 s blocks, rounded to 1 mrad/s; ``on_boundary``: every axis
+    shifted before the rounding so that its mean level sits on a boundary between two codes."""
     from companion.sim.preset import load_preset
     from companion.sim.vehicle import Schedule, VehicleSimulator
 
@@ -85,7 +87,10 @@ def copter_blocks(seed, seconds, fault=None):
     sim = VehicleSimulator(P["model"], imus=1, seed=seed, rate_hz=P["vehicle"]["rate_hz"], realism=P["realism"],
                            fault=fault, schedule=Schedule())
     n = int(round(sim.rate_hz))
-    g = np.round(sim.run(seconds).gyro[0] / LSB) * LSB
+    g = sim.run(seconds).gyro[0] / LSB
+    if on_boundary:
+        g += np.floor(g.mean(axis=0)) + 0.5 - g.mean(axis=0)
+    g = np.round(g) * LSB
     return [g[b * n:(b + 1) * n] for b in range(g.shape[0] // n)]
 
 
@@ -119,27 +124,89 @@ def test_two_code_evidence_a_flipping_frozen_value_against_healthy_noise():
     assert two_code_outside(np.array([0.0, 1e-3, 2e-3, 1e-3]), LSB) == 1
 
 
-@pytest.mark.parametrize("seed, within", [(9, 10), (15, 45)])
-def test_dithered_frozen_copter_gyro_flipping_codes_is_stuck(seed, within):
-    # the realistic copter at 0.47 LSB: a value frozen with a 0.17 sigma dither; seed 15 freezes it on a code
-    # boundary, where it flips between two codes about as often as the healthy gyro changes code (neither
-    # the variance nor the repeated codes see it; only the spread over codes does, about 0.6 nats a block
-    # from the samples' own spread at rest: named after 33 s)
+def test_codes_evidence_reads_the_split_and_the_spread_at_the_best_healthy_level():
+    s = 0.47
+    q0 = math.erfc(1.0 / (s * math.sqrt(2.0)))  # 2 Phi(-1/s): healthy samples beyond two codes on a boundary
+    # two codes in equal shares: a healthy level on the boundary, evidence ln((1 - q1) / (1 - q0)) per sample
+    on = 50 * math.log((1 - q0 / 20) / (1 - q0))
+    assert codes_glr(0, np.array([25.0, 25.0]), s, q0 / 20) == pytest.approx(on, rel=0.01)
+    # a 23:77 split puts a healthy level 0.35 LSB off the boundary, where 8.6 % of the samples leave the two
+    # codes: the same samples are worth about 2.5x as much
+    off = codes_glr(0, np.array([11.5, 38.5]), s, q0 / 20)
+    assert 2.0 < off / on < 3.0
+    # one code: what a healthy level at the code's centre keeps in it, n ln(1 / P), P = erf(0.5 / (s sqrt 2))
+    assert codes_glr(3, np.array([50.0]), s, q0 / 20) == pytest.approx(
+        -50 * math.log(math.erf(0.5 / (s * 2 ** 0.5))), rel=0.01)
+    # a sample beyond two codes costs about ln(q1 / q0) = -3 nats, wherever it lands
+    assert codes_glr(0, np.array([25.0, 25.0, 1.0]), s, q0 / 20) < on - 2.5
+    assert codes_glr(-20, np.r_[1.0, np.zeros(18), 25.0, 25.0], s, q0 / 20) < on - 2.5
+    # a block in which motion starts: half of it on two codes, the rest spread over 25 (the healthy model at one
+    # level fits none of it well, and that must not make it frozen)
+    start = np.r_[np.full(12, 3), np.full(13, 4), np.round(np.linspace(-6.0, 19.0, 25))].astype(int)
+    assert codes_glr(-6, np.bincount(start + 6).astype(float), s, q0 / 20) < -50
+    # a gyro spread far beyond its learned noise (real logs: vibration, a noisier period) is no frozen value
+    wide = np.random.default_rng(1).normal(0.0, 8.0, 50).round().astype(int)
+    assert codes_glr(int(wide.min()), np.bincount(wide - wide.min()).astype(float), 4.0, 0.45 / 20) < -50
+    # healthy noise anywhere on the grid: negative on average (runs of 200 samples)
+    rng = np.random.default_rng(5)
+    for level in (0.5, 0.3, 0.0):
+        g = []
+        for _ in range(200):
+            c = np.round(level + rng.normal(0.0, s, 200)).astype(int)
+            g.append(codes_glr(int(c.min()), np.bincount(c - c.min()).astype(float), s, q0 / 20))
+        assert np.mean(g) < -5.0
+
+
+def frozen_copter_delay(seed, dither_sigma, seconds):
+    """The realistic copter at 0.47 LSB with a value frozen at 60 s with a dither of ``dither_sigma`` times
+    the noise, on an axis drawn from the seed: (axis, codes after the fault, first stuck block, early events)."""
     from companion.sim.vehicle import Fault
 
     rng = np.random.default_rng(seed)
     ax = AXES[rng.integers(3)]
-    blocks = copter_blocks(100 + seed, 60.0 + within + 2.0, Fault("stuck", at=60.0, size=0.17 * 0.47e-3, axis=ax))
+    blocks = copter_blocks(100 + seed, 60.0 + seconds + 2.0,
+                           Fault("stuck", at=60.0, size=dither_sigma * 0.47e-3, axis=ax))
+    codes = set(np.round(np.concatenate(blocks[61:])[:, AXES.index(ax)] / LSB).astype(int).tolist())
     events = detect(blocks)
     hits = [b for b, e in events if e.axis == ax and e.state == FAULT and e.kind == "stuck"]
-    assert hits and 59 <= hits[0] <= 60 + within, events
-    assert [e for b, e in events if b < 59] == []
+    return ax, codes, (hits[0] if hits else None), [e for b, e in events if b < 59]
+
+
+@pytest.mark.parametrize("seed", [0, 21, 41, 47])
+def test_copter_gyro_frozen_between_two_codes_off_their_boundary_is_stuck_within_10_s(seed):
+    # a 0.3 sigma dither (the bench's worst) 0.1-0.2 LSB from a boundary: the samples split 15:85 to 35:65
+    # between two codes and never leave them; a healthy level giving that split would leave them 2-3x as
+    # often as on the boundary (the split says where it would sit): about 3 nats a block, named in 5-9 s
+    ax, codes, hit, early = frozen_copter_delay(seed, 0.3, 12.0)
+    assert len(codes) == 2 and early == []
+    assert hit is not None and 60 <= hit <= 70
+
+
+@pytest.mark.parametrize("seed, within", [(9, 10), (15, 35), (31, 35)])
+def test_dithered_frozen_copter_gyro_flipping_codes_is_stuck(seed, within):
+    # a 0.17 sigma dither; seeds 15 and 31 freeze the value on a code boundary (41:59 and 59:41 between two
+    # codes), where it flips about as often as the healthy gyro changes code: neither the variance nor the
+    # repeated codes see it, only what a healthy gyro there would add beyond two codes (2 Phi(-1/s) at the
+    # Sheppard-corrected s = 0.43 LSB: 2 % of its samples, about 0.9 equivalent nats a block against h = 20:
+    # 22 blocks expected; named in 16-22 s)
+    ax, codes, hit, early = frozen_copter_delay(seed, 0.17, within)
+    assert early == []
+    assert hit is not None and 59 <= hit <= 60 + within
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_healthy_copter_gyro_at_half_an_lsb_is_not_stuck(seed):
     events = detect(copter_blocks(seed, 300.0))
     assert events == []
+
+
+@pytest.mark.parametrize("seed", [4, 5, 6])
+def test_healthy_copter_gyro_resting_on_code_boundaries_is_not_stuck(seed):
+    # every axis shifted so that its level over the 5 minutes sits on a boundary between two codes, where a
+    # healthy gyro leaves two codes least often and flips between them like a frozen value on the boundary
+    blocks = copter_blocks(seed, 300.0, on_boundary=True)
+    assert np.allclose(np.concatenate(blocks).mean(axis=0) / LSB % 1.0, 0.5, atol=0.1)
+    assert detect(blocks) == []
 
 
 def test_inspect_sentence_of_an_int16_stream_reading_zero_names_both_causes():

@@ -24,15 +24,18 @@ whose codes always change). The LSB is the smallest non-zero step seen on the ax
 
 A value frozen near a code boundary with a dither far below the step flips between two adjacent codes
 about as often as a healthy gyro of ~0.5 LSB changes code, and its variance is that of the flips: neither
-test sees it. What a frozen value lacks is spread: healthy noise also lands beyond two adjacent codes.
-The larger of the above and the SPRT of the samples beyond the block's two best adjacent codes
-(:func:`two_code_llr`, against the healthy rate with the level on a boundary, the least) is the block's
-evidence. It is thin where the frozen value sits right on a boundary (0.26 nats per 50-sample block at
-0.36 LSB of noise: a minute or more at rest); in motion a live gyro spreads over many codes at once.
+test sees it. What a frozen value lacks is spread: healthy noise also lands beyond two adjacent codes, and
+how often depends on where its level sits, which the split between the two codes tells. A second CUSUM
+weighs the codes of its run (since it last stood at 0; the largest over the run's last 1, 2, ..., 32,
+48, 64, ... blocks) by :func:`codes_glr`: the best split between two adjacent codes against the best healthy level
+(its rate beyond two codes is least on the boundary, 2 Phi(-1/s), and grows off it). It is thin where the
+frozen value sits right on a boundary (about 0.9 nats per 50-sample block at the copter preset's 0.43 LSB
+of noise: 15-30 s at rest); the other evidence there is small (the low-pass correlation of the healthy flips, ~0.1 nats a block
+on the copter; the bias wander, less); in motion a live gyro spreads over many codes at once.
 
-The healthy rate beyond two codes comes from the samples' own spread at rest (a gyro low-passed well below
-its logged rate spreads its samples far beyond its sample-to-sample noise, the rover's 5 Hz at 50 Hz), over
-the block's equivalent independent samples. A gyro whose codes do not repeat (floats) has a third CUSUM:
+The healthy noise comes from the samples' own spread at rest (a gyro low-passed well below its logged rate
+spreads its samples far beyond its sample-to-sample noise, the rover's 5 Hz at 50 Hz), over the block's
+equivalent independent samples. A gyro whose codes do not repeat (floats) has a third CUSUM:
 its variance collapse, counted while the same IMU's accelerometer vibrates at least half as much as at the
 reference (:meth:`StuckDetector._vibration_llr`): a parked plane's engine stop lowers both, a frozen gyro
 only its own.
@@ -54,10 +57,12 @@ handling otherwise). A value frozen at 0 after a learned reference showed codes 
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Mapping
 
 import numpy as np
+from scipy.special import ndtr, ndtri
 
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 from companion.health.limits import equal_codes_llr, p_equal_codes
@@ -70,6 +75,8 @@ H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
 H_OFF = 10.0
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
 VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
+RUN_BLOCKS = 256  # blocks of a run of codes kept (the windows of its evidence end there)
+WINDOWS = tuple(range(1, 33)) + (48, 64, 96, 128, 192, 256, 1 << 30)  # the run's last blocks weighed
 ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
 
 
@@ -85,7 +92,8 @@ def two_code_outside(y: np.ndarray, lsb: float) -> int:
 
 def two_code_llr(k: float, n: float, q0: float) -> float:
     """Evidence (nats) of a block's ``k`` samples beyond its two best adjacent codes among ``n``: a value
-    frozen with a dither far below the step (rate q0 / ``Q_RATIO``) against a healthy gyro (rate q0).
+    frozen with a dither far below the step (rate q0 / ``Q_RATIO``) against a healthy gyro (rate q0). What
+    clears a stuck axis (each sample beyond two codes is -3 nats); :func:`codes_glr` names it.
 
     A frozen value with a dither d << LSB rounds to one code, or flips between two adjacent codes when it
     lies near their boundary; then its repeated codes and its variance look like a healthy gyro's of
@@ -102,6 +110,60 @@ def two_code_llr(k: float, n: float, q0: float) -> float:
     return k * math.log(q1 / q0) + (n - k) * math.log((1.0 - q1) / (1.0 - q0))
 
 
+def codes_glr(lo: int, counts: np.ndarray, s: float, q1: float) -> float:
+    """Evidence (nats) of the counts of codes ``lo``, ``lo`` + 1, ... (samples) for a value frozen near a
+    code boundary against a healthy gyro of noise ``s`` (LSB), each at its most likely parameter.
+
+    The samples are read as three counts: in the two adjacent codes k, k + 1 that hold the most of them,
+    and beyond them. Frozen: they flip between k and k + 1 with some probability p (any p: the dither and
+    the distance to the boundary are unknown) and land beyond them at a rate ``q1``. Healthy: a level mu
+    plus noise s puts P_k(mu), P_k+1(mu) (P_c = Phi((c + 1/2 - mu) / s) - Phi((c - 1/2 - mu) / s)) and the
+    rest, Q(mu), beyond them. The split between the two codes tells where a healthy level would be, and
+    there its share beyond them (least on the boundary: 2 Phi(-1/s), more off it) is what the frozen
+    value lacks: a split of 23:77 puts a healthy level of 0.47 LSB noise 0.35 LSB off the boundary, where
+    8.6 % of its samples leave the two codes (3.3 % on the boundary). About ln((1 - q1) / (1 - q0)) per
+    sample on a boundary, as the count beyond two codes alone gives; n ln(1 / P_k) for a single code (a
+    healthy level at the code's centre). Which codes the samples beyond the pair hit is not used: a block
+    the healthy model does not fit (motion starting, a noisier period) must not count as frozen."""
+    if s <= 0 or not (0.0 < q1 < 1.0):
+        return 0.0
+    return float(_glr(np.asarray([_three_counts(np.asarray(counts, dtype=float))]), s, q1)[0])
+
+
+def _three_counts(counts: np.ndarray) -> tuple[float, float, float]:
+    """(in code k, in code k + 1, beyond them) for the two adjacent codes holding the most samples."""
+    if counts.shape[0] < 2:
+        return float(counts.sum()), 0.0, 0.0
+    j = int(np.argmax(counts[:-1] + counts[1:]))
+    n_a, n_b = float(counts[j]), float(counts[j + 1])
+    return n_a, n_b, float(counts.sum()) - n_a - n_b
+
+
+@functools.lru_cache(maxsize=64)
+def _level_logs(s: float) -> np.ndarray:
+    """ln P_k, ln P_k+1 and ln of the rest for a healthy level on the grid of :func:`_glr` (3, levels): the
+    noise is learned slowly, so the same few values recur (rounded to 0.001 LSB)."""
+    mu = np.arange(-1.0, 2.0 + 1e-9, 0.005)
+    pa = ndtr((0.5 - mu) / s) - ndtr((-0.5 - mu) / s)
+    pb = ndtr((1.5 - mu) / s) - ndtr((0.5 - mu) / s)
+    logs = np.log(np.maximum(np.vstack([pa, pb, 1.0 - pa - pb]), 1e-300))
+    logs.flags.writeable = False
+    return logs
+
+
+def _glr(n: np.ndarray, s: float, q1: float) -> np.ndarray:
+    """:func:`codes_glr` of rows of three counts (n_k, n_k+1, beyond). The healthy level is profiled on a
+    grid relative to code k (0.005 LSB from 1 LSB below it to 2 above: where the pair can be the most
+    likely; off the grid the healthy shares only fall), the same grid for every row."""
+    healthy = np.max(n @ _level_logs(round(s, 3)), axis=1)
+    n2 = n[:, 0] + n[:, 1]
+    frozen = n[:, 2] * math.log(q1) + n2 * math.log(1.0 - q1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for col in (0, 1):
+            frozen = frozen + np.where(n[:, col] > 0, n[:, col] * np.log(n[:, col] / np.maximum(n2, 1e-300)), 0.0)
+    return np.where(n.sum(axis=1) > 0, frozen - healthy, 0.0)
+
+
 class StuckDetector:
     """``coded_lsb``: the message's resolution (rad/s) for integer messages (RAW_IMU, SCALED_IMU*), None for
     float messages; it only decides how an axis reading exactly 0 is named."""
@@ -114,6 +176,8 @@ class StuckDetector:
         self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
         self.out_n = 0
         self.spread = [0.0, 0]  # the still blocks' sample variance (times samples) and samples, while healthy
+        self.pend = [0, 0, 0.0, 0]  # the same of the current run of codes, kept once it ends healthy
+        self.run: list[tuple[int, np.ndarray]] = []  # each block's codes (lowest, counts) since the two-code CUSUM stood at 0
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
         self.vib = Cusum(H_ON, H_OFF)  # the variance collapse while the accelerometer's vibration did not fall
@@ -235,43 +299,93 @@ class StuckDetector:
         return -n * math.log(max(p_one, 1e-300)) if p_one < 1.0 else 0.0
 
     def _two_codes(self, obs: Observation, ref) -> float | None:
-        """A frozen value flipping between two codes near their boundary: the spread over codes. The healthy
-        rate q0 = 2 Phi(-1 / s), s the noise of the samples' own spread at rest (below), at
-        most the rate this axis showed at rest; counted only once the axis was seen beyond two codes
-        ``MIN_OUTSIDE`` times (a quiet gyro that never leaves two codes is never judged by it)."""
+        """A frozen value flipping between two codes near their boundary: the codes since the CUSUM last stood at
+        0, weighed by :func:`codes_glr` over the run's last blocks (:meth:`_best_window`), so that the step is
+        that evidence less the CUSUM's value; the run ends when no window's evidence is above 0. The healthy noise s is the samples' own spread at rest (below),
+        its rate beyond two codes on a boundary 2 Phi(-1 / s) at most the rate this axis showed at rest;
+        counted only once the axis was seen beyond two codes ``MIN_OUTSIDE`` times (a quiet gyro that never
+        leaves two codes is never judged by it). What is learned at rest is kept only once the run it
+        belongs to ended healthy (the evidence fell back to 0): a frozen value's first blocks never teach
+        the healthy rate. While stuck, each block's count beyond two codes clears it (:func:`two_code_llr`)."""
         y = np.asarray(obs.y)[:, obs.col]
+        c = np.round(y / self.lsb)
         k, n = two_code_outside(y, self.lsb), y.shape[0]
-        if obs.still and self.state == OK and self.cusum.s == 0.0 and self.two.s == 0.0:
-            self.out_k += k
-            self.out_n += n
-            if n >= 2:
-                self.spread[0] += float(np.var(y)) * n
-                self.spread[1] += n
+        if obs.still and self.state == OK and self.cusum.s == 0.0 and n >= 2:
+            self.pend[0] += k
+            self.pend[1] += n
+            self.pend[2] += float(np.var(y)) * n
+            self.pend[3] += n
         if self.out_k < MIN_OUTSIDE or self.spread[1] == 0:
+            self._end_run(commit=True)
             return None
         # What lands beyond two codes is the samples' own spread at rest (their within-block variance v_b),
         # not the second-difference figure v_dd: a gyro low-passed well below its logged rate (the rover: 5 Hz
         # at 50 Hz) spreads its samples over codes far beyond its sample-to-sample noise, and a decimated one
         # with energy near its Nyquist rate (the plane at 10 Hz) less than that figure says (taken from v_dd, a
         # healthy plane resting on a boundary for a minute was named stuck). The noise s = sqrt(v_b - 1/12)
-        # (Sheppard), its rate on a boundary q0 = 2 Phi(-1 / s) at most the rate seen at rest; a correlated
-        # block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that changes
-        # from sample to sample).
+        # (Sheppard), less if the axis left two codes at rest less often than s on a boundary would; a
+        # correlated block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that
+        # changes from sample to sample).
         v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
         v_dd = ref.sigma2 / (self.lsb * self.lsb)
         s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
-        q0 = min(math.erfc(1.0 / (s_b * math.sqrt(2.0))), self.out_k / self.out_n, 0.45) if s_b > 0 else 0.0
-        if q0 <= 0:
+        seen = self.out_k / self.out_n
+        if s_b <= 0 or seen <= 0:
+            self._end_run(commit=True)
             return 0.0  # a level resting on a boundary could give all of it: no evidence either way
-        n_eff = n * min(1.0, v_dd / v_b) if v_b > 0 else n
-        return two_code_llr(k * n_eff / n, n_eff, q0)
+        s_l = min(s_b, -1.0 / float(ndtri(0.5 * min(seen, 0.9))))
+        q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), 0.45)
+        f = min(1.0, v_dd / v_b) if v_b > 0 else 1.0
+        if self.two.state == FAULT:
+            self._end_run(commit=False)
+            return two_code_llr(k * f, n * f, q0)
+        if c.max() - c.min() > MAX_CODES:
+            self._end_run(commit=True)
+            return -self.two.s - 1.0
+        lo = int(c.min())
+        self.run.append((lo, np.bincount((c - lo).astype(np.int64)).astype(float)))
+        del self.run[:-RUN_BLOCKS]
+        g = f * self._best_window(s_l, q0 / Q_RATIO)
+        if g <= 0.0:
+            self._end_run(commit=True)
+            return -self.two.s - 1.0
+        return g - self.two.s
+
+    def _best_window(self, s_l: float, q1: float) -> float:
+        """The largest :func:`codes_glr` of the run's last 1, 2, ..., 32, 48, 64, ... blocks and of all of it
+        (the change may have come inside the run: a frozen value's codes after healthy ones, or after one of
+        its own rare flips to the next code)."""
+        m = len(self.run)
+        lo = min(b[0] for b in self.run)
+        hi = max(b[0] + b[1].shape[0] for b in self.run)
+        if hi - lo > MAX_CODES:
+            return -1.0
+        cnt = np.zeros(hi - lo)
+        rows, k = [], 0
+        for i, (b_lo, b_cnt) in enumerate(reversed(self.run)):
+            cnt[b_lo - lo:b_lo - lo + b_cnt.shape[0]] += b_cnt
+            if i + 1 == WINDOWS[k] or i + 1 == m:
+                k += i + 1 == WINDOWS[k]
+                rows.append(_three_counts(cnt))
+        return float(np.max(_glr(np.asarray(rows), s_l, q1)))
+
+    def _end_run(self, commit: bool) -> None:
+        """The run of codes ends: what it taught at rest is kept if it ended healthy (``commit``)."""
+        if commit:
+            self.out_k += int(self.pend[0])
+            self.out_n += int(self.pend[1])
+            self.spread[0] += self.pend[2]
+            self.spread[1] += int(self.pend[3])
+        self.pend = [0, 0, 0.0, 0]
+        self.run = []
 
     def state_dict(self) -> dict:
         return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
                 "equal_run": self.equal_run,
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
                 "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n],
-                "spread": self.spread}
+                "spread": self.spread, "pend": self.pend,
+                "run": [[lo, c.tolist()] for lo, c in self.run]}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
@@ -286,3 +400,6 @@ class StuckDetector:
         self.out_k, self.out_n = (int(v) for v in (d.get("out") or [0, 0]))
         sp = d.get("spread") or [0.0, 0]
         self.spread = [float(sp[0]), int(sp[1])]
+        pd = d.get("pend") or [0, 0, 0.0, 0]
+        self.pend = [int(pd[0]), int(pd[1]), float(pd[2]), int(pd[3])]
+        self.run = [(int(lo), np.asarray(c, dtype=float)) for lo, c in (d.get("run") or [])]
