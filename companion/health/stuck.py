@@ -59,10 +59,10 @@ from __future__ import annotations
 
 import functools
 import math
+from statistics import NormalDist
 from typing import Mapping
 
 import numpy as np
-from scipy.special import ndtr, ndtri
 
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 from companion.health.limits import equal_codes_llr, p_equal_codes
@@ -139,13 +139,24 @@ def _three_counts(counts: np.ndarray) -> tuple[float, float, float]:
     return n_a, n_b, float(counts.sum()) - n_a - n_b
 
 
+# the live pipeline loads no scipy (seconds of start-up, tens of MB on a small board): the normal CDF from
+# math.erfc, its inverse from the standard library
+_STD_NORMAL = NormalDist()
+_ERFC = np.frompyfunc(math.erfc, 1, 1)
+
+
+def _ndtr(x: np.ndarray) -> np.ndarray:
+    """Standard normal CDF, elementwise: erfc(-x / sqrt 2) / 2."""
+    return 0.5 * _ERFC(-np.asarray(x, dtype=float) / math.sqrt(2.0)).astype(float)
+
+
 @functools.lru_cache(maxsize=64)
 def _level_logs(s: float) -> np.ndarray:
     """ln P_k, ln P_k+1 and ln of the rest for a healthy level on the grid of :func:`_glr` (3, levels): the
     noise is learned slowly, so the same few values recur (rounded to 0.001 LSB)."""
     mu = np.arange(-1.0, 2.0 + 1e-9, 0.005)
-    pa = ndtr((0.5 - mu) / s) - ndtr((-0.5 - mu) / s)
-    pb = ndtr((1.5 - mu) / s) - ndtr((0.5 - mu) / s)
+    pa = _ndtr((0.5 - mu) / s) - _ndtr((-0.5 - mu) / s)
+    pb = _ndtr((1.5 - mu) / s) - _ndtr((0.5 - mu) / s)
     logs = np.log(np.maximum(np.vstack([pa, pb, 1.0 - pa - pb]), 1e-300))
     logs.flags.writeable = False
     return logs
@@ -333,7 +344,7 @@ class StuckDetector:
         if s_b <= 0 or seen <= 0:
             self._end_run(commit=True)
             return 0.0  # a level resting on a boundary could give all of it: no evidence either way
-        s_l = min(s_b, -1.0 / float(ndtri(0.5 * min(seen, 0.9))))
+        s_l = min(s_b, -1.0 / _STD_NORMAL.inv_cdf(0.5 * min(seen, 0.9)))
         q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), 0.45)
         f = min(1.0, v_dd / v_b) if v_b > 0 else 1.0
         if self.two.state == FAULT:
