@@ -158,7 +158,7 @@ def _term_as_interrupt():
 
 def run_analyze(args) -> int:
     from companion.fleet.discover import discover
-    from companion.fleet.runner import (Progress, close_client, hash_on_cluster, open_client, plan, run_dask,
+    from companion.fleet.runner import (FleetProgress, close_client, hash_on_cluster, open_client, plan, run_dask,
                                         run_serial)
     from companion.fleet.store import FleetStore
     from companion.samples import AXES
@@ -186,7 +186,7 @@ def run_analyze(args) -> int:
                 print(f"warning: {path}: {reason}; skipped", file=sys.stderr)
             print(f"{len(logs)} log(s): {len(work)} to analyse, {skipped} already in {args.db}"
                   + (f", {len(unreadable)} unreadable" if unreadable else ""), file=sys.stderr)
-            progress = Progress(len(work), skipped, enabled=not args.quiet)
+            progress = FleetProgress(len(work), skipped, enabled=not args.quiet)
             stats = None
             if work and args.workers == 0 and not args.scheduler:
                 stats = run_serial(store, work, progress, axes, args.vehicle, args.time_limit)

@@ -51,8 +51,9 @@ class RunStats:
         return (self.done + self.failed) / self.elapsed_s if self.elapsed_s > 0 else 0.0
 
 
-class Progress:
-    """``fleet [#####.....] 120/1000 failed 3 | 4.2 logs/s | ETA 3:29`` on stderr.
+class FleetProgress:
+    """``fleet [#####.....] 120/1000 failed 3 | 4.2 logs/s | ETA 3:29`` on stderr: a fleet run's count, rate and ETA
+    (the bar of one long computation is :class:`companion.cli.progress.Progress`).
 
     On a terminal the line is redrawn in place (at most 10 times a second); otherwise a line is written
     every ``every_s`` seconds and at the end, so a batch job's log shows progress too.
@@ -179,7 +180,7 @@ def _failed(w: Work, reason: str) -> dict:
             "log": {}, "rows": [], "elapsed_s": None}
 
 
-def run_serial(store, work: list[Work], progress: Progress, axes=GYRO_AXES, vehicle_from="auto",
+def run_serial(store, work: list[Work], progress: FleetProgress, axes=GYRO_AXES, vehicle_from="auto",
                deadline_s: float | None = None) -> RunStats:
     """Analyse ``work`` one log after the other in this process (``--workers 0``; the benchmark's baseline)."""
     stats = RunStats(total=len(work), workers=0)
@@ -267,7 +268,7 @@ def auto_batch(n_logs: int, nthreads: int) -> int:
     return int(min(max(n_logs // (max(nthreads, 1) * TASKS_PER_THREAD), 1), MAX_AUTO_BATCH))
 
 
-def run_dask(store, work: list[Work], progress: Progress, client, axes=GYRO_AXES, vehicle_from="auto",
+def run_dask(store, work: list[Work], progress: FleetProgress, client, axes=GYRO_AXES, vehicle_from="auto",
              deadline_s: float | None = None, window: int | None = None, batch: int | None = None) -> RunStats:
     """Analyse ``work`` on the Dask ``client``'s workers; this process is the only database writer.
 
@@ -355,5 +356,5 @@ def describe(stats: RunStats) -> str:
     return s
 
 
-__all__ = ["plan", "hash_on_cluster", "run_serial", "run_dask", "auto_batch", "open_client", "close_client", "Progress", "RunStats", "describe",
+__all__ = ["plan", "hash_on_cluster", "run_serial", "run_dask", "auto_batch", "open_client", "close_client", "FleetProgress", "RunStats", "describe",
            "DASK_MISSING"]
