@@ -735,10 +735,12 @@ def upper_bounds(fr: FitResult, tau, avar, *, n, rate_hz, m=None, segments=None,
     missing = [e for e in effects if e not in have and e in LINEAR_PARAM]
     if not missing or not fr.terms or tau.size < 3:
         return []
+    # a term the record is too short to resolve (fr.nuisance) stays in the model of the others' bounds, as in
+    # the fit: left out, the bounded term would take up its share
     m = np.round(tau * rate_hz).astype(np.int64) if m is None else np.asarray(m, dtype=np.int64)
     white = ({"filter_hz": fr.filter["filter_hz"], "sample_hz": fr.filter.get("sample_hz")}
              if fr.filter else None)
-    plain = [{k: v for k, v in t.items() if k != "ci95"} for t in fr.terms]
+    plain = [{k: v for k, v in t.items() if k != "ci95"} for t in list(fr.terms) + list(fr.nuisance)]
     linear = [t["effect"] for t in plain if t["effect"] in LINEAR_EFFECTS]
     nonlin = [(t["effect"], float(t[_NL_SHAPE[t["effect"]]])) for t in plain if t["effect"] in NONLINEAR_EFFECTS]
     scale = float(np.median(avar[avar > 0]))
