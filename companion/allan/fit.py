@@ -719,7 +719,7 @@ _Z95 = 1.6448536269514722
 
 
 def upper_bounds(fr: FitResult, tau, avar, *, n, rate_hz, m=None, segments=None,
-                 effects=("white_noise", "bias_instability", "random_walk"), max_iter=8) -> list[dict]:
+                 effects=("white_noise", "bias_instability", "random_walk"), max_iter=12) -> list[dict]:
     """95 % upper bounds of the ``effects`` the fit ``fr`` left out, each the value the data would reject at
     the one-sided 5 % level: the term is added to the fitted model, theta_u = theta_hat + z sd, with the AVAR
     points' covariance evaluated *at the bound* (the fitted terms as they are, the left-out one at theta_u)
@@ -756,22 +756,57 @@ def upper_bounds(fr: FitResult, tau, avar, *, n, rate_hz, m=None, segments=None,
         lin = [x for x in LINEAR_EFFECTS if x in linear or x == e]
         A = _columns(lin, nonlin, tau, white)
         j = lin.index(e)
-        ub = None
-        for _ in range(max_iter):
-            terms = [t for t in plain if t["effect"] != e]
-            if ub:
-                terms = terms + [{"effect": e, p: math.sqrt(ub * scale)}]
+        others = [t for t in plain if t["effect"] != e]
+
+        def step(u):
+            """theta_hat + z sd of the term with the points' covariance evaluated at theta = u (None: without it)."""
+            terms = others + ([{"effect": e, p: math.sqrt(u * scale)}] if u else [])
             prob = _Problem(tau, v, cov_at(terms), white, 1.0 / rate_hz)
             theta, _ = prob.solve(A)
             # the term's variance with it freed from the bound 0 (the others as the NNLS left them)
             act = (theta > 0) | (np.arange(len(theta)) == j)
             ct = prob.cov_theta(A[:, act])
             k = int(np.count_nonzero(act[:j]))
-            new = max(float(theta[j]), 0.0) + _Z95 * math.sqrt(max(float(ct[k, k]), 0.0))
-            if ub is not None and abs(new - ub) <= 1e-3 * ub:
-                ub = new
+            return max(float(theta[j]), 0.0) + _Z95 * math.sqrt(max(float(ct[k, k]), 0.0))
+
+        # the bound is the fixed point u = step(u): below it the data do not reject u (h = log step(u) - log u
+        # > 0), above it they do. Plain iteration creeps (10-15 % a step where the term would dominate the
+        # long-tau points) and step() jumps where the NNLS drops a term; so: secant steps in log u until the
+        # sign of h changes, then regula falsi with bisection inside the bracket, and, unconverged, the lowest
+        # u found rejected (conservative)
+        u = step(None)
+        lo = hi = prev = None  # (log u, h) with h > 0 (the largest such u) / h < 0 (the smallest)
+        ub = None
+        for _ in range(max_iter):
+            f = step(u)
+            if not (f > 0 and u > 0):
+                ub = max(f, u)
                 break
-            ub = new
+            x, h = math.log(u), math.log(f) - math.log(u)
+            if abs(h) <= 1e-3:
+                ub = max(f, u)
+                break
+            if h > 0 and (lo is None or x > lo[0]):
+                lo = (x, h)
+            if h < 0 and (hi is None or x < hi[0]):
+                hi = (x, h)
+            if lo and hi:
+                if hi[0] - lo[0] <= 2e-3:
+                    break
+                nx = lo[0] - lo[1] * (hi[0] - lo[0]) / (hi[1] - lo[1])
+                d = hi[0] - lo[0]
+                if not lo[0] + 0.05 * d < nx < hi[0] - 0.05 * d:
+                    nx = 0.5 * (lo[0] + hi[0])
+            else:
+                nx = math.log(f)
+                if prev is not None and h != prev[1]:
+                    sec = x - h * (x - prev[0]) / (h - prev[1])
+                    if math.isfinite(sec) and x - math.log(4.0) <= sec <= x + math.log(16.0):
+                        nx = sec
+            prev = (x, h)
+            u = math.exp(nx)
+        if ub is None:
+            ub = math.exp(hi[0]) if hi else max(f, u)
         b = math.sqrt(max(ub, 0.0) * scale)
         out.append({"effect": e, p: b, "std": {p: b / _Z95}, "ci95": {p: [0.0, b]}, "bound": True})
     return out
