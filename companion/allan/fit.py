@@ -758,10 +758,23 @@ def upper_bounds(fr: FitResult, tau, avar, *, n, rate_hz, m=None, segments=None,
         j = lin.index(e)
         others = [t for t in plain if t["effect"] != e]
 
+        order = {x: i for i, x in enumerate(LINEAR_EFFECTS + NONLINEAR_EFFECTS)}
+
+        def cov_with(u):
+            # the terms in the fit's order, the bounded one in even at 0: the covariance's pair sums are
+            # remembered per set of term shapes, and the fit computed this set's for its superset model
+            terms = others + [{"effect": e, p: math.sqrt(max(u, 0.0) * scale)}]
+            return cov_at(sorted(terms, key=lambda t: order.get(t["effect"], len(order))))
+
+        # the points' covariance is a quadratic form in the terms' squared magnitudes (pair sums, model error),
+        # so in u it is exactly C0 + u C1 + u^2 C2: three evaluations give it at every u the search asks for
+        u_s = max(float(np.max(v)) / float(np.max(A[:, j])), 1e-300)
+        c0, c1, c2 = cov_with(0.0), cov_with(u_s), cov_with(2.0 * u_s)
+        lin_c, quad_c = (4.0 * c1 - 3.0 * c0 - c2) / (2.0 * u_s), (c2 - 2.0 * c1 + c0) / (2.0 * u_s**2)
+
         def step(u):
             """theta_hat + z sd of the term with the points' covariance evaluated at theta = u (None: without it)."""
-            terms = others + ([{"effect": e, p: math.sqrt(u * scale)}] if u else [])
-            prob = _Problem(tau, v, cov_at(terms), white, 1.0 / rate_hz)
+            prob = _Problem(tau, v, c0 + (lin_c * u + quad_c * u * u if u else 0.0), white, 1.0 / rate_hz)
             theta, _ = prob.solve(A)
             # the term's variance with it freed from the bound 0 (the others as the NNLS left them)
             act = (theta > 0) | (np.arange(len(theta)) == j)
