@@ -44,10 +44,9 @@ from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_ter
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    measure_pooled, model_avar)
 from companion.gap._edf import local_slope, oavar_edf
-from companion.gap.filtered import synthesize_filtered_white
+from companion.gap.null import null_gap, null_text, resolved_subset, synthesize_model
 from companion.gap.spectral import line_evidence
 from companion.gap.thermal import regression_check, thermal_term
-from companion.sim.synth import synthesize_axis
 
 ALPHA = selection.ALPHA
 ALPHA_RECAL = selection.ALPHA_RECAL
@@ -91,6 +90,8 @@ class GapResult:
     #: analysis' rule, companion.allan.fit.RESOLVE_RECORD_FACTOR), when longer ones were measured
     gap_after_resolved: float | None = None
     resolved_tau_max: float | None = None
+    #: when a gap remains: G's spread for the model after on this record's layout (companion.gap.null)
+    gap_after_null: dict | None = None
 
     def to_dict(self) -> dict:
         m = self.measured
@@ -102,6 +103,7 @@ class GapResult:
             "noise_floor": NOISE_FLOOR_G,
             "gap_after_resolved": self.gap_after_resolved,
             "resolved_tau_max": self.resolved_tau_max,
+            "gap_after_null": self.gap_after_null,
             "gap_sim_before": self.gap_sim_before,
             "gap_sim_after": self.gap_sim_after,
             "sim_check_before": self.sim_check_before,
@@ -143,26 +145,7 @@ def _simulate(terms, meas: Measured, seed: int, t_series=None):
     n = min(meas.n, SIM_MAX_SAMPLES)
     if not terms:
         return None, None
-    rng = np.random.default_rng(seed)
-    # averaged samples (PX4 sensor_combined): a vibration line is averaged over each interval like the noise
-    # (a 112 Hz line at 248.6 Hz keeps 0.70 of its amplitude; point samples would keep all of it)
-    averaged = any(t.get("integrate") for t in terms)
-    plain = [t for t in terms if not t.get("cutoff_hz") and t["effect"] != "temperature"
-             and not (averaged and t["effect"] == "sinusoid")]
-    y = synthesize_axis(plain, meas.rate_hz, n, rng) if plain else np.zeros(n)
-    if averaged:
-        tk = np.arange(n) / meas.rate_hz
-        for t in terms:
-            if t["effect"] == "sinusoid":
-                w, ph = 2.0 * math.pi * t["freq_hz"], rng.uniform(0.0, 2.0 * math.pi)
-                y = y + t["amplitude"] * (np.sin(w * (tk + 1.0 / meas.rate_hz) + ph) - np.sin(w * tk + ph)) \
-                    / (w / meas.rate_hz)
-    for t in terms:
-        if t.get("cutoff_hz"):  # the autopilot's filter and decimation, simulated at 8x the log's rate
-            y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)),
-                                              integrate=bool(t.get("integrate", False)))
-        if t["effect"] == "temperature" and t_series is not None and t_series.shape[0] >= n:
-            y = y + t["coef"] * t_series[:n]
+    y = synthesize_model(terms, meas.rate_hz, n, np.random.default_rng(seed), t_series)
     m = meas.m[meas.m <= n // 2]
     if m.shape[0] < meas.m.shape[0]:
         return None, None
@@ -591,10 +574,21 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             res.sim_avar_after, res.gap_sim_after, res.sim_check_after = _sim_checks(res.terms_after, meas,
                                                                                      seed + 1, t_series)
     _resolved_gap(res, meas, max(len(s_) for s_ in y_segs) / rate_hz)
-    if changed and res.gap_after > NOISE_FLOOR_G:
-        res.notes.append(f"a gap remains above the noise floor (G = {res.gap_after:.2f} > {NOISE_FLOOR_G}): "
-                         "the data hold something none of the seven effects describes well" + _strongest_left(res)
-                         + _resolved_text(res, meas))
+    resolved_over = res.gap_after_resolved is not None and res.gap_after_resolved > NOISE_FLOOR_G
+    if changed and (res.gap_after > NOISE_FLOOR_G or resolved_over):
+        # how often the model after, on a record like this one, leaves a gap as large (companion.gap.null)
+        res.gap_after_null = null_gap(res.terms_after, [len(s_) for s_ in y_segs], rate_hz, res.gap_after,
+                                      res.gap_after_resolved, res.resolved_tau_max, seed=seed + 7,
+                                      t_segs=t_smooth or None) if simulate else None
+        nl = null_text(res.gap_after_null, res.gap_after, res.gap_after_resolved) if res.gap_after_null else ""
+        if res.gap_after > NOISE_FLOOR_G:
+            res.notes.append(f"a gap remains above the noise floor (G = {res.gap_after:.2f} > {NOISE_FLOOR_G}): "
+                             "the data hold something none of the seven effects describes well"
+                             + _strongest_left(res) + _resolved_text(res, meas) + nl)
+        else:
+            res.notes.append(f"over the cluster times the record resolves (tau <= {res.resolved_tau_max:.3g} s, a "
+                             f"tenth of the record) G = {res.gap_after_resolved:.2f} > {NOISE_FLOOR_G}, although G "
+                             f"over all of them is {res.gap_after:.2f}" + nl)
     return res
 
 
@@ -606,11 +600,9 @@ def _resolved_gap(res: GapResult, meas: Measured, record_s: float) -> None:
     from companion.allan.fit import RESOLVE_RECORD_FACTOR
 
     tau_max = record_s / RESOLVE_RECORD_FACTOR
-    keep = meas.tau <= tau_max * (1.0 + 1e-9)
-    if keep.all() or np.count_nonzero(keep) < 3:
+    sub = resolved_subset(meas, tau_max)
+    if sub is None:
         return
-    sub = Measured(tau=meas.tau[keep], avar=meas.avar[keep], m=meas.m[keep], nu=meas.nu[keep],
-                   rate_hz=meas.rate_hz, n=meas.n, nu_raw=meas.nu_raw[keep])
     res.gap_after_resolved = gap_metric(sub, model_avar(res.terms_after, sub.tau, meas.rate_hz))
     res.resolved_tau_max = float(tau_max)
 
