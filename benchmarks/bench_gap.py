@@ -417,9 +417,18 @@ def _named(r):
     return [a["effect"] for a in r.added if a.get("form") != "rate_lsb"]
 
 
+#: runs of the workflow, and Gauss-Markov terms in their final models (added or kept) with tau_c < 3 tau0
+TAU_C_RULE = {"runs": 0, "gm_terms": 0, "below_3_tau0": 0}
+
+
 def _run(truth, model, seed):
     y = synthesize_axis(truth, F_RATE, F_N, np.random.default_rng(seed))
     r = run_gap(y, F_RATE, model, seed=seed, simulate=False)
+    TAU_C_RULE["runs"] += 1
+    for t in r.terms_after:
+        if t["effect"] == "gauss_markov":
+            TAU_C_RULE["gm_terms"] += 1
+            TAU_C_RULE["below_3_tau0"] += t["tau_c"] < 3.0 / F_RATE * (1 - 1e-9)
     return y, r, r.measured
 
 
@@ -713,6 +722,8 @@ def main():
         ardupilot(max(2, a.seeds // 3))
         if not a.skip_real:
             real(Path(a.shared))
+    print(f"tau_c >= 3 tau0 rule: {TAU_C_RULE['gm_terms']} Gauss-Markov terms in the final models of "
+          f"{TAU_C_RULE['runs']} fresh-draw runs, {TAU_C_RULE['below_3_tau0']} with tau_c < 3 tau0")
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
 
 

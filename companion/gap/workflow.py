@@ -275,6 +275,57 @@ def _hold_test(meas: Measured, base: Fit, held, i: int, t0) -> tuple:
     return lr_raw / phi, lr_raw, phi, hf
 
 
+def _added_level(term, y, rate_hz: float) -> float:
+    """The level an added effect passed: chi^2_k(1 - ALPHA) for k free parameters (a Gauss-Markov term's
+    tau_c and a sinusoid's searched frequency count), a sinusoid whose line the periodogram confirms at
+    that of a known frequency (chi^2_1(1 - ALPHA_RECAL), as when it was taken)."""
+    if term["effect"] == "sinusoid" and y is not None:
+        ev = line_evidence(y, rate_hz, term["freq_hz"], term["amplitude"])
+        if ev is not None and ev.get("confirmed"):
+            return selection.RECAL_PENALTY
+    return selection.add_penalty(2 if term["effect"] in SHAPE else 1)
+
+
+def _drop_unneeded(meas: Measured, base: Fit, held, n_model: int, alternatives: dict, y, rate_hz: float):
+    """Backward step for added effects, the counterpart of undoing a recalibration: each effect added at
+    one step is taken out with the rest refitted (magnitudes; shapes as they stand); when putting it back no longer
+    passes the level it passed when it was added (corrected LR, overdispersion under that null), the
+    weakest such effect is removed, and the test is repeated. A later addition can make an earlier one
+    unnecessary: a sinusoid first fitted at a frequency 7 % off, then a second at the periodogram's line,
+    left the first at a tenth of the amplitude. Returns (terms, held, alternatives, notes)."""
+    terms, held, notes = [dict(t) for t in base.terms], set(held), []
+    while True:
+        weakest, dev_all = None, fit_terms(meas, terms, sorted(held), intervals=False).dev
+        for i in range(n_model, len(terms)):
+            t = terms[i]
+            if i in held or t["effect"] not in MAGNITUDE or t[MAGNITUDE[t["effect"]]] <= 0:
+                continue
+            trial = [dict(x) for x in terms]
+            trial[i][MAGNITUDE[t["effect"]]] = 0.0
+            # the others' shapes as they stand (magnitudes free): re-optimised, a second sinusoid would move
+            # onto the first's frequency and either of two would look unneeded in turn
+            without = fit_terms(meas, trial, sorted(held | {i}), intervals=False)
+            phi = lr_inflation(meas, without, None, direction=[unit_column(t, meas.tau, meas.rate_hz)])
+            lr = (without.dev - dev_all) / phi
+            level = _added_level(t, y, rate_hz)
+            if lr <= level and (weakest is None or lr / level < weakest[0]):
+                weakest = (lr / level, i, lr, level, without)
+        if weakest is None:
+            return terms, held, alternatives, notes
+        _, i, lr, level, without = weakest
+        t = terms[i]
+        notes.append(f"{t['effect']} ({', '.join(f'{k} {v:.3g}' for k, v in _params(t).items())}), added at one "
+                     f"step, is no longer needed after a later one (putting it back: LR {lr:.1f} <= {level:.1f}): "
+                     "dropped")
+        keep = [j for j in range(len(terms)) if j != i]
+        index = {j: k for k, j in enumerate(keep)}
+        held = {index[j] for j in held if j != i}
+        alternatives = {index[j]: v for j, v in alternatives.items() if j != i}
+        terms = [dict(without.terms[j]) for j in keep]
+        shaped = [j for j in range(n_model, len(terms)) if terms[j]["effect"] in SHAPE and j not in held]
+        terms = refine_shapes(meas, terms, sorted(held), shaped).terms  # the state changed: shapes again
+
+
 def _params(term) -> dict:
     return {k: v for k, v in term.items() if k != "effect"}
 
@@ -424,6 +475,12 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             # line near the logger's Nyquist frequency), added after the filter, takes back short-tau power
             # the cut-off had absorbed; a long-tau effect (ramp, random walk) does not compete with it
             current = selection.refine_cutoff(meas, current, sorted(held), lp).terms
+        base = _refit(meas, current, held, len(terms0))
+
+    # 5a. an effect that later steps made unnecessary is dropped (backward step, the level it passed)
+    current, held, alternatives, dropped = _drop_unneeded(meas, base, held, len(terms0), alternatives, y, rate_hz)
+    if dropped:
+        res.notes.extend(dropped)
         base = _refit(meas, current, held, len(terms0))
 
     # 5. a recalibration that later additions made unnecessary is undone (backward step, same test)
