@@ -87,7 +87,8 @@ def null_gap(terms, seg_lengths, rate_hz: float, g_obs: float, g_res_obs: float 
     if g_res and g_res_obs is not None:
         gr = np.array(g_res)
         out.update({"share_ge_resolved": float(np.mean(gr >= g_res_obs)), "median_resolved": float(np.median(gr)),
-                    "p95_resolved": float(np.percentile(gr, 95)), "share_above_floor_resolved": float(np.mean(gr > 2.0))})
+                    "p95_resolved": float(np.percentile(gr, 95)),
+                    "share_above_floor_resolved": float(np.mean(gr > 2.0))})
     return out
 
 

@@ -288,8 +288,8 @@ def _added_level(term, y, rate_hz: float) -> float:
 
 def _drop_unneeded(meas: Measured, base: Fit, held, n_model: int, alternatives: dict, y, rate_hz: float):
     """Backward step for added effects, the counterpart of undoing a recalibration: each effect added at
-    one step is taken out with the rest refitted (magnitudes; shapes as they stand); when putting it back no longer
-    passes the level it passed when it was added (corrected LR, overdispersion under that null), the
+    one step is taken out with the rest refitted (magnitudes; shapes as they stand); when putting it back
+    no longer passes the level it passed when it was added (corrected LR, overdispersion under that null), the
     weakest such effect is removed, and the test is repeated. A later addition can make an earlier one
     unnecessary: a sinusoid first fitted at a frequency 7 % off, then a second at the periodogram's line,
     left the first at a tenth of the amplitude. Returns (terms, held, alternatives, notes)."""
