@@ -59,6 +59,7 @@ import numpy as np
 
 from companion.allan.confidence import flicker_sampling_excess, oavar_covariance
 from companion.allan.lsq import nnls
+from companion.allan.memo import BoundedMemo
 from companion.allan.special import brentq, chi2_ppf, minimize_scalar_bounded
 from companion.allan.terms import (BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term,
                                    avar_white_noise, linear_basis)
@@ -167,21 +168,19 @@ class _Problem:
         return np.linalg.pinv(Aw.T @ Aw)
 
 
-_FILTERED_COLUMNS: dict = {}
+_FILTERED_COLUMNS = BoundedMemo(256)
 
 
 def _filtered_white_column(tau, white):
     """The filtered white-noise column at ``tau``, remembered: the model search asks for the same one hundreds
     of times per fit (each shape-grid point, each candidate set) and each costs a phase-structure evaluation."""
     key = (np.asarray(tau, dtype=float).tobytes(), white.get("filter_hz"), white.get("sample_hz"))
-    col = _FILTERED_COLUMNS.get(key)
-    if col is None:
-        if len(_FILTERED_COLUMNS) >= 256:
-            _FILTERED_COLUMNS.clear()
-        col = avar_white_noise(tau, 1.0, **white)
-        col.setflags(write=False)
-        _FILTERED_COLUMNS[key] = col
-    return col
+    return _FILTERED_COLUMNS.get(key, lambda: _read_only(avar_white_noise(tau, 1.0, **white)))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
 
 
 def _columns(linear, nonlinear, tau, white=None):
