@@ -12,9 +12,9 @@ sample kurtosis of a block is dominated by one value and has no usable tail). Po
 
 h = 12: three spikes close together flag it (0.2 % of samples at 100 Hz: about 15 s). On a still block
 whose accelerometer stayed quiet a spike's size adds to its count (ALPHA0, ALPHA1 below): two spikes whose
-|dd| exceeds ~40 robust sigmas flag it (a 0.3 rad/s glitch on a still gyro is hundreds), one never does;
-at a 10 Hz log rate, where 0.2-1 % of the samples is a spike every 10-50 s, the third spike came 36-119 s
-after the fault, the second comes after half that. Outside still
+|dd| exceeds ~40 robust sigmas flag it (a 0.3 rad/s glitch on a still gyro is hundreds), one never does
+(at a 10 Hz log rate 0.2-1 % of the samples is a spike every 10-50 s: the third came up to two minutes
+after the fault). Outside still
 blocks only spikes on one axis alone count (a landing shock moves every axis at once), and they are
 weighed against the outlier rate of the vehicle's own motion, not the still one: flight vibration and
 handling knocks are heavy-tailed (0.04-1.9 % of 50 Hz samples beyond 6 robust sigmas in healthy copter
