@@ -16,7 +16,9 @@ Further modes (docs/analysis.md quotes them):
                                                f_c 30 Hz): cut-off from the log, or found in the data
     python benchmarks/bench_fit.py draws [draws=100] [set=0]
                                                random N/B/K (2 h at 50 Hz): every term found, coverage;
-                                               a term left out: whether its 95 % upper bound holds
+                                               a term left out: whether its 95 % upper bound holds; each
+                                               split by whether the term is detectable at all (bands with
+                                               and without it apart at some tau <= T/10, no fit involved)
     python benchmarks/bench_fit.py draws null [draws=100] [set=0]
                                                the same N/B draws with K = 0: how often a K is invented
 """

@@ -207,13 +207,42 @@ def _evidence(terms, effect, tau, m, n, fs):
     return float(r @ r)
 
 
+def _detectable(terms, effect, m, n, fs):
+    """Whether ``effect`` is detectable at all in a record of ``n`` samples made of ``terms``, judged without
+    any fit and without the record's realisation: at some octave cluster time up to a tenth of the record (the
+    longest a single record resolves, EDF ~ 10 there; the fit's record rule, RESOLVE_RECORD_FACTOR) the 95 %
+    band of the Allan variance estimate with the term lies wholly above the 95 % band without it (bands
+    chi^2(EDF) / EDF of the expected AVAR, EDF from the true noise mix, :func:`edf_model`). Where the bands
+    overlap at every such tau, no estimator can tell the term from its absence in a sizeable share of records;
+    the honest output there is a bound. Returns (detectable, the tau with the widest separation, separation =
+    lower end with / upper end without)."""
+    from companion.allan.confidence import edf_model
+    from companion.allan.special import chi2_ppf
+    from companion.allan.terms import avar_model
+
+    m = np.asarray(m)
+    m = m[m / fs <= n / fs / 10.0]
+    tau = m / fs
+    rest = [t for t in terms if t["effect"] != effect]
+    v1, v0 = avar_model(terms, tau), avar_model(rest, tau)
+    e1, e0 = edf_model(terms, m, n, fs), edf_model(rest, m, n, fs)
+    lo1 = v1 * e1 / np.array([chi2_ppf(0.975, e) for e in e1])
+    hi0 = v0 * np.array([chi2_ppf(0.975, e) for e in e0]) / e0
+    sep = lo1 / hi0
+    i = int(np.argmax(sep))
+    return bool(sep[i] > 1.0), float(tau[i]), float(sep[i])
+
+
 def run_draws(args):
     """Random N/B/K, each with a region where it dominates (N log-uniform 2e-4..3e-3 rad/s/sqrt(Hz), the AVAR
     crossings N-B at 0.5-20 s and B-K at max(15 x that, 50)-600 s), 2 h at 50 Hz: terms found and coverage of
     the 95 % intervals (a missing term counts as not covered), also split by the term's expected evidence
     (:func:`_evidence`: a K whose B-K crossing is past ~300 s rests on the last 2-3 octaves, lambda ~ 2-4).
+    Each term is also judged *detectable* or not without any fit (:func:`_detectable`: the 95 % bands of the
+    AVAR with and without it apart at some tau up to a tenth of the record); found and covered are counted
+    for both groups, and "value covers or bound holds" counts a left-out term whose bound lies above the truth.
     A term the fit leaves out gets a 95 % upper bound: the fit's (:func:`companion.allan.fit.upper_bounds`,
-    the covariance evaluated at the bound) and the online report's rule
+    the covariance evaluated at the bound; what ``companion analyze`` reports) and the online report's rule
     (:func:`companion.estimators.report.bounds_for_fit`, evaluated at the fitted model); the benchmark says
     whether each holds.
     ``draws null [draws=100]``: the same N and B with K = 0: how often a random walk is invented. A third
@@ -237,6 +266,11 @@ def run_draws(args):
     held = {p: [0, 0, 0] for p in names}  # missing terms: count, fit's / report rule's bound above the truth
     missing = []
     strong = {p: [0, 0, 0] for p in names}  # draws with lambda >= 9: count, found, covered
+    # detectable (:func:`_detectable`): count, found, covered; not detectable: count, found, covered,
+    # left out with the fit's bound above the truth
+    det = {p: [0, 0, 0] for p in names}
+    undet = {p: [0, 0, 0, 0] for p in names}
+    t_fit, t_bound = [], []
     for d in range(draws):
         # every term visible in 2 h: white meets the flicker floor at tau_NB in 0.5-20 s, the floor meets the
         # random walk at tau_BK in max(15 tau_NB, 50)-600 s (AVAR crossings)
@@ -250,7 +284,9 @@ def run_draws(args):
         terms = [{"effect": names[p], p: v} for p, v in truth.items()]
         y = synthesize_axis(terms, fs, n, np.random.default_rng(10_000 + 1000 * fresh + d))
         tau, av = oavar(y, fs, m=m)[:2]
+        t0 = time.perf_counter()
         fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m)
+        t_fit.append(time.perf_counter() - t0)
         if null:
             found["K"] += fr.term("random_walk") is not None
             for p in ("N", "B"):
@@ -263,15 +299,23 @@ def run_draws(args):
             t = fr.term(e)
             lam = _evidence(terms, e, tau, m, n, fs)
             strong[p][0] += lam >= 9.0
+            ok, tau_s, sep = _detectable(terms, e, m, n, fs)
+            (det if ok else undet)[p][0] += 1
             if t is None:
                 if bounds is None:
+                    t0 = time.perf_counter()
                     bounds = (upper_bounds(fr, tau, av, n=n, rate_hz=fs, m=m), bounds_for_fit(fr, tau, av, edf, fs, n))
+                    t_bound.append(time.perf_counter() - t0)
                 b, b_rep = (next((x for x in bs if x["effect"] == e), None) for bs in bounds)
                 held[p][0] += 1
                 held[p][1] += b is not None and truth[p] <= b[p]
                 held[p][2] += b_rep is not None and truth[p] <= b_rep[p]
+                if not ok:
+                    undet[p][3] += b is not None and truth[p] <= b[p]
                 missing.append((d, p, {k: f"{v:.2g}" for k, v in truth.items()}, f"t_BK {t_bk:.0f} s",
-                                f"lambda {lam:.1f}", "bound " + ("-" if b is None else f"{b[p] / truth[p]:.2f} x truth")
+                                f"lambda {lam:.1f}", ("detectable" if ok else "not detectable")
+                                + f" (bands {sep:.2f} at {tau_s:.3g} s)",
+                                "bound " + ("-" if b is None else f"{b[p] / truth[p]:.2f} x truth")
                                 + " (report rule " + ("-" if b_rep is None else f"{b_rep[p] / truth[p]:.2f}") + ")"))
                 continue
             found[p] += 1
@@ -279,19 +323,27 @@ def run_draws(args):
             lo, hi = t["ci95"][p]
             inside[p] += lo <= truth[p] <= hi
             strong[p][2] += lam >= 9.0 and lo <= truth[p] <= hi
+            (det if ok else undet)[p][1] += 1
+            (det if ok else undet)[p][2] += lo <= truth[p] <= hi
     if null:
         print(f"{draws} draws of N and B with K = 0 (set {fresh}), 2 h at 50 Hz")
         print(f"  K invented in {found['K']}/{draws}")
         for p in ("N", "B"):
             print(f"  {p}: found {found[p]}/{draws}, 95 % interval covers the truth in {inside[p]}/{draws}")
         return
-    print(f"{draws} random N/B/K draws (set {fresh}), 2 h at 50 Hz")
+    print(f"{draws} random N/B/K draws (set {fresh}), 2 h at 50 Hz; fit median {np.median(t_fit):.2f} s, "
+          f"bounds of the left-out terms median {np.median(t_bound) if t_bound else 0:.2f} s per draw")
     for p in names:
         print(f"  {p}: found {found[p]}/{draws}, 95 % interval covers the truth in {inside[p]}/{draws} "
               f"({100 * inside[p] / draws:.0f} %); where its expected evidence lambda >= 9: found "
               f"{strong[p][1]}/{strong[p][0]}, covers {strong[p][2]}/{strong[p][0]}"
               + (f"; left out in {held[p][0]}, its 95 % upper bound above the truth in {held[p][1]} "
                  f"(the online report's rule: {held[p][2]})" if held[p][0] else ""))
+        dd, uu = det[p], undet[p]
+        print(f"     detectable (bands apart at some tau <= T/10) in {dd[0]}: found {dd[1]}/{dd[0]}, covers "
+              f"{dd[2]}/{dd[0]}; not detectable in {uu[0]}: found {uu[1]} (covers {uu[2]}), left out "
+              f"{uu[0] - uu[1]} (bound above the truth {uu[3]}/{uu[0] - uu[1]}); value covers or bound holds: "
+              f"{dd[2] + uu[2] + uu[3] + (held[p][1] - uu[3])}/{draws}")
     for x in missing[:30]:
         print("  missing:", x)
 

@@ -417,10 +417,29 @@ def _named(r):
     return [a["effect"] for a in r.added if a.get("form") != "rate_lsb"]
 
 
+#: runs of the workflow, and Gauss-Markov terms in their final models (added or kept) with tau_c < 3 tau0
+TAU_C_RULE = {"runs": 0, "gm_terms": 0, "below_3_tau0": 0}
+
+
 def _run(truth, model, seed):
     y = synthesize_axis(truth, F_RATE, F_N, np.random.default_rng(seed))
     r = run_gap(y, F_RATE, model, seed=seed, simulate=False)
+    TAU_C_RULE["runs"] += 1
+    for t in r.terms_after:
+        if t["effect"] == "gauss_markov":
+            TAU_C_RULE["gm_terms"] += 1
+            TAU_C_RULE["below_3_tau0"] += t["tau_c"] < 3.0 / F_RATE * (1 - 1e-9)
     return y, r, r.measured
+
+
+_LAP = [time.perf_counter()]
+
+
+def _lap() -> float:
+    """Wall seconds since the previous row (or tier start): each row of a table says what it cost."""
+    t = time.perf_counter()
+    dt, _LAP[0] = t - _LAP[0], t
+    return dt
 
 
 def _pct(k, n):
@@ -457,7 +476,8 @@ def single_tier(seeds, seed0=100_000):
             tot[j] += c[j]
         tot[4] += seeds
         w = ", ".join(f"{k} {v}" for k, v in sorted(wrong.items(), key=lambda kv: -kv[1])) or "-"
-        print(f"{effect:17} {_pct(c[0], seeds)} {_pct(c[1], seeds)} {_pct(c[2], seeds)} {_pct(c[3], seeds)}  {w}")
+        print(f"{effect:17} {_pct(c[0], seeds)} {_pct(c[1], seeds)} {_pct(c[2], seeds)} {_pct(c[3], seeds)}  {w}"
+              f"  [{_lap():.0f} s]", flush=True)
     print(f"{'all':17} {_pct(tot[0], tot[4])} {_pct(tot[1], tot[4])} {_pct(tot[2], tot[4])} {_pct(tot[3], tot[4])}")
 
 
@@ -509,7 +529,8 @@ def missized_tier(seeds, seed0=300_000):
             tot[j] += c[j]
         tot[3] += seeds
         w = ", ".join(f"{k} {v}" for k, v in sorted(wrong.items(), key=lambda kv: -kv[1])) or "-"
-        print(f"{effect:17} {_pct(c[0], seeds)} {_pct(c[1], seeds)} {_pct(c[2], seeds)}  {w}")
+        print(f"{effect:17} {_pct(c[0], seeds)} {_pct(c[1], seeds)} {_pct(c[2], seeds)}  {w}  [{_lap():.0f} s]",
+              flush=True)
     print(f"{'all':17} {_pct(tot[0], tot[3])} {_pct(tot[1], tot[3])} {_pct(tot[2], tot[3])}")
 
 
@@ -539,7 +560,7 @@ def two_effect_tier(seeds, seed0=400_000):
         tot[1] += c[1]
         tot[2] += seeds
         w = ", ".join(f"{k} {v}" for k, v in sorted(wrong.items(), key=lambda kv: -kv[1])) or "-"
-        print(f"{e1 + ' + ' + e2:30} {_pct(c[0], seeds)} {_pct(c[1], seeds)}  {w}")
+        print(f"{e1 + ' + ' + e2:30} {_pct(c[0], seeds)} {_pct(c[1], seeds)}  {w}  [{_lap():.0f} s]", flush=True)
     print(f"{'all':30} {_pct(tot[0], tot[2])} {_pct(tot[1], tot[2])}")
 
 
@@ -586,7 +607,7 @@ def hard_tier(draws, seed0=600_000, cases=None):
         tot[3] += draws
         w = ", ".join(f"{k} {v}" for k, v in sorted(wrong.items(), key=lambda kv: -kv[1])) or "-"
         print(f"{' + '.join(case):28} {_pct(c[0], draws)} {_pct(c[1], draws)} {_pct(c[2], draws)}  "
-              f"{np.median(g_after):6.2f}          {w}", flush=True)
+              f"{np.median(g_after):6.2f}          {w}  [{_lap():.0f} s]", flush=True)
     print(f"{'all':28} {_pct(tot[0], tot[3])} {_pct(tot[1], tot[3])} {_pct(tot[2], tot[3])}")
 
 
@@ -621,7 +642,7 @@ def ramp_rw_tier(draws, seed0=700_000):
         tot[0] += ok_n
         tot[1] += draws
         w = ", ".join(f"{k} {v}" for k, v in sorted(wrong.items(), key=lambda kv: -kv[1])) or "-"
-        print(f"{effect:14} {_pct(ok_n, draws)}  {', '.join(lrs) or '-'}  {w}", flush=True)
+        print(f"{effect:14} {_pct(ok_n, draws)}  {', '.join(lrs) or '-'}  {w}  [{_lap():.0f} s]", flush=True)
     print(f"{'all':14} {_pct(tot[0], tot[1])}")
 
 
@@ -688,6 +709,7 @@ def main():
     for name, fn in tiers.items():
         if a.only in (None, name):
             t = time.perf_counter()
+            _LAP[0] = t
             fn()
             print(f"[{name}: {time.perf_counter() - t:.0f} s]", flush=True)
     if a.legacy:
@@ -700,6 +722,8 @@ def main():
         ardupilot(max(2, a.seeds // 3))
         if not a.skip_real:
             real(Path(a.shared))
+    print(f"tau_c >= 3 tau0 rule: {TAU_C_RULE['gm_terms']} Gauss-Markov terms in the final models of "
+          f"{TAU_C_RULE['runs']} fresh-draw runs, {TAU_C_RULE['below_3_tau0']} with tau_c < 3 tau0")
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
 
 

@@ -169,8 +169,8 @@ def test_default_fit_copes_with_a_line_the_model_lacks(seed):
     model cannot describe: the short-tau levels, with thousands of degrees of freedom, disagree with the
     model. Without the model-error floor the fast fit matched them with N 1.20x, dropped B to 0 and made K
     2-2.8x; with it, N keeps only the part of the line's power that looks white (<= 15 %), B is within 30 %
-    (the spread of a flicker estimate over 2.8 h is ~10 % in ln B) and K within a factor 2 (truth from the
-    simulator)."""
+    (the spread of a flicker estimate over 2.8 h is ~10 % in ln B) and K within a factor 2, or, left out, a
+    bound above it (truth from the simulator)."""
     from companion.sim.synth import synthesize_axis
 
     N, B, K = 6.5e-4, 1.4e-4, 5e-6
@@ -182,4 +182,10 @@ def test_default_fit_copes_with_a_line_the_model_lacks(seed):
     t = {d["effect"]: d for d in est.terms()}
     assert 1.0 <= t["white_noise"]["N"] / N <= 1.15
     assert t["bias_instability"]["B"] == pytest.approx(B, rel=0.30)
-    assert 0.5 <= t["random_walk"]["K"] / K <= 2.0
+    k = t["random_walk"]
+    if k.get("bound"):
+        # left out, K's 95 % bound by test inversion holds; the line the model lacks enters the points'
+        # covariance as model error and widens it (3.8x and 4.3x the truth on seeds 0 and 1)
+        assert 1.0 <= k["K"] / K <= 10.0
+    else:
+        assert 0.5 <= k["K"] / K <= 2.0

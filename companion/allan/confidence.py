@@ -45,6 +45,8 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from companion.allan.memo import BoundedMemo
+
 #: power-law exponent alpha of the rate PSD (S_y ~ f^alpha) for the effects that are power laws
 ALPHA = {"quantization": 2, "white_noise": 0, "bias_instability": -1, "random_walk": -2}
 
@@ -136,9 +138,8 @@ def _tail(terms, m2: int, tau0: float) -> int:
 _MAGNITUDE = {"white_noise": "N", "bias_instability": "B", "random_walk": "K", "gauss_markov": "sigma",
               "sinusoid": "amplitude"}
 #: pair sums per (pair geometry, term shapes): a fit asks for the same ones many times (each iteration, each
-#: re-selection of the online report as the record grows); bounded, cleared when full
-_PAIR_FORMS: dict = {}
-_PAIR_FORMS_MAX = 8192
+#: re-selection of the online report as the record grows)
+_PAIR_FORMS = BoundedMemo(8192)
 
 
 def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div: int = 32):
@@ -164,15 +165,10 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
         shapes = tuple((t["effect"], t.get("filter_hz"), t.get("sample_hz"), t.get("tau_c"), t.get("freq_hz"))
                        for t in kern)
         key = (m1, m2, M1 - M2, lo, hi, tau0, step_div, shapes, bool(Q2))
-        forms = _PAIR_FORMS.get(key)
+        forms = _PAIR_FORMS.get(key, lambda: _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div,
+                                                          inside))
     else:
-        forms = None
-    if forms is None:
         forms = _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div, inside)
-        if key is not None:
-            if len(_PAIR_FORMS) >= _PAIR_FORMS_MAX:
-                _PAIR_FORMS.clear()
-            _PAIR_FORMS[key] = forms
     G0, Gf, h0, hf = forms
     mm = float(M1) if inside else 0.0
     return float(mm * (a @ G0 @ a) + a @ Gf @ a), float(mm * (h0 @ a) + hf @ a)

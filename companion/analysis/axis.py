@@ -69,10 +69,18 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     fit = fit_avar(tau_f[keep], avar_f[keep], edf0, effects=effects, n=n, rate_hz=rate_hz, m=m_fit[keep],
                    level=level, segments=lengths if pooled else None, white_filter=white_filter,
                    detect_filter=sampling if rate_hz >= FIT_MIN_RATE_HZ and keep.sum() >= 5 else None)
+    from companion.allan.fit import upper_bounds
     from companion.estimators.report import bounds_for_fit
 
-    # effects the fit left out (N, B, K): their 95 % upper bound, as the online report gives it (so offline and online reports compare)
-    bounds = bounds_for_fit(fit, tau_f[keep], avar_f[keep], np.maximum(edf0, 0.5), rate_hz, n)
+    # effects the fit left out (N, B, K): their 95 % upper bound by test inversion, the points' covariance
+    # evaluated at the bound (:func:`companion.allan.fit.upper_bounds`); the online report's cheaper rule
+    # (covariance at the fitted model, where the left-out term is 0) fell below the truth of a rate random walk
+    # left out of 2-h records in 9 of 17 draws against 1 of 17 (benchmarks/bench_fit.py draws)
+    bounds = upper_bounds(fit, tau_f[keep], avar_f[keep], n=n, rate_hz=rate_hz, m=m_fit[keep],
+                          segments=lengths if pooled else None)
+    have = {b["effect"] for b in bounds} | {t["effect"] for t in fit.terms}
+    bounds += [b for b in bounds_for_fit(fit, tau_f[keep], avar_f[keep], np.maximum(edf0, 0.5), rate_hz, n)
+               if b["effect"] not in have]
     m = parse_taus(taus, max(lengths), rate_hz) if isinstance(taus, str) else cluster_sizes(max(lengths), taus)
     tau, avar, m, _ = pooled_oavar(pieces, rate_hz, m=m)
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in fit.terms]

@@ -44,10 +44,9 @@ from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_ter
 from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_simulation, measure,
                                    measure_pooled, model_avar)
 from companion.gap._edf import local_slope, oavar_edf
-from companion.gap.filtered import synthesize_filtered_white
+from companion.gap.null import null_gap, null_text, resolved_subset, synthesize_model
 from companion.gap.spectral import line_evidence
 from companion.gap.thermal import regression_check, thermal_term
-from companion.sim.synth import synthesize_axis
 
 ALPHA = selection.ALPHA
 ALPHA_RECAL = selection.ALPHA_RECAL
@@ -91,6 +90,8 @@ class GapResult:
     #: analysis' rule, companion.allan.fit.RESOLVE_RECORD_FACTOR), when longer ones were measured
     gap_after_resolved: float | None = None
     resolved_tau_max: float | None = None
+    #: when a gap remains: G's spread for the model after on this record's layout (companion.gap.null)
+    gap_after_null: dict | None = None
 
     def to_dict(self) -> dict:
         m = self.measured
@@ -102,6 +103,7 @@ class GapResult:
             "noise_floor": NOISE_FLOOR_G,
             "gap_after_resolved": self.gap_after_resolved,
             "resolved_tau_max": self.resolved_tau_max,
+            "gap_after_null": self.gap_after_null,
             "gap_sim_before": self.gap_sim_before,
             "gap_sim_after": self.gap_sim_after,
             "sim_check_before": self.sim_check_before,
@@ -143,26 +145,7 @@ def _simulate(terms, meas: Measured, seed: int, t_series=None):
     n = min(meas.n, SIM_MAX_SAMPLES)
     if not terms:
         return None, None
-    rng = np.random.default_rng(seed)
-    # averaged samples (PX4 sensor_combined): a vibration line is averaged over each interval like the noise
-    # (a 112 Hz line at 248.6 Hz keeps 0.70 of its amplitude; point samples would keep all of it)
-    averaged = any(t.get("integrate") for t in terms)
-    plain = [t for t in terms if not t.get("cutoff_hz") and t["effect"] != "temperature"
-             and not (averaged and t["effect"] == "sinusoid")]
-    y = synthesize_axis(plain, meas.rate_hz, n, rng) if plain else np.zeros(n)
-    if averaged:
-        tk = np.arange(n) / meas.rate_hz
-        for t in terms:
-            if t["effect"] == "sinusoid":
-                w, ph = 2.0 * math.pi * t["freq_hz"], rng.uniform(0.0, 2.0 * math.pi)
-                y = y + t["amplitude"] * (np.sin(w * (tk + 1.0 / meas.rate_hz) + ph) - np.sin(w * tk + ph)) \
-                    / (w / meas.rate_hz)
-    for t in terms:
-        if t.get("cutoff_hz"):  # the autopilot's filter and decimation, simulated at 8x the log's rate
-            y = y + synthesize_filtered_white(t["N"], t["cutoff_hz"], meas.rate_hz, n, rng, int(t.get("order", 2)),
-                                              integrate=bool(t.get("integrate", False)))
-        if t["effect"] == "temperature" and t_series is not None and t_series.shape[0] >= n:
-            y = y + t["coef"] * t_series[:n]
+    y = synthesize_model(terms, meas.rate_hz, n, np.random.default_rng(seed), t_series)
     m = meas.m[meas.m <= n // 2]
     if m.shape[0] < meas.m.shape[0]:
         return None, None
@@ -290,6 +273,57 @@ def _hold_test(meas: Measured, base: Fit, held, i: int, t0) -> tuple:
     lr_raw = hf.dev - base.dev
     phi = lr_inflation(meas, hf, None, direction=[unit_column(terms[i], meas.tau, meas.rate_hz)])
     return lr_raw / phi, lr_raw, phi, hf
+
+
+def _added_level(term, y, rate_hz: float) -> float:
+    """The level an added effect passed: chi^2_k(1 - ALPHA) for k free parameters (a Gauss-Markov term's
+    tau_c and a sinusoid's searched frequency count), a sinusoid whose line the periodogram confirms at
+    that of a known frequency (chi^2_1(1 - ALPHA_RECAL), as when it was taken)."""
+    if term["effect"] == "sinusoid" and y is not None:
+        ev = line_evidence(y, rate_hz, term["freq_hz"], term["amplitude"])
+        if ev is not None and ev.get("confirmed"):
+            return selection.RECAL_PENALTY
+    return selection.add_penalty(2 if term["effect"] in SHAPE else 1)
+
+
+def _drop_unneeded(meas: Measured, base: Fit, held, n_model: int, alternatives: dict, y, rate_hz: float):
+    """Backward step for added effects, the counterpart of undoing a recalibration: each effect added at
+    one step is taken out with the rest refitted (magnitudes; shapes as they stand); when putting it back
+    no longer passes the level it passed when it was added (corrected LR, overdispersion under that null), the
+    weakest such effect is removed, and the test is repeated. A later addition can make an earlier one
+    unnecessary: a sinusoid first fitted at a frequency 7 % off, then a second at the periodogram's line,
+    left the first at a tenth of the amplitude. Returns (terms, held, alternatives, notes)."""
+    terms, held, notes = [dict(t) for t in base.terms], set(held), []
+    while True:
+        weakest, dev_all = None, fit_terms(meas, terms, sorted(held), intervals=False).dev
+        for i in range(n_model, len(terms)):
+            t = terms[i]
+            if i in held or t["effect"] not in MAGNITUDE or t[MAGNITUDE[t["effect"]]] <= 0:
+                continue
+            trial = [dict(x) for x in terms]
+            trial[i][MAGNITUDE[t["effect"]]] = 0.0
+            # the others' shapes as they stand (magnitudes free): re-optimised, a second sinusoid would move
+            # onto the first's frequency and either of two would look unneeded in turn
+            without = fit_terms(meas, trial, sorted(held | {i}), intervals=False)
+            phi = lr_inflation(meas, without, None, direction=[unit_column(t, meas.tau, meas.rate_hz)])
+            lr = (without.dev - dev_all) / phi
+            level = _added_level(t, y, rate_hz)
+            if lr <= level and (weakest is None or lr / level < weakest[0]):
+                weakest = (lr / level, i, lr, level, without)
+        if weakest is None:
+            return terms, held, alternatives, notes
+        _, i, lr, level, without = weakest
+        t = terms[i]
+        notes.append(f"{t['effect']} ({', '.join(f'{k} {v:.3g}' for k, v in _params(t).items())}), added at one "
+                     f"step, is no longer needed after a later one (putting it back: LR {lr:.1f} <= {level:.1f}): "
+                     "dropped")
+        keep = [j for j in range(len(terms)) if j != i]
+        index = {j: k for k, j in enumerate(keep)}
+        held = {index[j] for j in held if j != i}
+        alternatives = {index[j]: v for j, v in alternatives.items() if j != i}
+        terms = [dict(without.terms[j]) for j in keep]
+        shaped = [j for j in range(n_model, len(terms)) if terms[j]["effect"] in SHAPE and j not in held]
+        terms = refine_shapes(meas, terms, sorted(held), shaped).terms  # the state changed: shapes again
 
 
 def _params(term) -> dict:
@@ -443,6 +477,12 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             current = selection.refine_cutoff(meas, current, sorted(held), lp).terms
         base = _refit(meas, current, held, len(terms0))
 
+    # 5a. an effect that later steps made unnecessary is dropped (backward step, the level it passed)
+    current, held, alternatives, dropped = _drop_unneeded(meas, base, held, len(terms0), alternatives, y, rate_hz)
+    if dropped:
+        res.notes.extend(dropped)
+        base = _refit(meas, current, held, len(terms0))
+
     # 5. a recalibration that later additions made unnecessary is undone (backward step, same test)
     while True:
         weakest = None
@@ -591,10 +631,21 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             res.sim_avar_after, res.gap_sim_after, res.sim_check_after = _sim_checks(res.terms_after, meas,
                                                                                      seed + 1, t_series)
     _resolved_gap(res, meas, max(len(s_) for s_ in y_segs) / rate_hz)
-    if changed and res.gap_after > NOISE_FLOOR_G:
-        res.notes.append(f"a gap remains above the noise floor (G = {res.gap_after:.2f} > {NOISE_FLOOR_G}): "
-                         "the data hold something none of the seven effects describes well" + _strongest_left(res)
-                         + _resolved_text(res, meas))
+    resolved_over = res.gap_after_resolved is not None and res.gap_after_resolved > NOISE_FLOOR_G
+    if changed and (res.gap_after > NOISE_FLOOR_G or resolved_over):
+        # how often the model after, on a record like this one, leaves a gap as large (companion.gap.null)
+        res.gap_after_null = null_gap(res.terms_after, [len(s_) for s_ in y_segs], rate_hz, res.gap_after,
+                                      res.gap_after_resolved, res.resolved_tau_max, seed=seed + 7,
+                                      t_segs=t_smooth or None) if simulate else None
+        nl = null_text(res.gap_after_null, res.gap_after, res.gap_after_resolved) if res.gap_after_null else ""
+        if res.gap_after > NOISE_FLOOR_G:
+            res.notes.append(f"a gap remains above the noise floor (G = {res.gap_after:.2f} > {NOISE_FLOOR_G}): "
+                             "the data hold something none of the seven effects describes well"
+                             + _strongest_left(res) + _resolved_text(res, meas) + nl)
+        else:
+            res.notes.append(f"over the cluster times the record resolves (tau <= {res.resolved_tau_max:.3g} s, a "
+                             f"tenth of the record) G = {res.gap_after_resolved:.2f} > {NOISE_FLOOR_G}, although G "
+                             f"over all of them is {res.gap_after:.2f}" + nl)
     return res
 
 
@@ -606,11 +657,9 @@ def _resolved_gap(res: GapResult, meas: Measured, record_s: float) -> None:
     from companion.allan.fit import RESOLVE_RECORD_FACTOR
 
     tau_max = record_s / RESOLVE_RECORD_FACTOR
-    keep = meas.tau <= tau_max * (1.0 + 1e-9)
-    if keep.all() or np.count_nonzero(keep) < 3:
+    sub = resolved_subset(meas, tau_max)
+    if sub is None:
         return
-    sub = Measured(tau=meas.tau[keep], avar=meas.avar[keep], m=meas.m[keep], nu=meas.nu[keep],
-                   rate_hz=meas.rate_hz, n=meas.n, nu_raw=meas.nu_raw[keep])
     res.gap_after_resolved = gap_metric(sub, model_avar(res.terms_after, sub.tau, meas.rate_hz))
     res.resolved_tau_max = float(tau_max)
 

@@ -133,7 +133,9 @@ class Observation:
     * pairs of IMUs: ``y`` and ``other`` the aligned samples (m, 3) of this IMU and of ``other_imu``,
       ``noise_var`` the white variance expected of their difference, ``noise_other`` the other IMU's own;
     * ``vibration``: the same IMU's accelerometer second-difference variance over its still reference (three
-      axes pooled; nan before the reference or without an accelerometer): what the rest of the sensor sees.
+      axes pooled; nan before the reference or without an accelerometer): what the rest of the sensor sees;
+      ``accel_quiet``: that accelerometer's second differences all stayed within ``SPIKE_K`` of their still
+      scale in the block (False when unknown): no knock or jolt of the vehicle in it.
     """
 
     imu: int = 0
@@ -149,6 +151,7 @@ class Observation:
     noise_var: float | None = None
     noise_other: float | None = None
     vibration: float = math.nan
+    accel_quiet: bool = False
 
     @property
     def col(self) -> int:
@@ -225,6 +228,7 @@ def gauss_mean_llr(x: float, sigma: float, delta: float) -> float:
 # --------------------------------------------------------------------------------------------- block statistics
 SPIKE_K = 6.0  # outlier threshold in robust sigmas of the second differences (see spikes.py)
 LOCAL_MIN = 8  # second differences per quarter of a block before the quarter's own scale is used
+CARRY = 6  # samples of the previous block carried into a block's spike search (a spike's shape and isolation)
 #: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
 #: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
 DD_NU_PER_SAMPLE = 2.0 / (140.0 / 36.0)
@@ -259,10 +263,18 @@ class BlockStats:
     changes: np.ndarray
     step: np.ndarray
     temperature: float = math.nan  # the block's mean IMU temperature (degC) where the source has it
+    spike_size: np.ndarray | None = None  # sum over the spikes of ln(|dd| / bar) (spikes.py)
+    spike_size_solo: np.ndarray | None = None  # the same over ``spikes_solo``
 
 
-def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float = SPIKE_K) -> BlockStats:
-    """Per-axis statistics of a block ``y`` of shape (n, 3) (rad/s)."""
+def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float = SPIKE_K,
+                prev: np.ndarray | None = None) -> BlockStats:
+    """Per-axis statistics of a block ``y`` of shape (n, 3) (rad/s). ``prev``: the samples just before the
+    block (the previous block's last ``CARRY`` ones, contiguous in time), or None. A spike's second
+    difference is centred on its sample, so the block's own first and last samples are never a centre: with
+    ``prev`` the previous block's last sample and this block's first become centres here (each sample is a
+    centre in exactly one block), and the carried samples give the shape and isolation tests their context.
+    Only the spike search reads ``prev``; every other figure is the block's own."""
     y = np.asarray(y, dtype=float)
     n = y.shape[0]
     mean = y.mean(axis=0)
@@ -275,7 +287,14 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     step = np.where(changes > 0, np.min(np.where(dy > 0, dy, np.inf), axis=0, initial=np.inf), np.nan)
     if n < 5:
         z = np.zeros(y.shape[1])
-        return BlockStats(n, mean, rms, np.full(y.shape[1], np.nan), z, z, z, top, top_run, changes, step)
+        return BlockStats(n, mean, rms, np.full(y.shape[1], np.nan), z, z, z, top, top_run, changes, step,
+                          spike_size=z, spike_size_solo=z)
+    c0 = 0  # carried samples before the block
+    if prev is not None and dd_scale_ref is not None:
+        prev = np.asarray(prev, dtype=float)[-CARRY:]
+        if prev.ndim == 2 and prev.shape[1] == y.shape[1] and prev.shape[0] >= 3 and np.all(np.isfinite(prev)):
+            c0 = prev.shape[0]
+            y = np.concatenate([prev, y])
     dd = y[2:] - 2.0 * y[1:-1] + y[:-2]
     a = np.abs(dd)
     scale = np.median(a, axis=0) / 0.6745
@@ -294,22 +313,25 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     # q^2/12, so its second differences have sd >= q sqrt(6/12) whatever the reference says (a gyro quieter
     # than the int16 step sits on one code, then flips to the next one or two and back: noise, not spikes)
     code = math.sqrt(0.5) * np.where(np.isfinite(step), step, 0.0)
-    out = a > k * np.maximum(np.maximum(scale, local), code)
+    bar = np.maximum(np.maximum(scale, local), code)
+    out = a > k * bar
     # a spike is looked for against a bar it does not raise itself: in a short block (10 Hz: 8 second
     # differences) a quarter of two holds the spike's own -2A and A, so there, once the still reference
     # exists, the quarters are left out (LOCAL_MIN per quarter) and the isolation test below does their work
     # There the block's own smallest step is no floor when it is itself an outlier against the reference
     # (which holds the learned resolution, ImuFaults.dd_scale_ref): a gyro resting on one code whose only
     # change is the spike has the spike for its step.
-    if m >= 4 * LOCAL_MIN or dd_scale_ref is None:
-        cand = out
-    else:
+    short = not (m - c0 >= 4 * LOCAL_MIN or dd_scale_ref is None)
+    if short:
         ref = np.asarray(dd_scale_ref, dtype=float)
-        cand = a > k * np.maximum(scale, np.where((ref > 1e-9) & (code > k * ref), 0.0, code))
-    prev = np.vstack([np.zeros((1, a.shape[1])), a[:-1]])
+        bar = np.broadcast_to(np.maximum(scale, np.where((ref > 1e-9) & (code > k * ref), 0.0, code)), a.shape)
+        cand = a > k * bar
+    else:
+        cand = out
+    prev_a = np.vstack([np.zeros((1, a.shape[1])), a[:-1]])
     nxt = np.vstack([a[1:], np.zeros((1, a.shape[1]))])
-    peak = cand & (a >= prev) & (a > nxt)
-    if cand is not out:
+    peak = cand & (a >= prev_a) & (a > nxt)
+    if short:
         # without the quarters, only the whole shape of a spike inside the block counts: -2A flanked by A
         # and A of the other sign (a motion that starts at the block's end rises on one side only)
         pd = np.vstack([np.zeros((1, a.shape[1])), dd[:-1]])
@@ -317,34 +339,45 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
         half_p = (pd * dd < 0) & (np.abs(pd) > 0.25 * a) & (np.abs(pd) < 0.75 * a)
         half_n = (nd * dd < 0) & (np.abs(nd) > 0.25 * a) & (np.abs(nd) < 0.75 * a)
         shape = half_p & half_n
-        shape[0], shape[-1] = half_n[0], half_p[-1]  # at the block's edges the one flank inside it
+        shape[-1] = half_p[-1]  # at the block's end the one flank inside it
+        if c0 == 0:
+            shape[0] = half_n[0]
         peak &= shape
+    # the carried samples' own centres belong to the previous block (counted there): only context here
+    if c0 > 2:
+        peak[:c0 - 2] = False
     # isolated: nothing above half the peak 2-5 samples away (a spike is -2A flanked by A, then noise)
     for j, c in zip(*np.nonzero(peak)):
         around = np.concatenate([a[max(j - 5, 0):max(j - 1, 0), c], a[j + 2:j + 6, c]])
         if around.size and around.max() >= 0.5 * a[j, c]:
             peak[j, c] = False
-    if cand is not out:  # the spike's second differences (its -2A, the A either side) are not noise
+    if short:  # the spike's second differences (its -2A, the A either side) are not noise
         out = out | peak
         out[1:] |= peak[:-1]
         out[:-1] |= peak[1:]
     spikes = np.count_nonzero(peak, axis=0)
+    # the size of each spike in robust sigmas beyond the bar, ln(|dd| / (k bar)) >= 0 (spikes.py weighs it)
+    size = np.where(peak, np.log(np.maximum(a / np.maximum(k * bar, 1e-300), 1.0)), 0.0)
     near = peak.copy()
     near[1:] |= peak[:-1]
     near[:-1] |= peak[1:]
     others = near.sum(axis=1, keepdims=True) - near  # peaks of the other axes within +-1 sample
-    spikes_solo = np.count_nonzero(peak & (others == 0), axis=0)
+    solo = peak & (others == 0)
+    spikes_solo = np.count_nonzero(solo, axis=0)
     bad = out.copy()
     bad[1:] |= out[:-1]
     bad[:-1] |= out[1:]
-    keep = ~bad
     spike_sample = np.zeros(y.shape, dtype=bool)  # dd_j is centred on sample j + 1
     spike_sample[1:-1] = out
+    # back to the block's own samples and second differences
+    y, spike_sample = y[c0:], spike_sample[c0:]
+    dd, keep = dd[c0:], ~bad[c0:]
     clean = ~spike_sample
     mean = np.where(clean.any(axis=0), np.sum(np.where(clean, y, 0.0), axis=0) / np.maximum(clean.sum(axis=0), 1), mean)
     m2 = keep.sum(axis=0)
     v2 = np.where(m2 > 0, np.sum(np.where(keep, dd * dd, 0.0), axis=0) / np.maximum(m2, 1) / 6.0, np.nan)
-    return BlockStats(n, mean, rms, v2, m2.astype(float), spikes, spikes_solo, top, top_run, changes, step)
+    return BlockStats(n, mean, rms, v2, m2.astype(float), spikes, spikes_solo, top, top_run, changes, step,
+                      spike_size=size.sum(axis=0), spike_size_solo=np.where(solo, size, 0.0).sum(axis=0))
 
 
 def _longest_run(mask: np.ndarray) -> int:

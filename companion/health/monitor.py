@@ -15,8 +15,8 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.bias import BiasDetector
-from companion.health.faults import (AXES, FAULT, KIND_CODE, OK, PRIORITY, AxisRef, BlockStats, FaultDetector,
-                                     FaultEvent, Observation, fault_mask)
+from companion.health.faults import (AXES, FAULT, KIND_CODE, OK, PRIORITY, SPIKE_K, AxisRef, BlockStats,
+                                     FaultDetector, FaultEvent, Observation, fault_mask)
 from companion.health.limits import FaultLimits
 from companion.health.noise import NoiseDetector
 from companion.health.resolution import ResolutionDetector
@@ -76,6 +76,7 @@ class ImuFaults:
         self.quiet_blocks = 0
         self.accel_ref = math.nan  # pooled accel second-difference variance of still blocks ((m/s^2)^2)
         self._accel = [0.0, 0]  # its sum and block count while it is learned
+        self.accel_quiet = False  # the last block's accelerometer had no outlier against that reference
 
     # ------------------------------------------------------------------ inputs
     def dd_scale_ref(self) -> np.ndarray | None:
@@ -95,12 +96,17 @@ class ImuFaults:
         """The block's accelerometer second-difference variance (three axes pooled) over that of the first
         ``ref_blocks`` still blocks (learned meanwhile, like the gyro references): 1 while the vehicle
         vibrates as it did then, below 1 when the vibration fell (an engine stopped), nan when unknown."""
+        self.accel_quiet = False
         if accel is None or accel.shape[0] < 5:
             return math.nan
         dd = accel[2:] - 2.0 * accel[1:-1] + accel[:-2]
         v = float(np.mean(dd * dd)) * 3.0 / 6.0
         if not math.isfinite(v):
             return math.nan
+        if math.isfinite(self.accel_ref):
+            # per axis the second differences' variance is 6 / 3 of the pooled figure: a knock or a jolt of the
+            # vehicle shows there, a glitch of the gyro alone does not (spikes.py weighs a spike's size only then)
+            self.accel_quiet = bool(np.max(np.abs(dd)) <= SPIKE_K * math.sqrt(2.0 * self.accel_ref))
         if not math.isfinite(self.accel_ref):
             if still:
                 self._accel[0] += v
@@ -118,6 +124,7 @@ class ImuFaults:
         obs = self.observe(st, t, still)
         obs.y = y
         obs.vibration = self.vibration(accel, still)
+        obs.accel_quiet = self.accel_quiet
         ev = self.timing.update(obs)
         for ax, af in self.axes.items():
             o = obs.at(ax, af.ref)

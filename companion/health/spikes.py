@@ -10,7 +10,11 @@ sample kurtosis of a block is dominated by one value and has no usable tail). Po
 
     llr = c ln(lambda1 / lambda0) - (lambda1 - lambda0) n,    lambda1 = 1e-3 per sample (0.1 %)
 
-h = 12: three spikes close together flag it (0.2 % of samples at 100 Hz: about 15 s). Outside still
+h = 12: three spikes close together flag it (0.2 % of samples at 100 Hz: about 15 s). On a still block
+whose accelerometer stayed quiet a spike's size adds to its count (ALPHA0, ALPHA1 below): two spikes whose
+|dd| exceeds ~40 robust sigmas flag it (a 0.3 rad/s glitch on a still gyro is hundreds), one never does
+(at a 10 Hz log rate 0.2-1 % of the samples is a spike every 10-50 s: the third came up to two minutes
+after the fault). Outside still
 blocks only spikes on one axis alone count (a landing shock moves every axis at once), and they are
 weighed against the outlier rate of the vehicle's own motion, not the still one: flight vibration and
 handling knocks are heavy-tailed (0.04-1.9 % of 50 Hz samples beyond 6 robust sigmas in healthy copter
@@ -35,6 +39,16 @@ LAMBDA0_MOTION = 1e-2  # outliers per sample a moving vehicle may show (heavy-ta
 MOTION_RATIO = 5.0
 MOTION_HOLD = 5
 MOTION_TAU_BLOCKS = 60.0
+#: A still spike's size, u = ln(|dd| / bar) >= 0 (bar: SPIKE_K robust sigmas, faults.block_stats): healthy
+#: outliers beyond the bar are taken to fall off as z^-ALPHA0 (a Pareto tail: heavier than the copter flights'
+#: 2.4-3.6 measured on real logs, far heavier than Gaussian), a glitch's size spreads over decades up to full
+#: scale (z^-ALPHA1). The ratio of the two densities, ln(ALPHA1 / ALPHA0) + (ALPHA0 - ALPHA1) u, is added to
+#: the rate evidence where positive (u > 0.92: beyond 15 sigmas), only while the accelerometer stayed quiet
+#: (a knock or jolt of the vehicle moves both; a gyro glitch only the gyro), and a spike's whole evidence is
+#: at most SPIKE_LLR_MAX: two spikes are needed, one is never a fault.
+ALPHA0 = 2.0
+ALPHA1 = 0.5
+SPIKE_LLR_MAX = 0.6 * H_ON
 
 
 class SpikeDetector:
@@ -56,17 +70,22 @@ class SpikeDetector:
         moves every axis)."""
         st, j = obs.stats, obs.col
         count = int(st.spikes[j] if obs.still else st.spikes_solo[j])
-        changed = self._step(obs.ref, count, st.n, obs.still)
+        size = st.spike_size[j] if st.spike_size is not None else 0.0
+        changed = self._step(obs.ref, count, st.n, obs.still, float(size), obs.accel_quiet)
         return [obs.event(self.kind, self.state, self.value)] if changed else []
 
-    def _step(self, ref, count: int, n: int, still: bool = True) -> bool:
+    def _step(self, ref, count: int, n: int, still: bool = True, size: float = 0.0, quiet: bool = False) -> bool:
+        """``size``: the sum of the block's spike sizes u = ln(|dd| / bar), weighed on still blocks whose
+        accelerometer stayed ``quiet`` (ALPHA0, ALPHA1 above)."""
         if n <= 0:
             return False
         w = 1.0 / RATE_TAU_BLOCKS
         self.rate = (1 - w) * self.rate + w * count / n
         if still:
             lam0 = max(ref.spike_rate if ref.ready else 0.0, LAMBDA0_FLOOR)
-            llr = count * math.log(LAMBDA1 / lam0) - (LAMBDA1 - lam0) * n
+            per = math.log(LAMBDA1 / lam0)
+            extra = max((ALPHA0 - ALPHA1) * size + count * math.log(ALPHA1 / ALPHA0), 0.0) if quiet else 0.0
+            llr = min(count * per + extra, count * max(SPIKE_LLR_MAX, per)) - (LAMBDA1 - lam0) * n
         else:
             lam0 = max(self.motion_rate, LAMBDA0_MOTION)
             lam1 = MOTION_RATIO * lam0

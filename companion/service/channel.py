@@ -27,7 +27,7 @@ import numpy as np
 from companion.estimators import from_state_dict as estimator_from_state, make_estimator
 from companion.health.baseline import check_params, rounding_ceiling, supported_params
 from companion.health.detector import DEGRADING, LEARNING, HealthDetector, Transition
-from companion.health.faults import FAULT, OK, BlockStats, FaultEvent, block_stats
+from companion.health.faults import CARRY, FAULT, OK, BlockStats, FaultEvent, block_stats
 from companion.health.monitor import ImuFaults
 from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.service.baseline_match import units_mismatch
@@ -74,6 +74,7 @@ class Channel:
         self.still_run_s = 0.0
         self.last_stats: BlockStats | None = None  # of the last closed block (motion consensus between IMUs)
         self.recent: deque = deque(maxlen=3)  # (t, gyro) of the last closed blocks (IMU disagreement)
+        self._tail: np.ndarray | None = None  # (t, gyro) of the last block's last samples (the spike search)
         self._blocks = {"blocks_still": 0, "blocks_moving": 0, "blocks_fed": 0}
         self.current: dict[str, dict[str, tuple[float, float]]] = {}
         self.off_rate: list[float] = []  # block rates of the consecutive blocks off the stream's rate
@@ -127,6 +128,7 @@ class Channel:
         self.cutter.dts.clear()
         self.cutter.dts.extend(np.diff(np.asarray(t_block, dtype=float)).tolist())
         self.drop_lookahead()
+        self._tail = None
         self.off_rate = []
         self.rate_switches += 1
         if kept:
@@ -205,10 +207,19 @@ class Channel:
         self.restart_settling()
         self.next_check_t = None
         self.recent.clear()
+        self._tail = None
 
     # ------------------------------------------------------------------ blocks
     def stats(self, data: np.ndarray) -> BlockStats:
-        st = block_stats(data[:, 1:4], self.faults.dd_scale_ref())
+        # the previous block's last samples, when this block follows them (one sample period apart): the spike
+        # search sees a spike on either side of the junction (health/faults.py block_stats)
+        prev = None
+        if self._tail is not None and self.rate_hz:
+            gap = float(data[0, 0]) - float(self._tail[-1, 0])
+            if 0.0 < gap < 1.5 / self.rate_hz:
+                prev = self._tail[:, 1:4]
+        st = block_stats(data[:, 1:4], self.faults.dd_scale_ref(), prev=prev)
+        self._tail = data[-CARRY:, :4].copy()
         if data.shape[1] > TEMP_COLUMN:
             temp = data[:, TEMP_COLUMN]
             ok = np.isfinite(temp)

@@ -1,0 +1,31 @@
+"""A bounded memo of computed arrays: the fits ask for the same columns and covariance forms many times (each
+model-search step, each re-selection of the online report, each gap profile), and each costs far more than a
+lookup. Keys must be hashable; values are treated as read-only. When full, the memo forgets everything (the
+working set of one analysis is far below the bound, so a full memo means the inputs moved on)."""
+
+from __future__ import annotations
+
+from typing import Callable, Hashable
+
+
+class BoundedMemo:
+    """``memo.get(key, compute)``: the value remembered for ``key``, else ``compute()`` remembered."""
+
+    def __init__(self, maxsize: int):
+        self.maxsize = int(maxsize)
+        self._values: dict = {}
+
+    def get(self, key: Hashable, compute: Callable[[], object]):
+        value = self._values.get(key)
+        if value is None:
+            if len(self._values) >= self.maxsize:
+                self._values.clear()
+            value = compute()
+            self._values[key] = value
+        return value
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def clear(self) -> None:
+        self._values.clear()
