@@ -39,10 +39,11 @@ equivalent independent samples (both figures from the same still samples). The h
 from block to block: it jitters around the window's level by what successive still blocks' means showed
 beyond their samples' noise (a frozen value's split holds still), and a window's level far from where the
 still blocks before the run put it (their error at rest learned 1 and 16 blocks ahead) costs up to 3 nats
-(a value frozen at one sample of the noise sits about a sample's sd from the level it froze from). A gyro whose codes do not repeat (floats) has a third CUSUM:
-its variance collapse, counted while the same IMU's accelerometer vibrates at least half as much as at the
-reference (:meth:`StuckDetector._vibration_llr`): a parked plane's engine stop lowers both, a frozen gyro
-only its own.
+(a value frozen at one sample of the noise sits about a sample's sd from the level it froze from).
+
+A gyro whose codes do not repeat (floats) has a third CUSUM: its variance collapse, counted while the same
+IMU's accelerometer vibrates at least half as much as at the reference (:meth:`StuckDetector._vibration_llr`):
+a parked plane's engine stop lowers both, a frozen gyro only its own.
 
 Before a reference exists (the first seconds of still data) the PX4-like rule applies: ``equal_blocks``
 consecutive blocks of at least 50 samples with every value equal (no change at all).
@@ -225,7 +226,7 @@ class StuckDetector:
         self.out_n = 0
         self.spread = [0.0, 0, 0.0, 0]  # the still blocks' sample variance (times samples), samples, their second
         # differences' squares and count, while healthy
-        self.pend = [0, 0, 0.0, 0, 0.0, 0]  # out_k, out_n and spread of the current run of codes, kept once it ends healthy
+        self.pend = [0, 0, 0.0, 0, 0.0, 0]  # out_k, out_n, spread of the current run of codes (kept if it ends healthy)
         self.jitter = [0.0, 0.0, 0]  # successive still blocks: their means' squared differences, the share of
         self.jpend = [0.0, 0.0, 0]  # their within-block variance in it (LSB^2), pairs; and of the current run
         self.prev_level: tuple[float, float] | None = None  # the last still block's mean and variance of its mean
@@ -233,7 +234,8 @@ class StuckDetector:
         self.lpend: list[tuple[int, float]] = []  # the same of the current run
         self.lead_err = [0.0, 0, 0.0, 0]  # squared errors of the expected level 1 and PRIOR_LEAD blocks ahead, counts
         self.nblk = 0
-        self.run: list[tuple[int, np.ndarray, dict]] = []  # each block's codes (lowest, counts) since the two-code CUSUM stood at 0
+        # each block's codes (lowest, counts, its healthy likelihoods by pair) since the two-code CUSUM stood at 0
+        self.run: list[tuple[int, np.ndarray, dict]] = []
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
         self.vib = Cusum(H_ON, H_OFF)  # the variance collapse while the accelerometer's vibration did not fall
