@@ -270,7 +270,8 @@ def quantised_stuck_limit(sim, s_lsb, d_lsb, lsb, rate):
     both per sample and white. The Gaussian variance ratio of the other limits ((d^2 + 1/12) / s^2) is no
     bound there: a value frozen on a code boundary flips between two codes with a variance up to 1/4 LSB^2,
     as much as the healthy gyro's, and what tells them apart is only the healthy samples beyond those two
-    codes. Returns (limit s, where the value froze: its distance from the nearest boundary in LSB)."""
+    codes. Returns (limit s, where the value froze: its distance from the nearest boundary in LSB, and the limit
+    of an oracle that does not know the healthy level: the level closest to the frozen codes)."""
     from scipy.special import ndtr
 
     frozen = sim._frozen if sim._frozen is not None else (sim._blk_frozen or (0, math.nan))[1]
@@ -286,7 +287,15 @@ def quantised_stuck_limit(sim, s_lsb, d_lsb, lsb, rate):
     m = f > 1e-12
     kl = float(np.sum(f[m] * np.log(f[m] / np.maximum(healthy[m], 1e-300))))
     off = abs((v - math.floor(v)) - 0.5)
-    return (stuck.H_ON / (rate * kl) if kl > 0 else math.inf), f", {off:.2f} LSB from a code boundary"
+    # an oracle that knows the frozen value's codes but not the healthy level (the detector cannot know it: the
+    # value froze at one sample of the noise, about a sample's sd from the level, and the level wanders): the
+    # healthy level closest to the frozen codes
+    mu = v + np.arange(-1.5, 1.5 + 1e-9, 0.002)[:, None]
+    h_mu = ndtr((c[m] + 0.5 - mu) / s_lsb) - ndtr((c[m] - 0.5 - mu) / s_lsb)
+    kl_unk = float(np.min(np.sum(f[m] * np.log(f[m] / np.maximum(h_mu, 1e-300)), axis=1)))
+    unk = stuck.H_ON / (rate * kl_unk) if kl_unk > 0 else math.inf
+    return ((stuck.H_ON / (rate * kl) if kl > 0 else math.inf),
+            f", {off:.2f} LSB from a code boundary, {unk:.1f} s not knowing the level")
 
 
 def run_b2(seed, max_delay=3600.0):

@@ -247,3 +247,69 @@ def test_lowpassed_gyro_frozen_between_two_codes_is_stuck_and_the_healthy_one_is
     assert hits and 40 <= hits[0] <= 52, events  # 20 s of healthy spread beyond two codes, then 1-12 s
     assert [e for b, e in events if b < 40] == []
     assert detect(lowpassed_blocks(2, 120.0)) == []
+
+
+def test_level_jitter_learned_at_rest_matches_the_simulated_one():
+    # still blocks whose level moves by a normal jitter of sd tau from block to block around a fixed level, with
+    # 0.4 LSB of white noise on 50 rounded samples: the learned jitter is tau, what the samples' own noise
+    # moves a block's mean (0.07 LSB here) taken out
+    rng = np.random.default_rng(7)
+    for tau in (0.0, 0.12):
+        det = StuckDetector(LSB)
+        det.lsb = LSB
+        for _ in range(600):
+            level = 0.3 + rng.normal(0.0, tau)
+            det._learn_jitter(np.round(level + rng.normal(0.0, 0.4, 50)) * LSB)
+        det._end_run(commit=True)
+        assert det._jitter_lsb(1.0) == pytest.approx(tau, abs=0.03)
+
+
+def test_a_frozen_split_holds_still_while_a_healthy_level_moves_and_its_expected_level_counts_at_most_a_cap():
+    from companion.health import stuck
+
+    s, q1 = 0.43, math.erfc(1.0 / (0.43 * math.sqrt(2.0))) / 20
+    rng = np.random.default_rng(11)
+    det = StuckDetector(LSB)
+    # eight blocks of a value frozen 0.05 LSB off the boundary of codes 0 and 1 with a 0.12 LSB dither
+    det.run = [(0, np.bincount(np.round(0.55 + rng.normal(0.0, 0.12, 50)).astype(int), minlength=2).astype(float),
+                {}) for _ in range(8)]
+    plain = det._best_window(s, q1)
+    # a healthy level moving 0.08 LSB from block to block could not hold its split this still
+    assert det._best_window(s, q1, tau=0.08) > plain + 2.0
+    # an expected level far from any that fits: the healthy pays the cap, no more (a level may have stepped)
+    far = det._best_window(s, q1, prior=(6.0, 0.1))
+    assert far == pytest.approx(plain + stuck.PRIOR_CAP, abs=1e-6)
+    # an expected level where the split puts a healthy one: nearly nothing
+    assert det._best_window(s, q1, prior=(0.5, 0.3)) == pytest.approx(plain, abs=0.3)
+    # healthy blocks whose level moves by that jitter around the boundary, judged with it: evidence for healthy on
+    # average (about -1.7 nats for 8 blocks; the plain model gives -2.1 there: the best of the windows and
+    # levels is no likelihood ratio, which is what the threshold of 20 nats is for)
+    g = []
+    for _ in range(60):
+        det.run = []
+        for _ in range(8):
+            c = np.round(0.5 + rng.normal(0.0, 0.08) + rng.normal(0.0, s, 50)).astype(int)
+            det.run.append((int(c.min()), np.bincount(c - c.min()).astype(float), {}))
+        g.append(det._best_window(s, q1, tau=0.08, prior=(0.5, 0.15)))
+    assert np.mean(g) < -1.0
+
+
+def test_nearly_white_codes_count_as_independent_samples():
+    # 10 Hz blocks of white noise of 0.36 LSB rounded to the LSB (the plane's decimated codes at rest): every
+    # sample is an independent one; the share is read from the same still samples as their spread
+    rng = np.random.default_rng(2)
+    refs, dets = [AxisRef() for _ in AXES], [StuckDetector(LSB) for _ in AXES]
+    for _ in range(400):
+        y = np.round(0.2 + rng.normal(0.0, 0.36, (10, 3))) * LSB
+        scale = np.array([math.sqrt(6 * r.sigma2) for r in refs]) if all(r.ready for r in refs) else None
+        st = block_stats(y, scale)
+        for j, ax in enumerate(AXES):
+            dets[j].update(Observation(0, st, None, True, ax, refs[j], y=y))
+            if not refs[j].ready:
+                refs[j].add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n, 30)
+    for d in dets:
+        assert d.spread[1] > 3000
+        v_b = d.spread[0] / d.spread[1]
+        assert d._independent_share(refs[0]) == pytest.approx(1.0, abs=0.05)
+        # and the spread itself is the noise's (unbiased within a block of 10: 0.36^2 + 1/12 LSB^2 with rounding)
+        assert v_b / LSB**2 == pytest.approx(0.36**2 + 1 / 12, rel=0.06)

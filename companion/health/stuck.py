@@ -35,10 +35,15 @@ on the copter; the bias wander, less); in motion a live gyro spreads over many c
 
 The healthy noise comes from the samples' own spread at rest (a gyro low-passed well below its logged rate
 spreads its samples far beyond its sample-to-sample noise, the rover's 5 Hz at 50 Hz), over the block's
-equivalent independent samples. A gyro whose codes do not repeat (floats) has a third CUSUM:
-its variance collapse, counted while the same IMU's accelerometer vibrates at least half as much as at the
-reference (:meth:`StuckDetector._vibration_llr`): a parked plane's engine stop lowers both, a frozen gyro
-only its own.
+equivalent independent samples (both figures from the same still samples). The healthy level is not free
+from block to block: it jitters around the window's level by what successive still blocks' means showed
+beyond their samples' noise (a frozen value's split holds still), and a window's level far from where the
+still blocks before the run put it (their error at rest learned 1 and 16 blocks ahead) costs up to 3 nats
+(a value frozen at one sample of the noise sits about a sample's sd from the level it froze from).
+
+A gyro whose codes do not repeat (floats) has a third CUSUM: its variance collapse, counted while the same
+IMU's accelerometer vibrates at least half as much as at the reference (:meth:`StuckDetector._vibration_llr`):
+a parked plane's engine stop lowers both, a frozen gyro only its own.
 
 Before a reference exists (the first seconds of still data) the PX4-like rule applies: ``equal_blocks``
 consecutive blocks of at least 50 samples with every value equal (no change at all).
@@ -77,6 +82,11 @@ EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz)
 VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
 RUN_BLOCKS = 256  # blocks of a run of codes kept (the windows of its evidence end there)
 WINDOWS = tuple(range(1, 33)) + (48, 64, 96, 128, 192, 256, 1 << 30)  # the run's last blocks weighed
+LEVEL_STEP = 0.005  # LSB: the grid the healthy level is profiled on
+PRIOR_BLOCKS = 8  # still blocks before a run whose mean level is where a healthy level is expected
+PRIOR_LEAD = 16  # blocks: the second lead at which that expectation's error is learned
+PRIOR_CAP = 3.0  # nats: the most a healthy level away from the expected one is penalised (a level may step)
+JITTER_MIN = 30  # pairs of successive still blocks before the level's block-to-block jitter is used
 ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
 
 
@@ -132,11 +142,16 @@ def codes_glr(lo: int, counts: np.ndarray, s: float, q1: float) -> float:
 
 def _three_counts(counts: np.ndarray) -> tuple[float, float, float]:
     """(in code k, in code k + 1, beyond them) for the two adjacent codes holding the most samples."""
+    return _pair_counts(counts)[1:]
+
+
+def _pair_counts(counts: np.ndarray) -> tuple[int, float, float, float]:
+    """(k, in code k, in code k + 1, beyond them), k the index of the two adjacent codes holding the most."""
     if counts.shape[0] < 2:
-        return float(counts.sum()), 0.0, 0.0
+        return 0, float(counts.sum()), 0.0, 0.0
     j = int(np.argmax(counts[:-1] + counts[1:]))
     n_a, n_b = float(counts[j]), float(counts[j + 1])
-    return n_a, n_b, float(counts.sum()) - n_a - n_b
+    return j, n_a, n_b, float(counts.sum()) - n_a - n_b
 
 
 # the live pipeline loads no scipy (seconds of start-up, tens of MB on a small board): the normal CDF from
@@ -154,7 +169,7 @@ def _ndtr(x: np.ndarray) -> np.ndarray:
 def _level_logs(s: float) -> np.ndarray:
     """ln P_k, ln P_k+1 and ln of the rest for a healthy level on the grid of :func:`_glr` (3, levels): the
     noise is learned slowly, so the same few values recur (rounded to 0.001 LSB)."""
-    mu = np.arange(-1.0, 2.0 + 1e-9, 0.005)
+    mu = np.arange(-1.0, 2.0 + 1e-9, LEVEL_STEP)
     pa = _ndtr((0.5 - mu) / s) - _ndtr((-0.5 - mu) / s)
     pb = _ndtr((1.5 - mu) / s) - _ndtr((0.5 - mu) / s)
     logs = np.log(np.maximum(np.vstack([pa, pb, 1.0 - pa - pb]), 1e-300))
@@ -175,6 +190,29 @@ def _glr(n: np.ndarray, s: float, q1: float) -> np.ndarray:
     return np.where(n.sum(axis=1) > 0, frozen - healthy, 0.0)
 
 
+@functools.lru_cache(maxsize=64)
+def _jitter_kernel(tau: float) -> np.ndarray:
+    """A normal density of sd ``tau`` (LSB) on the level grid of :func:`_level_logs` (weights summing to 1)."""
+    h = max(1, int(math.ceil(4.0 * tau / LEVEL_STEP)))
+    x = np.arange(-h, h + 1) * LEVEL_STEP
+    w = np.exp(-0.5 * (x / tau) ** 2)
+    w = w / w.sum()
+    w.flags.writeable = False
+    return w
+
+
+def _block_level_logs(row: np.ndarray, s: float, f: float, tau: float) -> np.ndarray:
+    """ln of one block's likelihood (three counts ``row`` relative to a pair of codes) at each level of the grid
+    of :func:`_level_logs`, its samples worth ``f`` independent ones each, its level spread around the grid's
+    by a normal jitter of sd ``tau`` (LSB) of its own (a healthy level moves from block to block)."""
+    ll = f * (row @ _level_logs(round(s, 3)))
+    if tau <= 0.0:
+        return ll
+    top = float(ll.max())
+    conv = np.convolve(np.exp(ll - top), _jitter_kernel(round(tau, 3)), mode="same")
+    return np.log(np.maximum(conv, 1e-300)) + top
+
+
 class StuckDetector:
     """``coded_lsb``: the message's resolution (rad/s) for integer messages (RAW_IMU, SCALED_IMU*), None for
     float messages; it only decides how an axis reading exactly 0 is named."""
@@ -186,9 +224,18 @@ class StuckDetector:
         self.alive = False  # the axis changed codes in a moving block (a live gyro; its zeros at rest are resolution)
         self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
         self.out_n = 0
-        self.spread = [0.0, 0]  # the still blocks' sample variance (times samples) and samples, while healthy
-        self.pend = [0, 0, 0.0, 0]  # the same of the current run of codes, kept once it ends healthy
-        self.run: list[tuple[int, np.ndarray]] = []  # each block's codes (lowest, counts) since the two-code CUSUM stood at 0
+        self.spread = [0.0, 0, 0.0, 0]  # the still blocks' sample variance (times samples), samples, their second
+        # differences' squares and count, while healthy
+        self.pend = [0, 0, 0.0, 0, 0.0, 0]  # out_k, out_n, spread of the current run of codes (kept if it ends healthy)
+        self.jitter = [0.0, 0.0, 0]  # successive still blocks: their means' squared differences, the share of
+        self.jpend = [0.0, 0.0, 0]  # their within-block variance in it (LSB^2), pairs; and of the current run
+        self.prev_level: tuple[float, float] | None = None  # the last still block's mean and variance of its mean
+        self.recent: list[tuple[int, float]] = []  # (block number, mean level in LSB) of the last still blocks kept
+        self.lpend: list[tuple[int, float]] = []  # the same of the current run
+        self.lead_err = [0.0, 0, 0.0, 0]  # squared errors of the expected level 1 and PRIOR_LEAD blocks ahead, counts
+        self.nblk = 0
+        # each block's codes (lowest, counts, its healthy likelihoods by pair) since the two-code CUSUM stood at 0
+        self.run: list[tuple[int, np.ndarray, dict]] = []
         self.cusum = Cusum(H_ON, H_OFF)
         self.two = Cusum(H_ON, H_OFF)  # the spread over codes (two_code_llr)
         self.vib = Cusum(H_ON, H_OFF)  # the variance collapse while the accelerometer's vibration did not fall
@@ -324,8 +371,18 @@ class StuckDetector:
         if obs.still and self.state == OK and self.cusum.s == 0.0 and n >= 2:
             self.pend[0] += k
             self.pend[1] += n
-            self.pend[2] += float(np.var(y)) * n
+            self.pend[2] += float(np.var(y, ddof=1)) * n  # unbiased: 10 samples at 10 Hz gave 0.9 of it
             self.pend[3] += n
+            dd = np.diff(y, 2)
+            self.pend[4] += float(np.dot(dd, dd))
+            self.pend[5] += dd.shape[0]
+            self._learn_jitter(y)
+            self.lpend.append((self.nblk, float(np.mean(y)) / self.lsb))
+        else:
+            self.prev_level = None
+            if not obs.still:
+                self.recent = []  # moved: the level before is no expectation
+        self.nblk += 1
         if self.out_k < MIN_OUTSIDE or self.spread[1] == 0:
             self._end_run(commit=True)
             return None
@@ -338,7 +395,6 @@ class StuckDetector:
         # correlated block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that
         # changes from sample to sample).
         v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
-        v_dd = ref.sigma2 / (self.lsb * self.lsb)
         s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
         seen = self.out_k / self.out_n
         if s_b <= 0 or seen <= 0:
@@ -346,7 +402,7 @@ class StuckDetector:
             return 0.0  # a level resting on a boundary could give all of it: no evidence either way
         s_l = min(s_b, -1.0 / _STD_NORMAL.inv_cdf(0.5 * min(seen, 0.9)))
         q0 = min(math.erfc(1.0 / (s_l * math.sqrt(2.0))), 0.45)
-        f = min(1.0, v_dd / v_b) if v_b > 0 else 1.0
+        f = self._independent_share(ref)
         if self.two.state == FAULT:
             self._end_run(commit=False)
             return two_code_llr(k * f, n * f, q0)
@@ -354,31 +410,130 @@ class StuckDetector:
             self._end_run(commit=True)
             return -self.two.s - 1.0
         lo = int(c.min())
-        self.run.append((lo, np.bincount((c - lo).astype(np.int64)).astype(float)))
+        self.run.append((lo, np.bincount((c - lo).astype(np.int64)).astype(float), {}))
         del self.run[:-RUN_BLOCKS]
-        g = f * self._best_window(s_l, q0 / Q_RATIO)
+        g = self._best_window(s_l, q0 / Q_RATIO, f, self._jitter_lsb(f), self._level_prior())
         if g <= 0.0:
             self._end_run(commit=True)
             return -self.two.s - 1.0
         return g - self.two.s
 
-    def _best_window(self, s_l: float, q1: float) -> float:
-        """The largest :func:`codes_glr` of the run's last 1, 2, ..., 32, 48, 64, ... blocks and of all of it
-        (the change may have come inside the run: a frozen value's codes after healthy ones, or after one of
-        its own rare flips to the next code)."""
+    def _independent_share(self, ref) -> float:
+        """min(1, v_dd / v_b): the share of the still samples' spread that changes from one sample to the next,
+        each sample worth that many independent ones. Both from the same still samples (the reference's v2
+        leaves outliers out and comes from the first still blocks only: on the plane's nearly white 10 Hz
+        codes it was 0.79 of their spread, and a fifth of the evidence was lost)."""
+        v_b = self.spread[0] / self.spread[1] if self.spread[1] > 0 else 0.0
+        v_dd = self.spread[2] / self.spread[3] / 6.0 if self.spread[3] > 0 else ref.sigma2
+        return min(1.0, v_dd / v_b) if v_b > 0 else 1.0
+
+    def _learn_jitter(self, y: np.ndarray) -> None:
+        """One still block's level (mean, LSB) against the last one's: what moves a healthy level from block to
+        block beyond its samples' own noise. Differences are clipped at 1 LSB (a level step, a nudge the motion
+        gate missed, must not teach a wide jitter: too narrow a jitter only costs evidence)."""
+        m = float(np.mean(y)) / self.lsb
+        vm = float(np.var(y)) / (self.lsb * self.lsb) / y.shape[0]
+        if self.prev_level is not None:
+            d = m - self.prev_level[0]
+            self.jpend[0] += min(d * d, 1.0)
+            self.jpend[1] += vm + self.prev_level[1]
+            self.jpend[2] += 1
+        self.prev_level = (m, vm)
+
+    def _jitter_lsb(self, f: float) -> float:
+        """The sd (LSB) of a healthy level's own block-to-block jitter at rest: half the mean squared difference
+        of successive still blocks' means less what their samples' noise gives (over ``f`` independent samples
+        each); 0 until ``JITTER_MIN`` pairs were seen."""
+        d2, within, m = self.jitter
+        if m < JITTER_MIN or f <= 0:
+            return 0.0
+        return math.sqrt(max(0.0, (d2 - within / f) / (2.0 * m)))
+
+    def _level_prior(self) -> tuple[float, float] | None:
+        """Where a healthy level is expected (LSB) and the sd of that expectation for the current block: the mean
+        of the last ``PRIOR_BLOCKS`` still blocks kept before the run, its error as learned at rest 1 and
+        ``PRIOR_LEAD`` blocks ahead, linear in between and beyond (wander grows with the lead). None until
+        ``JITTER_MIN`` errors of each lead were seen, or while too few still blocks precede the run."""
+        e1, n1, e16, n16 = self.lead_err
+        if n1 < JITTER_MIN or n16 < JITTER_MIN or len(self.recent) < PRIOR_BLOCKS:
+            return None
+        last = self.recent[-PRIOR_BLOCKS:]
+        lead = max(1, self.nblk - last[-1][0])
+        v1, v16 = e1 / n1, e16 / n16
+        var = v1 + max(0.0, v16 - v1) * (lead - 1) / (PRIOR_LEAD - 1)
+        return sum(m for _, m in last) / PRIOR_BLOCKS, math.sqrt(max(var, 1e-6))
+
+    def _learn_prior(self, blocks: list) -> None:
+        """Still blocks kept (their run ended healthy): each block's level against the expectation from the
+        blocks before it, 1 and ``PRIOR_LEAD`` blocks earlier (errors clipped at 1 LSB: a step or a nudge must
+        not teach a wide expectation, which only costs evidence)."""
+        for i, m in blocks:
+            r = self.recent
+            if len(r) >= PRIOR_BLOCKS and i - r[-1][0] == 1:
+                e = m - sum(x for _, x in r[-PRIOR_BLOCKS:]) / PRIOR_BLOCKS
+                self.lead_err[0] += min(e * e, 1.0)
+                self.lead_err[1] += 1
+            k = PRIOR_BLOCKS + PRIOR_LEAD - 1
+            if len(r) >= k and i - r[-k][0] == k:
+                old = r[-k:-k + PRIOR_BLOCKS]
+                e = m - sum(x for _, x in old) / PRIOR_BLOCKS
+                self.lead_err[2] += min(e * e, 1.0)
+                self.lead_err[3] += 1
+            r.append((i, m))
+        del self.recent[:-(PRIOR_BLOCKS + PRIOR_LEAD)]
+
+    def _best_window(self, s_l: float, q1: float, f: float = 1.0, tau: float = 0.0,
+                     prior: tuple[float, float] | None = None) -> float:
+        """The largest evidence (:func:`codes_glr`, each sample worth ``f``) of the run's last 1, 2, ..., 32, 48,
+        64, ... blocks and of all of it (the change may have come inside the run: a frozen value's codes after
+        healthy ones, or after one of its own rare flips to the next code). Frozen: one split between the
+        window's two codes for all its blocks. Healthy: one level for the window, each block's own level
+        spread around it by the jitter ``tau`` (LSB) learned at rest: a frozen value's split holds still from
+        block to block, a healthy level's moves; and a window's healthy level away from where the still blocks
+        before the run put it (``prior``: level, sd) is penalised, by at most ``PRIOR_CAP`` nats: a value
+        frozen at one sample of the noise sits about one sample sd away from the level it froze from."""
         m = len(self.run)
         lo = min(b[0] for b in self.run)
         hi = max(b[0] + b[1].shape[0] for b in self.run)
         if hi - lo > MAX_CODES:
             return -1.0
         cnt = np.zeros(hi - lo)
-        rows, k = [], 0
-        for i, (b_lo, b_cnt) in enumerate(reversed(self.run)):
+        wins, k = [], 0
+        for i, (b_lo, b_cnt, _) in enumerate(reversed(self.run)):
             cnt[b_lo - lo:b_lo - lo + b_cnt.shape[0]] += b_cnt
             if i + 1 == WINDOWS[k] or i + 1 == m:
                 k += i + 1 == WINDOWS[k]
-                rows.append(_three_counts(cnt))
-        return float(np.max(_glr(np.asarray(rows), s_l, q1)))
+                j, n_a, n_b, n_o = _pair_counts(cnt)
+                wins.append((i + 1, lo + j, n_a, n_b, n_o))
+        best = -math.inf
+        key = (round(s_l, 3), round(f, 3), round(tau, 3))
+        for pair in {w[1] for w in wins}:
+            healthy = np.cumsum(np.vstack([self._block_logs(b, pair, key) for b in reversed(self.run)]), axis=0)
+            if prior is not None:
+                lev = pair - 1.0 + np.arange(healthy.shape[1]) * LEVEL_STEP
+                healthy = healthy - np.minimum(0.5 * ((lev - prior[0]) / prior[1]) ** 2, PRIOR_CAP)
+            for w, p_code, n_a, n_b, n_o in wins:
+                if p_code != pair:
+                    continue
+                n2 = n_a + n_b
+                frozen = n_o * math.log(q1) + n2 * math.log(1.0 - q1)
+                frozen += sum(x * math.log(x / n2) for x in (n_a, n_b) if x > 0)
+                best = max(best, f * frozen - float(healthy[w - 1].max()))
+        return best
+
+    @staticmethod
+    def _block_logs(block: tuple, pair: int, key: tuple) -> np.ndarray:
+        """:func:`_block_level_logs` of one block of the run relative to the codes ``pair``, ``pair`` + 1 (kept
+        with the block: only the newest block's are new at each step)."""
+        b_lo, b_cnt, memo = block
+        got = memo.get((pair, key))
+        if got is None:
+            i = pair - b_lo
+            n_a = float(b_cnt[i]) if 0 <= i < b_cnt.shape[0] else 0.0
+            n_b = float(b_cnt[i + 1]) if 0 <= i + 1 < b_cnt.shape[0] else 0.0
+            row = np.array([n_a, n_b, float(b_cnt.sum()) - n_a - n_b])
+            got = memo[(pair, key)] = _block_level_logs(row, key[0], key[1], key[2])
+        return got
 
     def _end_run(self, commit: bool) -> None:
         """The run of codes ends: what it taught at rest is kept if it ended healthy (``commit``)."""
@@ -387,7 +542,13 @@ class StuckDetector:
             self.out_n += int(self.pend[1])
             self.spread[0] += self.pend[2]
             self.spread[1] += int(self.pend[3])
-        self.pend = [0, 0, 0.0, 0]
+            self.spread[2] += self.pend[4]
+            self.spread[3] += int(self.pend[5])
+            self.jitter = [a + b for a, b in zip(self.jitter, self.jpend)]
+            self._learn_prior(self.lpend)
+        self.pend = [0, 0, 0.0, 0, 0.0, 0]
+        self.jpend = [0.0, 0.0, 0]
+        self.lpend = []
         self.run = []
 
     def state_dict(self) -> dict:
@@ -396,7 +557,9 @@ class StuckDetector:
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
                 "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n],
                 "spread": self.spread, "pend": self.pend,
-                "run": [[lo, c.tolist()] for lo, c in self.run]}
+                "jitter": self.jitter, "jpend": self.jpend, "recent": self.recent, "lpend": self.lpend,
+                "lead_err": self.lead_err, "nblk": self.nblk,
+                "run": [[lo, c.tolist()] for lo, c, _ in self.run]}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.cusum.load_state_dict(d.get("cusum", {}))
@@ -409,8 +572,17 @@ class StuckDetector:
         self.detail = str(d.get("detail", ""))
         self.alive = bool(d.get("alive", False))
         self.out_k, self.out_n = (int(v) for v in (d.get("out") or [0, 0]))
-        sp = d.get("spread") or [0.0, 0]
-        self.spread = [float(sp[0]), int(sp[1])]
-        pd = d.get("pend") or [0, 0, 0.0, 0]
-        self.pend = [int(pd[0]), int(pd[1]), float(pd[2]), int(pd[3])]
-        self.run = [(int(lo), np.asarray(c, dtype=float)) for lo, c in (d.get("run") or [])]
+        sp = list(d.get("spread") or []) + [0.0, 0, 0.0, 0][len(d.get("spread") or []):]
+        self.spread = [float(sp[0]), int(sp[1]), float(sp[2]), int(sp[3])]
+        pd = list(d.get("pend") or []) + [0, 0, 0.0, 0, 0.0, 0][len(d.get("pend") or []):]
+        self.pend = [int(pd[0]), int(pd[1]), float(pd[2]), int(pd[3]), float(pd[4]), int(pd[5])]
+        self.run = [(int(lo), np.asarray(c, dtype=float), {}) for lo, c in (d.get("run") or [])]
+        jt, jp = d.get("jitter") or [0.0, 0.0, 0], d.get("jpend") or [0.0, 0.0, 0]
+        self.jitter = [float(jt[0]), float(jt[1]), int(jt[2])]
+        self.jpend = [float(jp[0]), float(jp[1]), int(jp[2])]
+        self.prev_level = None
+        self.recent = [(int(i), float(m)) for i, m in (d.get("recent") or [])]
+        self.lpend = [(int(i), float(m)) for i, m in (d.get("lpend") or [])]
+        le = d.get("lead_err") or [0.0, 0, 0.0, 0]
+        self.lead_err = [float(le[0]), int(le[1]), float(le[2]), int(le[3])]
+        self.nblk = int(d.get("nblk", 0))
