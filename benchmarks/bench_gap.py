@@ -534,12 +534,14 @@ def missized_tier(seeds, seed0=300_000):
     print(f"{'all':17} {_pct(tot[0], tot[3])} {_pct(tot[1], tot[3])} {_pct(tot[2], tot[3])}")
 
 
-def two_effect_tier(seeds, seed0=400_000):
+def two_effect_tier(seeds, seed0=400_000, only=None):
     pairs = [(a, b) for i, a in enumerate(ADDED) for b in ADDED[i + 1:]]
     print(f"\n== two hidden effects at once, exact model, {seeds} draws per pair ==")
     print(f"{'pair':30} {'both named':>15} {'oracle both':>15}  named instead (counts)")
     tot = [0, 0, 0]
     for p_i, (e1, e2) in enumerate(pairs):
+        if only is not None and p_i not in only:
+            continue
         c = [0, 0]
         wrong: dict[str, int] = {}
         for s in range(seeds):
@@ -681,6 +683,8 @@ def main():
                     "drawn from the OS entropy (printed, so a run can be repeated), not at the fixed defaults")
     ap.add_argument("--offset", type=int, help="the seed offset / 10^6 of an earlier --fresh run, to repeat it")
     ap.add_argument("--hard-draws", type=int, default=10, help="draws per case of the hard tier (default 10)")
+    ap.add_argument("--two-pairs", help="comma-separated indices of the two-effect tier's pairs to run (0 "
+                    "quantization + ramp, ... 2 quantization + sinusoid, ... 5 gauss_markov + sinusoid; default all)")
     ap.add_argument("--hard-cases", help="comma-separated indices of HARD_CASES to run (default all; to run "
                     "the cases in parallel processes)")
     ap.add_argument("--legacy", action="store_true", help="also the fixed-case tables of the earlier versions "
@@ -701,7 +705,8 @@ def main():
         print(f"fresh draws: every tier's seeds offset by {off} (repeat with the same offset to reproduce)")
     tiers = {"single": lambda: single_tier(a.seeds, 100_000 + off), "null": lambda: null_fresh(null_seeds, 200_000 + off),
              "missized": lambda: missized_tier(a.seeds, 300_000 + off),
-             "two": lambda: two_effect_tier(max(2, a.seeds // 2), 400_000 + off),
+             "two": lambda: two_effect_tier(max(2, a.seeds // 2), 400_000 + off,
+                                            None if not a.two_pairs else {int(x) for x in a.two_pairs.split(",")}),
              "issue": lambda: issue_ramp_family(a.seeds, 500_000 + off),
              "hard": lambda: hard_tier(a.hard_draws, 600_000 + off,
                                        None if not a.hard_cases else {int(x) for x in a.hard_cases.split(",")}),

@@ -48,3 +48,43 @@ def test_a_filter_roll_off_is_not_a_line():
 def test_too_short_a_record_gives_no_verdict():
     assert line_evidence(np.zeros(100), RATE, 0.05, 1e-3) is None
     assert line_evidence(np.ones(10_000), RATE, 15.0, 1e-3) is None  # above Nyquist
+
+
+def test_a_line_the_periodogram_would_show_is_ruled_out_when_absent():
+    """Noise alone, a line of the hypothesised amplitude (its half would stand ~10x above the level in one
+    bin): ruled out at every frequency, up to near the Nyquist frequency (where angle quantisation's rise
+    sits); the same line really there is confirmed and never ruled out."""
+    rate, n = 50.0, 50_000
+    t = np.arange(n) / rate
+    for freq_hz in (0.5, 8.8, 22.3):
+        out, kept = 0, 0
+        for seed in range(8):
+            rng = np.random.default_rng(300 + seed)
+            y = rng.normal(0.0, 1.0, n)
+            out += line_evidence(y, rate, freq_hz, 0.5)["ruled_out"]
+            f = freq_hz * rng.uniform(0.95, 1.05)
+            ev = line_evidence(y + 0.5 * np.sin(2 * np.pi * f * t + rng.uniform(0, 6.3)), rate, freq_hz, 0.5)
+            kept += ev["confirmed"] and not ev["ruled_out"]
+        assert out == 8 and kept == 8, freq_hz
+
+
+def test_no_verdict_against_a_line_without_the_resolution():
+    """A slow line in a short record (one Welch segment at 0.1 Hz): the periodogram has little power
+    against it, so its absence rules nothing out (the Allan curve alone decides there)."""
+    rng = np.random.default_rng(5)
+    ev = line_evidence(rng.normal(0.0, 1.0, 5_000), RATE, 0.1, 0.15)
+    assert ev["power"] < 0.5 and not ev["ruled_out"]
+    ev = line_evidence(rng.normal(0.0, 1.0, 50_000), RATE, 0.1, 0.15)  # ten times as long: 23 segments
+    assert ev["power"] > 0.999 and ev["ruled_out"]
+
+
+def test_no_false_line_near_the_nyquist_frequency():
+    """Near the Nyquist frequency the background fit must not take the (halved) Nyquist bin: noise alone
+    gave a 'significant' peak at 22.3 Hz of 50 Hz data in most records."""
+    rate = 50.0
+    sig = 0
+    for seed in range(20):
+        y = np.random.default_rng(400 + seed).normal(0.0, 1.0, 20_000)
+        ev = line_evidence(y, rate, 22.3, 0.05)
+        sig += ev["peak_ratio"] > ev["threshold"]
+    assert sig <= 2

@@ -385,17 +385,24 @@ def runner_up(ranked, chosen: Explanation):
 
 
 def choose(meas: Measured, state: Fit, held, recalibratable, combine_top: int | None = None, shaped=(),
-           lowpass=None, thermal=None, detrended=None) -> dict:
+           lowpass=None, thermal=None, detrended=None, veto=None) -> dict:
     """One step: rank all explanations, apply the nested rule, return
     {ranked, chosen (Explanation or None), best (top of the ranking, chosen or not), nested, alternative
     (Gauss-Markov fit the limit won over), runner_up, trend}. ``detrended``: a callable giving the Allan
     variance of the record with its least-squares line taken out (:mod:`companion.gap.trend`), the
     indices of the terms that are no model term and stay fixed (a rate-LSB white term) and the segments'
     lengths (s): when a ramp and a random walk both pass their level, whichever leads, the detrended record
-    decides between them (``trend``: that test's record)."""
+    decides between them (``trend``: that test's record). ``veto``: a callable that returns a reason (str)
+    for an explanation the record's own time series rules out (a sinusoid whose line the periodogram
+    would show and does not), or None; vetoed ones leave the ranking (``vetoed``: (explanation, reason))."""
     ranked = explanations(meas, state, held, recalibratable, combine_top, shaped, lowpass, thermal)
+    vetoed = []
+    if veto is not None:
+        reasons = [veto(x) for x in ranked]
+        vetoed = [(x, r) for x, r in zip(ranked, reasons) if r]
+        ranked = [x for x, r in zip(ranked, reasons) if not r]
     out = {"ranked": ranked, "chosen": None, "best": ranked[0] if ranked else None, "nested": None,
-           "alternative": None, "runner_up": None, "trend": None}
+           "alternative": None, "runner_up": None, "trend": None, "vetoed": vetoed}
     if not ranked:
         return out
     def resolve(best):

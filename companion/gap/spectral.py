@@ -17,6 +17,14 @@ curve alone is checked against the data's power spectral density.
 
 The line is *confirmed* when the peak is significant and A_spec >= 0.5 A, i.e. the periodogram holds at
 least a quarter of the power that the Allan fit gave the sinusoid.
+
+The line is *ruled out* when the peak is not significant although the periodogram had the resolution to
+show it: a line of 0.5 A (a quarter of the fitted power) anywhere in the band would make the peak
+significant with probability >= 1 - 1e-3 (``power``). A Hann-windowed line of amplitude a adds
+(a^2/2) / (1.5 df) to its bin, x0.72 at the worst placement between two bins (scalloping, 1.42 dB); the
+Welch average is then level x noncentral chi^2_nu(lambda) / nu with lambda = nu x that excess / level.
+A short record (few segments at the line's frequency) has little power and rules nothing out: an
+unconfirmed line there still stands on the Allan curve alone.
 """
 
 from __future__ import annotations
@@ -32,13 +40,16 @@ REL_BAND = 0.10
 #: the share of the Allan-fitted amplitude the periodogram must hold (0.5 in amplitude = 25 % in power)
 MIN_AMPLITUDE_SHARE = 0.5
 ALPHA = 1e-3
+#: Hann window: equivalent noise bandwidth in bins, and the worst-case power loss between two bins
+HANN_ENBW = 1.5
+HANN_SCALLOP = 10 ** (-1.42 / 10)
 
 
 def line_evidence(y, rate_hz: float, freq_hz: float, amplitude: float) -> dict | None:
     """Periodogram evidence for a sinusoid of ``amplitude`` at ``freq_hz`` in rate samples ``y``.
 
-    Returns {f_peak, peak_ratio, threshold, amplitude_psd, confirmed, segments} or None when the record
-    is too short to resolve the band (fewer than 4 background bins)."""
+    Returns {f_peak, peak_ratio, threshold, amplitude_psd, confirmed, power, ruled_out, segments} or None
+    when the record is too short to resolve the band (fewer than 4 background bins)."""
     y = np.asarray(y, dtype=float)
     n = y.shape[0]
     if n < 256 or not (0 < freq_hz < rate_hz / 2):
@@ -49,19 +60,28 @@ def line_evidence(y, rate_hz: float, freq_hz: float, amplitude: float) -> dict |
     df = f[1]
     segments = max(1, 2 * n // seg - 1)
     band = (f >= freq_hz * (1 - REL_BAND) - df) & (f <= freq_hz * (1 + REL_BAND) + df) & (f > 0)
-    outer = (f >= freq_hz / 2) & (f <= min(2 * freq_hz, rate_hz / 2)) & ~band & (f > 0) & (P > 0)
+    # the Nyquist bin is not doubled in a one-sided estimate (half the level): kept out of the background fit
+    outer = (f >= freq_hz / 2) & (f <= 2 * freq_hz) & (f < rate_hz / 2) & ~band & (f > 0) & (P > 0)
     if band.sum() == 0 or outer.sum() < 4:
         return None
     lf, lp = np.log(f[outer]), np.log(P[outer])
     coef = np.polyfit(lf, lp, 2)
     coef[-1] += float(np.median(lp - np.polyval(coef, lf)))  # median residual: robust to a neighbouring peak
-    level = np.exp(np.polyval(coef, np.log(np.where(f > 0, f, df))))
-    k = int(np.argmax(np.where(band, P / level, -np.inf)))
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # only the band's bins are used; the
+        # parabola extrapolated far from [f0/2, 2 f0] may overflow or underflow there
+        level = np.exp(np.polyval(coef, np.log(np.where(f > 0, f, df))))
+        k = int(np.argmax(np.where(band, P / level, -np.inf)))
     peak_ratio = float(P[k] / level[k])
     nu = 1.8 * segments
     threshold = float(stats.chi2.isf(ALPHA / band.sum(), nu) / nu)
     excess = float(np.sum(np.maximum(P[band] - level[band], 0.0)) * df)
     amp_psd = math.sqrt(2.0 * excess)
+    significant = peak_ratio > threshold
+    # power against a line carrying a quarter of the fitted power, at the band's highest local level
+    line_bin = HANN_SCALLOP * (MIN_AMPLITUDE_SHARE * amplitude) ** 2 / 2.0 / (HANN_ENBW * df)
+    lam = nu * line_bin / float(np.max(level[band]))
+    power = float(stats.ncx2.sf(threshold * nu, nu, lam))
     return {"f_peak": float(f[k]), "peak_ratio": peak_ratio, "threshold": threshold, "amplitude_psd": amp_psd,
-            "confirmed": bool(peak_ratio > threshold and amp_psd >= MIN_AMPLITUDE_SHARE * amplitude),
+            "confirmed": bool(significant and amp_psd >= MIN_AMPLITUDE_SHARE * amplitude),
+            "power": power, "ruled_out": bool(not significant and power >= 1.0 - ALPHA),
             "segments": segments}

@@ -22,7 +22,9 @@
 6. Noise floor: the model fits within the noise when the gap metric G <= NOISE_FLOOR_G = 2 (G is 1 on
    average for a right model; the null benchmark gives its spread) and nothing is added or recalibrated.
    An added sinusoid is checked against the periodogram (:func:`companion.gap.spectral.line_evidence`):
-   the explanation says whether a line carrying its power is there or the Allan bump is some broader shape.
+   the explanation says whether a line carrying its power is there or the Allan bump is some broader shape;
+   a sinusoid explanation whose line the periodogram rules out (no peak where it had the power to show one)
+   leaves the ranking at every step (:func:`_line_veto`).
 7. Known LSB (rate rounding, e.g. int16 mrad/s RAW_IMU): a white term N_q = LSB sqrt(tau0/12) with no free
    parameter is added first when it lowers the deviance of the unrecalibrated model by more than
    chi^2_1(1 - ALPHA); see :mod:`companion.allan.lsb`.
@@ -220,6 +222,33 @@ def _spectral_line(ranked, y, rate_hz):
     return None, ""
 
 
+def _line_veto(y, rate_hz: float):
+    """A veto for :func:`companion.gap.selection.choose`: a sinusoid explanation whose line the periodogram
+    rules out (no significant peak in its band, where a line of half its amplitude would show with
+    probability >= 1 - 1e-3: :func:`companion.gap.spectral.line_evidence`). Its Allan bump is then some
+    other shape: near the Nyquist frequency a line's bump sits on the shortest cluster times, as angle
+    quantisation's rise does, and without the veto the line took it. Where the periodogram lacks the
+    resolution (a slow line in a short record) the sinusoid stays in the running on the Allan curve alone.
+    Returns veto(explanation) -> reason or None."""
+    cache: dict = {}
+
+    def veto(x):
+        if x.effect != "sinusoid" or x.delta_dev <= 0 or y is None:
+            return None
+        t = x.added_term()
+        key = (round(math.log(t["freq_hz"]), 6), round(math.log(max(t["amplitude"], 1e-300)), 6))
+        if key not in cache:
+            cache[key] = line_evidence(y, rate_hz, t["freq_hz"], t["amplitude"])
+        ev = cache[key]
+        if ev is None or not ev["ruled_out"]:
+            return None
+        return (f"a sinusoid at {t['freq_hz']:.4g} Hz (amplitude {t['amplitude']:.3g}, score {x.score:.1f} on the "
+                f"Allan curve) is ruled out by the periodogram: peak {ev['peak_ratio']:.3g}x the local level against "
+                f"{ev['threshold']:.3g} needed, where a line of half that amplitude would show with probability "
+                f"{ev['power']:.4f}")
+    return veto
+
+
 #: drift-like effects a temperature-driven rate is a look-alike of on the Allan curve
 _DRIFTS = ("ramp", "random_walk", "gauss_markov", "sinusoid", "bias_instability")
 
@@ -412,12 +441,15 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
             cache["meas"] = trend.detrended_measure(y_segs, rate_hz)
         return cache["meas"], sorted(fixed), [len(s) / rate_hz for s in y_segs]
     alternatives: dict[int, dict] = {}  # index of a term -> the Gauss-Markov fit it won over
+    veto = _line_veto(y, rate_hz)
     for it in range(max_iter):
         recalibratable = [j for j in range(len(terms0)) if j in held]
         shaped = [i for i in range(len(terms0), len(current)) if current[i]["effect"] in SHAPE and i not in held]
         step = selection.choose(meas, base, sorted(held), recalibratable, shaped=shaped, lowpass=lp, thermal=thermal,
-                                detrended=detrended)
+                                detrended=detrended, veto=veto)
         ranked, chosen, top, ru = step["ranked"], step["chosen"], step["best"], step["runner_up"]
+        if step["vetoed"] and step["vetoed"][0][0].score > max(0.0, ranked[0].score if ranked else 0.0):
+            res.notes.append(step["vetoed"][0][1] + "; the next explanation is weighed instead")
         if chosen is None:  # a vibration line the periodogram shows is a known frequency, not a searched one
             chosen, note = _spectral_line(ranked, y, rate_hz)
             if note:
@@ -436,6 +468,9 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                   "explanations": [x.as_dict(terms0) for x in ranked[:8]],
                   "threshold": {k: selection.add_penalty(k) for k in (1, 2)},
                   "recal_threshold": selection.RECAL_PENALTY}
+        if step["vetoed"]:
+            record["vetoed"] = [{"explanation": x.label(terms0), "score": x.score, "reason": r}
+                                for x, r in step["vetoed"][:4]]
         if step["nested"]:
             record["nested"] = step["nested"]
         if step["trend"]:
@@ -510,7 +545,7 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         value = lr_raw - phi * selection.RECAL_PENALTY
         shaped = [i for i in range(len(terms0), len(hf.terms)) if hf.terms[i]["effect"] in SHAPE and i not in held]
         step = selection.choose(meas, hf, sorted(held | {j}), [], shaped=shaped, lowpass=lp, thermal=thermal,
-                                detrended=detrended)
+                                detrended=detrended, veto=veto)
         x = step["chosen"]
         if x is None:
             continue
