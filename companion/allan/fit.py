@@ -168,19 +168,14 @@ class _Problem:
         return np.linalg.pinv(Aw.T @ Aw)
 
 
-_FILTERED_COLUMNS = BoundedMemo(256)
+_FILTERED_COLUMNS = BoundedMemo(256, read_only=True)
 
 
 def _filtered_white_column(tau, white):
     """The filtered white-noise column at ``tau``, remembered: the model search asks for the same one hundreds
     of times per fit (each shape-grid point, each candidate set) and each costs a phase-structure evaluation."""
     key = (np.asarray(tau, dtype=float).tobytes(), white.get("filter_hz"), white.get("sample_hz"))
-    return _FILTERED_COLUMNS.get(key, lambda: _read_only(avar_white_noise(tau, 1.0, **white)))
-
-
-def _read_only(a: np.ndarray) -> np.ndarray:
-    a.setflags(write=False)
-    return a
+    return _FILTERED_COLUMNS.get(key, lambda: avar_white_noise(tau, 1.0, **white))
 
 
 def _columns(linear, nonlinear, tau, white=None):

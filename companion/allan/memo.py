@@ -9,10 +9,12 @@ from typing import Callable, Hashable
 
 
 class BoundedMemo:
-    """``memo.get(key, compute)``: the value remembered for ``key``, else ``compute()`` remembered."""
+    """``memo.get(key, compute)``: the value remembered for ``key``, else ``compute()`` remembered (an array
+    value made read-only when ``read_only``: the callers share it)."""
 
-    def __init__(self, maxsize: int):
+    def __init__(self, maxsize: int, read_only: bool = False):
         self.maxsize = int(maxsize)
+        self.read_only = read_only
         self._values: dict = {}
 
     def get(self, key: Hashable, compute: Callable[[], object]):
@@ -21,6 +23,8 @@ class BoundedMemo:
             if len(self._values) >= self.maxsize:
                 self._values.clear()
             value = compute()
+            if self.read_only:
+                value.setflags(write=False)
             self._values[key] = value
         return value
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar, nnls
 
+from companion.allan.memo import BoundedMemo
 from companion.gap.likelihood import MODEL_FLOOR, Measured, deviance, gap_metric, term_avar
 
 #: The magnitude parameter of each effect (AVAR proportional to its square).
@@ -37,7 +38,7 @@ SHAPE = {"gauss_markov": "tau_c", "sinusoid": "freq_hz"}
 N_PARAMS = {e: 1 + (e in SHAPE) for e in MAGNITUDE}
 
 
-_UNIT_COLUMNS: dict = {}
+_UNIT_COLUMNS = BoundedMemo(4096, read_only=True)
 
 
 def unit_column(term, tau, rate_hz):
@@ -52,14 +53,7 @@ def unit_column(term, tau, rate_hz):
         hash(key)
     except TypeError:  # a term carrying arrays (the temperature record): computed each time
         return term_avar(t, tau, rate_hz)
-    col = _UNIT_COLUMNS.get(key)
-    if col is None:
-        if len(_UNIT_COLUMNS) >= 4096:
-            _UNIT_COLUMNS.clear()
-        col = term_avar(t, tau, rate_hz)
-        col.setflags(write=False)
-        _UNIT_COLUMNS[key] = col
-    return col
+    return _UNIT_COLUMNS.get(key, lambda: term_avar(t, tau, rate_hz))
 
 
 @dataclass
@@ -84,7 +78,7 @@ def fit_magnitudes(meas: Measured, A: np.ndarray, s_fixed: np.ndarray, iters: in
         s = np.maximum(s_fixed, floor)
         return np.zeros(0), s, deviance(meas, s)
     # the loop runs tens of thousands of times per workflow on a few dozen points: what does not change
-    # between iterations is computed once, and the deviance inline (the same operations as deviance())
+    # between iterations is computed once
     sq_nu, rhs = np.sqrt(nu), a - s_fixed
     s = a.copy()
     best = (np.inf, None, None)
@@ -96,8 +90,7 @@ def fit_magnitudes(meas: Measured, A: np.ndarray, s_fixed: np.ndarray, iters: in
         c, _ = nnls(M / norms, w * rhs, maxiter=50 * k)
         c = c / norms
         s_new = np.maximum(s_fixed + A @ c, floor)
-        r = a / np.maximum(s_new, 1e-300)
-        d = float(np.sum(nu * (r - 1.0 - np.log(r))))
+        d = deviance(meas, s_new)
         if d < best[0]:
             best = (d, c, s_new)
         if np.max(np.abs(s_new - s) / s) < 1e-9:
