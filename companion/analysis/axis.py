@@ -78,9 +78,11 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     # left out of 2-h records in 9 of 17 draws against 1 of 17 (benchmarks/bench_fit.py draws)
     bounds = upper_bounds(fit, tau_f[keep], avar_f[keep], n=n, rate_hz=rate_hz, m=m_fit[keep],
                           segments=lengths if pooled else None)
+    # the report's rule only where the inversion gave none (it is not computed for the others)
     have = {b["effect"] for b in bounds} | {t["effect"] for t in fit.terms}
-    bounds += [b for b in bounds_for_fit(fit, tau_f[keep], avar_f[keep], np.maximum(edf0, 0.5), rate_hz, n)
-               if b["effect"] not in have]
+    rest = tuple(e for e in ("white_noise", "bias_instability", "random_walk") if e not in have)
+    if rest:
+        bounds += bounds_for_fit(fit, tau_f[keep], avar_f[keep], np.maximum(edf0, 0.5), rate_hz, n, effects=rest)
     m = parse_taus(taus, max(lengths), rate_hz) if isinstance(taus, str) else cluster_sizes(max(lengths), taus)
     tau, avar, m, _ = pooled_oavar(pieces, rate_hz, m=m)
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in fit.terms]
