@@ -343,13 +343,13 @@ def _cov_along(effect, sup_terms, cov_sup, theta, linear, scale, covariance, flo
     b_fit = theta[linear.index("bias_instability")] if "bias_instability" in linear else 0.0
     flick = None
     if effect == "bias_instability" or b_fit > 0:
-        # rank one and proportional to B^2: as a function of u it is u (or b_fit) times the unit one
-        flick = _flicker_shape_cov({"effect": "bias_instability", "B": math.sqrt(scale)}, m, tau) / scale
+        # rank one, its vector proportional to B^2: the matrix is theta_B^2 times the one at theta_B = 1
+        flick = _flicker_shape_cov({"effect": "bias_instability", "B": math.sqrt(scale)}, m, tau) / scale**2
 
     def cov_at(u):
         c = c0 + lin_c * u + quad_c * u * u
         if flick is not None:
-            c = c + flick * (u if effect == "bias_instability" else b_fit)
+            c = c + flick * (u if effect == "bias_instability" else b_fit) ** 2
         return c
 
     return cov_at
