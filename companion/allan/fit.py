@@ -304,6 +304,113 @@ def _scaled_chi2_ci(theta, var, level):
     return theta * nu / chi2_ppf(1.0 - a, nu), theta * nu / chi2_ppf(a, nu)
 
 
+
+#: The interval of a linear term is found by test inversion (:func:`_inverted_ci`) unless the pivot's nu at the
+#: estimate is at least this (relative sd <= 1.4 %): the covariance then hardly changes over the interval and the
+#: pivot is the same interval (N of hours at tens of Hz, nu ~ 1e5-1e6), at a tenth of the cost.
+INVERT_MAX_NU = 1e4
+
+_ORDER = {x: i for i, x in enumerate(LINEAR_EFFECTS + NONLINEAR_EFFECTS)}
+
+
+def _cov_along(effect, sup_terms, cov_sup, theta, linear, scale, covariance, floor, tau, m):
+    """The AVAR points' covariance (units of ``scale``^2) as a function of the coefficient u of ``effect``, the
+    other terms of the covariance's model held (``sup_terms``, the superset model the fit's covariance
+    ``cov_sup`` was computed from): an exact quadratic in u (pair sums, model error), so ``cov_sup`` and two
+    evaluations give it everywhere. The flicker's shape error (:func:`_flicker_shape_cov`) is added as in the
+    fit's intervals, with B at u when ``effect`` is the bias instability."""
+    p = LINEAR_PARAM[effect]
+    rest = [t for t in sup_terms if t["effect"] != effect]
+    own = next((t for t in sup_terms if t["effect"] == effect), None)
+    u_sup = own[p] ** 2 / scale if own is not None else 0.0
+    own = dict(own) if own is not None else {"effect": effect}
+
+    def at(u):
+        terms = sorted(rest + [dict(own, **{p: math.sqrt(max(u, 0.0) * scale)})],
+                       key=lambda t: _ORDER.get(t["effect"], len(_ORDER)))
+        return covariance(terms, avar_model(terms, tau) / scale, floor)
+
+    if u_sup > 0:
+        # C(u) = C(u_sup) + (u - u_sup) L + (u^2 - u_sup^2) Q from C at 0 and at 2 u_sup
+        d0, d2 = at(0.0) - cov_sup, at(2.0 * u_sup) - cov_sup
+        quad_c = (d0 + d2) / (2.0 * u_sup**2)
+        lin_c = (d2 - 3.0 * u_sup**2 * quad_c) / u_sup
+        c0 = cov_sup - u_sup * lin_c - u_sup**2 * quad_c
+    else:
+        u_s = max(float(theta[linear.index(effect)]), 1e-300)
+        c0, c1, c2 = at(0.0), at(u_s), at(2.0 * u_s)
+        lin_c, quad_c = (4.0 * c1 - 3.0 * c0 - c2) / (2.0 * u_s), (c2 - 2.0 * c1 + c0) / (2.0 * u_s**2)
+    b_fit = theta[linear.index("bias_instability")] if "bias_instability" in linear else 0.0
+    flick = None
+    if effect == "bias_instability" or b_fit > 0:
+        # rank one, its vector proportional to B^2: the matrix is theta_B^2 times the one at theta_B = 1
+        flick = _flicker_shape_cov({"effect": "bias_instability", "B": math.sqrt(scale)}, m, tau) / scale**2
+
+    def cov_at(u):
+        c = c0 + lin_c * u + quad_c * u * u
+        if flick is not None:
+            c = c + flick * (u if effect == "bias_instability" else b_fit) ** 2
+        return c
+
+    return cov_at
+
+
+def _inverted_ci(theta_hat, j, A, cov_at, tau, v, white, tau0, level, guess_lo=None, guess_hi=None,
+                 max_steps=12):
+    """Interval of the linear coefficient ``theta_hat`` (column ``j`` of ``A``) by test inversion: u is inside
+    when the GLS estimate with the points' covariance evaluated *at u* (``cov_at(u)``) lies between the
+    (1 -+ level) / 2 quantiles of u chi2(nu_u) / nu_u, nu_u = 2 u^2 / var_u(estimate). Evaluated at the estimate
+    instead (:func:`_scaled_chi2_ci`), nu is too large where the estimate lies high: the estimate's variance
+    is only partly the term's own (the rest comes from the other terms' share of the same points), so a
+    random walk kept when its long-tau points happen to lie high got an interval that missed it high (found K
+    of random 2-h records covered in 76 of 83, against 82 of 83 here; benchmarks/bench_fit.py draws). The
+    covariance at u also moves the estimate (its weights), which is part of the test. ``guess_lo``, ``guess_hi``:
+    where to look first (the interval at the estimate). 0 when no u far below is rejected."""
+    if theta_hat <= 0:
+        return 0.0, 0.0
+    a = (1.0 - level) / 2.0
+    idx = np.arange(A.shape[1])
+
+    def g(x, q):
+        """log(estimate at u) - log(q-quantile of u chi2(nu_u)/nu_u), u = e^x: > 0 where the estimate lies above."""
+        u = math.exp(x)
+        prob = _Problem(tau, v, cov_at(u), white, tau0)
+        th, _ = prob.solve(A)
+        act = (th > 0) | (idx == j)
+        ct = prob.cov_theta(A[:, act])
+        k = int(np.count_nonzero(act[:j]))
+        var = float(ct[k, k])
+        if not var > 0:
+            return math.log(max(th[j], 1e-300)) - x
+        nu = 2.0 * u * u / var
+        return math.log(max(th[j], 1e-300 * u)) - x - math.log(chi2_ppf(q, nu) / nu)
+
+    x0 = math.log(theta_hat)
+    ends = []
+    for q, guess in ((1.0 - a, guess_lo), (a, guess_hi)):
+        # from the estimate, step away by the distance to the guess (the interval at the estimate), doubled
+        # each time, until u is rejected; then solve in the bracket
+        want = 1.0 if q > 0.5 else -1.0  # the sign of g where u is rejected
+        sign = -want
+        d = abs(math.log(guess) - x0) if guess and guess > 0 and guess != theta_hat else math.log(2.0)
+        d = min(max(d, 1e-4), math.log(2.0))
+        x_in, x_out, step = x0, None, d
+        for _ in range(max_steps):
+            x = x_in + sign * step
+            if g(x, q) * want > 0:
+                x_out = x
+                break
+            x_in, step = x, 2.0 * step
+        if x_out is None:
+            ends.append(0.0 if sign < 0 else math.exp(x_in))
+            continue
+        if x_in == x0 and g(x0, q) * want > 0:  # the estimate itself is rejected (tiny nu): keep it inside
+            ends.append(theta_hat)
+            continue
+        ends.append(math.exp(brentq(lambda x: g(x, q), min(x_in, x_out), max(x_in, x_out),
+                                    xtol=1e-3 * abs(x_out - x0))))
+    return min(ends[0], theta_hat), max(ends[1], theta_hat)
+
 #: A long-tau term (bias instability, rate random walk) is "resolved" only when the record shows it: it must
 #: dominate the fitted AVAR (at least half of it) from a cluster time tau_d no longer than a tenth of the
 #: record, where a single-segment Allan variance still has an EDF of about 5 or more (rate random walk: EDF
@@ -471,14 +578,15 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         cov = np.diag(2.0 * np.maximum(v, 1e-6 * v.max()) ** 2 / edf_v)
         base = [e for e in LINEAR_EFFECTS if e in effects and (e in BASE_EFFECTS or not auto)]
         linear, nonlin, c2 = list(base), [], 0.0
-        prev, v_sup = None, v
+        prev, v_sup, sup_terms = None, v, []
         for it in range(max_iter):
             prob = _Problem(tau, v, cov, white, tau0)
             sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
             A_sup = _columns(sup_lin, nonlin, tau, white)
             th_sup, _ = prob.solve(A_sup)
             v_sup = A_sup @ th_sup
-            cov = covariance(_terms_from(sup_lin, nonlin, th_sup, scale, white), v_sup, floor)
+            sup_terms = _terms_from(sup_lin, nonlin, th_sup, scale, white)
+            cov = covariance(sup_terms, v_sup, floor)
             prob = _Problem(tau, v, cov, white, tau0)
             linear, nonlin, c2 = _select(prob, tau, effects, n_pts, auto)
             theta, c2 = prob.solve(_columns(linear, nonlin, tau, white))
@@ -486,9 +594,9 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             if prev is not None and key == prev[0] and np.allclose(theta, prev[1], rtol=1e-3, atol=1e-12):
                 break
             prev = (key, theta)
-        return cov, linear, nonlin, c2, v_sup
+        return cov, linear, nonlin, c2, v_sup, sup_terms
 
-    cov, linear, nonlin, c2, v_sup = iterate(0.0)
+    cov, linear, nonlin, c2, v_sup, sup_terms = iterate(0.0)
     filter_info = None
     if detect_filter and "white_noise" in effects and tau0 and n_pts >= 5:
         # a low-pass roll-off: claimed only when the data show one (the filtered white-noise shape lowers
@@ -503,7 +611,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             white = {"filter_hz": filter_info["filter_hz"],
                      "sample_hz": rate_hz if detect_filter != "average" else None}
             filter_info["source"] = "data"
-            cov, linear, nonlin, c2, v_sup = iterate(0.0)
+            cov, linear, nonlin, c2, v_sup, sup_terms = iterate(0.0)
             notes.append(f"low-pass roll-off seen in the data: 2-pole {filter_info['filter_hz']:.3g} Hz "
                          f"[{filter_info['ci95'][0]:.3g}, {filter_info['ci95'][1]:.3g}] modelled in the white-noise term")
         elif white:
@@ -530,7 +638,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         else:
             floor = 3.0
         chi_before = c2
-        cov, linear, nonlin, c2, v_sup = iterate(floor)
+        cov, linear, nonlin, c2, v_sup, sup_terms = iterate(floor)
         notes.append(f"model misfit (chi2 {chi_before:.0f} for {dof0} dof): a model error of {100 * floor:.1f} % "
                      "of AVAR per point was added to the covariance")
     prob = _Problem(tau, v, cov, white, tau0)
@@ -551,6 +659,9 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         if theta[j] <= 0:
             continue
         lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
+        if e in LINEAR_EFFECTS and full and 2.0 * theta[j] ** 2 < INVERT_MAX_NU * cov_t[j, j]:
+            lo, hi = _inverted_ci(theta[j], j, A, _cov_along(e, sup_terms, cov, theta, linear, scale, covariance, floor,
+                                                            tau, m), tau, v, white, tau0, level, lo, hi)
         if e in LINEAR_EFFECTS:
             p = LINEAR_PARAM[e]
             t = {"effect": e, p: math.sqrt(theta[j] * scale), "ci95": {p: [math.sqrt(lo * scale), math.sqrt(hi * scale)]}}
