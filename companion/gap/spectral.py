@@ -85,3 +85,48 @@ def line_evidence(y, rate_hz: float, freq_hz: float, amplitude: float) -> dict |
             "confirmed": bool(significant and amp_psd >= MIN_AMPLITUDE_SHARE * amplitude),
             "power": power, "ruled_out": bool(not significant and power >= 1.0 - ALPHA),
             "segments": segments}
+
+
+#: at most this many lines are offered as candidates (the strongest peaks first)
+MAX_LINES = 3
+
+
+def significant_lines(y, rate_hz: float, max_lines: int = MAX_LINES) -> tuple:
+    """The vibration lines the periodogram of ``y`` shows: ((f_peak Hz, amplitude_psd), ...), strongest first.
+
+    Welch periodogram of the whole band at segments of 256 samples (at most an eighth of the record, at
+    least 64), its local maxima ranked by their ratio to a running median of 21 bins (the noise floor's
+    level there, robust to the peak); the strongest ``4 max_lines`` are each tested by
+    :func:`line_evidence` at their frequency (the band's own background fit and the 1e-3 level over the
+    band's bins), and the significant ones kept, one per band. The Allan curve places a line near the
+    Nyquist frequency only to within tens of percent (its octave cluster times see it at tau0 alone); the
+    periodogram resolves it to a bin."""
+    from scipy.ndimage import median_filter
+
+    y = np.asarray(y, dtype=float)
+    n = y.shape[0]
+    if n < 512:
+        return ()
+    seg = int(min(256, max(64, 1 << int(math.floor(math.log2(n / 8))))))
+    f, P = welch(y - y.mean(), fs=rate_hz, nperseg=seg)
+    if P.shape[0] < 25:
+        return ()
+    level = median_filter(P, size=21, mode="nearest")
+    ratio = P / np.maximum(level, 1e-300)
+    k = np.arange(1, P.shape[0] - 1)
+    peaks = k[(P[k] > P[k - 1]) & (P[k] >= P[k + 1]) & (ratio[k] > 1.0)]
+    peaks = peaks[np.argsort(-ratio[peaks])][: 4 * max_lines]
+    out = []
+    for i in peaks:
+        ev = line_evidence(y, rate_hz, float(f[i]), 0.0)
+        if ev is None or ev["peak_ratio"] <= ev["threshold"]:
+            continue
+        fp = ev["f_peak"]
+        if fp >= 0.5 * rate_hz - 0.5 * f[1]:  # the Nyquist bin: a line there cannot be told from its alias
+            continue
+        if any(abs(fp - g) <= REL_BAND * g for g, _ in out):
+            continue
+        out.append((fp, ev["amplitude_psd"]))
+        if len(out) >= max_lines:
+            break
+    return tuple(out)
