@@ -87,20 +87,27 @@ def line_evidence(y, rate_hz: float, freq_hz: float, amplitude: float) -> dict |
             "segments": segments}
 
 
+
 #: at most this many lines are offered as candidates (the strongest peaks first)
 MAX_LINES = 3
+#: running-median width (bins) of the periodogram's background level, and the bins either side of a peak
+#: that hold a Hann-windowed line's power
+MEDIAN_BINS, LINE_BINS = 21, 2
 
 
 def significant_lines(y, rate_hz: float, max_lines: int = MAX_LINES) -> tuple:
-    """The vibration lines the periodogram of ``y`` shows: ((f_peak Hz, amplitude_psd), ...), strongest first.
+    """The vibration lines the periodogram of ``y`` shows: ((f_peak Hz, amplitude), ...), strongest first.
 
-    Welch periodogram of the whole band at segments of 256 samples (at most an eighth of the record, at
-    least 64), its local maxima ranked by their ratio to a running median of 21 bins (the noise floor's
-    level there, robust to the peak); the strongest ``4 max_lines`` are each tested by
-    :func:`line_evidence` at their frequency (the band's own background fit and the 1e-3 level over the
-    band's bins), and the significant ones kept, one per band. The Allan curve places a line near the
-    Nyquist frequency only to within tens of percent (its octave cluster times see it at tau0 alone); the
-    periodogram resolves it to a bin."""
+    Welch periodogram (Hann, 50 % overlap) of segments of 256 samples (at most an eighth of the record,
+    at least 64); background level: the running median of MEDIAN_BINS bins, over the median of
+    chi^2_nu / nu (Wilson-Hilferty, (1 - 2/(9 nu))^3), reflected at the Nyquist frequency (a sampled
+    process's spectrum is even about it; a fit from below alone extrapolates, and named noise near Nyquist
+    a line in a third of filtered records). A local maximum is a line when above chi^2_nu(1 - 1e-3 / bins)
+    / nu of that level, the level over *all* the periodogram's bins, since its frequency is searched. The
+    amplitude: sqrt(2 x the excess power of the peak bin and LINE_BINS either side). The Nyquist bin (half
+    the level in a one-sided estimate, and where a line cannot be told from its alias) is left out.
+    The Allan curve places a line near the Nyquist frequency only to within tens of percent (its octave
+    cluster times see it at tau0 alone); the periodogram resolves it to a bin."""
     from scipy.ndimage import median_filter
 
     y = np.asarray(y, dtype=float)
@@ -109,24 +116,28 @@ def significant_lines(y, rate_hz: float, max_lines: int = MAX_LINES) -> tuple:
         return ()
     seg = int(min(256, max(64, 1 << int(math.floor(math.log2(n / 8))))))
     f, P = welch(y - y.mean(), fs=rate_hz, nperseg=seg)
-    if P.shape[0] < 25:
+    if seg % 2 == 0:  # the Nyquist bin
+        f, P = f[:-1], P[:-1]
+    if P.shape[0] < MEDIAN_BINS + 4:
         return ()
-    level = median_filter(P, size=21, mode="nearest")
+    segments = max(1, 2 * n // seg - 1)
+    nu = 1.8 * segments
+    level = median_filter(P, size=MEDIAN_BINS, mode="reflect") / (1.0 - 2.0 / (9.0 * nu)) ** 3
     ratio = P / np.maximum(level, 1e-300)
-    k = np.arange(1, P.shape[0] - 1)
-    peaks = k[(P[k] > P[k - 1]) & (P[k] >= P[k + 1]) & (ratio[k] > 1.0)]
-    peaks = peaks[np.argsort(-ratio[peaks])][: 4 * max_lines]
+    threshold = float(stats.chi2.isf(ALPHA / P.shape[0], nu) / nu)
+    k = np.arange(1, P.shape[0])
+    right = np.append(P[2:], P[-2])  # reflected at the top
+    peaks = k[(P[k] > P[k - 1]) & (P[k] >= right) & (ratio[k] > threshold)]
+    peaks = peaks[np.argsort(-ratio[peaks])]
+    df = float(f[1])
     out = []
     for i in peaks:
-        ev = line_evidence(y, rate_hz, float(f[i]), 0.0)
-        if ev is None or ev["peak_ratio"] <= ev["threshold"]:
-            continue
-        fp = ev["f_peak"]
-        if fp >= 0.5 * rate_hz - 0.5 * f[1]:  # the Nyquist bin: a line there cannot be told from its alias
-            continue
+        fp = float(f[i])
         if any(abs(fp - g) <= REL_BAND * g for g, _ in out):
             continue
-        out.append((fp, ev["amplitude_psd"]))
+        sl = slice(max(i - LINE_BINS, 1), min(i + LINE_BINS + 1, P.shape[0]))
+        excess = float(np.sum(np.maximum(P[sl] - level[sl], 0.0)) * df)
+        out.append((fp, math.sqrt(2.0 * excess)))
         if len(out) >= max_lines:
             break
     return tuple(out)
