@@ -132,12 +132,12 @@ def significant_lines(y, rate_hz: float, max_lines: int = MAX_LINES) -> tuple:
     df = float(f[1])
     out = []
     for i in peaks:
+        if len(out) >= max_lines:
+            break
         fp = float(f[i])
         if any(abs(fp - g) <= REL_BAND * g for g, _ in out):
             continue
         sl = slice(max(i - LINE_BINS, 1), min(i + LINE_BINS + 1, P.shape[0]))
         excess = float(np.sum(np.maximum(P[sl] - level[sl], 0.0)) * df)
         out.append((fp, math.sqrt(2.0 * excess)))
-        if len(out) >= max_lines:
-            break
     return tuple(out)
