@@ -93,6 +93,10 @@ MAX_LINES = 3
 #: running-median width (bins) of the periodogram's background level, and the bins either side of a peak
 #: that hold a Hann-windowed line's power
 MEDIAN_BINS, LINE_BINS = 21, 2
+#: a line is offered only at or above this many bins (its frequency then known within 1/32, 3 %, the
+#: resolution line_evidence asks for: segments of at least 16 periods); a slower line is left to the Allan
+#: curve's search (a 0.5 Hz line at 50 Hz falls between bins 0.2 Hz apart)
+MIN_PERIODS = 16
 
 
 def significant_lines(y, rate_hz: float, max_lines: int = MAX_LINES) -> tuple:
@@ -106,8 +110,9 @@ def significant_lines(y, rate_hz: float, max_lines: int = MAX_LINES) -> tuple:
     / nu of that level, the level over *all* the periodogram's bins, since its frequency is searched. The
     amplitude: sqrt(2 x the excess power of the peak bin and LINE_BINS either side). The Nyquist bin (half
     the level in a one-sided estimate, and where a line cannot be told from its alias) is left out.
-    The Allan curve places a line near the Nyquist frequency only to within tens of percent (its octave
-    cluster times see it at tau0 alone); the periodogram resolves it to a bin."""
+    Lines below MIN_PERIODS bins are left out (the bin too wide for the frequency). The Allan curve
+    places a line near the Nyquist frequency only to within tens of percent (its octave cluster times see
+    it at tau0 alone); the periodogram resolves it to a bin."""
     from scipy.ndimage import median_filter
 
     y = np.asarray(y, dtype=float)
@@ -135,6 +140,8 @@ def significant_lines(y, rate_hz: float, max_lines: int = MAX_LINES) -> tuple:
         if len(out) >= max_lines:
             break
         fp = float(f[i])
+        if fp < MIN_PERIODS * df:  # the bin is too wide to place the line better than the Allan curve does
+            continue
         if any(abs(fp - g) <= REL_BAND * g for g, _ in out):
             continue
         sl = slice(max(i - LINE_BINS, 1), min(i + LINE_BINS + 1, P.shape[0]))
