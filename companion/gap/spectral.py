@@ -87,7 +87,6 @@ def line_evidence(y, rate_hz: float, freq_hz: float, amplitude: float) -> dict |
             "segments": segments}
 
 
-
 #: at most this many lines are offered as candidates (the strongest peaks first)
 MAX_LINES = 3
 #: running-median width (bins) of the periodogram's background level, and the bins either side of a peak
