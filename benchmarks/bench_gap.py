@@ -446,11 +446,13 @@ def _pct(k, n):
     return f"{k:>3}/{n:<3} {100.0 * k / max(n, 1):5.1f} %"
 
 
-def single_tier(seeds, seed0=100_000):
+def single_tier(seeds, seed0=100_000, only=None):
     print(f"\n== single hidden effect, exact model, fresh random draws: {seeds} per effect, 2 h at {F_RATE:g} Hz ==")
     print(f"{'effect':17} {'named':>15} {'30 %':>15} {'oracle named':>15} {'oracle 30 %':>15}  named instead (counts)")
     tot = [0, 0, 0, 0, 0]
     for e_i, effect in enumerate(EFFECTS):
+        if only is not None and effect not in only:  # the same seeds as in a full run
+            continue
         c = [0, 0, 0, 0]
         wrong: dict[str, int] = {}
         for s in range(seeds):
@@ -689,6 +691,8 @@ def main():
                     "the cases in parallel processes)")
     ap.add_argument("--legacy", action="store_true", help="also the fixed-case tables of the earlier versions "
                     "(20 Hz; information limit, nested null, B power, ArduPilot rounding, real ADIS16405)")
+    ap.add_argument("--effects", help="comma-separated effects of the single tier to run (default all; each "
+                    "keeps its seeds)")
     ap.add_argument("--skip-real", action="store_true")
     ap.add_argument("--shared", default=str(ROOT.parent / "shared" / "data"))
     a = ap.parse_args()
@@ -703,7 +707,8 @@ def main():
     elif a.fresh:
         off = int(np.random.SeedSequence().entropy % 10**9) * 10**6
         print(f"fresh draws: every tier's seeds offset by {off} (repeat with the same offset to reproduce)")
-    tiers = {"single": lambda: single_tier(a.seeds, 100_000 + off), "null": lambda: null_fresh(null_seeds, 200_000 + off),
+    only = set(a.effects.split(",")) if a.effects else None
+    tiers = {"single": lambda: single_tier(a.seeds, 100_000 + off, only), "null": lambda: null_fresh(null_seeds, 200_000 + off),
              "missized": lambda: missized_tier(a.seeds, 300_000 + off),
              "two": lambda: two_effect_tier(max(2, a.seeds // 2), 400_000 + off,
                                             None if not a.two_pairs else {int(x) for x in a.two_pairs.split(",")}),

@@ -88,3 +88,26 @@ def test_no_false_line_near_the_nyquist_frequency():
         ev = line_evidence(y, rate, 22.3, 0.05)
         sig += ev["peak_ratio"] > ev["threshold"]
     assert sig <= 2
+
+
+def test_lines_searched_over_the_spectrum_none_in_noise_and_the_true_one_found():
+    """significant_lines: no line in filtered, interval-averaged noise (a band fit from below the Nyquist
+    frequency named one in a third of such records), and a line at 0.47 x the rate found within a Welch
+    bin with its amplitude (as the averaged samples carry it) within 25 %."""
+    from companion.gap.filtered import synthesize_filtered_white
+    from companion.gap.spectral import significant_lines
+
+    rate, n = 250.0, 15000
+    false = 0
+    for seed in range(20):
+        rng = np.random.default_rng(500 + seed)
+        false += len(significant_lines(synthesize_filtered_white(1e-3, 42.0, rate, n, rng, integrate=True), rate))
+    assert false <= 1
+    f0, A = 0.47 * rate, 2e-3
+    for seed in range(5):
+        rng = np.random.default_rng(600 + seed)
+        y = synthesize_filtered_white(1e-3, 42.0, rate, n, rng, integrate=True)
+        y = y + A * np.sin(2 * np.pi * f0 * np.arange(n) / rate + rng.uniform(0, 2 * np.pi))
+        lines = significant_lines(y, rate)
+        assert lines and abs(lines[0][0] - f0) <= rate / 256
+        assert abs(lines[0][1] / A - 1) < 0.25

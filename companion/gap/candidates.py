@@ -314,6 +314,13 @@ def gm_rw_direction(meas: Measured, K: float) -> np.ndarray:
     return -(K**2) * meas.tau**2 / 4.0
 
 
+def pinned(meas: Measured, term) -> bool:
+    """A sinusoid at a frequency the record's periodogram measured (``meas.lines``): the frequency is the
+    data's, resolved to a bin, and is not moved along the Allan curve's profile (flat near the Nyquist
+    frequency, where the octave cluster times see a line at tau0 alone)."""
+    return term["effect"] == "sinusoid" and any(abs(term["freq_hz"] - f) <= 1e-9 * f for f, _ in meas.lines)
+
+
 def refine_shapes(meas: Measured, terms, fixed, indices, steps: int = 3) -> Fit:
     """Refit with the shape parameters (tau_c, freq_hz) of the terms ``indices`` re-optimised one after the
     other by profile likelihood near their current values (``steps`` grid steps of :func:`shape_grid` either
@@ -324,7 +331,7 @@ def refine_shapes(meas: Measured, terms, fixed, indices, steps: int = 3) -> Fit:
     for i in indices:
         t = terms[i]
         q = SHAPE.get(t["effect"])
-        if q is None or t[MAGNITUDE[t["effect"]]] <= 0:
+        if q is None or t[MAGNITUDE[t["effect"]]] <= 0 or pinned(meas, t):
             continue
         per = 8 if t["effect"] == "gauss_markov" else 30
         step = math.log(10.0) / per

@@ -33,6 +33,9 @@ class Measured:
     lo: np.ndarray = field(default=None)
     hi: np.ndarray = field(default=None)
     nu_raw: np.ndarray = field(default=None)
+    #: vibration lines the record's periodogram shows: ((frequency Hz, amplitude), ...)
+    #: (:func:`companion.gap.spectral.significant_lines`); a sinusoid at one of these frequencies keeps it
+    lines: tuple = ()
 
     def __post_init__(self):
         if self.nu_raw is None:

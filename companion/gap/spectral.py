@@ -85,3 +85,65 @@ def line_evidence(y, rate_hz: float, freq_hz: float, amplitude: float) -> dict |
             "confirmed": bool(significant and amp_psd >= MIN_AMPLITUDE_SHARE * amplitude),
             "power": power, "ruled_out": bool(not significant and power >= 1.0 - ALPHA),
             "segments": segments}
+
+
+#: at most this many lines are offered as candidates (the strongest peaks first)
+MAX_LINES = 3
+#: running-median width (bins) of the periodogram's background level, and the bins either side of a peak
+#: that hold a Hann-windowed line's power
+MEDIAN_BINS, LINE_BINS = 21, 2
+#: a line is offered only at or above this many bins (its frequency then known within 1/32, 3 %, the
+#: resolution line_evidence asks for: segments of at least 16 periods); a slower line is left to the Allan
+#: curve's search (a 0.5 Hz line at 50 Hz falls between bins 0.2 Hz apart)
+MIN_PERIODS = 16
+
+
+def significant_lines(y, rate_hz: float, max_lines: int = MAX_LINES) -> tuple:
+    """The vibration lines the periodogram of ``y`` shows: ((f_peak Hz, amplitude), ...), strongest first.
+
+    Welch periodogram (Hann, 50 % overlap) of segments of 256 samples (at most an eighth of the record,
+    at least 64); background level: the running median of MEDIAN_BINS bins, over the median of
+    chi^2_nu / nu (Wilson-Hilferty, (1 - 2/(9 nu))^3), reflected at the Nyquist frequency (a sampled
+    process's spectrum is even about it; a fit from below alone extrapolates, and named noise near Nyquist
+    a line in a third of filtered records). A local maximum is a line when above chi^2_nu(1 - 1e-3 / bins)
+    / nu of that level, the level over *all* the periodogram's bins, since its frequency is searched. The
+    amplitude: sqrt(2 x the excess power of the peak bin and LINE_BINS either side). The Nyquist bin (half
+    the level in a one-sided estimate, and where a line cannot be told from its alias) is left out.
+    Lines below MIN_PERIODS bins are left out (the bin too wide for the frequency). The Allan curve
+    places a line near the Nyquist frequency only to within tens of percent (its octave cluster times see
+    it at tau0 alone); the periodogram resolves it to a bin."""
+    from scipy.ndimage import median_filter
+
+    y = np.asarray(y, dtype=float)
+    n = y.shape[0]
+    if n < 512:
+        return ()
+    seg = int(min(256, max(64, 1 << int(math.floor(math.log2(n / 8))))))
+    f, P = welch(y - y.mean(), fs=rate_hz, nperseg=seg)
+    if seg % 2 == 0:  # the Nyquist bin
+        f, P = f[:-1], P[:-1]
+    if P.shape[0] < MEDIAN_BINS + 4:
+        return ()
+    segments = max(1, 2 * n // seg - 1)
+    nu = 1.8 * segments
+    level = median_filter(P, size=MEDIAN_BINS, mode="reflect") / (1.0 - 2.0 / (9.0 * nu)) ** 3
+    ratio = P / np.maximum(level, 1e-300)
+    threshold = float(stats.chi2.isf(ALPHA / P.shape[0], nu) / nu)
+    k = np.arange(1, P.shape[0])
+    right = np.append(P[2:], P[-2])  # reflected at the top
+    peaks = k[(P[k] > P[k - 1]) & (P[k] >= right) & (ratio[k] > threshold)]
+    peaks = peaks[np.argsort(-ratio[peaks])]
+    df = float(f[1])
+    out = []
+    for i in peaks:
+        if len(out) >= max_lines:
+            break
+        fp = float(f[i])
+        if fp < MIN_PERIODS * df:  # the bin is too wide to place the line better than the Allan curve does
+            continue
+        if any(abs(fp - g) <= REL_BAND * g for g, _ in out):
+            continue
+        sl = slice(max(i - LINE_BINS, 1), min(i + LINE_BINS + 1, P.shape[0]))
+        excess = float(np.sum(np.maximum(P[sl] - level[sl], 0.0)) * df)
+        out.append((fp, math.sqrt(2.0 * excess)))
+    return tuple(out)

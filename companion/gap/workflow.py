@@ -47,7 +47,7 @@ from companion.gap.compare import (Measured, disagreements, gap_metric, gap_vs_s
                                    measure_pooled, model_avar)
 from companion.gap._edf import local_slope, oavar_edf
 from companion.gap.null import null_gap, null_text, resolved_subset, synthesize_model
-from companion.gap.spectral import line_evidence
+from companion.gap.spectral import line_evidence, significant_lines
 from companion.gap.thermal import regression_check, thermal_term
 
 ALPHA = selection.ALPHA
@@ -56,8 +56,7 @@ NESTED = selection.NESTED
 NOISE_FLOOR_G = 2.0
 #: steps (an effect added, a term recalibrated, or both) before stopping
 MAX_ITER = 6
-#: effects with power at the shortest cluster times, where a fitted low-pass cut-off acts
-SHORT_TAU_EFFECTS = ("quantization", "gauss_markov", "sinusoid")
+SHORT_TAU_EFFECTS = selection.SHORT_TAU_EFFECTS
 SIM_MAX_SAMPLES = 2_000_000
 
 
@@ -381,6 +380,8 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         meas = measure(y, rate_hz)
         y_all = y
     lp = (cutoff_hz, int(filter_order), bool(integrated)) if lowpass else None
+    if y is not None:  # the lines the periodogram shows are candidates at their own frequency
+        meas.lines = significant_lines(y, rate_hz)
     # the log's temperature channel (aligned with ``segments``, or with ``y``): a temperature-driven rate
     y_segs = segments if segments is not None else [y]
     t_segs = None
