@@ -113,7 +113,7 @@ Z_SIGMA = 0.0  # the underlying noise is taken at the upper Z-sigma bound of the
 NU_KEEP = 0.7  # the share of the model's dof kept when the reference's v2 are as dispersed as it predicts
 OFFSET_Z = 1.0  # standard errors of a block's offset estimate within which its true offset is sought
 _SPAN = np.linspace(-1.0, 1.0, 21)
-_TABLE = np.linspace(0.0, 0.5, 101)  # offsets (LSB) the healthy moments are tabulated on
+_TABLE = np.linspace(0.0, 0.5, 51)  # offsets (LSB) the healthy moments are tabulated on
 
 
 def place(y: np.ndarray | None, mean: float, v2: float, lsb: float) -> tuple[float, float]:
@@ -147,12 +147,17 @@ class OffsetModel:
         smallest dof there. The error is at least the model's own variance over n (a block resting on one
         code places its bias no better than the noise does) plus the bias of a rounded mean (it leans to the
         nearest code by up to e^(-2 pi^2 sigma^2) / pi)."""
-        v_b = float(np.interp(_fold(b), _TABLE, self.var))
-        s = math.sqrt(max(sb2, v_b / max(n, 1)) if floor else sb2) + self.lean
-        d = _fold(b + OFFSET_Z * s * _SPAN)
+        v, nu = self.window(np.array([b]), np.array([sb2]), np.array([m]), np.array([n]), worst, floor)
+        return float(v[0]), float(nu[0])
+
+    def window(self, b, sb2, m, n, worst: int = 1, floor: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`moments` of many blocks at once (arrays)."""
+        v_b = np.interp(_fold(b), _TABLE, self.var)
+        s = np.sqrt(np.maximum(sb2, v_b / np.maximum(n, 1)) if floor else sb2) + self.lean
+        d = _fold(b[:, None] + OFFSET_Z * s[:, None] * _SPAN[None, :])
         v, k4 = np.interp(d, _TABLE, self.var), np.interp(d, _TABLE, self.k4)
-        nu = 2.0 * v * v / np.maximum(v2_var(v, k4, m), 1e-30)
-        return float(v.max() if worst > 0 else v.min()), self.dof_keep * float(nu.min())
+        nu = 2.0 * v * v / np.maximum(v2_var(v, k4, m[:, None]), 1e-30)
+        return (v.max(axis=1) if worst > 0 else v.min(axis=1)), self.dof_keep * nu.min(axis=1)
 
 
 def bias_diffusion(track, z: float = 2.0, max_lag: int = 10) -> float:
@@ -214,16 +219,14 @@ def fit_offset_model(blocks, z: float = Z_SIGMA) -> OffsetModel | None:
     v2, m, n, b, sb2 = bl.T
 
     def expected(sigma):
-        mod = OffsetModel(sigma, 1.0)
-        mom = [mod.moments(bj, sj, mj, int(nj), worst=-1) for bj, sj, mj, nj in zip(b, sb2, m, n)]
-        mean = np.array([x[0] for x in mom])
-        return mean, 2.0 * mean * mean / np.array([x[1] for x in mom])
+        mean, nu = OffsetModel(sigma, 1.0).window(b, sb2, m, n, worst=-1)
+        return mean, 2.0 * mean * mean / nu
 
     def solve(target):
         lo, hi = 0.0, 2.0
         if expected(hi)[0].sum() < target:
             return math.inf
-        for _ in range(30):
+        for _ in range(20):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if expected(mid)[0].sum() < target else (lo, mid)
         return hi
@@ -291,20 +294,24 @@ class NoiseDetector:
             if not (math.isfinite(dm) and abs(k - round(k)) < GRID_TOL):  # its grid is not the LSB's
                 continue
             v2l, varl = v2 / self.lsb ** 2, var / self.lsb ** 2
-            r = varl / n * max(1.0, varl / max(v2l, 1e-12))
-            rows.append((v2l, m2, n, (dm / self.lsb) % 1.0, r))
-            track.append((t, dm / self.lsb + round(y0 / self.lsb), r, n))
+            infl = max(1.0, varl / max(v2l, 1e-12))  # a low-pass: successive samples alike
+            rows.append((v2l, m2, n, (dm / self.lsb) % 1.0, varl / n * infl))
+            track.append((t, dm / self.lsb + round(y0 / self.lsb), infl / n))
         spread = [x[5] for x in self.learned if math.isfinite(x[3])]
         self.white = float(np.sum(spread) / max(sum(x[0] for x in self.learned if math.isfinite(x[3])), 1e-300))
         if not self.white <= WHITE_MAX:  # low-passed samples: the rounding's variance is not the iid one's
             return
         self.model = fit_offset_model(rows)
-        self.q = bias_diffusion([x[:3] for x in track])
-        if self.model is not None and math.isfinite(self.q):  # the filter starts from the reference's blocks
-            floor = float(self.model.var.min())
-            for t, a, r, n in track:
+        if self.model is None:
+            return
+        # the variance of each reference block's mean from the model at its offset (a block resting on one
+        # code has no sample spread, yet its mean places the bias no better than the rounded noise does)
+        track = [(t, a, float(np.interp(_fold(a), _TABLE, self.model.var)) * f) for t, a, f in track]
+        self.q = bias_diffusion(track)
+        if math.isfinite(self.q):  # the filter starts from the reference's blocks
+            for t, a, r in track:
                 if math.isfinite(t):
-                    self._follow(a, max(r, floor / n), _At(t))
+                    self._follow(a, r, _At(t))
 
     def update(self, obs: Observation) -> list[FaultEvent]:
         """One still block of one axis: the white-noise variance against the reference."""
@@ -331,7 +338,8 @@ class NoiseDetector:
             y = np.asarray(obs.y, float)[:, j]
             b, sb2 = place(y, float(obs.stats.mean[j]), v2, self.lsb)
             if math.isfinite(b):
-                floor = float(self.model.var.min()) / y.shape[0]  # the mean varies by at least V_min / n
+                # the mean varies by the rounded noise's variance at that offset over n (at least)
+                floor = float(np.interp(_fold(b), _TABLE, self.model.var)) / y.shape[0]
                 a = (float(obs.stats.mean[j]) - float(y[0])) / self.lsb + round(float(y[0]) / self.lsb)
                 b, sb2, tracked = self._follow(a, max(sb2, floor), obs)
                 mean, nu = self.model.moments(b, sb2, float(obs.stats.m2[j]), y.shape[0], floor=not tracked)
