@@ -26,7 +26,38 @@ variance of that sigma over all offsets, V0 = max_b var(round(b + sigma_hi e)) >
 (Sheppard: sigma^2 + LSB^2 / 12 within 1e-4) and V0 = s0^2. The LSB is the smallest non-zero step of the
 still blocks (float logs: far below the noise, so no change). Autopilot low-pass filters only make the
 samples smoother than white noise of the same second-difference variance, so the white model is the
-larger spread (conservative).
+larger spread (conservative). The ceiling is what is used where the offset cannot be placed (below).
+
+Reference per offset. The ceiling costs the noise test most of its power on such a gyro: at 10 Hz a block has
+8 second differences, and against the worst offset's variance a doubled noise gives u = 1.7-2.5 where the
+variance at the bias' own offset gives up to 5 (20-50 blocks for h = 20 on the realistic plane). Where the
+still samples sit on a code grid (every sample y[0] + k LSB within GRID_TOL; the grid's phase is the
+samples', so a calibration offset is allowed), the offset is seen in the block mean:
+
+* the reference blocks (the 30 AxisRef learns from) give the underlying sigma (LSB): the one whose expected
+  v2, summed over the blocks' own offsets, matches theirs, each block's expected v2 the *smallest* the
+  rounding gives within its offset's uncertainty (so sigma errs high: :func:`fit_offset_model`), and the
+  share of dof kept, NU_KEEP = 0.7 (less when the blocks spread more than the model predicts);
+* the offset of each block is followed by a Kalman filter of the block means (a random walk of diffusion q,
+  its upper 2-sigma bound from the reference blocks' pairs up to 10 apart, with their full covariance:
+  :func:`bias_diffusion`); each block mean varies by the model's variance at its offset over n (times
+  var / v2 where a low-pass makes successive samples alike), and the filter's variance grows with the time
+  since the last placed block (after a flight: about one block's);
+* a block is compared with the *largest* expected v2 within OFFSET_Z = 1 standard error of that offset,
+  widened by the lean of a rounded mean towards its code (up to e^(-2 pi^2 sigma^2) / pi LSB, 0.14 at
+  0.2 LSB: a 10-sample mean near a code's centre says the bias is nearer the centre than it is), with the
+  smallest dof there: nu = NU_KEEP 2 V^2 / var(v2), var(v2) from the rounded noise's variance and fourth
+  cumulant (:func:`v2_var`; a block at a code's centre holds a few excursions, 1.5 dof where white noise
+  gives 4.1, on a boundary a near-binary flip, 8.8).
+
+So a healthy block is never compared with less than the rounding gives at any offset the data allow, and the
+model's own sigma is its upper reading. Taking the offset as exact instead (no window, no lean, no
+tracking) flags healthy gyros once the bias left the code centre the reference was learned at (tests/
+test_noise_quantized.py), the plane's old `noise 1.6x baseline`. The ceiling stays where the offset cannot be
+placed: samples off a grid (float logs), fewer than MIN_PLACED reference blocks on it, a sigma above 0.75
+LSB (the offset no longer matters), or samples far from independent (the reference's sample variance over
+1.5 times its v2: the rover's 5 Hz low-pass at 50 Hz, where the rounding of independent samples is not the
+model).
 """
 
 from __future__ import annotations
