@@ -134,14 +134,18 @@ class ImuFaults:
                 ev += af.saturation.update(o)
         return ev
 
-    def on_quiet(self, st: BlockStats, extra_var: Mapping[str, float] | None = None) -> list[FaultEvent]:
-        """A still, settled block: learn the references, then resolution, noise and bias."""
+    def on_quiet(self, st: BlockStats, extra_var: Mapping[str, float] | None = None,
+                 y: np.ndarray | None = None, t: np.ndarray | None = None) -> list[FaultEvent]:
+        """A still, settled block: learn the references, then resolution, noise and bias. ``y``, ``t``: the
+        block's gyro samples (n, 3) and times (the noise test places the bias on the code grid with them)."""
         ev = []
         self.quiet_blocks += 1
-        obs = self.observe(st)
+        obs = self.observe(st, t)
+        obs.y = y
         for j, (ax, af) in enumerate(self.axes.items()):
             if not af.ref.ready:
                 if af.stuck.state == OK and af.spikes.state == OK:
+                    af.noise.learn(obs.at(ax, af.ref))
                     af.ref.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n,
                                self.ref_blocks)
                     # the bias wander of the reference period counts too; its temperature is the model's origin

@@ -253,8 +253,10 @@ class Channel:
         self.still_run_s += data.shape[0] / self.rate_hz
         return out
 
-    def on_quiet(self, st: BlockStats, extra_var: Mapping[str, float]) -> list[FaultEvent]:
-        return self.faults.on_quiet(st, extra_var)
+    def on_quiet(self, st: BlockStats, extra_var: Mapping[str, float], data: np.ndarray | None = None) -> list[FaultEvent]:
+        if data is None:
+            return self.faults.on_quiet(st, extra_var)
+        return self.faults.on_quiet(st, extra_var, data[:, 1:4], data[:, 0])
 
     def feed(self, data: np.ndarray) -> bool:
         """Queue a still block for the estimators; True when the baseline learning is complete (the caller

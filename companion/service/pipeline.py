@@ -325,7 +325,7 @@ class Pipeline:
             return
         pending, pending_stats = ch.settle(data, st, still)
         if pending is not None:
-            self._report(ch.on_quiet(pending_stats, self._bias_extra_var(ch)), float(pending[-1, 0]))
+            self._report(ch.on_quiet(pending_stats, self._bias_extra_var(ch), pending), float(pending[-1, 0]))
             self._confirm_bias(ch, float(pending[-1, 0]))
             if ch.feed(pending):
                 self._learn_done(ch)
