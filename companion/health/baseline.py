@@ -153,6 +153,63 @@ def rounding_ceiling(base: Mapping[str, tuple[float, float]] | None, rate_hz: fl
     return out
 
 
+def rise_z(ratio, nu1, nu2):
+    """z-score of a ratio of two Allan variance estimates avar_now / avar_base against equality, each a scaled
+    chi-square with nu1 and nu2 equivalent degrees of freedom, so that the ratio is F(nu1, nu2) when the
+    true variances are equal. Paulson's normal approximation of the F distribution (Johnson, Kotz &
+    Balakrishnan, Continuous Univariate Distributions vol. 2, ch. 27): at the exact 3-sigma quantile of F it
+    gives z 2.95-3.00 for nu1, nu2 >= 10 and less for fewer (1.6 at nu1 = nu2 = 1, 2.8 at 4 and 4): with few
+    degrees of freedom it asks for a larger ratio than the exact test, never a smaller one:
+
+        z = ((1 - 2 / (9 nu2)) r^(1/3) - (1 - 2 / (9 nu1))) / sqrt(2 / (9 nu2) r^(2/3) + 2 / (9 nu1))
+    """
+    r, a1, a2 = (np.asarray(x, float) for x in (ratio, nu1, nu2))
+    a1, a2 = 2.0 / (9.0 * a1), 2.0 / (9.0 * a2)
+    c = np.cbrt(np.maximum(r, 0.0))
+    return ((1.0 - a2) * c - (1.0 - a1)) / np.sqrt(a2 * c * c + a1)
+
+
+def risen_params(params: Mapping[str, tuple[float, float]], base: Mapping[str, tuple[float, float]],
+                 now_levels, base_levels, z: float = 3.0) -> dict[str, tuple[float, float]]:
+    """The entries of ``params`` whose rise over the baseline the measured Allan curves show.
+
+    A coefficient is a projection of the Allan curve on the selected model, and two selections of the same
+    data can project it differently: a Gauss-Markov bias the model lacks looks like a random walk of
+    sigma sqrt(2 / tau_c) below its correlation time and like a bias instability near it, and which of the
+    two takes it moves with the record (a healthy copter hour: K 1.9e-5 rad/s^1.5 in the 600 s baseline,
+    5.7e-5 in the selection at 1000 s on levels within 2 % of the ones before it, each with an interval of
+    +-10 to 25 %: `K 3.1x baseline`). A real rise of a term raises the curve where the term matters. So a
+    value above its baseline is compared only when some cluster time tau shows it: where the claimed rise
+    (x^2 - b^2) basis(tau) is at least a quarter of the baseline's measured AVAR there, the measured ratio
+    avar_now / avar_base is above 1 at ``z`` (:func:`rise_z`, the two as independent estimates: they
+    share the baseline's data, which only makes the test harder to pass). Values at or below the baseline
+    are always kept (they only ever clear a flag). ``now_levels`` / ``base_levels``: ``(tau, avar, edf)``,
+    matched by cluster time; without the baseline's levels (a baseline read from a file) ``params`` is
+    returned as is.
+    """
+    if base_levels is None or now_levels is None:
+        return dict(params)
+    tn, an, en = (np.asarray(x, float) for x in now_levels)
+    tb, ab, eb = (np.asarray(x, float) for x in base_levels)
+    kn, kb = np.round(tn * 1e6).astype(np.int64), np.round(tb * 1e6).astype(np.int64)
+    common, i_n, i_b = np.intersect1d(kn, kb, return_indices=True)
+    out = {}
+    for p, (x, s) in params.items():
+        b = base.get(p, (0.0, 0.0))[0] if base else 0.0
+        effect = PARAM_EFFECT.get(p)
+        if effect is None or not (math.isfinite(b) and x > b) or common.size == 0:
+            out[p] = (x, s)
+            continue
+        tau, a_now, a_base = tn[i_n], an[i_n], ab[i_b]
+        nu1, nu2 = en[i_n], eb[i_b]
+        ok = (a_now > 0) & (a_base > 0) & (nu1 > 0) & (nu2 > 0)
+        claim = (x * x - b * b) * avar_term({"effect": effect, p: 1.0}, tau)
+        where = ok & (claim >= 0.25 * np.where(ok, a_base, np.inf))
+        if where.any() and float(np.max(rise_z(a_now[where] / a_base[where], nu1[where], nu2[where]))) > z:
+            out[p] = (x, s)
+    return out
+
+
 class Baseline:
     """Healthy reference per ``(imu, axis)``: ``{param: (value, std)}`` in SI units.
 
@@ -164,6 +221,8 @@ class Baseline:
     def __init__(self, source: str = "learned"):
         self.source = source
         self.axes: dict[tuple[int, str], dict[str, tuple[float, float]]] = {}
+        # per (imu, axis): the Allan levels (tau, avar, edf) the learned terms were fitted to (risen_params)
+        self.levels: dict[tuple[int, str], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         # per IMU: the stream the baseline was measured on (message, rate_hz, gyro_lsb, units: a baseline of another stream would raise false alarms),
         # checked against the live stream by companion.service.baseline_match
         self.meta: dict[int, dict] = {}
@@ -173,6 +232,12 @@ class Baseline:
 
     def get(self, imu: int, axis: str) -> dict[str, tuple[float, float]] | None:
         return self.axes.get((int(imu), str(axis)))
+
+    def set_levels(self, imu: int, axis: str, tau, avar, edf) -> None:
+        self.levels[(int(imu), str(axis))] = tuple(np.asarray(x, float).copy() for x in (tau, avar, edf))
+
+    def get_levels(self, imu: int, axis: str):
+        return self.levels.get((int(imu), str(axis)))
 
     def has_imu(self, imu: int) -> bool:
         return any(k[0] == int(imu) for k in self.axes)
@@ -185,8 +250,11 @@ class Baseline:
         axes = {}
         for (imu, axis), params in sorted(self.axes.items()):
             axes.setdefault(f"IMU{imu}", {})[axis] = {p: {"value": v, "std": _finite_or_none(s)} for p, (v, s) in params.items()}
+        levels = {}
+        for (imu, axis), (tau, avar, edf) in sorted(self.levels.items()):
+            levels.setdefault(f"IMU{imu}", {})[axis] = {"tau": tau.tolist(), "avar": avar.tolist(), "edf": edf.tolist()}
         return {"format": self.FORMAT, "version": 1, "source": self.source, "imus": axes,
-                "streams": {f"IMU{imu}": dict(m) for imu, m in sorted(self.meta.items())}}
+                "streams": {f"IMU{imu}": dict(m) for imu, m in sorted(self.meta.items())}, "levels": levels}
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "Baseline":
@@ -206,6 +274,14 @@ class Baseline:
             if not b.axes:
                 raise ValueError("baseline file holds no axes")
             b.meta = {_imu_index(k): dict(v) for k, v in (data.get("streams") or {}).items() if isinstance(v, Mapping)}
+            for imu_name, axes in (data.get("levels") or {}).items():
+                for axis, lv in (axes or {}).items():
+                    try:
+                        tau, avar, edf = (np.asarray(lv[k], float) for k in ("tau", "avar", "edf"))
+                    except (KeyError, TypeError, ValueError):
+                        continue  # levels are an aid: a damaged entry leaves that axis on the coefficients alone
+                    if tau.shape == avar.shape == edf.shape and tau.ndim == 1:
+                        b.set_levels(_imu_index(imu_name), axis, tau, avar, edf)
             return b
         return cls._from_analyze(data)
 

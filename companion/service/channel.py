@@ -25,7 +25,7 @@ from typing import Mapping
 import numpy as np
 
 from companion.estimators import from_state_dict as estimator_from_state, make_estimator
-from companion.health.baseline import check_params, rounding_ceiling, supported_params
+from companion.health.baseline import check_params, risen_params, rounding_ceiling, supported_params
 from companion.health.detector import DEGRADING, LEARNING, HealthDetector, Transition
 from companion.health.faults import CARRY, FAULT, OK, BlockStats, FaultEvent, block_stats
 from companion.health.monitor import ImuFaults
@@ -61,6 +61,7 @@ class Channel:
         self.fast: dict = {}
         self.slow: dict = {}
         self.learn: dict = {}
+        self.learned_levels: dict = {}
         self.learned_s = 0.0
         self.fed_s = 0.0
         self._queue: list = []
@@ -307,6 +308,8 @@ class Channel:
         self.flush()
         out = {ax: check_params(est.terms(full=True) if est.kind == "octave" else est.terms(), side="baseline")
                for ax, est in self.learn.items()}
+        # the Allan levels behind them: a later rise is compared only where the measured curve shows it
+        self.learned_levels = {ax: est.avar() for ax, est in self.learn.items() if hasattr(est, "avar")}
         self.learn = {}
         return out
 
@@ -340,6 +343,19 @@ class Channel:
             out.update(sub)
         return out
 
+    def risen(self, ax: str, params: dict[str, tuple[float, float]], base, base_levels) -> dict[str, tuple[float, float]]:
+        """The current parameters whose rise over the baseline the measured Allan curves show
+        (health.baseline.risen_params): Q and N on the fast estimator's levels, B, K and R on the slow one's,
+        each against the levels the baseline was learned from."""
+        out = {}
+        for bank, ps in ((self.fast, ("Q", "N")), (self.slow, ("B", "K", "R"))):
+            sub = {p: params[p] for p in ps if p in params}
+            est = bank.get(ax)
+            if sub and est is not None and hasattr(est, "avar"):
+                sub = risen_params(sub, base, est.avar(), base_levels, z=self.cfg.health.z)
+            out.update(sub)
+        return out
+
     def check_due(self, t: float) -> bool:
         return self.next_check_t is not None and t >= self.next_check_t
 
@@ -365,6 +381,7 @@ class Channel:
             if bad:
                 return reported, transitions, (f"baseline {baseline.source} does not match IMU{self.imu} {ax}: "
                                                f"{bad}; use a baseline of this stream or --baseline-force")
+            cur = self.risen(ax, cur, base, baseline.get_levels(self.imu, ax))
             if ax in GYRO_AXES:
                 base = rounding_ceiling(base, self.rate_hz, self.gyro_lsb)
             for tr in self.detector.check(ax, cur, base):

@@ -365,6 +365,8 @@ class Pipeline:
             self.baseline = Baseline("learned")
         for ax, params in ch.learned_terms().items():
             self.baseline.set_axis(ch.imu, ax, params)
+            if ax in ch.learned_levels:
+                self.baseline.set_levels(ch.imu, ax, *ch.learned_levels[ax])
         self.baseline.meta[ch.imu] = stream_meta(ch)
         b = self.baseline.get(ch.imu, "gx") or {}
         n = b.get("N", (math.nan, math.nan))[0]
