@@ -467,15 +467,16 @@ def quantization_slope(tau, avar) -> bool:
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
              max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
-             detect_filter=None) -> FitResult:
+             detect_filter=None, inverted_ci=True) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring (and :func:`_fit_avar`
-    for the arguments). With ``n`` and ``rate_hz`` (the record is known), a bias-instability or rate
+    for the arguments; ``inverted_ci=False``: the linear terms keep the scaled chi-square interval at the
+    estimate, for a caller that computes its own intervals, as the online report does). With ``n`` and ``rate_hz`` (the record is known), a bias-instability or rate
     random-walk term the record is too short to resolve (:func:`record_needed`) is not reported: it moves
     from ``terms`` to ``nuisance`` (it stays in the model), with a note giving the record length it would
     need; the caller reports a bound."""
     res = _fit_avar(tau, avar, edf, effects, n=n, rate_hz=rate_hz, m=m, level=level, max_iter=max_iter,
                     max_ratio=max_ratio, segments=segments, select=select, white_filter=white_filter,
-                    detect_filter=detect_filter)
+                    detect_filter=detect_filter, inverted_ci=inverted_ci)
     if n is None or not rate_hz or not res.terms:
         return res
     record = (max(segments) if segments else n) / float(rate_hz)
@@ -508,7 +509,7 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
 
 def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
               max_iter=4, max_ratio=256, segments=None, select=None, white_filter=None,
-              detect_filter=None) -> FitResult:
+              detect_filter=None, inverted_ci=True) -> FitResult:
     """Fit measured overlapping AVAR ``avar`` at ``tau`` (s); see the module docstring.
 
     ``edf``: EDF of each point (used for the first weights, and for the diagonal covariance when ``n`` or
@@ -659,7 +660,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         if theta[j] <= 0:
             continue
         lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
-        if e in LINEAR_EFFECTS and full and 2.0 * theta[j] ** 2 < INVERT_MAX_NU * cov_t[j, j]:
+        if e in LINEAR_EFFECTS and full and inverted_ci and 2.0 * theta[j] ** 2 < INVERT_MAX_NU * cov_t[j, j]:
             lo, hi = _inverted_ci(theta[j], j, A, _cov_along(e, sup_terms, cov, theta, linear, scale, covariance, floor,
                                                             tau, m), tau, v, white, tau0, level, lo, hi)
         if e in LINEAR_EFFECTS:

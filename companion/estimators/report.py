@@ -95,9 +95,10 @@ def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ra
     n = max(int(n), int(2 * m.max() + 2)) if m.size else int(n)
     edf0 = np.maximum(edf_simple(n + 1, m, 0), 0.5)
     pooled = segments is not None and len(segments) > 1
+    # the selection's linear intervals are not used (report() computes the report's own): not inverted here
     fr = fit_avar(tau, avar, edf0, effects=list(candidates), n=n, rate_hz=rate_hz, m=m, max_ratio=max_ratio,
                   select=True, white_filter=white_filter, detect_filter=detect_filter,
-                  segments=list(segments) if pooled else None)
+                  segments=list(segments) if pooled else None, inverted_ci=False)
     return fr, structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw)
 
 
