@@ -86,6 +86,17 @@ def test_temperature_drift_named_and_checked_against_the_channel():
     assert r0.added == []  # no drift: the channel alone adds nothing
 
 
+def _gap_of_averaged_line(rng, rate, n, fc, N, f0, A):
+    """The workflow on averaged samples (PX4 sensor_combined) of white noise of density N behind an fc two-pole
+    filter plus a line of frequency f0 and amplitude A averaged over each interval, from the model N alone."""
+    y = synthesize_filtered_white(N, fc, rate, n, rng, integrate=True)
+    t = np.arange(n) / rate
+    ph = rng.uniform(0, 2 * math.pi)
+    w = 2 * math.pi * f0
+    y = y + A * (np.sin(w * (t + 1 / rate) + ph) - np.sin(w * t + ph)) / (w / rate)  # the mean over each interval
+    return run_gap(y, rate, [{"effect": "white_noise", "N": N}], simulate=False, integrated=True)
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_fitted_cutoff_is_refitted_after_a_line_near_nyquist(seed):
     """Averaged samples (PX4 sensor_combined) of white noise behind a 42 Hz two-pole filter, plus a 116.5 Hz
@@ -94,12 +105,7 @@ def test_fitted_cutoff_is_refitted_after_a_line_near_nyquist(seed):
     line at 60 % of its amplitude, G above 2), so the line's amplitude is within 30 % and the gap closes."""
     rate, n, fc, N, f0, A = 250.0, 15000, 42.0, 5.6e-5, 116.5, 6e-4
     rng = np.random.default_rng(seed)
-    y = synthesize_filtered_white(N, fc, rate, n, rng, integrate=True)
-    t = np.arange(n) / rate
-    ph = rng.uniform(0, 2 * math.pi)
-    w = 2 * math.pi * f0
-    y = y + A * (np.sin(w * (t + 1 / rate) + ph) - np.sin(w * t + ph)) / (w / rate)  # the mean over each interval
-    r = run_gap(y, rate, [{"effect": "white_noise", "N": N}], simulate=False, integrated=True)
+    r = _gap_of_averaged_line(rng, rate, n, fc, N, f0, A)
     named = {a["effect"]: a for a in r.added}
     assert set(named) == {"sinusoid", "lowpass"}
     assert abs(named["sinusoid"]["freq_hz"] / f0 - 1) < 0.1
@@ -117,12 +123,7 @@ def test_a_line_near_nyquist_is_named_at_its_frequency(seed):
     cut-off, refined between its grid points (33 % apart), within 10 % of the filter's."""
     rate, n, fc, N, f0, A = 250.0, 15000, 42.0, 5.6e-5, 0.47 * 250.0, 6e-4
     rng = np.random.default_rng(100 + seed)
-    y = synthesize_filtered_white(N, fc, rate, n, rng, integrate=True)
-    t = np.arange(n) / rate
-    ph = rng.uniform(0, 2 * math.pi)
-    w = 2 * math.pi * f0
-    y = y + A * (np.sin(w * (t + 1 / rate) + ph) - np.sin(w * t + ph)) / (w / rate)  # the mean over each interval
-    r = run_gap(y, rate, [{"effect": "white_noise", "N": N}], simulate=False, integrated=True)
+    r = _gap_of_averaged_line(rng, rate, n, fc, N, f0, A)
     named = {a["effect"]: a for a in r.added}
     assert set(named) == {"sinusoid", "lowpass"}
     assert abs(named["sinusoid"]["freq_hz"] / f0 - 1) < 0.01
