@@ -330,31 +330,27 @@ class Channel:
         lower end (health.baseline.check_params)."""
         return check_params(self.report_terms(ax) if terms is None else terms, side="current")
 
-    def supported(self, ax: str, params: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
-        """The current parameters the estimators' own Allan curves support (health.baseline.supported_params):
-        Q and N against the fast estimator's levels, B, K and R against the slow one's."""
+    def _per_estimator(self, ax: str, params: dict[str, tuple[float, float]], test) -> dict[str, tuple[float, float]]:
+        """``params`` filtered by ``test(sub, (tau, avar, edf))`` per estimator: Q and N with the fast
+        estimator's Allan levels, B, K and R with the slow one's."""
         out = {}
         for bank, ps in ((self.fast, ("Q", "N")), (self.slow, ("B", "K", "R"))):
             sub = {p: params[p] for p in ps if p in params}
             est = bank.get(ax)
             if sub and est is not None and hasattr(est, "avar"):
-                tau, avar, edf = est.avar()
-                sub = supported_params(sub, tau, avar, edf, z=self.cfg.health.z)
+                sub = test(sub, est.avar())
             out.update(sub)
         return out
 
+    def supported(self, ax: str, params: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        """The current parameters the estimators' own Allan curves support (health.baseline.supported_params)."""
+        return self._per_estimator(ax, params, lambda sub, lv: supported_params(sub, *lv, z=self.cfg.health.z))
+
     def risen(self, ax: str, params: dict[str, tuple[float, float]], base, base_levels) -> dict[str, tuple[float, float]]:
         """The current parameters whose rise over the baseline the measured Allan curves show
-        (health.baseline.risen_params): Q and N on the fast estimator's levels, B, K and R on the slow one's,
-        each against the levels the baseline was learned from."""
-        out = {}
-        for bank, ps in ((self.fast, ("Q", "N")), (self.slow, ("B", "K", "R"))):
-            sub = {p: params[p] for p in ps if p in params}
-            est = bank.get(ax)
-            if sub and est is not None and hasattr(est, "avar"):
-                sub = risen_params(sub, base, est.avar(), base_levels, z=self.cfg.health.z)
-            out.update(sub)
-        return out
+        (health.baseline.risen_params), each against the levels the baseline was learned from."""
+        return self._per_estimator(ax, params,
+                                   lambda sub, lv: risen_params(sub, base, lv, base_levels, z=self.cfg.health.z))
 
     def check_due(self, t: float) -> bool:
         return self.next_check_t is not None and t >= self.next_check_t
