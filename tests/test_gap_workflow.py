@@ -245,6 +245,41 @@ def test_too_long_gauss_markov_is_named_random_walk_with_the_alternative():
     assert r.gap_after <= NOISE_FLOOR_G
 
 
+def test_hidden_flicker_is_not_named_a_gauss_markov_term():
+    """A flicker floor B 4.5e-4 hidden from white + random walk (2 h at 50 Hz; a fresh bench_gap draw): one
+    Gauss-Markov term of tau_c ~17 s fits this record 5.3 deviance units better, which the ranking's 3.3
+    for its shape parameter let through. The one-parameter flicker is named, B within 30 % of the truth,
+    and the Gauss-Markov fit is given as the alternative."""
+    model = [{"effect": "white_noise", "N": 1.2233769e-3}, {"effect": "random_walk", "K": 4.3008905e-6}]
+    hidden = {"effect": "bias_instability", "B": 4.4951199e-4}
+    y = synthesize_axis(model + [hidden], RATE_50, N_50, np.random.default_rng(718693275102007))
+    r = run_gap(y, RATE_50, model, seed=0, simulate=False)
+    assert [a["effect"] for a in r.added] == ["bias_instability"]
+    assert abs(r.added[0]["B"] / hidden["B"] - 1) < 0.3
+    alt = r.added[0]["alternative"]
+    assert alt["effect"] == "gauss_markov" and alt["instead_of"] == "bias_instability" and alt["lr"] < 10.8
+    assert r.gap_after <= NOISE_FLOOR_G
+
+
+def test_flicker_rule_charges_the_shape_parameter_its_level():
+    """The rule alone: a Gauss-Markov winner gives way to an added flicker that passes its own level unless
+    it fits better by more than chi^2_1(0.999) = 10.8; a flicker that fails its level, or comes with other
+    recalibrations, does not replace it."""
+    from companion.gap.candidates import Fit
+    from companion.gap.selection import Explanation, flicker_rule
+
+    def x(effect, dev, score_pen=15.1, recal=()):
+        return Explanation(effect, recal, Fit([], [], dev, 1.0, np.zeros(1)), 1000.0 - dev, 1.0, score_pen)
+
+    gm = x("gauss_markov", 100.0, 18.4)
+    assert flicker_rule(gm, [gm, x("bias_instability", 105.0)]).effect == "bias_instability"
+    assert flicker_rule(gm, [gm, x("bias_instability", 115.0)]) is gm
+    assert flicker_rule(gm, [gm, x("bias_instability", 990.0)]) is gm  # fails its level (score < 0)
+    assert flicker_rule(gm, [gm, x("bias_instability", 105.0, recal=(1,))]) is gm
+    sine = x("sinusoid", 100.0, 18.4)
+    assert flicker_rule(sine, [sine, x("bias_instability", 101.0)]) is sine
+
+
 def test_alternative_explanations_name_the_right_limit():
     from companion.gap.explain import explain_alternative
 
@@ -253,6 +288,8 @@ def test_alternative_explanations_name_the_right_limit():
     assert "rate random walk" in rw and "24 times that tau_c" in rw
     wn = explain_alternative({**alt, "tau_c": 0.1, "instead_of": "white_noise"}, 7200.0, 20.0)
     assert "white noise" in wn and "2 samples" in wn and "random walk" not in wn
+    fl = explain_alternative({**alt, "tau_c": 17.0, "instead_of": "bias_instability"}, 7200.0, 20.0)
+    assert "flicker" in fl and "random walk" not in fl
 
 
 # --- a ramp under a mis-sized random walk: explanations weighed head to head on the same data ----------------------------------------

@@ -107,6 +107,11 @@ def explain_alternative(alt, record_s: float, rate_hz: float) -> str:
         return (f"A Gauss-Markov term (sigma = {alt['sigma']:.3g} rad/s, tau_c = {tau_c:.3g} s, "
                 f"{tau_c * rate_hz:.3g} samples) fits almost as well (likelihood ratio {alt['lr']:.1f}, not "
                 "significant): a correlation that short is white noise at every cluster time measured.")
+    if alt["instead_of"] == "bias_instability":
+        return (f"A Gauss-Markov term (sigma = {alt['sigma']:.3g} rad/s, tau_c = {tau_c:.3g} s) fits almost as "
+                f"well (likelihood ratio {alt['lr']:.1f} for its extra parameter, below the 10.8 it must pass): "
+                "flicker noise is a sum of such terms with spread correlation times, and over the cluster "
+                "times measured one of them can pass for it; the one-parameter flicker is named.")
     return (f"A Gauss-Markov term (sigma = {alt['sigma']:.3g} rad/s, tau_c = {tau_c:.3g} s) fits almost as well "
             f"(likelihood ratio {alt['lr']:.1f}, corrected, not significant): the record ({record_s:.4g} s, "
             f"{record_s / tau_c:.3g} times that tau_c) is too short to tell a slow correlated bias from a rate "
