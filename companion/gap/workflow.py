@@ -354,6 +354,64 @@ def _drop_unneeded(meas: Measured, base: Fit, held, n_model: int, alternatives: 
         terms = refine_shapes(meas, terms, sorted(held), shaped).terms  # the state changed: shapes again
 
 
+def _penalised_dev(meas: Measured, terms, held, terms0, y, rate_hz: float) -> float:
+    """Deviance plus the level each added effect passed (a fitted filter on a model's white term 15.1):
+    the criterion two final states are compared by."""
+    dev = fit_terms(meas, terms, sorted(held), intervals=False).dev
+    for i, t in enumerate(terms):
+        if i in held:
+            continue
+        if i >= len(terms0):
+            dev += _added_level(t, y, rate_hz)
+        elif t.get("cutoff_hz") and not terms0[i].get("cutoff_hz"):
+            dev += selection.add_penalty(1)
+    return dev
+
+
+def _filter_or_gauss_markov(meas: Measured, base: Fit, held, terms0, lp, y, rate_hz: float, alternatives: dict,
+                            veto):
+    """The filter rule decides between a fitted low-pass filter and a short Gauss-Markov term at the step
+    where they compete, in the state of that step: with another effect not yet named (a vibration line at
+    the Gauss-Markov term's cluster times) the Gauss-Markov fit is pulled to a few samples' tau_c, the filter
+    wins, and later steps patch what it leaves (a hidden tau_c 0.25 s term beside a 1.4 Hz line ended as a
+    1 Hz filter + the line + quantization). In the final state the filter is taken out and the step weighed
+    again (the same choice and rules); when a Gauss-Markov term wins there, the effects it makes unnecessary
+    are dropped (backward step) and the two final states are compared by deviance plus the levels their
+    added effects passed. Returns (terms, held, alternatives, note) for the Gauss-Markov state when it is
+    the better one, else None."""
+    n_model = len(terms0)
+    js = [j for j, t in enumerate(base.terms) if t["effect"] == "white_noise" and t.get("cutoff_hz")
+          and not (j < n_model and terms0[j].get("cutoff_hz"))]
+    if not js:
+        return None
+    trial = [dict(t) for t in base.terms]
+    for j in js:
+        for k in ("cutoff_hz", "order", "integrated"):
+            trial[j].pop(k, None)
+    shaped = [i for i in range(n_model, len(trial)) if trial[i]["effect"] in SHAPE and i not in held]
+    tb = fit_terms(meas, trial, sorted(held), intervals=False)
+    step = selection.choose(meas, tb, sorted(held), [], shaped=shaped, lowpass=lp, veto=veto)
+    x = step["chosen"]
+    if x is None or x.effect != "gauss_markov":
+        return None
+    gm_fit = fit_terms(meas, [dict(t) for t in x.fit.terms], sorted(held), intervals=False)
+    alt = dict(alternatives)
+    if step["alternative"] is not None:
+        alt[len(gm_fit.terms) - 1] = step["alternative"]
+    terms, held2, alt, dropped = _drop_unneeded(meas, gm_fit, held, n_model, alt, y, rate_hz)
+    before = _penalised_dev(meas, base.terms, held, terms0, y, rate_hz)
+    after = _penalised_dev(meas, terms, held2, terms0, y, rate_hz)
+    if after >= before:
+        return None
+    fc = ", ".join(f"{base.terms[j]['cutoff_hz']:.3g} Hz" for j in js)
+    gm = [t for t in terms[n_model:] if t["effect"] == "gauss_markov"][-1]
+    note = (f"the low-pass filter fitted at one step ({fc}) was weighed again in the final state: a "
+            f"Gauss-Markov term (tau_c {gm['tau_c']:.3g} s) explains the short cluster times better there "
+            f"(deviance + levels {after:.1f} against {before:.1f}) and is taken instead"
+            + ("; " + "; ".join(dropped) if dropped else ""))
+    return terms, held2, alt, note
+
+
 def _params(term) -> dict:
     return {k: v for k, v in term.items() if k != "effect"}
 
@@ -577,6 +635,14 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         held.add(j)
         current = [dict(t) for t in x.fit.terms]
         base = _refit(meas, current, held, len(terms0))
+
+    # 5c. a fitted filter taken over a short Gauss-Markov term is weighed again in the final state
+    if lp is not None and not lp[0]:
+        swap = _filter_or_gauss_markov(meas, base, held, terms0, lp, y, rate_hz, alternatives, veto)
+        if swap is not None:
+            current, held, alternatives, note = swap
+            res.notes.append(note)
+            base = _refit(meas, current, held, len(terms0))
 
     final = [dict(t) for t in base.terms]
     for i, t0 in enumerate(terms0):
