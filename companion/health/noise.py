@@ -140,7 +140,8 @@ GRID_TOL = 0.01  # LSB: the samples of a block placed on the code grid lie withi
 WHITE_MAX = 1.5  # the reference's sample variance over its v2 at most this: samples about independent (the
 #                  model's rounding of independent samples; a low-pass spreads the samples beyond v2)
 MIN_PLACED = 20  # reference blocks placed on the grid before the per-offset reference is used
-Z_SIGMA = 0.0  # the underlying noise is taken at the upper Z-sigma bound of the reference's evidence
+Z_SIGMA = 0.0  # the underlying noise raised by this many sigma of the reference's evidence: 0, at its estimate
+#               (the reference's own uncertainty enters as the dof kept, NU_KEEP, instead)
 NU_KEEP = 0.7  # the share of the model's dof kept when the reference's v2 are as dispersed as it predicts
 OFFSET_Z = 1.0  # standard errors of a block's offset estimate within which its true offset is sought
 _SPAN = np.linspace(-1.0, 1.0, 21)
@@ -226,13 +227,6 @@ def bias_diffusion(track, z: float = 2.0, max_lag: int = 10) -> float:
     return bound
 
 
-class _At:
-    """A stand-in observation carrying only a block's time (the filter's start from the reference)."""
-
-    def __init__(self, t: float):
-        self.t = (t,)
-
-
 def _fold(b):
     """Distance (LSB) of an offset from the nearest code: the moments are even and 1-periodic in it."""
     return np.abs(np.asarray(b, float) - np.round(b))
@@ -241,8 +235,8 @@ def _fold(b):
 def fit_offset_model(blocks, z: float = Z_SIGMA) -> OffsetModel | None:
     """The per-offset reference from the reference blocks ``(v2, m2, n, b, sb2)`` (LSB units, placed): the
     underlying sigma whose expected v2 summed over the blocks' own offsets matches theirs (bisection: the
-    rounded variance grows with sigma at every offset), raised to the upper ``z``-sigma bound of that sum,
-    and the share of dof kept (NU_KEEP, less when the blocks spread more than predicted). None when the
+    rounded variance grows with sigma at every offset), raised to the upper ``z``-sigma bound of that sum
+    when ``z`` > 0 (the default Z_SIGMA = 0 keeps the estimate), and the share of dof kept (NU_KEEP, less when the blocks spread more than predicted). None when the
     noise is above 0.75 LSB (the offset does not matter there: the plain reference is used)."""
     bl = np.asarray([r for r in blocks if all(math.isfinite(x) for x in r)], float)
     if bl.shape[0] < MIN_PLACED:
@@ -342,7 +336,7 @@ class NoiseDetector:
         if math.isfinite(self.q):  # the filter starts from the reference's blocks
             for t, a, r in track:
                 if math.isfinite(t):
-                    self._follow(a, r, _At(t))
+                    self._follow(a, r, t)
 
     def update(self, obs: Observation) -> list[FaultEvent]:
         """One still block of one axis: the white-noise variance against the reference."""
@@ -372,18 +366,19 @@ class NoiseDetector:
                 # the mean varies by the rounded noise's variance at that offset over n (at least)
                 floor = float(np.interp(_fold(b), _TABLE, self.model.var)) / y.shape[0]
                 a = (float(obs.stats.mean[j]) - float(y[0])) / self.lsb + round(float(y[0]) / self.lsb)
-                b, sb2, tracked = self._follow(a, max(sb2, floor), obs)
+                t = float(obs.t[-1]) if obs.t is not None and len(obs.t) else math.nan
+                b, sb2, tracked = self._follow(a, max(sb2, floor), t)
                 mean, nu = self.model.moments(b, sb2, float(obs.stats.m2[j]), y.shape[0], floor=not tracked)
                 return mean * self.lsb * self.lsb, nu
             self.track = None
         return self.reference_var(ref.sigma2), ref.nu
 
-    def _follow(self, a: float, r: float, obs: Observation) -> tuple[float, float, bool]:
+    def _follow(self, a: float, r: float, t: float) -> tuple[float, float, bool]:
         """The bias' offset (LSB, unfolded) and its variance from this block's mean ``a`` (variance ``r``) and
         the blocks before it: a Kalman filter of a random walk of diffusion ``q`` (learned from the reference,
         its upper bound), its variance growing with the time since the last placed block (a flight between
-        them: about the block alone). Without times or a learned diffusion, the block alone."""
-        t = float(obs.t[-1]) if obs.t is not None and len(obs.t) else math.nan
+        them: about the block alone). ``t``: the block's time (s). Without times or a learned diffusion, the
+        block alone."""
         if not (math.isfinite(t) and math.isfinite(self.q)):
             self.track = None
             return a, r, False
