@@ -19,6 +19,10 @@ Further modes (docs/analysis.md quotes them):
                                                a term left out: whether its 95 % upper bound holds; each
                                                split by whether the term is detectable at all (bands with
                                                and without it apart at some tau <= T/10, no fit involved)
+    python benchmarks/bench_fit.py short [seeds=200] [seconds=33]
+                                               the fit and the plateau reference of `real` on the same short
+                                               filtered white-noise records (the copter's 20 Hz at 50 Hz):
+                                               how far apart two sound estimates of N are on such a record
     python benchmarks/bench_fit.py draws null [draws=100] [set=0]
                                                the same N/B draws with K = 0: how often a K is invented
 """
@@ -94,7 +98,7 @@ def main():
 
 if __name__ == "__main__":
     mode = sys.argv[1] if len(sys.argv) > 1 else ""
-    if mode in ("real", "filtered", "draws"):
+    if mode in ("real", "filtered", "draws", "short"):
         from bench_fit_real import main_mode  # noqa: E402
 
         main_mode(mode, sys.argv[2:])

@@ -186,6 +186,44 @@ def run_filtered(args):
                   f"coverage {100 * np.mean([x[1] for x in v]):.0f} %, extra terms in {sum(x[2] > 0 for x in v)}")
 
 
+def run_short(args):
+    """What a short still window allows: the fit (the log's cut-off given, as for the copter's stills) and the
+    plateau reference of ``real`` on the same simulated records, against the truth and against each other.
+    White noise through the copter's filter (2-pole 20 Hz, point-sampled at 50 Hz), ``seconds`` long
+    (default 33, the copter log's still window): how far apart two sound estimates of N are on such a record."""
+    from companion.sim.filtered import filtered_white_noise, logged_white_level
+
+    seeds = int(args[0]) if args else 200
+    secs = float(args[1]) if len(args) > 1 else 33.0
+    fs, fc = 50.0, 20.0
+    n = int(fs * secs)
+    m = cluster_sizes(n, "octave")
+    edf = edf_simple(n + 1, m, 0)
+    level = logged_white_level(1e-3, fs, fc, "point")
+    fit_e, plat_e, diff, cover, t0 = [], [], [], [], time.time()
+    for s in range(seeds):
+        y = filtered_white_noise(n, 1e-3, fs, fc, "point", 9000 + s)
+        tau, av = oavar(y, fs, m=m)[:2]
+        fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m, white_filter={"filter_hz": fc, "sample_hz": fs},
+                      detect_filter="point")
+        t = fr.term("white_noise")
+        ref, _ = plateau(tau, av, n, fs)
+        if t is None or ref is None:
+            continue
+        fit_e.append(t["N"] / level - 1)
+        plat_e.append(ref / level - 1)
+        diff.append(t["N"] / ref - 1)
+        lo, hi = t["ci95"]["N"]
+        cover.append(lo <= ref <= hi)
+    fit_e, plat_e, diff = (np.array(v) * 100 for v in (fit_e, plat_e, diff))
+    print(f"white noise through 2-pole {fc:g} Hz, point-sampled at {fs:g} Hz, {len(diff)} of {seeds} records x "
+          f"{secs:g} s ({time.time() - t0:.0f} s)")
+    for name, e in (("fit vs truth", fit_e), ("plateau vs truth", plat_e), ("fit vs plateau", diff)):
+        print(f"   {name:<17} sd {np.std(e):.2f} %, |.| median {np.median(np.abs(e)):.2f} %, 95th pct "
+              f"{np.percentile(np.abs(e), 95):.2f} %, beyond 3 % in {100 * np.mean(np.abs(e) > 3):.0f} %")
+    print(f"   fit's 95 % interval covers the plateau in {100 * np.mean(cover):.0f} %")
+
+
 def _evidence(terms, effect, tau, m, n, fs):
     """Expected evidence for ``effect`` in a record made of ``terms``: the noncentrality
     lambda = |P_perp C^-1/2 a theta|^2 of the chi^2 drop its column brings (the GLS with the true covariance C,
@@ -349,4 +387,4 @@ def run_draws(args):
 
 
 def main_mode(mode, args):
-    {"real": run_real, "filtered": run_filtered, "draws": run_draws}[mode](args)
+    {"real": run_real, "filtered": run_filtered, "draws": run_draws, "short": run_short}[mode](args)
