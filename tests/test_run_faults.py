@@ -40,11 +40,11 @@ def run(duration, imus=1, fault=None, schedule=None, seed=1, sigma_lsb=2.0, base
     return p, sink
 
 
-#: the single-IMU tests of seed 1 (faults from 260 s on) share their first PREFIX_S seconds: the simulator's
-#: fault draws from its own generator and acts from its time on, so before it the samples are the healthy
-#: vehicle's (run_faulty checks it), and the pipeline is deterministic. The prefix is replayed once per test
-#: process; each test continues a copy of it with its own faulty simulator: the same messages, bit for bit, as
-#: run(duration, fault=fault), at a fifth of the replay time.
+#: tests of seed 1 with the same IMUs and schedule share the first ``prefix_s`` seconds, before their faults
+#: (260 s and later at rest, 300 s in flight): the simulator's fault draws from its own generator and acts from
+#: its time on, so before it the samples are the healthy vehicle's (run_faulty checks it), and the pipeline is
+#: deterministic. Each prefix is replayed once per test process; each test continues a copy of it with its own
+#: faulty simulator: the same messages, bit for bit, as run(duration, imus, fault, schedule).
 PREFIX_S = 250.0
 
 
@@ -66,23 +66,24 @@ class _Digest:
 
 
 @functools.lru_cache(maxsize=None)
-def _prefix():
-    """(pipeline, sink) after the first PREFIX_S seconds of the healthy vehicle, and the digest of what it was fed."""
-    sim = VehicleSimulator(model(), imus=1, seed=1, schedule=Schedule(), fault=None, warmup=WarmUp())
+def _prefix(prefix_s, imus, schedule):
+    """(pipeline, sink) after the first ``prefix_s`` seconds of the healthy vehicle, and the digest of what it was
+    fed."""
+    sim = VehicleSimulator(model(), imus=imus, seed=1, schedule=schedule, fault=None, warmup=WarmUp())
     sink = RecordingSink()
     p = Pipeline(PipelineConfig(baseline_s=200.0), Reporter(sink, 1.0))
     fed = _Digest(p)
-    replay_vehicle(sim, fed, PREFIX_S, lsb=LSB)
+    replay_vehicle(sim, fed, prefix_s, lsb=LSB)
     return (p, sink), fed.hash.hexdigest()
 
 
-def run_faulty(duration, fault):
-    """``run(duration, fault=fault)`` (seed 1, one IMU), its first PREFIX_S seconds from the shared prefix."""
-    assert fault.at > PREFIX_S
-    sim = VehicleSimulator(model(), imus=1, seed=1, schedule=Schedule(), fault=fault, warmup=WarmUp())
+def run_faulty(duration, fault, imus=1, schedule=Schedule(), prefix_s=PREFIX_S):
+    """``run(duration, imus, fault, schedule)`` (seed 1), its first ``prefix_s`` seconds from the shared prefix."""
+    assert fault.at > prefix_s
+    sim = VehicleSimulator(model(), imus=imus, seed=1, schedule=schedule, fault=fault, warmup=WarmUp())
     skipped = _Digest()
-    replay_vehicle(sim, skipped, PREFIX_S, lsb=LSB)  # in replay_vehicle's own chunks: the state it would have
-    state, digest = _prefix()
+    replay_vehicle(sim, skipped, prefix_s, lsb=LSB)  # in replay_vehicle's own chunks: the state it would have
+    state, digest = _prefix(prefix_s, imus, schedule)
     assert skipped.hash.hexdigest() == digest, "the faulty vehicle's first seconds are not the healthy one's"
     p, sink = copy.deepcopy(state)
     replay_vehicle(sim, p, duration, lsb=LSB)
@@ -140,7 +141,10 @@ def test_stuck_during_baseline_learning_is_flagged_before_any_baseline():
 def test_in_flight_fault_named_from_the_disagreement(imus, kind):
     # a bias above the disagreement floor (5 deg/s + 10 % of the rms rate of the flight)
     fault = Fault(kind, at=300.0, size=0.0 if kind == "stuck" else 10.0 * DEG, imu=imus - 1, axis="gx")
-    p, sink = run(312.0, imus=imus, fault=fault, schedule=Schedule(flights=(Flight(240.0, 600.0),)))
+    sched = Schedule(flights=(Flight(240.0, 600.0),))
+    # the two three-IMU cases share their first 290 s (the two-IMU one has no partner: replayed whole)
+    p, sink = (run_faulty(312.0, fault, imus=imus, schedule=sched, prefix_s=290.0) if imus == 3 else
+               run(312.0, imus=imus, fault=fault, schedule=sched))
     texts = fault_texts(sink)
     odd = imus - 1
     others = "/".join(f"IMU{k}" for k in range(imus) if k != odd)
