@@ -386,7 +386,7 @@ def _filter_or_gauss_markov(meas: Measured, base: Fit, held, terms0, lp, y, rate
         return None
     trial = [dict(t) for t in base.terms]
     for j in js:
-        for k in ("cutoff_hz", "order", "integrated"):
+        for k in ("cutoff_hz", "order", "integrate"):
             trial[j].pop(k, None)
     shaped = [i for i in range(n_model, len(trial)) if trial[i]["effect"] in SHAPE and i not in held]
     tb = fit_terms(meas, trial, sorted(held), intervals=False)
@@ -394,11 +394,10 @@ def _filter_or_gauss_markov(meas: Measured, base: Fit, held, terms0, lp, y, rate
     x = step["chosen"]
     if x is None or x.effect != "gauss_markov":
         return None
-    gm_fit = fit_terms(meas, [dict(t) for t in x.fit.terms], sorted(held), intervals=False)
     alt = dict(alternatives)
     if step["alternative"] is not None:
-        alt[len(gm_fit.terms) - 1] = step["alternative"]
-    terms, held2, alt, dropped = _drop_unneeded(meas, gm_fit, held, n_model, alt, y, rate_hz)
+        alt[len(x.fit.terms) - 1] = step["alternative"]
+    terms, held2, alt, dropped = _drop_unneeded(meas, x.fit, held, n_model, alt, y, rate_hz)
     before = _penalised_dev(meas, base.terms, held, terms0, y, rate_hz)
     after = _penalised_dev(meas, terms, held2, terms0, y, rate_hz)
     if after >= before:
