@@ -227,6 +227,11 @@ def bias_diffusion(track, z: float = 2.0, max_lag: int = 10) -> float:
     return bound
 
 
+def _block_time(obs) -> float:
+    """The time (s) of a block's last sample, nan when the block carries no times."""
+    return float(obs.t[-1]) if obs.t is not None and len(obs.t) else math.nan
+
+
 def _fold(b):
     """Distance (LSB) of an offset from the nearest code: the moments are even and 1-periodic in it."""
     return np.abs(np.asarray(b, float) - np.round(b))
@@ -303,7 +308,7 @@ class NoiseDetector:
             dm = float(st.mean[j]) - float(y[0])  # a block on one code is on any grid
         var = float(np.var(y)) if y is not None else math.nan
         y0 = float(y[0]) if y is not None else math.nan
-        t = float(obs.t[-1]) if obs.t is not None and len(obs.t) else math.nan
+        t = _block_time(obs)
         self.learned.append((v2, float(st.m2[j]), int(st.n), dm, step, var, y0, t))
         if math.isfinite(step) and step > 0.0:
             self.lsb = min(self.lsb, step)
@@ -366,7 +371,7 @@ class NoiseDetector:
                 # the mean varies by the rounded noise's variance at that offset over n (at least)
                 floor = float(np.interp(_fold(b), _TABLE, self.model.var)) / y.shape[0]
                 a = (float(obs.stats.mean[j]) - float(y[0])) / self.lsb + round(float(y[0]) / self.lsb)
-                t = float(obs.t[-1]) if obs.t is not None and len(obs.t) else math.nan
+                t = _block_time(obs)
                 b, sb2, tracked = self._follow(a, max(sb2, floor), t)
                 mean, nu = self.model.moments(b, sb2, float(obs.stats.m2[j]), y.shape[0], floor=not tracked)
                 return mean * self.lsb * self.lsb, nu
