@@ -8,8 +8,11 @@ K = 6e-5 rad/s^1.5 (white meets the flicker floor near 10 s, the floor meets the
 
 Further modes (docs/analysis.md quotes them):
 
-    python benchmarks/bench_fit.py real        real still stretches: offline N against the white-noise plateau of
-                                               ADEV sqrt(tau) (computed here, no fit), online against offline
+    python benchmarks/bench_fit.py real [--no-shared] [LOG|FOLDER ...]
+                                               real still stretches: offline N against the white-noise plateau of
+                                               ADEV sqrt(tau) (computed here, no fit), online against offline; the
+                                               ../shared/data recordings, then the logs named (e.g. public logs
+                                               fetched for local use; a folder: every .bin/.ulg/.tlog/.csv in it)
     python benchmarks/bench_fit.py filtered [seeds=100]
                                                coverage of N's 95 % interval on white noise through a 2-pole
                                                low-pass, point-sampled (50 Hz, f_c 20 Hz) or averaged (250 Hz,

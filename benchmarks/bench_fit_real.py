@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 from companion.allan.adev import cluster_sizes, oavar  # noqa: E402
 from companion.allan.confidence import edf_simple  # noqa: E402
 from companion.allan.fit import fit_avar  # noqa: E402
+from companion.allan.terms import avar_white_noise  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data"
 RAD2DEG_SQRTH = 180.0 / math.pi * 60.0  # rad/s/sqrt(Hz) -> deg/sqrt(h)
@@ -87,10 +88,24 @@ def _val(terms, effect, p):
     return None, None, None
 
 
+_LOG_SUFFIXES = (".bin", ".ulg", ".tlog", ".csv", ".csv.gz")
+
+
+def _real_sources(args):
+    """The shared recordings, then each further file named, or every log under each further folder named."""
+    out = [] if "--no-shared" in args else [(DATA / rel, rel, extra) for rel, extra in REAL]
+    for a in (a for a in args if a != "--no-shared"):
+        p = Path(a)
+        if not p.exists():
+            raise SystemExit(f"bench_fit real: no such file or folder: {a}")
+        files = sorted(f for f in p.rglob("*") if f.name.lower().endswith(_LOG_SUFFIXES)) if p.is_dir() else [p]
+        out += [(f, f.name, []) for f in files]
+    return out
+
+
 def run_real(args):
     rows = []
-    for rel_path, extra in REAL:
-        path = DATA / rel_path
+    for path, rel_path, extra in _real_sources(args):
         if not path.exists():
             continue
         with tempfile.TemporaryDirectory() as d:
@@ -111,6 +126,13 @@ def run_real(args):
                 n, rate = int(st["samples"]), float(st["rate_hz"])
                 tau, adev = np.array(a["tau"]), np.array(a["adev"])
                 Nref, span = plateau(tau, adev**2, n, rate)
+                # where the log gives the low-pass cut-off (not fitted), the filter-aware reference: the plateau
+                # of AVAR x tau / s(tau), s the 2-pole filter's shape at that cut-off (1 far above the corner)
+                flt = (a.get("fit") or {}).get("filter") or {}
+                Naware = None
+                if flt.get("source") == "log":
+                    s_tau = avar_white_noise(tau, 1.0, flt["filter_hz"], flt.get("sample_hz")) * tau
+                    Naware, _ = plateau(tau, adev**2 / s_tau, n, rate)
                 N, ci, _ = _val(a["terms"], "white_noise", "N")
                 Nb = next((b["N"] for b in a.get("bounds", []) if b["effect"] == "white_noise"), None)
                 B, _, _ = _val(a["terms"], "bias_instability", "B")
@@ -118,7 +140,7 @@ def run_real(args):
                 oN, _, oNb = _val(a.get("online"), "white_noise", "N")
                 oB, _, oBb = _val(a.get("online"), "bias_instability", "B")
                 rows.append(dict(src=f"{Path(rel_path).name} {st['message']}[{st['instance']}]", ax=ax,
-                                 secs=st["duration_s"], Nref=Nref, span=span, N=N, ci=ci, Nbound=Nb, B=B, Bbound=Bb,
+                                 secs=st["duration_s"], Nref=Nref, Naware=Naware, span=span, N=N, ci=ci, Nbound=Nb, B=B, Bbound=Bb,
                                  oN=oN, oNb=oNb, oB=oB, oBb=oBb, filt=(a.get("fit") or {}).get("filter"),
                                  notes=(a.get("fit") or {}).get("notes", [])))
         print(f"# {rel_path}: {time.time() - t0:.0f} s", flush=True)
@@ -148,8 +170,16 @@ def run_real(args):
         db = f"{100 * (r['oB'] / bref - 1):+7.1f}%" if (r["oB"] and bref and bool(r["oBb"]) == (r["B"] is None)) else "       -"
         f = r["filt"]
         fs = f"{f['filter_hz']:.3g} Hz ({f['source']})" if f else "none"
+        aw = ""
+        if r["Naware"]:
+            aw = f"  filter-aware {r['Naware'] * c:.3f}"
+            if r["N"] is not None:
+                aw += (f" ({100 * (r['N'] / r['Naware'] - 1):+.1f} %, "
+                       f"{'covers' if r['ci'][0] <= r['Naware'] <= r['ci'][1] else 'NOT covered'})")
+            elif r["Nbound"]:
+                aw += f" ({'bound holds' if r['Nbound'] >= r['Naware'] else 'BELOW the bound'})"
         print(f"{r['src']:<44}{r['ax']:>3}{r['secs']:6.0f}  {plat} {span:>13}  {off:>24} {d:>8} {cov:>6}  {on:>9} {do:>8}  "
-              f"{bo} {bn} {db:>8}  {fs}")
+              f"{bo} {bn} {db:>8}  {fs}{aw}")
     return rows
 
 

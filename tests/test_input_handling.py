@@ -267,6 +267,29 @@ def test_random_walk_resolved_only_from_a_long_enough_record():
         assert k and k[0]["K"] == pytest.approx(8e-4, rel=0.3)
 
 
+def test_a_long_tau_term_alone_on_a_short_record_is_a_bound_not_a_value():
+    """The record rule holds when the term it cannot resolve is the only one the model has (a 14-s still whose
+    curve only rises, fitted without white noise, as the online selection did on a rover log whose low-pass
+    it did not know): no term is resolved, the bias instability stays in the model and is reported as a
+    bound above its truth; before, it was reported as a value from 14 s of record."""
+    from companion.allan.adev import cluster_sizes, oavar
+    from companion.allan.confidence import edf_simple
+    from companion.allan.fit import fit_avar, upper_bounds
+    from companion.sim.synth import synthesize_axis
+
+    fs, n, B = 50.0, 700, 2e-3
+    m = cluster_sizes(n, "octave")
+    edf = edf_simple(n + 1, m, 0)
+    for seed in range(3):
+        y = synthesize_axis([{"effect": "bias_instability", "B": B}], fs, n, np.random.default_rng(seed))
+        tau, av = oavar(y, fs, m=m)[:2]
+        fr = fit_avar(tau, av, edf, effects=["bias_instability"], n=n, rate_hz=fs, m=m)
+        assert fr.terms == [] and [t["effect"] for t in fr.nuisance] == ["bias_instability"]
+        assert any(x.startswith("bias_instability not resolved: the record (14 s)") for x in fr.notes)
+        ub = {b["effect"]: b for b in upper_bounds(fr, tau, av, n=n, rate_hz=fs, m=m, effects=("bias_instability",))}
+        assert ub["bias_instability"]["bound"] and ub["bias_instability"]["B"] > B
+
+
 def test_bin_float_damaged_to_inf_or_nan_is_dropped_and_said(tmp_path):
     """A gyro float whose exponent bits were flipped (inf, NaN) is a damaged record: dropped and counted."""
     from companion.analysis.notes import notes

@@ -124,6 +124,11 @@ def test_tlog_param_value_gives_the_filter_to_run_and_to_analyze(tmp_path):
     ("ulog", "sensor_combined", {"IMU_GYRO_CUTOFF": 30.0}, {"gyro": 30.0}),
     (None, "HIGHRES_IMU", {"IMU_GYRO_CUTOFF": 30.0, "IMU_ACCEL_CUTOFF": math.nan}, {"gyro": 30.0}),
     ("csv", "CSV", {"INS_GYRO_FILTER": 20.0}, {}),
+    # 2014-2015 firmware: the MPU6000/MPU9250's own low-pass for gyro and accelerometer; 0 = a default that
+    # changed between releases (unknown); the newer per-kind parameters win where a log has both
+    ("dataflash", "IMU", {"INS_MPU6K_FILTER": 5.0}, {"gyro": 5.0, "accel": 5.0}),
+    ("dataflash", "IMU", {"INS_MPU6K_FILTER": 0.0}, {}),
+    ("dataflash", "IMU", {"INS_MPU6K_FILTER": 42.0, "INS_GYRO_FILTER": 20.0}, {"gyro": 20.0, "accel": 42.0}),
 ])
 def test_filter_rules(fmt, msg, params, want):
     from companion.analysis.filters import filters_from_params

@@ -473,7 +473,8 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     estimate, for a caller that computes its own intervals, as the online report does). With ``n`` and ``rate_hz`` (the record is known), a bias-instability or rate
     random-walk term the record is too short to resolve (:func:`record_needed`) is not reported: it moves
     from ``terms`` to ``nuisance`` (it stays in the model), with a note giving the record length it would
-    need; the caller reports a bound."""
+    need; the caller reports a bound. So even when it is the only term the data select: a bias instability
+    alone on a 14-s record is no resolved value (everything is then a bound)."""
     res = _fit_avar(tau, avar, edf, effects, n=n, rate_hz=rate_hz, m=m, level=level, max_iter=max_iter,
                     max_ratio=max_ratio, segments=segments, select=select, white_filter=white_filter,
                     detect_filter=detect_filter, inverted_ci=inverted_ci)
@@ -484,9 +485,6 @@ def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None,
     needs = _record_for(tau_d)
     drop = {e: need for e, need in needs.items() if need > record}
     if not drop:
-        return res
-    keep = [t["effect"] for t in res.terms if t["effect"] not in drop]
-    if not keep:
         return res
     # the record rule decides what is reported, not what is modelled: the dropped term stays in the model
     # (its share of the curve is there, resolved or not) as a nuisance term, and the kept terms keep their
@@ -840,7 +838,7 @@ def upper_bounds(fr: FitResult, tau, avar, *, n, rate_hz, m=None, segments=None,
     avar = np.asarray(avar, dtype=float)
     have = {t["effect"] for t in fr.terms}
     missing = [e for e in effects if e not in have and e in LINEAR_PARAM]
-    if not missing or not fr.terms or tau.size < 3:
+    if not missing or not (fr.terms or fr.nuisance) or tau.size < 3:
         return []
     # a term the record is too short to resolve (fr.nuisance) stays in the model of the others' bounds, as in
     # the fit: left out, the bounded term would take up its share

@@ -7,7 +7,8 @@ with intervals that do not cover. There the honest answer is a bound (:func:`whi
 makes AVAR(tau) = N^2 s(tau) / tau (s the filter's shape, :func:`companion.allan.terms.avar_white_noise` with
 N = 1, times tau), and every other independent term adds to it, so at every cluster time
 N^2 <= AVAR(tau) tau / s(tau); with the estimate's chi-square spread (EDF) the one-sided 95 % upper bound at
-each point is AVAR tau / s EDF / chi2_{0.05}(EDF), and the least over the points is the bound.
+each point is AVAR tau / s EDF / chi2_{0.05/k}(EDF), and the least over the k points is the bound (each point's
+level Bonferroni-corrected: the least of k bounds at 95 % each falls below N with probability up to k x 5 %).
 """
 
 from __future__ import annotations
@@ -55,11 +56,12 @@ def white_bound(tau, avar, edf, white_filter=None, level=0.95) -> tuple[float, f
     avar = np.asarray(avar, dtype=float)
     edf = np.maximum(np.asarray(edf, dtype=float), 0.5)
     s = _shape(dict(white_filter or {}), tau)
-    q = np.array([chi2_ppf(1.0 - level, float(e)) for e in edf])
-    ub = avar * tau / s * edf / q
-    ok = np.isfinite(ub) & (ub > 0)
+    ok = np.isfinite(avar * tau / s) & (avar * tau / s > 0)
     if not ok.any():
         return float("nan"), float("nan")
+    alpha = (1.0 - level) / int(np.count_nonzero(ok))  # Bonferroni over the points the least is taken from
+    q = np.array([chi2_ppf(alpha, float(e)) for e in edf])
+    ub = np.where(ok, avar * tau / np.where(ok, s, 1.0) * edf / q, np.inf)
     i = int(np.flatnonzero(ok)[np.argmin(ub[ok])])
     return math.sqrt(float(ub[i])), float(tau[i])
 

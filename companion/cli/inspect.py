@@ -92,8 +92,8 @@ def render(res) -> str:
     return "\n".join(lines)
 
 
-FILTER_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_FAST_SAMPLE", "INS_LOG_BAT_MASK", "INS_LOG_BAT_OPT",
-                 "IMU_GYRO_CUTOFF", "IMU_ACCEL_CUTOFF", "IMU_INTEG_RATE")
+FILTER_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_MPU6K_FILTER", "INS_FAST_SAMPLE", "INS_LOG_BAT_MASK",
+                 "INS_LOG_BAT_OPT", "IMU_GYRO_CUTOFF", "IMU_ACCEL_CUTOFF", "IMU_INTEG_RATE")
 
 
 def log_lines(res) -> list[str]:

@@ -123,7 +123,7 @@ def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure
 def bounds_for_fit(fr, tau, avar, edf0, rate_hz, n, effects=("white_noise", "bias_instability", "random_walk")):
     """95 % upper bounds (report format, ``"bound": True``) of the ``effects`` an offline fit left out, with
     the same rule as the online report: what ``companion analyze`` prints instead of '-'."""
-    if not fr.terms:
+    if not (fr.terms or getattr(fr, "nuisance", None)):
         return []
     st = structure_from_fit(fr, tau, avar, edf0, rate_hz, n)
     keep = np.isin(np.round(np.asarray(tau, float) * rate_hz).astype(np.int64), st.m)
@@ -142,7 +142,7 @@ def _inverted_bounds(fr, tau, avar, n, rate_hz, segments=None) -> list:
     bounded a rate random walk left out of 2-h records below its truth in 9 of 17 draws (1 of 17 here)."""
     from companion.allan.fit import upper_bounds
 
-    if not fr.terms:
+    if not (fr.terms or getattr(fr, "nuisance", None)):
         return []
     m = np.round(np.asarray(tau, float) * rate_hz).astype(np.int64)
     keep = np.isin(m, np.round(np.asarray(fr.tau, float) * rate_hz).astype(np.int64))
