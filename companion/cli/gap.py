@@ -43,7 +43,7 @@ examples:
 MEASURED is anything 'companion analyze' reads (.bin, .ulg, .tlog, .csv, .csv.gz); the still segments are
 selected as analyze selects them (armed state, motion; --start/--end/--all) and pooled. Besides the seven
 terms the candidates include the autopilot's low-pass filter with the logger's decimation (cut-off from
-INS_GYRO_FILTER / IMU_GYRO_CUTOFF or --cutoff, else fitted) and, when the log has a temperature channel,
+INS_GYRO_FILTER / INS_MPU6K_FILTER / IMU_GYRO_CUTOFF or --cutoff, else fitted) and, when the log has a temperature channel,
 a temperature-driven rate checked against that channel. With --datasheet the first line says which
 datasheet term the measurement contradicts and by how much.
 """
