@@ -26,6 +26,10 @@ Further modes (docs/analysis.md quotes them):
                                                the fit and the plateau reference of `real` on the same short
                                                filtered white-noise records (the copter's 20 Hz at 50 Hz):
                                                how far apart two sound estimates of N are on such a record
+    python benchmarks/bench_fit.py preset [name=copter] [seeds=20] [seconds=60]
+                                               the realistic simulator's stills (sensor rate, the autopilot's
+                                               filter and decimation, LSB, temperature, bias wander): N and its
+                                               95 % interval, offline and online, against the logged white level
     python benchmarks/bench_fit.py draws null [draws=100] [set=0]
                                                the same N/B draws with K = 0: how often a K is invented
 """
@@ -101,7 +105,7 @@ def main():
 
 if __name__ == "__main__":
     mode = sys.argv[1] if len(sys.argv) > 1 else ""
-    if mode in ("real", "filtered", "draws", "short"):
+    if mode in ("real", "filtered", "draws", "short", "preset"):
         from bench_fit_real import main_mode  # noqa: E402
 
         main_mode(mode, sys.argv[2:])

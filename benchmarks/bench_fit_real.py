@@ -416,5 +416,83 @@ def run_draws(args):
         print("  missing:", x)
 
 
+def preset_white_level(preset: dict, imu: int, axis: str) -> float:
+    """The white level N of the logged gyro samples of a realistic preset (no fit involved): the model's N
+    times the IMU's noise gain, plus the sensor's LSB rounding (Delta^2 / 12 per sensor sample, white at the
+    sensor rate: two-sided PSD Delta^2 / (12 fs)), then through the preset's digital filter and decimation
+    (:func:`companion.sim.realism.filtered_white_avar`, the analytic truth of that path) at a cluster time far
+    above the filter's corner, where AVAR x tau is the logged white level."""
+    from companion.sim.realism import filtered_white_avar
+
+    r, model = preset["realism"], preset["model"]
+    n_in = next(t["N"] for t in model.axes[axis] if t["effect"] == "white_noise") * r.imu_noise_gain[imu]
+    n2 = n_in**2 + (r.gyro_lsb**2 / 12.0 / r.sensor_rate_hz if r.gyro_lsb else 0.0)
+    big = 1e4
+    return math.sqrt(float(filtered_white_avar(math.sqrt(n2), r, model.rate_hz, np.array([big]))[0]) * big)
+
+
+def run_preset(args):
+    """Coverage of N's 95 % interval on the realistic simulator's stills: ``preset [name=copter] [seeds=20]
+    [seconds=60]``. Each seed: the preset's vehicle at rest (its IMUs, sensor rate, filter, decimation, LSB,
+    timing, temperature rise, Gauss-Markov bias wander; no vibration on the ground, no IMU scale or alignment
+    spread), every gyro axis analysed as ``companion analyze`` does (``analyze_axis`` with the preset's
+    cut-off as the log's; offline fit and the online report), N compared with :func:`preset_white_level`."""
+    from companion.analysis.axis import analyze_axis
+    from companion.estimators import online_terms
+    from companion.sim.preset import load_preset
+    from companion.sim.vehicle import ImuSpread, VehicleSimulator
+
+    name = args[0] if args else "copter"
+    seeds = int(args[1]) if len(args) > 1 else 20
+    secs = float(args[2]) if len(args) > 2 else 60.0
+    pr = load_preset(name)
+    r, model = pr["realism"], pr["model"]
+    imus = int(pr["vehicle"].get("imus", 1))
+    fs = float(model.rate_hz)
+    samp = "average" if r.decimation == "average" else "point"
+    wf = {"filter_hz": r.gyro_lpf_hz, "sample_hz": fs if samp == "point" else None} if r.gyro_lpf_hz else None
+    rows, t0 = [], time.time()
+    for seed in range(seeds):
+        blk = VehicleSimulator(model, imus=imus, seed=seed, realism=r, spread=ImuSpread(scale=0.0,
+                               misalignment_deg=0.0)).run(secs)
+        for i in range(imus):
+            for j, ax in enumerate(("gx", "gy", "gz")):
+                truth = preset_white_level(pr, i, ax)
+                y = blk.gyro[i, :, j]
+                a = analyze_axis(y, fs, white_filter=wf, sampling=samp)
+                wn = next((t for t in a["terms"] if t["effect"] == "white_noise"), None)
+                on = next((t for t in online_terms(y, fs, filter_hz=r.gyro_lpf_hz, sampling=samp)
+                           if t["effect"] == "white_noise"), None)
+                rows.append((i, ax, truth, wn, on, seed, a["fit"]["notes"]))
+    print(f"preset {name}: {seeds} seeds x {imus} IMUs x 3 gyro axes, {secs:g} s still at {fs:g} Hz "
+          f"(filter {r.gyro_lpf_hz} Hz, {r.decimation}); {time.time() - t0:.0f} s")
+    for label, k in (("offline", 3), ("online", 4)):
+        res = [x for x in rows if x[k] is not None and not x[k].get("bound")]
+        err = np.array([x[k]["N"] / x[2] - 1 for x in res]) * 100
+        cov = sum(x[k]["ci95"]["N"][0] <= x[2] <= x[k]["ci95"]["N"][1] for x in res)
+        bnd = [x for x in rows if x[k] is not None and x[k].get("bound")]
+        held = sum(x[k]["N"] >= x[2] for x in bnd)
+        print(f"  {label:8} resolved {len(res)}/{len(rows)}: N error median {np.median(err):+.2f} %, "
+              f"|error| 95th pct {np.percentile(np.abs(err), 95):.2f} %, max {np.max(np.abs(err)):.2f} %; "
+              f"95 % interval covers {cov}/{len(res)} ({100 * cov / max(len(res), 1):.1f} %); "
+              f"bounds {len(bnd)}, above the truth {held}")
+    worst = sorted((x for x in rows if x[3] is not None and not x[3].get("bound")),
+                   key=lambda x: -abs(x[3]["N"] / x[2] - 1))[:3]
+    for x in worst:
+        lo, hi = (v / x[2] for v in x[3]["ci95"]["N"])
+        print(f"  worst: seed {x[5]} IMU{x[0]} {x[1]}: N {x[3]['N'] / x[2]:.3f} x the truth [{lo:.3f}, {hi:.3f}]; "
+              f"{'; '.join(x[6])[:300]}")
+    for i in range(imus):
+        sub = [x for x in rows if x[0] == i and x[3] is not None and not x[3].get("bound")]
+        cov = sum(x[3]["ci95"]["N"][0] <= x[2] <= x[3]["ci95"]["N"][1] for x in sub)
+        print(f"    IMU{i} offline: truth {sub[0][2] if sub else float('nan'):.3g} rad/s/sqrt(Hz), covers {cov}/{len(sub)}")
+
+
 def main_mode(mode, args):
-    {"real": run_real, "filtered": run_filtered, "draws": run_draws, "short": run_short}[mode](args)
+    from companion.errors import CompanionError
+
+    try:
+        {"real": run_real, "filtered": run_filtered, "draws": run_draws, "short": run_short,
+         "preset": run_preset}[mode](args)
+    except (CompanionError, ValueError) as exc:  # a bad argument: one line, no traceback
+        raise SystemExit(f"bench_fit {mode}: {exc} (usage: the module docstring of benchmarks/bench_fit.py)")
