@@ -56,12 +56,13 @@ def white_bound(tau, avar, edf, white_filter=None, level=0.95) -> tuple[float, f
     avar = np.asarray(avar, dtype=float)
     edf = np.maximum(np.asarray(edf, dtype=float), 0.5)
     s = _shape(dict(white_filter or {}), tau)
-    ok = np.isfinite(avar * tau / s) & (avar * tau / s > 0)
+    r = avar * tau / s  # filter-corrected AVAR x tau: N^2 where white noise alone is there
+    ok = np.isfinite(r) & (r > 0)
     if not ok.any():
         return float("nan"), float("nan")
     alpha = (1.0 - level) / int(np.count_nonzero(ok))  # Bonferroni over the points the least is taken from
     q = np.array([chi2_ppf(alpha, float(e)) for e in edf])
-    ub = np.where(ok, avar * tau / np.where(ok, s, 1.0) * edf / q, np.inf)
+    ub = np.where(ok, r * edf / q, np.inf)
     i = int(np.flatnonzero(ok)[np.argmin(ub[ok])])
     return math.sqrt(float(ub[i])), float(tau[i])
 
