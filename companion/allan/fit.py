@@ -68,6 +68,8 @@ NONLINEAR_EFFECTS = ("gauss_markov", "sinusoid")
 #: quantization, ramp, gauss_markov and sinusoid enter only if they lower the BIC by more than this
 #: ("very strong" evidence on the scale of Kass & Raftery 1995: 2 ln(Bayes factor) > 10)
 EXTRA_BIC_MARGIN = 10.0
+#: the log's low-pass cut-off stands unless it lies outside the data's profile interval at this level
+FILTER_LOG_LEVEL = 0.99
 #: what effects=None tries; a sinusoid is fitted only when asked for (on octave-spaced points its
 #: oscillating AVAR fits chance bumps too easily)
 AUTO_EFFECTS = LINEAR_EFFECTS + ("gauss_markov",)
@@ -604,15 +606,27 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         lin_f = linear if "white_noise" in linear else ["white_noise"] + list(linear)
         filter_info = _profile_filter(_Problem(tau, v, cov, None, tau0), lin_f, nonlin, tau0,
                                       "point" if detect_filter != "average" else "average", white)
-        thr = math.log(n_pts) + EXTRA_BIC_MARGIN
-        base_c2 = filter_info["chi2_given"] if white else filter_info["chi2_plain"]
+        if white:
+            # the log's cut-off is a prior, not a claim to test: it is set aside when the data put it outside
+            # their 99 % profile interval (chi^2 scaled by the Birge ratio where the model misfits). A nominal
+            # cut-off need not be the 2-pole equivalent of the real filter (an MPU-6000's "5 Hz" DLPF setting
+            # on 2014 ArduPilot fits as 6-8 Hz), and N follows the shape it is given.
+            dof_f = max(n_pts - len(lin_f) - 2 * len(nonlin) - 1, 1)
+            thr = chi2_ppf(FILTER_LOG_LEVEL, 1) * max(1.0, filter_info["chi2"] / dof_f)
+            base_c2 = filter_info["chi2_given"]
+        else:
+            thr = math.log(n_pts) + EXTRA_BIC_MARGIN
+            base_c2 = filter_info["chi2_plain"]
         if filter_info["interior"] and filter_info["chi2"] < base_c2 - thr:
+            given_hz = white["filter_hz"] if white else None
             white = {"filter_hz": filter_info["filter_hz"],
                      "sample_hz": rate_hz if detect_filter != "average" else None}
             filter_info["source"] = "data"
             cov, linear, nonlin, c2, v_sup, sup_terms = iterate(0.0)
             notes.append(f"low-pass roll-off seen in the data: 2-pole {filter_info['filter_hz']:.3g} Hz "
-                         f"[{filter_info['ci95'][0]:.3g}, {filter_info['ci95'][1]:.3g}] modelled in the white-noise term")
+                         f"[{filter_info['ci95'][0]:.3g}, {filter_info['ci95'][1]:.3g}] modelled in the white-noise term"
+                         + (f" (the log's {given_hz:.3g} Hz set aside: outside the data's "
+                            f"{100 * FILTER_LOG_LEVEL:.0f} % interval)" if given_hz else ""))
         elif white:
             filter_info["source"] = "log"
         else:
@@ -712,26 +726,33 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
                      model_error=floor, filter=_filter_summary(white, filter_info))
 
 
+def forced_intervals(prob, sup, nonlin, tau, white, level) -> dict:
+    """Intervals (scaled chi-square, in ``prob``'s theta units) of the linear terms in the model with the
+    effects ``sup`` forced in, for each term with a positive estimate there: the other half of the selection
+    envelope (:func:`_selection_envelope` offline; the online report uses it the same way)."""
+    A_s = _columns(sup, nonlin, tau, white)
+    th_s, _ = prob.solve(A_s)
+    act = th_s > 0
+    if not act.any():
+        return {}
+    cov_s = np.zeros((len(th_s), len(th_s)))
+    cov_s[np.ix_(act, act)] = prob.cov_theta(A_s[:, act])
+    return {e: _scaled_chi2_ci(th_s[k], cov_s[k, k], level) for k, e in enumerate(sup) if th_s[k] > 0}
+
+
 def _selection_envelope(terms, prob, sup, nonlin, tau, white, scale, level):
     """Widen each resolved linear term's interval to the envelope of it and its interval in the model with every
     base effect (N, B, K) forced in (``sup``), as the online report does: a base effect the selection left out
     moves its share into the kept terms. Measured on random 2-h N/B/K draws (benchmarks/bench_fit.py draws):
     a rate random walk too weak to be selected went into B, whose interval then missed the truth high
     (1.02-1.08 x) in 7-8 of 100 draws. Estimates are unchanged."""
-    A_s = _columns(sup, nonlin, tau, white)
-    th_s, _ = prob.solve(A_s)
-    act = th_s > 0
-    if not act.any():
-        return
-    cov_s = np.zeros((len(th_s), len(th_s)))
-    cov_s[np.ix_(act, act)] = prob.cov_theta(A_s[:, act])
+    forced = forced_intervals(prob, sup, nonlin, tau, white, level)
     for t in terms:
         e = t["effect"]
-        if e not in sup or th_s[sup.index(e)] <= 0:
+        if e not in forced:
             continue
-        k = sup.index(e)
         p = LINEAR_PARAM[e]
-        lo_s, hi_s = _scaled_chi2_ci(th_s[k], cov_s[k, k], level)
+        lo_s, hi_s = forced[e]
         lo, hi = t["ci95"][p]
         t["ci95"][p] = [min(lo, math.sqrt(max(lo_s, 0.0) * scale)), max(hi, math.sqrt(max(hi_s, 0.0) * scale))]
 

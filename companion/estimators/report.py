@@ -182,7 +182,7 @@ def _marginal_var(prob, A, theta, i):
 def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95):
     """Resolved terms and bounds (see the module docstring) from the levels ``tau, avar`` (restricted to the
     structure's levels) and the covariance ``cov`` of the Allan estimates (default: the structure's)."""
-    from companion.allan.fit import _columns, _scaled_chi2_ci  # scipy-free; loaded at first report
+    from companion.allan.fit import _columns, _scaled_chi2_ci, forced_intervals  # scipy-free; loaded at first report
 
     tau = np.asarray(tau, float)
     avar = np.asarray(avar, float)
@@ -203,14 +203,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     # out (e.g. a bias instability hidden under a Gauss-Markov hump) can otherwise shift N beyond its interval
     # (solved only when that model has more terms: the selected one with N, B and K in is the same model)
     sup = [x for x in LINEAR_EFFECTS if x in mod or (x in BASE_EFFECTS and x in candidates)]
-    forced = set(sup) != set(mod)
-    if forced:
-        A_s = _columns(sup, st.nonlin, tau, st.white)
-        th_s, _ = prob.solve(A_s)
-        cov_s = np.zeros((len(th_s), len(th_s)))
-        act_s = th_s > 0
-        if act_s.any():
-            cov_s[np.ix_(act_s, act_s)] = prob.cov_theta(A_s[:, act_s])
+    forced = forced_intervals(prob, sup, st.nonlin, tau, st.white, level) if set(sup) != set(mod) else {}
     resolved = {}
     for j, e in enumerate(st.linear):
         if theta[j] <= 0:
@@ -218,10 +211,8 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
         lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
         if lo > 0:
             p = LINEAR_PARAM[e]
-            k = sup.index(e)
-            if forced and th_s[k] > 0:
-                lo_s, hi_s = _scaled_chi2_ci(th_s[k], cov_s[k, k], level)
-                lo, hi = min(lo, lo_s), max(hi, hi_s)
+            if e in forced:
+                lo, hi = min(lo, forced[e][0]), max(hi, forced[e][1])
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
             resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
                            "bound": False}
