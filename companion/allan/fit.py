@@ -525,8 +525,10 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     filtered shape, so N comes from every cluster time, the roll-off included; the fitted white_noise term
     carries the filter. None: plain white noise.
     ``detect_filter``: "point" or "average" (how the logged samples were taken from the filtered signal):
-    look for a roll-off in the data (:func:`_profile_filter`); it is modelled only when it lowers chi^2 by more
-    than ln(points) + EXTRA_BIC_MARGIN against no filter (or against ``white_filter``'s cut-off, the log's).
+    look for a roll-off in the data (:func:`_profile_filter`); without ``white_filter`` it is modelled only when
+    it lowers chi^2 by more than ln(points) + EXTRA_BIC_MARGIN against no filter; ``white_filter``'s cut-off
+    (the log's) stands unless it lies outside the data's FILTER_LOG_LEVEL profile interval (chi^2 scaled by the
+    Birge ratio of the best fit).
     The result's ``filter`` says what was used: {"filter_hz", "sample_hz", "source": "log" | "data", "ci95"}.
     """
     tau = np.asarray(tau, dtype=float)
@@ -602,7 +604,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     if detect_filter and "white_noise" in effects and tau0 and n_pts >= 5:
         # a low-pass roll-off: claimed only when the data show one (the filtered white-noise shape lowers
         # chi^2 by more than one parameter's BIC penalty + EXTRA_BIC_MARGIN); the log's cut-off, when given,
-        # stands unless the data contradict it by the same margin
+        # stands unless the data's profile interval excludes it
         lin_f = linear if "white_noise" in linear else ["white_noise"] + list(linear)
         filter_info = _profile_filter(_Problem(tau, v, cov, None, tau0), lin_f, nonlin, tau0,
                                       "point" if detect_filter != "average" else "average", white)
