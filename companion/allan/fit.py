@@ -60,7 +60,7 @@ import numpy as np
 from companion.allan.confidence import flicker_sampling_excess, oavar_covariance
 from companion.allan.lsq import nnls
 from companion.allan.memo import BoundedMemo
-from companion.allan.special import brentq, chi2_ppf, minimize_scalar_bounded
+from companion.allan.special import brentq, chi2_cdf, chi2_ppf, minimize_scalar_bounded
 from companion.allan.terms import (BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term,
                                    avar_white_noise, linear_basis)
 
@@ -705,27 +705,49 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     if auto and full and set(sup) != set(linear):
         _selection_envelope(terms, prob_ci, sup, nonlin, tau, white, scale, level)
     if filter_info and filter_info.get("source") == "data":
-        # N and the cut-off found in the data are correlated: N's interval is the envelope of its conditional
-        # intervals over the cut-off's interval (a projection interval, as for a Gauss-Markov sigma)
+        # N and the cut-off found in the data are correlated: N's interval is its profile-likelihood interval
+        # over the cut-off, the union over f_c of N's conditional intervals at the level left once f_c's own
+        # chi^2 excess is spent (chi^2(f_c) - chi^2_min + z^2 <= chi2_level(1)). The envelope of full-level
+        # conditional intervals over f_c's interval (the projection) allowed twice that excess and covered
+        # 99-100 % where a 95 % interval was asked for
         wt = next((t for t in terms if t["effect"] == "white_noise"), None)
         if wt is not None:
-            j = linear.index("white_noise")
-            lo_n, hi_n = wt["ci95"]["N"]
-            for fc in np.exp(np.linspace(*np.log(filter_info["ci95"]), 7)):
-                A2 = _columns(linear, nonlin, tau, dict(white, filter_hz=float(fc)))
-                th2, _ = prob.solve(A2)
-                if th2[j] > 0:
-                    act = th2 > 0
-                    ct = prob_ci.cov_theta(A2[:, act])
-                    l2, h2 = _scaled_chi2_ci(th2[j], ct[int(np.count_nonzero(act[:j]))][int(np.count_nonzero(act[:j]))], level)
-                    lo_n, hi_n = min(lo_n, math.sqrt(l2 * scale)), max(hi_n, math.sqrt(h2 * scale))
-            wt["ci95"]["N"] = [lo_n, hi_n]
+            wt["ci95"]["N"] = _profile_white_ci(wt["ci95"]["N"], prob, prob_ci, linear, nonlin, tau, white,
+                                                filter_info["ci95"], c2, scale, level)
     kk = int(np.count_nonzero(active)) + len(nonlin)
     avar_fit = avar_model([{k: v_ for k, v_ in t.items() if k != "ci95"} for t in terms], tau)
     return FitResult(terms=terms, tau=tau, avar_fit=avar_fit, chi2=c2, dof=max(n_pts - kk, 0),
                      criterion="bic", score=c2 + kk * math.log(n_pts),
                      covariance_mode="full" if full else "diagonal", avar_cov=cov * scale**2, notes=notes,
                      model_error=floor, filter=_filter_summary(white, filter_info))
+
+
+def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, scale, level):
+    """N's interval ``ci`` (at the fitted cut-off) widened to its profile-likelihood interval over the cut-off:
+    f_c on a log grid over its interval ``fc_ci`` widened by half its log-width each side (the final
+    covariance, with any model error, may allow more than the first profile did), each f_c's conditional
+    interval at the level whose chi^2 quantile is chi2_level(1) - (chi^2(f_c) - chi^2_min)."""
+    j = linear.index("white_noise")
+    thr = chi2_ppf(level, 1)
+    lo_l, hi_l = math.log(fc_ci[0]), math.log(fc_ci[1])
+    pad = 0.5 * (hi_l - lo_l)
+    rows = []
+    for fc in np.exp(np.linspace(lo_l - pad, hi_l + pad, 13)):
+        A2 = _columns(linear, nonlin, tau, dict(white, filter_hz=float(fc)))
+        th2, c2f = prob.solve(A2)
+        rows.append((A2, th2, c2f))
+    c2min = min([c2] + [r[2] for r in rows])
+    lo_n, hi_n = ci
+    for A2, th2, c2f in rows:
+        left = thr - (c2f - c2min)
+        if th2[j] <= 0 or left <= 0:
+            continue
+        act = th2 > 0
+        k = int(np.count_nonzero(act[:j]))
+        ct = prob_ci.cov_theta(A2[:, act])
+        l2, h2 = _scaled_chi2_ci(th2[j], ct[k, k], max(chi2_cdf(left, 1), 1e-6))
+        lo_n, hi_n = min(lo_n, math.sqrt(l2 * scale)), max(hi_n, math.sqrt(h2 * scale))
+    return [lo_n, hi_n]
 
 
 def forced_intervals(prob, sup, nonlin, tau, white, level) -> dict:

@@ -77,6 +77,8 @@ class Structure:
     # linear effects the model holds that the record is too short to resolve (fit_avar's record rule): in every
     # solve, never resolved (their bound is reported), so that the others do not take up their share
     nuisance: tuple = ()
+    # the cut-off's 95 % interval when the data gave it (N's interval is then profiled over it, as offline)
+    white_ci: tuple | None = None
 
 
 def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ratio=256, white_filter=None,
@@ -116,8 +118,10 @@ def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure
     white = ({"filter_hz": fr.filter["filter_hz"], "sample_hz": fr.filter.get("sample_hz")}
              if getattr(fr, "filter", None) else None)
     nuisance = tuple(t["effect"] for t in getattr(fr, "nuisance", ()) if t["effect"] in LINEAR_EFFECTS)
+    flt = getattr(fr, "filter", None) or {}
+    white_ci = tuple(flt["ci95"]) if flt.get("source") == "data" and flt.get("ci95") else None
     return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
-                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci, white, nuisance)
+                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci, white, nuisance, white_ci)
 
 
 def bounds_for_fit(fr, tau, avar, edf0, rate_hz, n, effects=("white_noise", "bias_instability", "random_walk")):
@@ -182,7 +186,7 @@ def _marginal_var(prob, A, theta, i):
 def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95):
     """Resolved terms and bounds (see the module docstring) from the levels ``tau, avar`` (restricted to the
     structure's levels) and the covariance ``cov`` of the Allan estimates (default: the structure's)."""
-    from companion.allan.fit import _columns, _scaled_chi2_ci, forced_intervals  # scipy-free; loaded at first report
+    from companion.allan.fit import _columns, _profile_white_ci, _scaled_chi2_ci, forced_intervals  # scipy-free
 
     tau = np.asarray(tau, float)
     avar = np.asarray(avar, float)
@@ -193,7 +197,7 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     prob, scale = _problem(tau, avar, cov)
     mod = _model_effects(st)
     A = _columns(mod, st.nonlin, tau, st.white)
-    theta, _ = prob.solve(A) if A.shape[1] else (np.zeros(0), 0.0)
+    theta, c2 = prob.solve(A) if A.shape[1] else (np.zeros(0), 0.0)
     cov_t = np.zeros((len(theta), len(theta)))
     act = theta > 0
     if act.any():
@@ -218,6 +222,12 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
                            "bound": False}
             if e == "white_noise" and st.white:
                 resolved[e]["filter_hz"] = float(st.white["filter_hz"])
+                if st.white_ci:
+                    # N and a cut-off found in the data are correlated: N's profile interval over it
+                    ci = _profile_white_ci([lo_p, hi_p], prob, prob, mod, st.nonlin, tau, st.white, st.white_ci,
+                                           c2, scale, level)
+                    resolved[e]["ci95"][p] = ci
+                    resolved[e]["std"][p] = (ci[1] - ci[0]) / 3.92
     for e in LINEAR_EFFECTS:
         if e not in candidates:
             continue
