@@ -612,7 +612,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             # the log's cut-off is a prior, not a claim to test: it is set aside when the data put it outside
             # their 99 % profile interval (chi^2 scaled by the Birge ratio where the model misfits). A nominal
             # cut-off need not be the 2-pole equivalent of the real filter (an MPU-6000's "5 Hz" DLPF setting
-            # on 2014 ArduPilot fits as 6-8 Hz), and N follows the shape it is given.
+            # fits as 8.4-8.6 Hz on a 2014 ArduPilot rover log), and N follows the shape it is given.
             dof_f = max(n_pts - len(lin_f) - 2 * len(nonlin) - 1, 1)
             thr = chi2_ppf(FILTER_LOG_LEVEL, 1) * max(1.0, filter_info["chi2"] / dof_f)
             base_c2 = filter_info["chi2_given"]
