@@ -30,6 +30,9 @@ Further modes (docs/analysis.md quotes them):
                                                the realistic simulator's stills (sensor rate, the autopilot's
                                                filter and decimation, LSB, temperature, bias wander): N and its
                                                95 % interval, offline and online, against the logged white level
+    python benchmarks/bench_fit.py gm [seeds=200]
+                                               white noise + a Gauss-Markov term (three cases, 30 min-2 h at
+                                               50 Hz): coverage of sigma's, tau_c's and N's 95 % intervals
     python benchmarks/bench_fit.py draws null [draws=100] [set=0]
                                                the same N/B draws with K = 0: how often a K is invented
 """
@@ -105,7 +108,7 @@ def main():
 
 if __name__ == "__main__":
     mode = sys.argv[1] if len(sys.argv) > 1 else ""
-    if mode in ("real", "filtered", "draws", "short", "preset"):
+    if mode in ("real", "filtered", "draws", "short", "preset", "gm"):
         from bench_fit_real import main_mode  # noqa: E402
 
         main_mode(mode, sys.argv[2:])
