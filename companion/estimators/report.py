@@ -115,11 +115,10 @@ def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure
     cov = fr.avar_cov if fr.avar_cov is not None else np.diag(2.0 * np.asarray(avar)[keep] ** 2 / edf0[keep])
     model = np.maximum(np.asarray(fr.avar_fit, float), 1e-300) if len(fr.avar_fit) else np.asarray(avar)[keep]
     nl_ci = {t["effect"]: t.get("ci95", {}) for t in fr.terms if t["effect"] in NL_PARAMS}
-    white = ({"filter_hz": fr.filter["filter_hz"], "sample_hz": fr.filter.get("sample_hz")}
-             if getattr(fr, "filter", None) else None)
-    nuisance = tuple(t["effect"] for t in getattr(fr, "nuisance", ()) if t["effect"] in LINEAR_EFFECTS)
     flt = getattr(fr, "filter", None) or {}
+    white = {"filter_hz": flt["filter_hz"], "sample_hz": flt.get("sample_hz")} if flt else None
     white_ci = tuple(flt["ci95"]) if flt.get("source") == "data" and flt.get("ci95") else None
+    nuisance = tuple(t["effect"] for t in getattr(fr, "nuisance", ()) if t["effect"] in LINEAR_EFFECTS)
     return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
                      int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci, white, nuisance, white_ci)
 
@@ -218,16 +217,14 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
             if e in forced:
                 lo, hi = min(lo, forced[e][0]), max(hi, forced[e][1])
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
+            if e == "white_noise" and st.white_ci:
+                # N and a cut-off found in the data are correlated: N's profile interval over it
+                lo_p, hi_p = _profile_white_ci([lo_p, hi_p], prob, prob, mod, st.nonlin, tau, st.white, st.white_ci,
+                                               c2, scale, level)
             resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
                            "bound": False}
             if e == "white_noise" and st.white:
                 resolved[e]["filter_hz"] = float(st.white["filter_hz"])
-                if st.white_ci:
-                    # N and a cut-off found in the data are correlated: N's profile interval over it
-                    ci = _profile_white_ci([lo_p, hi_p], prob, prob, mod, st.nonlin, tau, st.white, st.white_ci,
-                                           c2, scale, level)
-                    resolved[e]["ci95"][p] = ci
-                    resolved[e]["std"][p] = (ci[1] - ci[0]) / 3.92
     for e in LINEAR_EFFECTS:
         if e not in candidates:
             continue
