@@ -33,6 +33,10 @@ Further modes (docs/analysis.md quotes them):
     python benchmarks/bench_fit.py gm [seeds=200]
                                                white noise + a Gauss-Markov term (three cases, 30 min-2 h at
                                                50 Hz): coverage of sigma's, tau_c's and N's 95 % intervals
+    python benchmarks/bench_fit.py shape [seeds=40] [seconds=20,60,120]
+                                               a roll-off of first-order shape (a Gauss-Markov process of
+                                               tau_c 73 ms) where the log says a 2-pole 5 Hz: N and its 95 %
+                                               interval against the long-tau white level, the shape used
     python benchmarks/bench_fit.py draws null [draws=100] [set=0]
                                                the same N/B draws with K = 0: how often a K is invented
 """
@@ -108,7 +112,7 @@ def main():
 
 if __name__ == "__main__":
     mode = sys.argv[1] if len(sys.argv) > 1 else ""
-    if mode in ("real", "filtered", "draws", "short", "preset", "gm"):
+    if mode in ("real", "filtered", "draws", "short", "preset", "gm", "shape"):
         from bench_fit_real import main_mode  # noqa: E402
 
         main_mode(mode, sys.argv[2:])

@@ -169,7 +169,8 @@ def run_real(args):
         bref = r["B"] or r["Bbound"]
         db = f"{100 * (r['oB'] / bref - 1):+7.1f}%" if (r["oB"] and bref and bool(r["oBb"]) == (r["B"] is None)) else "       -"
         f = r["filt"]
-        fs = f"{f['filter_hz']:.3g} Hz ({f['source']})" if f else "none"
+        fs = (f"{f['filter_hz']:.3g} Hz{' 1-pole' if f.get('filter_order') == 1 else ''} ({f['source']})"
+              if f else "none")
         aw = ""
         if r["Naware"]:
             aw = f"  filter-aware {r['Naware'] * c:.3f}"
@@ -252,6 +253,51 @@ def run_short(args):
         print(f"   {name:<17} sd {np.std(e):.2f} %, |.| median {np.median(np.abs(e)):.2f} %, 95th pct "
               f"{np.percentile(np.abs(e), 95):.2f} %, beyond 3 % in {100 * np.mean(np.abs(e) > 3):.0f} %")
     print(f"   fit's 95 % interval covers the plateau in {100 * np.mean(cover):.0f} %")
+
+
+def run_shape(args):
+    """A roll-off of another shape than the log's: ``shape [seeds=40] [seconds=20,60,120]``. White noise through
+    a 2-pole 8.4 Hz filter (4e-4 rad/s/sqrt(Hz) before it) plus a Gauss-Markov process (sigma 7.4e-3 rad/s,
+    tau_c 73 ms), point samples at 50 Hz, the log saying 5 Hz (a 20-s still of a 2014 MPU-6000 rover log, gz,
+    looks like this): the Gauss-Markov process is white noise through a first-order low-pass, its long-tau level
+    the plateau of ADEV sqrt(tau) above the roll-off. N and its 95 % interval against that level, and which shape
+    the fit used."""
+    from collections import Counter
+
+    from companion.sim.filtered import filtered_white_noise, logged_white_level
+    from companion.sim.synth import synthesize_axis
+
+    seeds = int(args[0]) if args else 40
+    lengths = [float(x) for x in args[1].split(",")] if len(args) > 1 else [20.0, 60.0, 120.0]
+    fs, n_w, fc_w, sigma, tau_c = 50.0, 4e-4, 8.4, 7.4e-3, 0.073
+    phi = math.exp(-1.0 / (fs * tau_c))
+    level = math.sqrt(logged_white_level(n_w, fs, fc_w) ** 2 + sigma**2 / fs * (1 + phi) / (1 - phi))
+    print(f"white noise through 2-pole {fc_w:g} Hz + Gauss-Markov {sigma:g} rad/s / {tau_c:g} s at {fs:g} Hz, the log "
+          f"saying 5 Hz; long-tau white level {level * RAD2DEG_SQRTH:.2f} deg/sqrt(h); {seeds} seeds per length")
+    for secs in lengths:
+        n = int(fs * secs)
+        m = cluster_sizes(n, "octave")
+        edf = edf_simple(n + 1, m, 0)
+        ratio, cover, kinds, t0 = [], 0, Counter(), time.time()
+        for s in range(seeds):
+            y = filtered_white_noise(n, n_w, fs, fc_w, "point", 500 + s) + synthesize_axis(
+                [{"effect": "gauss_markov", "sigma": sigma, "tau_c": tau_c}], fs, n, np.random.default_rng(900 + s))
+            tau, av = oavar(y, fs, m=m)[:2]
+            fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m, white_filter={"filter_hz": 5.0, "sample_hz": fs},
+                          detect_filter="point")
+            f = fr.filter or {}
+            kinds[(f"{f.get('filter_order', 2)}-pole ({f.get('source')})" if f else "no filter")
+                  + "".join(f" + {t['effect']}" for t in list(fr.terms) + list(fr.nuisance)
+                            if t["effect"] != "white_noise")] += 1
+            t = fr.term("white_noise")
+            if t is None:
+                continue
+            ratio.append(t["N"] / level)
+            cover += t["ci95"]["N"][0] <= level <= t["ci95"]["N"][1]
+        print(f"  {secs:g} s ({time.time() - t0:.0f} s): N resolved in {len(ratio)}/{seeds}, N / level median "
+              f"{np.median(ratio):.3f} (5-95 % {np.percentile(ratio, 5):.2f}-{np.percentile(ratio, 95):.2f}); "
+              f"95 % interval covers it in {cover}/{len(ratio)}; models: "
+              + ", ".join(f"{k} {v}" for k, v in kinds.most_common()))
 
 
 def _evidence(terms, effect, tau, m, n, fs):
@@ -524,6 +570,6 @@ def main_mode(mode, args):
 
     try:
         {"real": run_real, "filtered": run_filtered, "draws": run_draws, "short": run_short,
-         "preset": run_preset, "gm": run_gm}[mode](args)
+         "preset": run_preset, "gm": run_gm, "shape": run_shape}[mode](args)
     except (CompanionError, ValueError) as exc:  # a bad argument: one line, no traceback
         raise SystemExit(f"bench_fit {mode}: {exc} (usage: the module docstring of benchmarks/bench_fit.py)")

@@ -102,7 +102,8 @@ def _gcov(term: Mapping, h: np.ndarray, tau0: float):
             # low-pass filtered white noise: G = -D/2 with the phase structure function D of the term
             from companion.allan.filtered_white import phase_structure_white
 
-            return -0.5 * phase_structure_white(ah * tau0, term["N"], term["filter_hz"], term.get("sample_hz"))
+            return -0.5 * phase_structure_white(ah * tau0, term["N"], term["filter_hz"], term.get("sample_hz"),
+                                                int(term.get("filter_order") or 2))
         return -0.5 * term["N"] ** 2 * tau0 * ah
     if e == "bias_instability":
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -162,7 +163,8 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     inside = lo == lo0 and hi == hi0
     key = None
     if inside:
-        shapes = tuple((t["effect"], t.get("filter_hz"), t.get("sample_hz"), t.get("tau_c"), t.get("freq_hz"))
+        shapes = tuple((t["effect"], t.get("filter_hz"), t.get("sample_hz"), t.get("filter_order"), t.get("tau_c"),
+                        t.get("freq_hz"))
                        for t in kern)
         key = (m1, m2, M1 - M2, lo, hi, tau0, step_div, shapes, bool(Q2))
         forms = _PAIR_FORMS.get(key, lambda: _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div,

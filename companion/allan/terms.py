@@ -9,7 +9,8 @@ effect             parameters              AVAR sigma^2(tau)
 =================  ======================  =====================================================
 quantization       Q (rad)                 3 Q^2 / tau^2
 white_noise        N (rad/s/sqrt(Hz)),     N^2 / tau; with a low-pass filter: see avar_white_noise
-                   [filter_hz, sample_hz]
+                   [filter_hz, sample_hz,
+                   filter_order]
 bias_instability   B (rad/s), [f0 (Hz)]    (2 ln2 / pi) B^2 (plateau), or the cosine-integral form
 random_walk        K (rad/s^1.5)           K^2 tau / 3
 ramp               R (rad/s^2)             R^2 tau^2 / 2
@@ -54,7 +55,9 @@ PARAMS: dict[str, tuple[str, ...]] = {
     "gauss_markov": ("sigma", "tau_c"),
     "sinusoid": ("amplitude", "freq_hz"),
 }
-OPTIONAL_PARAMS: dict[str, tuple[str, ...]] = {"bias_instability": ("f0",), "white_noise": ("filter_hz", "sample_hz")}
+#: the keys of a white-noise term's low-pass filter (``filter_order`` 2 when absent)
+FILTER_KEYS = ("filter_hz", "sample_hz", "filter_order")
+OPTIONAL_PARAMS: dict[str, tuple[str, ...]] = {"bias_instability": ("f0",), "white_noise": FILTER_KEYS}
 
 #: The five linear terms of Miao et al. 2014, x = [Q N B K R], eq. (3.5).
 LINEAR_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
@@ -71,11 +74,12 @@ def avar_quantization(tau, Q):
     return 3.0 * Q**2 / tau**2
 
 
-def avar_white_noise(tau, N, filter_hz=None, sample_hz=None):
+def avar_white_noise(tau, N, filter_hz=None, sample_hz=None, filter_order=2):
     """Angle (velocity) random walk, white rate noise of two-sided PSD N^2: sigma^2 = N^2 / tau (IEEE 952 C.2).
 
-    With ``filter_hz``: the same white noise seen through a 2-pole Butterworth low-pass of cut-off f_c (the
-    LowPassFilter2p of ArduPilot's INS_GYRO_FILTER and PX4's IMU_GYRO_CUTOFF, run far above f_c), either
+    With ``filter_hz``: the same white noise seen through a Butterworth low-pass of cut-off f_c and order
+    ``filter_order`` (2: the LowPassFilter2p of ArduPilot's INS_GYRO_FILTER and PX4's IMU_GYRO_CUTOFF, run far
+    above f_c; 1: a first-order roll-off, the shape of a Gauss-Markov process of tau_c = 1 / (2 pi f_c)), either
 
     * point-sampled (decimated) at ``sample_hz`` (ArduPilot DataFlash IMU, sensor_gyro), or
     * averaged over each sample interval (``sample_hz`` None: PX4 sensor_combined = delta angle / dt; the AVAR
@@ -93,7 +97,9 @@ def avar_white_noise(tau, N, filter_hz=None, sample_hz=None):
     if not filter_hz:
         return N**2 / tau
     # the white level of the logged samples is N: the density before the filter is N / sqrt(aliasing gain)
-    return avar_filtered_white(tau, N / math.sqrt(aliasing_gain(filter_hz, sample_hz)), filter_hz, sample_hz)
+    order = int(filter_order)
+    return avar_filtered_white(tau, N / math.sqrt(aliasing_gain(filter_hz, sample_hz, order)), filter_hz, sample_hz,
+                               order)
 
 
 def avar_bias_instability(tau, B, f0=None):

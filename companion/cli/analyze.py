@@ -23,7 +23,8 @@ motion detector over the accelerometers and gyros of every IMU pick the still se
 variance is pooled over them (no cluster crosses a gap); the report says what was used and what was left
 out. --start/--end restrict the time, --all skips the selection. A low-pass filter of the logged data
 (INS_GYRO_FILTER, older INS_MPU6K_FILTER, IMU_GYRO_CUTOFF, or a roll-off the data show; the data set a
-log's cut-off aside when it lies outside their 99 % interval) is modelled in the white-noise term, so N
+log's cut-off aside when it lies outside their 99 % interval, or for a first-order roll-off, the shape of a
+short Gauss-Markov process, which the note then names) is modelled in the white-noise term, so N
 comes from every cluster time and the filter never becomes bias instability or a Gauss-Markov term; where
 no cluster time carries white noise above the filter's corner, N is a bound and the table says why. A stream slower than 10 Hz or shorter than 60 s gets a warning and no Kalibr
 file (unless --force). Gyro in deg/sqrt(h), deg/h, deg/h^1.5;

@@ -106,6 +106,8 @@ def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ra
 
 def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure:
     """The :class:`Structure` of a :func:`companion.allan.fit.fit_avar` result on the levels ``tau, avar``."""
+    from companion.allan.fit import white_of
+
     tau = np.asarray(tau, float)
     m = np.round(tau * rate_hz).astype(np.int64)
     edf0 = np.asarray(edf0, float)
@@ -116,7 +118,7 @@ def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure
     model = np.maximum(np.asarray(fr.avar_fit, float), 1e-300) if len(fr.avar_fit) else np.asarray(avar)[keep]
     nl_ci = {t["effect"]: t.get("ci95", {}) for t in fr.terms if t["effect"] in NL_PARAMS}
     flt = getattr(fr, "filter", None) or {}
-    white = {"filter_hz": flt["filter_hz"], "sample_hz": flt.get("sample_hz")} if flt else None
+    white = white_of(flt)
     white_ci = tuple(flt["ci95"]) if flt.get("source") == "data" and flt.get("ci95") else None
     nuisance = tuple(t["effect"] for t in getattr(fr, "nuisance", ()) if t["effect"] in LINEAR_EFFECTS)
     return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
@@ -225,6 +227,8 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
                            "bound": False}
             if e == "white_noise" and st.white:
                 resolved[e]["filter_hz"] = float(st.white["filter_hz"])
+                if st.white.get("filter_order"):
+                    resolved[e]["filter_order"] = int(st.white["filter_order"])
     for e in LINEAR_EFFECTS:
         if e not in candidates:
             continue
