@@ -287,7 +287,7 @@ def _terms_from(linear, nonlinear, theta, scale, white=None):
     for e, t in zip(linear, theta[: len(linear)]):
         terms.append({"effect": e, LINEAR_PARAM[e]: math.sqrt(max(t, 0.0) * scale)})
         if e == "white_noise" and white:
-            terms[-1].update({k: float(v) for k, v in white.items() if v})
+            terms[-1].update(_filter_params(white))
     for (e, s), t in zip(nonlinear, theta[len(linear):]):
         terms.append({"effect": e, _NL_LINEAR[e]: math.sqrt(max(t, 0.0) * scale), _NL_SHAPE[e]: s})
     return [t for t in terms if any(v > 0 for k, v in t.items() if k in ("Q", "N", "B", "K", "R", "sigma", "amplitude"))]
@@ -728,7 +728,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             p = LINEAR_PARAM[e]
             t = {"effect": e, p: math.sqrt(theta[j] * scale), "ci95": {p: [math.sqrt(lo * scale), math.sqrt(hi * scale)]}}
             if e == "white_noise" and white:
-                t.update({k: float(x) for k, x in white.items() if x})
+                t.update(_filter_params(white))
         else:
             shape = dict(nonlin)[e]
             p, s = _NL_LINEAR[e], _NL_SHAPE[e]
@@ -867,6 +867,11 @@ def _flicker_shape_cov(bias_term, m, tau) -> np.ndarray:
     it can move N, and by nothing where B is negligible at tau0."""
     sh = FLICKER_SHAPE_ERROR * flicker_sampling_excess(m) * avar_term(bias_term, tau)
     return np.outer(sh, sh)
+
+
+def _filter_params(white) -> dict:
+    """A white-noise term's filter parameters from the column's filter: numbers, the order an integer."""
+    return {k: (int(v) if k == "filter_order" else float(v)) for k, v in white.items() if v}
 
 
 def white_of(flt) -> dict | None:
