@@ -33,7 +33,7 @@ Further modes (docs/analysis.md quotes them):
     python benchmarks/bench_fit.py gm [seeds=200]
                                                white noise + a Gauss-Markov term (three cases, 30 min-2 h at
                                                50 Hz): coverage of sigma's, tau_c's and N's 95 % intervals
-    python benchmarks/bench_fit.py shape [seeds=40] [seconds=20,60,120]
+    python benchmarks/bench_fit.py shape [seeds=40] [seconds=20,60,120] [log=5|none]
                                                a roll-off of first-order shape (a Gauss-Markov process of
                                                tau_c 73 ms) where the log says a 2-pole 5 Hz: N and its 95 %
                                                interval against the long-tau white level, the shape used

@@ -256,12 +256,12 @@ def run_short(args):
 
 
 def run_shape(args):
-    """A roll-off of another shape than the log's: ``shape [seeds=40] [seconds=20,60,120]``. White noise through
+    """A roll-off of another shape than the log's: ``shape [seeds=40] [seconds=20,60,120] [log=5|none]``. White noise through
     a 2-pole 8.4 Hz filter (4e-4 rad/s/sqrt(Hz) before it) plus a Gauss-Markov process (sigma 7.4e-3 rad/s,
     tau_c 73 ms), point samples at 50 Hz, the log saying 5 Hz (a 20-s still of a 2014 MPU-6000 rover log, gz,
     looks like this): the Gauss-Markov process is white noise through a first-order low-pass, its long-tau level
     the plateau of ADEV sqrt(tau) above the roll-off. N and its 95 % interval against that level, and which shape
-    the fit used."""
+    the fit used. ``none``: no cut-off from a log (a tlog, a CSV), the roll-off left to the data alone."""
     from collections import Counter
 
     from companion.sim.filtered import filtered_white_noise, logged_white_level
@@ -269,11 +269,13 @@ def run_shape(args):
 
     seeds = int(args[0]) if args else 40
     lengths = [float(x) for x in args[1].split(",")] if len(args) > 1 else [20.0, 60.0, 120.0]
+    log = None if len(args) > 2 and args[2] == "none" else float(args[2]) if len(args) > 2 else 5.0
     fs, n_w, fc_w, sigma, tau_c = 50.0, 4e-4, 8.4, 7.4e-3, 0.073
     phi = math.exp(-1.0 / (fs * tau_c))
     level = math.sqrt(logged_white_level(n_w, fs, fc_w) ** 2 + sigma**2 / fs * (1 + phi) / (1 - phi))
-    print(f"white noise through 2-pole {fc_w:g} Hz + Gauss-Markov {sigma:g} rad/s / {tau_c:g} s at {fs:g} Hz, the log "
-          f"saying 5 Hz; long-tau white level {level * RAD2DEG_SQRTH:.2f} deg/sqrt(h); {seeds} seeds per length")
+    print(f"white noise through 2-pole {fc_w:g} Hz + Gauss-Markov {sigma:g} rad/s / {tau_c:g} s at {fs:g} Hz, "
+          + (f"the log saying {log:g} Hz" if log else "no cut-off from a log")
+          + f"; long-tau white level {level * RAD2DEG_SQRTH:.2f} deg/sqrt(h); {seeds} seeds per length")
     for secs in lengths:
         n = int(fs * secs)
         m = cluster_sizes(n, "octave")
@@ -283,8 +285,8 @@ def run_shape(args):
             y = filtered_white_noise(n, n_w, fs, fc_w, "point", 500 + s) + synthesize_axis(
                 [{"effect": "gauss_markov", "sigma": sigma, "tau_c": tau_c}], fs, n, np.random.default_rng(900 + s))
             tau, av = oavar(y, fs, m=m)[:2]
-            fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m, white_filter={"filter_hz": 5.0, "sample_hz": fs},
-                          detect_filter="point")
+            fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m, detect_filter="point",
+                          white_filter={"filter_hz": log, "sample_hz": fs} if log else None)
             f = fr.filter or {}
             kinds[(f"{f.get('filter_order', 2)}-pole ({f.get('source')})" if f else "no filter")
                   + "".join(f" + {t['effect']}" for t in list(fr.terms) + list(fr.nuisance)
