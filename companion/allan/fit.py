@@ -532,9 +532,10 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     look for a roll-off in the data (:func:`_profile_filter`, a 2-pole shape); without ``white_filter`` it is
     modelled only when it lowers chi^2 by more than ln(points) + EXTRA_BIC_MARGIN against no filter;
     ``white_filter``'s cut-off (the log's) stands unless it lies outside the data's FILTER_LOG_LEVEL profile
-    interval (chi^2 scaled by the Birge ratio of the best fit). Against the log's cut-off the data's shape may
-    also be first-order, where it fits better than the best 2-pole by that level, judged under the covariance
-    of the log's model and, where the first-order shape fits better but not by that much, of its own.
+    interval (chi^2 scaled by the Birge ratio of the best fit). The data's shape may also be first-order (below
+    FIRST_ORDER_MAX of the sample rate), where it fits better than the best 2-pole by FILTER_LOG_LEVEL, judged
+    under the covariance of the model fitted with the log's cut-off (or none) and, where the first-order shape
+    fits better but not by the rule's margin, again under the covariance of its own model.
     The result's ``filter`` says what was used: {"filter_hz", "sample_hz", "source": "log" | "data", "ci95"}.
     """
     tau = np.asarray(tau, dtype=float)
@@ -619,11 +620,10 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
 
         def decide(cov_d, linear_d, nonlin_d):
             lin_f = linear_d if "white_noise" in linear_d else ["white_noise"] + list(linear_d)
-            infos = _profile_filter(_Problem(tau, v, cov_d, None, tau0), lin_f, nonlin_d, tau0, sampling, given,
-                                    orders=(2, 1) if given else (2,))
+            infos = _profile_filter(_Problem(tau, v, cov_d, None, tau0), lin_f, nonlin_d, tau0, sampling, given)
             dof_f = max(n_pts - len(lin_f) - 2 * len(nonlin_d) - 1, 1)
             # the 2-pole Butterworth is the autopilots' filter; a first-order shape only where the data exclude
-            # the 2-pole's best at the 99 % level (a short correlated process or a sensor's own roll-off)
+            # the 2-pole's best at the 99 % level (a short correlated process, a sensor's own roll-off)
             info, one = infos[2], infos.get(1)
             if one is not None and one["interior"] and one["chi2"] < info["chi2"] - chi2_ppf(FILTER_LOG_LEVEL, 1) * max(
                     1.0, one["chi2"] / dof_f):
@@ -646,13 +646,14 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
 
         given = white
         filter_info, aside, better = decide(cov, linear, nonlin)
-        if given and not aside and better is not None and better["filter_order"] != 2:
-            # the covariance above is the model's with the log's 2-pole shape: where the data roll off with
-            # another shape, the drift terms take up the difference and overshoot the long cluster times, whose
-            # variance then looks larger than it is, and the log's shape is judged leniently there (a 20-s
-            # MPU-6000 axis: the 2-pole + an unresolved bias instability at 2.5x the data's ADEV at 5 s, chi^2 5.5
-            # for 7 dof). A first-order shape that fits better is judged again under the covariance of its own
-            # model, by the same rules; it replaces the log's only if the data exclude the log's there
+        if not aside and better is not None and better["filter_order"] != 2:
+            # the covariance above is the model's with the log's 2-pole shape (or no filter): where the data roll
+            # off with another shape, the drift terms take up the difference and overshoot the long cluster
+            # times, whose variance then looks larger than it is, and that model is judged leniently there (a
+            # 20-s MPU-6000 axis: the log's 2-pole + an unresolved bias instability at 2.5x the data's ADEV at 5 s,
+            # chi^2 5.5 for 7 dof). A first-order shape that fits better is judged again under the covariance of
+            # its own model, by the same rules; it replaces the log's (or no filter) only if the data exclude that
+            # there
             white = data_filter(better)
             fit_data = iterate(0.0)
             info2, aside, _ = decide(*fit_data[:3])
@@ -898,21 +899,27 @@ def _filter_summary(white, info):
 #: the data's roll-off: the filter orders profiled, and the lowest cut-off of each in units of 1 / tau_max (a
 #: 2-pole at 30 / tau_max and a 1-pole at 8 / tau_max lower the AVAR at the longest cluster time by 0.5 % and 3 %)
 FILTER_ORDERS = {2: 30.0, 1: 8.0}
+#: a first-order roll-off is looked for only below this fraction of the sample rate: above it a first-order and
+#: a 2-pole roll-off differ at the first two or three octave points only, where how the samples were taken
+#: (point or averaged, a digital filter, a sensor's averaging window) shapes the curve as much as the order, and
+#: FILTER_SHAPE_ERROR carries that (measured: the ADIS16405's and a PX4 log's roll-offs fitted as 1-pole
+#: 29-53 Hz moved N by up to 5 % and out of its interval)
+FIRST_ORDER_MAX = 0.1
 
 
-def _profile_filter(prob, linear, nonlin, tau0, sampling, given=None, level=0.95, orders=(2,)) -> dict:
+def _profile_filter(prob, linear, nonlin, tau0, sampling, given=None, level=0.95) -> dict:
     """Profile chi^2 of the white-noise term's low-pass cut-off f_c, for each order of FILTER_ORDERS (a dict
     order -> result), over a log grid from its lowest cut-off to 3 / tau0 (a filter above that bends no
-    cluster time), refined by a bounded 1-D minimisation. ``interior``: the optimum is not at the grid's upper
+    cluster time; a first-order one to FIRST_ORDER_MAX / tau0), refined by a bounded 1-D minimisation. ``interior``: the optimum is not at the grid's upper
     end (there the data look unfiltered). ``ci95``: the cut-off's ``level`` profile interval at that order."""
     return {order: _profile_filter_order(prob, linear, nonlin, tau0, sampling, given, level, order, lo_k)
-            for order, lo_k in FILTER_ORDERS.items() if order in orders}
+            for order, lo_k in FILTER_ORDERS.items()}
 
 
 def _profile_filter_order(prob, linear, nonlin, tau0, sampling, given, level, order, lo_k):
     tau = prob.tau
     sample_hz = 1.0 / tau0 if sampling == "point" else None
-    lo, hi = lo_k / tau[-1], 3.0 / tau0
+    lo, hi = lo_k / tau[-1], (3.0 if order == 2 else FIRST_ORDER_MAX) / tau0
     extra = {} if order == 2 else {"filter_order": order}
 
     def chi(lf):
