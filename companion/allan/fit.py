@@ -529,14 +529,16 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     filtered shape, so N comes from every cluster time, the roll-off included; the fitted white_noise term
     carries the filter. None: plain white noise.
     ``detect_filter``: "point" or "average" (how the logged samples were taken from the filtered signal):
-    look for a roll-off in the data (:func:`_profile_filter`, a 2-pole shape); without ``white_filter`` it is
-    modelled only when it lowers chi^2 by more than ln(points) + EXTRA_BIC_MARGIN against no filter;
-    ``white_filter``'s cut-off (the log's) stands unless it lies outside the data's FILTER_LOG_LEVEL profile
-    interval (chi^2 scaled by the Birge ratio of the best fit). The data's shape may also be first-order (below
-    FIRST_ORDER_MAX of the sample rate), where it fits better than the best 2-pole by FILTER_LOG_LEVEL, judged
-    under the covariance of the model fitted with the log's cut-off (or none) and, where the first-order shape
-    fits better but not by the rule's margin, again under the covariance of its own model.
-    The result's ``filter`` says what was used: {"filter_hz", "sample_hz", "source": "log" | "data", "ci95"}.
+    look for a roll-off in the data (:func:`_profile_filter`, a 2-pole shape, see below for a first-order one);
+    without ``white_filter`` it is modelled only when it lowers chi^2 by more than ln(points) + EXTRA_BIC_MARGIN
+    against no filter; ``white_filter``'s cut-off (the log's) stands unless it lies outside the data's
+    FILTER_LOG_LEVEL profile interval (chi^2 scaled by the Birge ratio of the best fit). The data's shape may
+    also be first-order (below FIRST_ORDER_MAX of the sample rate), where it fits better than the best 2-pole by
+    FILTER_LOG_LEVEL, judged under the covariance of the model fitted with the log's cut-off (or none) and,
+    where the first-order shape fits better but not by the rule's margin, again under the covariance of its own
+    model.
+    The result's ``filter`` says what was used: {"filter_hz", "sample_hz", "source": "log" | "data", "ci95",
+    "filter_order" when 1}.
     """
     tau = np.asarray(tau, dtype=float)
     avar = np.asarray(avar, dtype=float)
@@ -910,8 +912,9 @@ FIRST_ORDER_MAX = 0.1
 def _profile_filter(prob, linear, nonlin, tau0, sampling, given=None, level=0.95) -> dict:
     """Profile chi^2 of the white-noise term's low-pass cut-off f_c, for each order of FILTER_ORDERS (a dict
     order -> result), over a log grid from its lowest cut-off to 3 / tau0 (a filter above that bends no
-    cluster time; a first-order one to FIRST_ORDER_MAX / tau0), refined by a bounded 1-D minimisation. ``interior``: the optimum is not at the grid's upper
-    end (there the data look unfiltered). ``ci95``: the cut-off's ``level`` profile interval at that order."""
+    cluster time; a first-order one to FIRST_ORDER_MAX / tau0), refined by a bounded 1-D minimisation.
+    ``interior``: the optimum is not at the grid's upper end (there the data look unfiltered). ``ci95``: the
+    cut-off's ``level`` profile interval at that order."""
     return {order: _profile_filter_order(prob, linear, nonlin, tau0, sampling, given, level, order, lo_k)
             for order, lo_k in FILTER_ORDERS.items()}
 
