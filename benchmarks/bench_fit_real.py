@@ -256,12 +256,13 @@ def run_short(args):
 
 
 def run_shape(args):
-    """A roll-off of another shape than the log's: ``shape [seeds=40] [seconds=20,60,120] [log=5|none]``. White noise through
-    a 2-pole 8.4 Hz filter (4e-4 rad/s/sqrt(Hz) before it) plus a Gauss-Markov process (sigma 7.4e-3 rad/s,
-    tau_c 73 ms), point samples at 50 Hz, the log saying 5 Hz (a 20-s still of a 2014 MPU-6000 rover log, gz,
-    looks like this): the Gauss-Markov process is white noise through a first-order low-pass, its long-tau level
-    the plateau of ADEV sqrt(tau) above the roll-off. N and its 95 % interval against that level, and which shape
-    the fit used. ``none``: no cut-off from a log (a tlog, a CSV), the roll-off left to the data alone."""
+    """A roll-off of another shape than the log's: ``shape [seeds=40] [seconds=20,60,120] [log=5|none]``.
+    White noise through a 2-pole 8.4 Hz filter (4e-4 rad/s/sqrt(Hz) before it) plus a Gauss-Markov process
+    (sigma 7.4e-3 rad/s, tau_c 73 ms), point samples at 50 Hz, the log saying 5 Hz (a 20-s still of a 2014
+    MPU-6000 rover log, gz, looks like this): the Gauss-Markov process is white noise through a first-order
+    low-pass, its long-tau level the plateau of ADEV sqrt(tau) above the roll-off. N and its 95 % interval
+    against that level, and which shape the fit used. ``none``: no cut-off from a log (a tlog, a CSV), the
+    roll-off left to the data alone."""
     from collections import Counter
 
     from companion.sim.filtered import filtered_white_noise, logged_white_level
