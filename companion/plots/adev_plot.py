@@ -31,6 +31,9 @@ def _value_text(t, axis):
         if ci:
             s += f" [{units.to_datasheet(p, ci[0], axis):.3g}, {units.to_datasheet(p, ci[1], axis):.3g}]"
         parts.append(s + " " + units.datasheet_unit(p, axis))
+    if t["effect"] == "white_noise" and t.get("filter_hz"):
+        # the dashed white-noise line bends below the filter's corner: say which filter
+        parts.append(f"through a {int(t.get('filter_order') or 2)}-pole {t['filter_hz']:.3g} Hz low-pass")
     return ", ".join(parts)
 
 
