@@ -108,6 +108,9 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
         terms = [t for t in terms if not t.get("bound")]
     out.update(tau=tau.tolist(), adev=adev.tolist(), adev_lo=lo.tolist(), adev_hi=hi.tolist(),
                terms=terms, bounds=bounds, edf=edf.tolist(),
+               # terms the record is too short to resolve but the fit kept in its model (reported as bounds):
+               # the plot draws them, so that the sum it shows is the model N was fitted with
+               unresolved=[{k: v for k, v in t.items() if k != "ci95"} for t in fit.nuisance],
                fit={"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
                     "model_error": fit.model_error, "tau_min": float(tau_f[keep][0]) if keep.any() else None,
                     "filter": fit.filter,

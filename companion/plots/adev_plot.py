@@ -63,6 +63,11 @@ def draw_axis(ax, axis: str, r: dict) -> None:
             total += av
             ax.loglog(tt, np.sqrt(av) * f, "--", lw=1.2, color=_COLORS.get(t["effect"]),
                       label=f"{_LABEL[t['effect']]}: {_value_text(t, axis)}")
+        for t in r.get("unresolved") or []:
+            av = avar_term(t, tt)
+            total += av
+            ax.loglog(tt, np.sqrt(av) * f, ":", lw=1.2, color=_COLORS.get(t["effect"]),
+                      label=f"{_LABEL[t['effect']]}: not resolved by the record, kept in the model")
         ax.loglog(tt, np.sqrt(total) * f, "-", lw=1.6, color="tab:cyan", label="sum of fitted terms")
         lo_v, hi_v = np.asarray(r["adev_lo"]) * f, np.asarray(r["adev_hi"]) * f
         lo_v, hi_v = lo_v[np.isfinite(lo_v) & (lo_v > 0)], hi_v[np.isfinite(hi_v)]
