@@ -51,6 +51,9 @@ def test_validate_term_messages():
     with pytest.raises(ValueError, match="no parameter 'X'"):
         T.validate_term({"effect": "white_noise", "N": 1.0, "X": 2})
     T.validate_term({"effect": "bias_instability", "B": 1.0, "f0": 50.0})
+    T.validate_term({"effect": "white_noise", "N": 1.0, "filter_hz": 5.0, "filter_order": 1})
+    with pytest.raises(ValueError, match="'filter_order' must be 1, 2, 3 or 4"):
+        T.validate_term({"effect": "white_noise", "N": 1.0, "filter_hz": 5.0, "filter_order": 0})
 
 
 def test_linear_basis_matches_terms():

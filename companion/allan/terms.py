@@ -200,6 +200,9 @@ def validate_term(term: Mapping) -> None:
         raise ValueError("effect 'gauss_markov' parameter 'tau_c' must be positive")
     if effect == "sinusoid" and term["freq_hz"] <= 0:
         raise ValueError("effect 'sinusoid' parameter 'freq_hz' must be positive")
+    order = term.get("filter_order") if effect == "white_noise" else None
+    if order is not None and order not in (1, 2, 3, 4):
+        raise ValueError(f"effect 'white_noise' parameter 'filter_order' must be 1, 2, 3 or 4, got {order!r}")
 
 
 def avar_term(term: Mapping, tau) -> np.ndarray:
