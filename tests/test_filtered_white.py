@@ -278,7 +278,7 @@ def test_a_first_order_roll_off_the_log_s_2_pole_cannot_fit():
     log saying 5 Hz. With the log's 2-pole shape an unresolved bias instability took up the difference and N
     came out at half the long-tau white level, its interval covering it in 0 of 20 seeds; judged under the
     covariance of its own model the first-order shape sets the log's aside, and N's 95 % interval covers the
-    long-tau white level (the plateau of ADEV sqrt(tau) above the roll-off) in 17 of 20 (asserted >= 6 of 10);
+    long-tau white level (the plateau of ADEV sqrt(tau) above the roll-off) in 18 of 20 (asserted >= 6 of 10);
     the note says a Gauss-Markov process has that shape. A first-order shape is also exactly that process: its
     AVAR is the Gauss-Markov term's."""
     from companion.sim.synth import synthesize_axis

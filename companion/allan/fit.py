@@ -626,9 +626,9 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             dof_f = max(n_pts - len(lin_f) - 2 * len(nonlin_d) - 1, 1)
             # the 2-pole Butterworth is the autopilots' filter; a first-order shape only where the data exclude
             # the 2-pole's best at the 99 % level (a short correlated process, a sensor's own roll-off)
-            info, one = infos[2], infos.get(1)
-            if one is not None and one["interior"] and one["chi2"] < info["chi2"] - chi2_ppf(FILTER_LOG_LEVEL, 1) * max(
-                    1.0, one["chi2"] / dof_f):
+            info, one = infos[2], infos[1]
+            margin = chi2_ppf(FILTER_LOG_LEVEL, 1) * max(1.0, one["chi2"] / dof_f)
+            if one["interior"] and one["chi2"] < info["chi2"] - margin:
                 info = one
             if given:
                 # the log's cut-off is a prior, not a claim to test: it is set aside when the data put it outside
@@ -640,22 +640,21 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             else:
                 thr = math.log(n_pts) + EXTRA_BIC_MARGIN
                 base_c2 = info["chi2_plain"]
-            # (the profile, whether the data set the log's cut-off or no filter aside, the best-fitting shape
+            # (the profile, whether the data set the log's cut-off or no filter aside, the first-order shape
             # where it fits better than that)
-            best = min((x for x in infos.values() if x["interior"]), key=lambda x: x["chi2"], default=None)
             return (info, bool(info["interior"] and info["chi2"] < base_c2 - thr),
-                    best if best is not None and best["chi2"] < base_c2 else None)
+                    one if one["interior"] and one["chi2"] < base_c2 else None)
 
         given = white
         filter_info, aside, better = decide(cov, linear, nonlin)
-        if not aside and better is not None and better["filter_order"] != 2:
+        if not aside and better is not None:
             # the covariance above is the model's with the log's 2-pole shape (or no filter): where the data roll
             # off with another shape, the drift terms take up the difference and overshoot the long cluster
             # times, whose variance then looks larger than it is, and that model is judged leniently there (a
             # 20-s MPU-6000 axis: the log's 2-pole + an unresolved bias instability at 2.5x the data's ADEV at 5 s,
-            # chi^2 5.5 for 7 dof). A first-order shape that fits better is judged again under the covariance of
-            # its own model, by the same rules; it replaces the log's (or no filter) only if the data exclude that
-            # there
+            # chi^2 5.5 for 7 dof). A first-order shape that fits better than that model is judged again under the
+            # covariance of its own, by the same rules; it replaces the log's (or no filter) only if the data
+            # exclude that there
             white = data_filter(better)
             fit_data = iterate(0.0)
             info2, aside, _ = decide(*fit_data[:3])
