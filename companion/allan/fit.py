@@ -63,8 +63,8 @@ from companion.allan.confidence import flicker_sampling_excess, oavar_covariance
 from companion.allan.lsq import nnls
 from companion.allan.memo import BoundedMemo
 from companion.allan.special import brentq, chi2_cdf, chi2_ppf, minimize_scalar_bounded
-from companion.allan.terms import (BASE_EFFECTS, FILTER_KEYS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term,
-                                   avar_white_noise, linear_basis)
+from companion.allan.terms import (BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, avar_term,
+                                   avar_white_noise, linear_basis, white_filter_of)
 
 NONLINEAR_EFFECTS = ("gauss_markov", "sinusoid")
 #: quantization, ramp, gauss_markov and sinusoid enter only if they lower the BIC by more than this
@@ -548,9 +548,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     ok &= np.isfinite(edf_all) & (edf_all > 0)
     tau, avar, edf_v = tau[ok], avar[ok], edf_all[ok]
     full = n is not None and rate_hz is not None
-    white = white_of(white_filter)
-    if white is not None and not white.get("filter_hz"):
-        white = None
+    white = white_filter_of(white_filter)
     tau0 = 1.0 / rate_hz if rate_hz else None
     if full:
         m = np.round(tau * rate_hz).astype(np.int64) if m is None else np.asarray(m, dtype=np.int64)[ok]
@@ -617,7 +615,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         sampling = "point" if detect_filter != "average" else "average"
 
         def data_filter(info):
-            return white_of({"filter_hz": info["filter_hz"], "sample_hz": rate_hz if sampling == "point" else None,
+            return white_filter_of({"filter_hz": info["filter_hz"], "sample_hz": rate_hz if sampling == "point" else None,
                              "filter_order": info["filter_order"]})
 
         def decide(cov_d, linear_d, nonlin_d):
@@ -876,15 +874,6 @@ def _filter_params(white) -> dict:
     return {k: (int(v) if k == "filter_order" else float(v)) for k, v in white.items() if v}
 
 
-def white_of(flt) -> dict | None:
-    """The white-noise column's filter ({"filter_hz", "sample_hz"[, "filter_order"]}) of a filter dict (the
-    log's, or a fit's ``filter`` summary); None without a cut-off. Order 2 is left implicit."""
-    w = {k: v for k, v in dict(flt or {}).items() if k in FILTER_KEYS and v is not None}
-    if w.get("filter_order") == 2:
-        del w["filter_order"]
-    return w if w.get("filter_hz") else None
-
-
 def _filter_summary(white, info):
     if not white:
         return None
@@ -913,14 +902,18 @@ def _profile_filter(prob, linear, nonlin, tau0, sampling, given=None, level=0.95
     order -> result), over a log grid from its lowest cut-off to 3 / tau0 (a filter above that bends no
     cluster time; a first-order one to FIRST_ORDER_MAX / tau0), refined by a bounded 1-D minimisation.
     ``interior``: the optimum is not at the grid's upper end (there the data look unfiltered). ``ci95``: the
-    cut-off's ``level`` profile interval at that order."""
-    return {order: _profile_filter_order(prob, linear, nonlin, tau0, sampling, given, level, order, lo_k)
+    cut-off's ``level`` profile interval at that order; ``chi2_plain`` and ``chi2_given``: without a filter and
+    with the log's."""
+    sample_hz = 1.0 / tau0 if sampling == "point" else None
+    plain = prob.solve(_columns(linear, nonlin, prob.tau, None))[1]
+    given_c2 = (prob.solve(_columns(linear, nonlin, prob.tau, white_filter_of(dict(given, sample_hz=sample_hz))))[1]
+                if given else None)
+    return {order: _profile_filter_order(prob, linear, nonlin, tau0, sample_hz, level, order, lo_k, plain, given_c2)
             for order, lo_k in FILTER_ORDERS.items()}
 
 
-def _profile_filter_order(prob, linear, nonlin, tau0, sampling, given, level, order, lo_k):
+def _profile_filter_order(prob, linear, nonlin, tau0, sample_hz, level, order, lo_k, plain, given_c2):
     tau = prob.tau
-    sample_hz = 1.0 / tau0 if sampling == "point" else None
     lo, hi = lo_k / tau[-1], (3.0 if order == 2 else FIRST_ORDER_MAX) / tau0
     extra = {} if order == 2 else {"filter_order": order}
 
@@ -928,11 +921,8 @@ def _profile_filter_order(prob, linear, nonlin, tau0, sampling, given, level, or
         w = {"filter_hz": math.exp(lf), "sample_hz": sample_hz, **extra}
         return prob.solve(_columns(linear, nonlin, tau, w))[1]
 
-    plain = prob.solve(_columns(linear, nonlin, tau, None))[1]
     out = {"chi2_plain": plain, "filter_hz": None, "chi2": plain, "interior": False, "ci95": [None, None],
-           "filter_order": order,
-           "chi2_given": prob.solve(_columns(linear, nonlin, tau, white_of(dict(given, sample_hz=sample_hz))))[1]
-           if given else None}
+           "filter_order": order, "chi2_given": given_c2}
     if not hi > lo:
         return out
     grid = np.linspace(math.log(lo), math.log(hi), 41 if order == 2 else 21)
@@ -1003,7 +993,7 @@ def upper_bounds(fr: FitResult, tau, avar, *, n, rate_hz, m=None, segments=None,
     # a term the record is too short to resolve (fr.nuisance) stays in the model of the others' bounds, as in
     # the fit: left out, the bounded term would take up its share
     m = np.round(tau * rate_hz).astype(np.int64) if m is None else np.asarray(m, dtype=np.int64)
-    white = white_of(fr.filter)
+    white = white_filter_of(fr.filter)
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in list(fr.terms) + list(fr.nuisance)]
     linear = [t["effect"] for t in plain if t["effect"] in LINEAR_EFFECTS]
     nonlin = [(t["effect"], float(t[_NL_SHAPE[t["effect"]]])) for t in plain if t["effect"] in NONLINEAR_EFFECTS]

@@ -102,6 +102,16 @@ def avar_white_noise(tau, N, filter_hz=None, sample_hz=None, filter_order=2):
                                order)
 
 
+def white_filter_of(flt: Mapping | None) -> dict | None:
+    """The low-pass filter ({"filter_hz", "sample_hz"[, "filter_order"]}, the keywords of
+    :func:`avar_white_noise`) of a white-noise term or a filter dict (the log's, a fit's ``filter`` summary);
+    None without a cut-off. Unset values are left out, and order 2, the default."""
+    w = {k: v for k, v in dict(flt or {}).items() if k in FILTER_KEYS and v is not None}
+    if w.get("filter_order") == 2:
+        del w["filter_order"]
+    return w if w.get("filter_hz") else None
+
+
 def avar_bias_instability(tau, B, f0=None):
     """Bias instability (flicker rate noise).
 

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from companion.allan.special import chi2_ppf
-from companion.allan.terms import FILTER_KEYS, avar_term, avar_white_noise
+from companion.allan.terms import avar_term, avar_white_noise, white_filter_of
 
 #: white noise must make at least this share of the fitted AVAR ...
 WHITE_SHARE = 0.5
@@ -29,8 +29,8 @@ MIN_POINTS = 2
 
 
 def _shape(white_term, tau):
-    f = {k: white_term.get(k) for k in FILTER_KEYS if white_term.get(k)}
-    return avar_white_noise(tau, 1.0, **f) * tau if f.get("filter_hz") else np.ones_like(tau)
+    f = white_filter_of(white_term)
+    return avar_white_noise(tau, 1.0, **f) * tau if f else np.ones_like(tau)
 
 
 def white_region(terms, tau) -> np.ndarray:
@@ -174,7 +174,7 @@ def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: flo
     wn = next((t for t in terms if t["effect"] == "white_noise" and not t.get("bound")), None)
     if wn is None or white_resolved(terms, tau):
         return terms, notes
-    filt = {k: wn[k] for k in FILTER_KEYS if wn.get(k)} or dict(white_filter or {})
+    filt = white_filter_of(wn) or dict(white_filter or {})
     ub, at = white_bound(tau, avar, edf, filt)
     if not math.isfinite(ub):
         return terms, notes

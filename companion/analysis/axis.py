@@ -96,12 +96,12 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     lo, hi = adev_ci(adev, edf, level)
     notes = list(fit.notes)
     terms = fit.terms
-    from companion.allan.terms import FILTER_KEYS
+    from companion.allan.terms import white_filter_of
     from companion.allan.white import apply_white_rules
 
     # the rules on N shared with the online report: local refit under misfit, resolved or a filter-aware bound
     terms, more = apply_white_rules(terms, tau_f[keep], avar_f[keep], edf0, 1.0 / rate_hz, fit.model_error,
-                                    {k: v for k, v in (fit.filter or {}).items() if k in FILTER_KEYS})
+                                    white_filter_of(fit.filter))
     notes += more
     if any(t.get("bound") for t in terms):
         bounds = [x for x in bounds if x["effect"] != "white_noise"] + [t for t in terms if t.get("bound")]

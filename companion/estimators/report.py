@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.allan.terms import BASE_EFFECTS, EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM
+from companion.allan.terms import BASE_EFFECTS, EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, white_filter_of
 from companion.units import fmt_value as _fmt
 
 #: every effect of the offline model is a candidate of the online model
@@ -106,8 +106,6 @@ def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ra
 
 def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure:
     """The :class:`Structure` of a :func:`companion.allan.fit.fit_avar` result on the levels ``tau, avar``."""
-    from companion.allan.fit import white_of
-
     tau = np.asarray(tau, float)
     m = np.round(tau * rate_hz).astype(np.int64)
     edf0 = np.asarray(edf0, float)
@@ -118,7 +116,7 @@ def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure
     model = np.maximum(np.asarray(fr.avar_fit, float), 1e-300) if len(fr.avar_fit) else np.asarray(avar)[keep]
     nl_ci = {t["effect"]: t.get("ci95", {}) for t in fr.terms if t["effect"] in NL_PARAMS}
     flt = getattr(fr, "filter", None) or {}
-    white = white_of(flt)
+    white = white_filter_of(flt)
     white_ci = tuple(flt["ci95"]) if flt.get("source") == "data" and flt.get("ci95") else None
     nuisance = tuple(t["effect"] for t in getattr(fr, "nuisance", ()) if t["effect"] in LINEAR_EFFECTS)
     return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
