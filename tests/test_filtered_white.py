@@ -301,3 +301,29 @@ def test_a_first_order_roll_off_the_log_s_2_pole_cannot_fit():
     one = avar_term({"effect": "white_noise", "N": 1.0, "filter_hz": 1.0 / (2 * math.pi * tau_c), "filter_order": 1},
                     tau)
     np.testing.assert_allclose(one / one[-1], gm / gm[-1], rtol=1e-9)
+
+
+def test_a_first_order_roll_off_without_a_log_is_not_left_to_a_2_pole_and_a_drift_term():
+    """The same process with no cut-off from a log (a tlog, a CSV): the data set "no filter" aside for a 2-pole
+    of their own, whose model keeps an unresolved bias instability for the difference, and the first-order
+    shape, judged against that model with the drift term in both, was left out: the first-order shape found in
+    6 of 20 records of 20 s, N about half the long-tau level in most of the rest (`bench_fit.py shape 40 20
+    none`: 12 of 40 covered). Judged again under its own model (its own selection and covariance), as where it
+    beats no filter, it is taken in 13 of these 20 (asserted >= 9; 21 of 40 in the benchmark), and where it is
+    taken N's 95 % interval covers the long-tau white level (13 of 13; asserted all but one)."""
+    from companion.sim.synth import synthesize_axis
+
+    fs, n, sigma, tau_c = 50.0, 1000, 7.4e-3, 0.073
+    phi = math.exp(-1.0 / (fs * tau_c))
+    level = math.sqrt(logged_white_level(4e-4, fs, 8.4) ** 2 + sigma**2 / fs * (1 + phi) / (1 - phi))
+    found = covered = 0
+    for s in range(20):
+        y = filtered_white_noise(n, 4e-4, fs, 8.4, "point", 500 + s) + synthesize_axis(
+            [{"effect": "gauss_markov", "sigma": sigma, "tau_c": tau_c}], fs, n, np.random.default_rng(900 + s))
+        fr = _fit(y, fs, detect_filter="point")
+        if (fr.filter or {}).get("source") == "data" and fr.filter.get("filter_order") == 1:
+            found += 1
+            lo, hi = fr.term("white_noise")["ci95"]["N"]
+            covered += lo <= level <= hi
+    assert found >= 9
+    assert covered >= found - 1

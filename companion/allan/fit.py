@@ -535,8 +535,8 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     FILTER_LOG_LEVEL profile interval (chi^2 scaled by the Birge ratio of the best fit). The data's shape may
     also be first-order (below FIRST_ORDER_MAX of the sample rate), where it fits better than the best 2-pole by
     FILTER_LOG_LEVEL, judged under the covariance of the model fitted with the log's cut-off (or none) and,
-    where the first-order shape fits better but not by the rule's margin, again under the covariance of its own
-    model.
+    where the first-order shape fits better but not by the rule's margin (than that model, or than the 2-pole the
+    data put in its place), again under its own model's selection and covariance.
     The result's ``filter`` says what was used: {"filter_hz", "sample_hz", "source": "log" | "data", "ci95",
     "filter_order" when 1}.
     """
@@ -641,10 +641,26 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             # (the profile, whether the data set the log's cut-off or no filter aside, the first-order shape
             # where it fits better than that)
             return (info, bool(info["interior"] and info["chi2"] < base_c2 - thr),
-                    one if one["interior"] and one["chi2"] < base_c2 else None)
+                    one if one["interior"] and one["chi2"] < base_c2 else None,
+                    one if one["interior"] and one["chi2"] < infos[2]["chi2"] else None)
 
         given = white
-        filter_info, aside, better = decide(cov, linear, nonlin)
+        filter_info, aside, better, over_two = decide(cov, linear, nonlin)
+        if aside and filter_info["filter_order"] == 2 and over_two is not None:
+            # the same where the data set the log's cut-off (or no filter) aside for a 2-pole of their own: the
+            # 2-pole's model may have kept a drift term for the difference (a bias instability the record cannot
+            # resolve), and the first-order shape is judged against it with that term in both. Judged again
+            # under its own model (its own selection and covariance), by the same rules, it replaces the 2-pole
+            # only if the data there put the 2-pole's best outside the margin too
+            white_2 = white
+            white = data_filter(over_two)
+            fit_data = iterate(0.0)
+            info2, aside2, _, _ = decide(*fit_data[:3])
+            if aside2 and info2["filter_order"] == 1:
+                filter_info = info2
+                cov, linear, nonlin, c2, v_sup, sup_terms = fit_data
+            else:
+                white = white_2
         if not aside and better is not None:
             # the covariance above is the model's with the log's 2-pole shape (or no filter): where the data roll
             # off with another shape, the drift terms take up the difference and overshoot the long cluster
@@ -655,7 +671,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             # exclude that there
             white = data_filter(better)
             fit_data = iterate(0.0)
-            info2, aside, _ = decide(*fit_data[:3])
+            info2, aside, _, _ = decide(*fit_data[:3])
             if aside:
                 filter_info = info2
                 cov, linear, nonlin, c2, v_sup, sup_terms = fit_data
