@@ -307,23 +307,30 @@ def test_a_first_order_roll_off_without_a_log_is_not_left_to_a_2_pole_and_a_drif
     """The same process with no cut-off from a log (a tlog, a CSV): the data set "no filter" aside for a 2-pole
     of their own, whose model keeps an unresolved bias instability for the difference, and the first-order
     shape, judged against that model with the drift term in both, was left out: the first-order shape found in
-    6 of 20 records of 20 s, N about half the long-tau level in most of the rest (`bench_fit.py shape 40 20
-    none`: 12 of 40 covered). Judged again under its own model (its own selection and covariance), as where it
-    beats no filter, it is taken in 13 of these 20 (asserted >= 9; 21 of 40 in the benchmark), and where it is
-    taken N's 95 % interval covers the long-tau white level (13 of 13; asserted all but one)."""
+    6 of 20 records of 20 s, N about half the long-tau level in the other 12 with a roll-off, and N's interval
+    covered that level in 6 of the 18 (`bench_fit.py shape 40 20 none`: 12 of 40). Judged again under its own
+    model (its own selection and covariance), as where it beats no filter, the first-order shape is taken in 13
+    of these 20 (asserted >= 9; 21 of 40 in the benchmark); and where a 2-pole stays, the two orders are within
+    the 99 % margin of each other, so N's interval is its profile interval over the roll-off's order as well as
+    its cut-off and spans both readings: it covers the level in 18 of the 18 with a roll-off (asserted all but
+    three; the other 2 read the curve as white noise + a Gauss-Markov term, N the white part)."""
     from companion.sim.synth import synthesize_axis
 
     fs, n, sigma, tau_c = 50.0, 1000, 7.4e-3, 0.073
     phi = math.exp(-1.0 / (fs * tau_c))
     level = math.sqrt(logged_white_level(4e-4, fs, 8.4) ** 2 + sigma**2 / fs * (1 + phi) / (1 - phi))
-    found = covered = 0
+    first = rolled = covered = spans = 0
     for s in range(20):
         y = filtered_white_noise(n, 4e-4, fs, 8.4, "point", 500 + s) + synthesize_axis(
             [{"effect": "gauss_markov", "sigma": sigma, "tau_c": tau_c}], fs, n, np.random.default_rng(900 + s))
         fr = _fit(y, fs, detect_filter="point")
-        if (fr.filter or {}).get("source") == "data" and fr.filter.get("filter_order") == 1:
-            found += 1
-            lo, hi = fr.term("white_noise")["ci95"]["N"]
-            covered += lo <= level <= hi
-    assert found >= 9
-    assert covered >= found - 1
+        if (fr.filter or {}).get("source") != "data":
+            continue
+        rolled += 1
+        first += fr.filter.get("filter_order") == 1
+        lo, hi = fr.term("white_noise")["ci95"]["N"]
+        covered += lo <= level <= hi
+        spans += any(x.startswith("N's interval spans a first-order") for x in fr.notes)
+    assert first >= 9
+    assert rolled >= 15 and covered >= rolled - 3
+    assert 1 <= spans <= rolled - first  # said where a 2-pole stays and the interval spans the 1-pole's reading

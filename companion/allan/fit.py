@@ -770,7 +770,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         wt = next((t for t in terms if t["effect"] == "white_noise"), None)
         if wt is not None:
             wt["ci95"]["N"] = _profile_white_ci(wt["ci95"]["N"], prob, prob_ci, linear, nonlin, tau, white,
-                                                filter_info["ci95"], c2, scale, level)
+                                                filter_info["ci95"], c2, scale, level, tau0, notes)
     kk = int(np.count_nonzero(active)) + len(nonlin)
     avar_fit = avar_model([{k: v_ for k, v_ in t.items() if k != "ci95"} for t in terms], tau)
     return FitResult(terms=terms, tau=tau, avar_fit=avar_fit, chi2=c2, dof=max(n_pts - kk, 0),
@@ -802,17 +802,41 @@ def _profile_union(lo, hi, prob, prob_ci, j, designs, c2, level):
     return lo, hi
 
 
-def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, scale, level):
-    """N's interval ``ci`` (at the fitted cut-off) widened to its profile-likelihood interval over the cut-off
-    (:func:`_profile_union`): f_c on a log grid over its interval ``fc_ci`` widened by half its log-width each
-    side (the final covariance, with any model error, may allow more than the first profile did)."""
+def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, scale, level, tau0=None,
+                      notes=None):
+    """N's interval ``ci`` (at the fitted cut-off) widened to its profile-likelihood interval over the roll-off's
+    shape (:func:`_profile_union`): f_c on a log grid over its interval ``fc_ci`` widened by half its log-width
+    each side (the final covariance, with any model error, may allow more than the first profile did) and, for
+    a 2-pole, the first-order shape over its whole range (FILTER_ORDERS, FIRST_ORDER_MAX; sample period
+    ``tau0``): where the record cannot tell the two orders apart, N's interval spans both readings (on 20 s
+    of a first-order roll-off the 2-pole + an unresolved drift term read N at half the level the 1-pole reads);
+    a note then goes to ``notes`` (a list) when given."""
     lo_l, hi_l = math.log(fc_ci[0]), math.log(fc_ci[1])
     pad = 0.5 * (hi_l - lo_l)
     designs = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc)))
                for fc in np.exp(np.linspace(lo_l - pad, hi_l + pad, 13))]
+    lo1, hi1 = FILTER_ORDERS[1] / tau[-1], FIRST_ORDER_MAX / tau0 if tau0 else 0.0
+    if int(white.get("filter_order") or 2) == 2 and hi1 > lo1:
+        ones = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc), filter_order=1))
+                for fc in np.exp(np.linspace(math.log(lo1), math.log(hi1), 21))]
+        # only a first-order roll-off the data show (its best cut-off inside the range, as the order's choice
+        # asks): one pressed against the range's top is no roll-off below a tenth of the sample rate
+        if int(np.argmin([prob.solve(A1)[1] for A1 in ones])) < len(ones) - 3:
+            if notes is not None:
+                two = _profile_union(ci[0] ** 2 / scale, ci[1] ** 2 / scale, prob, prob_ci,
+                                     linear.index("white_noise"), designs, c2, level)
+            designs += ones
+        else:
+            notes = None
+    else:
+        notes = None
     lo, hi = _profile_union(ci[0] ** 2 / scale, ci[1] ** 2 / scale, prob, prob_ci, linear.index("white_noise"),
                             designs, c2, level)
-    return [math.sqrt(lo * scale), math.sqrt(hi * scale)]
+    out = [math.sqrt(lo * scale), math.sqrt(hi * scale)]
+    if notes is not None and (lo < 0.98 * two[0] or hi > 1.02 * two[1]):
+        notes.append(f"N's interval spans a first-order roll-off's reading too: the record does not tell it from the "
+                     f"2-pole (within the {100 * FILTER_LOG_LEVEL:.0f} % margin)")
+    return out
 
 
 def forced_intervals(prob, sup, nonlin, tau, white, level) -> dict:

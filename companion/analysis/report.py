@@ -68,7 +68,7 @@ def format_table(report: dict) -> str:
                     other.append(f"misfit: +{100 * r['fit']['model_error']:.0f} % model error")
                 for n_ in (r.get("fit") or {}).get("notes", []):
                     if n_.startswith(("N from a local", "cluster times below", "the record is too short", "low-pass",
-                                      "N not resolved")):
+                                      "N not resolved", "N's interval spans")):
                         other.append(n_)
                 q = r.get("quantization")
                 if q and q.get("note"):
