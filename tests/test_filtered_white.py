@@ -278,9 +278,11 @@ def test_a_first_order_roll_off_the_log_s_2_pole_cannot_fit():
     log saying 5 Hz. With the log's 2-pole shape an unresolved bias instability took up the difference and N
     came out at half the long-tau white level, its interval covering it in 0 of 20 seeds; judged under the
     covariance of its own model the first-order shape sets the log's aside, and N's 95 % interval covers the
-    long-tau white level (the plateau of ADEV sqrt(tau) above the roll-off) in 18 of 20 (asserted >= 6 of 10);
-    the note says a Gauss-Markov process has that shape. A first-order shape is also exactly that process: its
-    AVAR is the Gauss-Markov term's."""
+    long-tau white level (the plateau of ADEV sqrt(tau) above the roll-off) in 18 of 20; the note says a
+    Gauss-Markov process has that shape. In the other 2 the log's 2-pole stays (the 1-pole fits better, not by
+    the 99 % margin): N's interval spans the first-order reading too, and says so: 20 of 20 (asserted >= 9 of
+    10; 8 of 10 without that). A first-order shape is also exactly that process: its AVAR is the Gauss-Markov
+    term's."""
     from companion.sim.synth import synthesize_axis
 
     fs, n, sigma, tau_c = 50.0, 1000, 7.4e-3, 0.073
@@ -295,7 +297,9 @@ def test_a_first_order_roll_off_the_log_s_2_pole_cannot_fit():
         covered += wn["ci95"]["N"][0] <= level <= wn["ci95"]["N"][1]
         if fr.filter.get("filter_order") == 1:
             assert any("Gauss-Markov process of tau_c" in x for x in fr.notes)
-    assert covered >= 6
+        elif wn["ci95"]["N"][0] <= level <= wn["ci95"]["N"][1]:
+            assert any(x.startswith("N's interval spans a first-order") for x in fr.notes)
+    assert covered >= 9
     tau = np.array([0.02, 0.1, 0.5, 2.0])
     gm = avar_term({"effect": "gauss_markov", "sigma": 1.0, "tau_c": tau_c}, tau)
     one = avar_term({"effect": "white_noise", "N": 1.0, "filter_hz": 1.0 / (2 * math.pi * tau_c), "filter_order": 1},

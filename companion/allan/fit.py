@@ -761,16 +761,18 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     sup = [e for e in LINEAR_EFFECTS if e in linear or (e in BASE_EFFECTS and e in effects)]
     if auto and full and set(sup) != set(linear):
         _selection_envelope(terms, prob_ci, sup, nonlin, tau, white, scale, level)
-    if filter_info and filter_info.get("source") == "data":
+    if white:
         # N and the cut-off found in the data are correlated: N's interval is its profile-likelihood interval
         # over the cut-off, the union over f_c of N's conditional intervals at the level left once f_c's own
         # chi^2 excess is spent (chi^2(f_c) - chi^2_min + z^2 <= chi2_level(1)). The envelope of full-level
         # conditional intervals over f_c's interval (the projection) allowed twice that excess and covered
-        # 99-100 % where a 95 % interval was asked for
+        # 99-100 % where a 95 % interval was asked for. With the log's cut-off (not profiled), over the order
         wt = next((t for t in terms if t["effect"] == "white_noise"), None)
         if wt is not None:
             wt["ci95"]["N"] = _profile_white_ci(wt["ci95"]["N"], prob, prob_ci, linear, nonlin, tau, white,
-                                                filter_info["ci95"], c2, scale, level, tau0, notes)
+                                                filter_info["ci95"] if (filter_info or {}).get("source") == "data"
+                                                else None,
+                                                c2, scale, level, tau0, notes)
     kk = int(np.count_nonzero(active)) + len(nonlin)
     avar_fit = avar_model([{k: v_ for k, v_ in t.items() if k != "ci95"} for t in terms], tau)
     return FitResult(terms=terms, tau=tau, avar_fit=avar_fit, chi2=c2, dof=max(n_pts - kk, 0),
@@ -806,15 +808,18 @@ def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, 
                       notes=None):
     """N's interval ``ci`` (at the fitted cut-off) widened to its profile-likelihood interval over the roll-off's
     shape (:func:`_profile_union`): f_c on a log grid over its interval ``fc_ci`` widened by half its log-width
-    each side (the final covariance, with any model error, may allow more than the first profile did) and, for
+    each side (the final covariance, with any model error, may allow more than the first profile did; None: the
+    log's cut-off, which is not profiled) and, for
     a 2-pole, the first-order shape over its whole range (FILTER_ORDERS, FIRST_ORDER_MAX; sample period
     ``tau0``): where the record cannot tell the two orders apart, N's interval spans both readings (on 20 s
     of a first-order roll-off the 2-pole + an unresolved drift term read N at half the level the 1-pole reads);
     a note then goes to ``notes`` (a list) when given."""
-    lo_l, hi_l = math.log(fc_ci[0]), math.log(fc_ci[1])
-    pad = 0.5 * (hi_l - lo_l)
-    designs = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc)))
-               for fc in np.exp(np.linspace(lo_l - pad, hi_l + pad, 13))]
+    designs = []
+    if fc_ci is not None:
+        lo_l, hi_l = math.log(fc_ci[0]), math.log(fc_ci[1])
+        pad = 0.5 * (hi_l - lo_l)
+        designs = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc)))
+                   for fc in np.exp(np.linspace(lo_l - pad, hi_l + pad, 13))]
     lo1, hi1 = FILTER_ORDERS[1] / tau[-1], FIRST_ORDER_MAX / tau0 if tau0 else 0.0
     if int(white.get("filter_order") or 2) == 2 and hi1 > lo1:
         ones = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc), filter_order=1))

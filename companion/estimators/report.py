@@ -217,8 +217,9 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
             if e in forced:
                 lo, hi = min(lo, forced[e][0]), max(hi, forced[e][1])
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
-            if e == "white_noise" and st.white_ci:
-                # N and a cut-off found in the data are correlated: N's profile interval over it
+            if e == "white_noise" and st.white:
+                # N and a cut-off found in the data are correlated: N's profile interval over it (and over the
+                # roll-off's order, with the log's cut-off too), as offline
                 lo_p, hi_p = _profile_white_ci([lo_p, hi_p], prob, prob, mod, st.nonlin, tau, st.white, st.white_ci,
                                                c2, scale, level, float(tau[0] / st.m[0]))
             resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
