@@ -809,11 +809,10 @@ def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, 
     """N's interval ``ci`` (at the fitted cut-off) widened to its profile-likelihood interval over the roll-off's
     shape (:func:`_profile_union`): f_c on a log grid over its interval ``fc_ci`` widened by half its log-width
     each side (the final covariance, with any model error, may allow more than the first profile did; None: the
-    log's cut-off, which is not profiled) and, for
-    a 2-pole, the first-order shape over its whole range (FILTER_ORDERS, FIRST_ORDER_MAX; sample period
-    ``tau0``): where the record cannot tell the two orders apart, N's interval spans both readings (on 20 s
-    of a first-order roll-off the 2-pole + an unresolved drift term read N at half the level the 1-pole reads);
-    a note then goes to ``notes`` (a list) when given."""
+    log's cut-off, which is not profiled) and, for a 2-pole, the first-order shape over its whole range
+    (FILTER_ORDERS, FIRST_ORDER_MAX; sample period ``tau0``): where the record cannot tell the two orders apart,
+    N's interval spans both readings (on 20 s of a first-order roll-off the 2-pole + an unresolved drift term
+    read N at half the level the 1-pole reads); a note then goes to ``notes`` (a list) when given."""
     designs = []
     if fc_ci is not None:
         lo_l, hi_l = math.log(fc_ci[0]), math.log(fc_ci[1])
