@@ -761,6 +761,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
     sup = [e for e in LINEAR_EFFECTS if e in linear or (e in BASE_EFFECTS and e in effects)]
     if auto and full and set(sup) != set(linear):
         _selection_envelope(terms, prob_ci, sup, nonlin, tau, white, scale, level)
+    first_order = False
     if white:
         # N and the cut-off found in the data are correlated: N's interval is its profile-likelihood interval
         # over the cut-off, the union over f_c of N's conditional intervals at the level left once f_c's own
@@ -769,16 +770,16 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
         # 99-100 % where a 95 % interval was asked for. With the log's cut-off (not profiled), over the order
         wt = next((t for t in terms if t["effect"] == "white_noise"), None)
         if wt is not None:
-            wt["ci95"]["N"] = _profile_white_ci(wt["ci95"]["N"], prob, prob_ci, linear, nonlin, tau, white,
-                                                filter_info["ci95"] if (filter_info or {}).get("source") == "data"
-                                                else None,
-                                                c2, scale, level, tau0, notes)
+            wt["ci95"]["N"], first_order = _profile_white_ci(
+                wt["ci95"]["N"], prob, prob_ci, linear, nonlin, tau, white,
+                filter_info["ci95"] if (filter_info or {}).get("source") == "data" else None,
+                c2, scale, level, tau0, notes)
     kk = int(np.count_nonzero(active)) + len(nonlin)
     avar_fit = avar_model([{k: v_ for k, v_ in t.items() if k != "ci95"} for t in terms], tau)
     return FitResult(terms=terms, tau=tau, avar_fit=avar_fit, chi2=c2, dof=max(n_pts - kk, 0),
                      criterion="bic", score=c2 + kk * math.log(n_pts),
                      covariance_mode="full" if full else "diagonal", avar_cov=cov * scale**2, notes=notes,
-                     model_error=floor, filter=_filter_summary(white, filter_info))
+                     model_error=floor, filter=_filter_summary(white, filter_info, first_order))
 
 
 def _profile_union(lo, hi, prob, prob_ci, j, designs, c2, level):
@@ -805,14 +806,16 @@ def _profile_union(lo, hi, prob, prob_ci, j, designs, c2, level):
 
 
 def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, scale, level, tau0=None,
-                      notes=None):
+                      notes=None, first_order=None):
     """N's interval ``ci`` (at the fitted cut-off) widened to its profile-likelihood interval over the roll-off's
     shape (:func:`_profile_union`): f_c on a log grid over its interval ``fc_ci`` widened by half its log-width
     each side (the final covariance, with any model error, may allow more than the first profile did; None: the
     log's cut-off, which is not profiled) and, for a 2-pole, the first-order shape over its whole range
     (FILTER_ORDERS, FIRST_ORDER_MAX; sample period ``tau0``): where the record cannot tell the two orders apart,
     N's interval spans both readings (on 20 s of a first-order roll-off the 2-pole + an unresolved drift term
-    read N at half the level the 1-pole reads); a note then goes to ``notes`` (a list) when given."""
+    read N at half the level the 1-pole reads); a note then goes to ``notes`` (a list) when given.
+    ``first_order``: whether the first-order shape is in the profile, as decided before (the online report takes
+    its selection's, between re-selections); None: decided here. Returns (interval, first_order)."""
     designs = []
     if fc_ci is not None:
         lo_l, hi_l = math.log(fc_ci[0]), math.log(fc_ci[1])
@@ -820,12 +823,14 @@ def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, 
         designs = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc)))
                    for fc in np.exp(np.linspace(lo_l - pad, hi_l + pad, 13))]
     lo1, hi1 = FILTER_ORDERS[1] / tau[-1], FIRST_ORDER_MAX / tau0 if tau0 else 0.0
-    if int(white.get("filter_order") or 2) == 2 and hi1 > lo1:
+    if int(white.get("filter_order") or 2) == 2 and hi1 > lo1 and first_order is not False:
         ones = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc), filter_order=1))
                 for fc in np.exp(np.linspace(math.log(lo1), math.log(hi1), 21))]
         # only a first-order roll-off the data show (its best cut-off inside the range, as the order's choice
         # asks): one pressed against the range's top is no roll-off below a tenth of the sample rate
-        if int(np.argmin([prob.solve(A1)[1] for A1 in ones])) < len(ones) - 3:
+        if first_order is None:
+            first_order = int(np.argmin([prob.solve(A1)[1] for A1 in ones])) < len(ones) - 3
+        if first_order:
             if notes is not None:
                 two = _profile_union(ci[0] ** 2 / scale, ci[1] ** 2 / scale, prob, prob_ci,
                                      linear.index("white_noise"), designs, c2, level)
@@ -833,14 +838,14 @@ def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, 
         else:
             notes = None
     else:
-        notes = None
+        notes, first_order = None, False
     lo, hi = _profile_union(ci[0] ** 2 / scale, ci[1] ** 2 / scale, prob, prob_ci, linear.index("white_noise"),
                             designs, c2, level)
     out = [math.sqrt(lo * scale), math.sqrt(hi * scale)]
     if notes is not None and (lo < 0.98 * two[0] or hi > 1.02 * two[1]):
         notes.append(f"N's interval spans a first-order roll-off's reading too: the record does not tell it from the "
                      f"2-pole (within the {100 * FILTER_LOG_LEVEL:.0f} % margin)")
-    return out
+    return out, bool(first_order)
 
 
 def forced_intervals(prob, sup, nonlin, tau, white, level) -> dict:
@@ -918,7 +923,7 @@ def _filter_params(white) -> dict:
     return {k: (int(v) if k == "filter_order" else float(v)) for k, v in white.items() if v}
 
 
-def _filter_summary(white, info):
+def _filter_summary(white, info, first_order=False):
     if not white:
         return None
     out = {"filter_hz": float(white["filter_hz"]), "sample_hz": white.get("sample_hz"),
@@ -927,6 +932,8 @@ def _filter_summary(white, info):
         out["filter_order"] = int(white["filter_order"])
     if info and info.get("source") == "data":
         out["ci95"] = list(info["ci95"])
+    if first_order:
+        out["first_order_in_ci"] = True  # N's interval spans the data's first-order reading too
     return out
 
 

@@ -79,6 +79,8 @@ class Structure:
     nuisance: tuple = ()
     # the cut-off's 95 % interval when the data gave it (N's interval is then profiled over it, as offline)
     white_ci: tuple | None = None
+    # N's interval spans the data's first-order reading too (the selection fit's decision, kept until the next)
+    first_order: bool = False
 
 
 def select(tau, avar, edf, n, rate_hz, candidates=CANDIDATES, n_raw=None, max_ratio=256, white_filter=None,
@@ -120,7 +122,8 @@ def structure_from_fit(fr, tau, avar, edf0, rate_hz, n, n_raw=None) -> Structure
     white_ci = tuple(flt["ci95"]) if flt.get("source") == "data" and flt.get("ci95") else None
     nuisance = tuple(t["effect"] for t in getattr(fr, "nuisance", ()) if t["effect"] in LINEAR_EFFECTS)
     return Structure(linear, nonlin, m[keep], np.asarray(cov, float), model, float(n),
-                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci, white, nuisance, white_ci)
+                     int(n if n_raw is None else n_raw), float(fr.model_error), nl_ci, white, nuisance, white_ci,
+                     bool(flt.get("first_order_in_ci")))
 
 
 def bounds_for_fit(fr, tau, avar, edf0, rate_hz, n, effects=("white_noise", "bias_instability", "random_walk")):
@@ -220,8 +223,9 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
             if e == "white_noise" and st.white:
                 # N and a cut-off found in the data are correlated: N's profile interval over it (and over the
                 # roll-off's order, with the log's cut-off too), as offline
-                lo_p, hi_p = _profile_white_ci([lo_p, hi_p], prob, prob, mod, st.nonlin, tau, st.white, st.white_ci,
-                                               c2, scale, level, float(tau[0] / st.m[0]))
+                (lo_p, hi_p), _ = _profile_white_ci([lo_p, hi_p], prob, prob, mod, st.nonlin, tau, st.white,
+                                                    st.white_ci, c2, scale, level, float(tau[0] / st.m[0]),
+                                                    first_order=st.first_order)
             resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
                            "bound": False}
             if e == "white_noise" and st.white:
