@@ -933,7 +933,7 @@ def _filter_summary(white, info, first_order=False):
     if info and info.get("source") == "data":
         out["ci95"] = list(info["ci95"])
     if first_order:
-        out["first_order_in_ci"] = True  # N's interval spans the data's first-order reading too
+        out["first_order_in_ci"] = True  # the data's first-order reading is in N's profile interval
     return out
 
 

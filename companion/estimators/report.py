@@ -79,7 +79,7 @@ class Structure:
     nuisance: tuple = ()
     # the cut-off's 95 % interval when the data gave it (N's interval is then profiled over it, as offline)
     white_ci: tuple | None = None
-    # N's interval spans the data's first-order reading too (the selection fit's decision, kept until the next)
+    # the data's first-order reading is in N's profile interval (the selection fit's decision, kept until the next)
     first_order: bool = False
 
 
