@@ -644,6 +644,14 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
                     one if one["interior"] and one["chi2"] < base_c2 else None,
                     one if one["interior"] and one["chi2"] < infos[2]["chi2"] else None)
 
+        def under_own_model(shape):
+            """decide's (profile, set aside) under the model fitted with the data's ``shape`` (its own selection
+            and covariance), and that fit; ``white`` is left at ``shape``."""
+            nonlocal white
+            white = data_filter(shape)
+            fit_d = iterate(0.0)
+            return decide(*fit_d[:3])[:2] + (fit_d,)
+
         given = white
         filter_info, aside, better, over_two = decide(cov, linear, nonlin)
         if aside and filter_info["filter_order"] == 2 and over_two is not None:
@@ -652,15 +660,12 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             # resolve), and the first-order shape is judged against it with that term in both. Judged again
             # under its own model (its own selection and covariance), by the same rules, it replaces the 2-pole
             # only if the data there put the 2-pole's best outside the margin too
-            white_2 = white
-            white = data_filter(over_two)
-            fit_data = iterate(0.0)
-            info2, aside2, _, _ = decide(*fit_data[:3])
+            info2, aside2, fit_data = under_own_model(over_two)
             if aside2 and info2["filter_order"] == 1:
                 filter_info = info2
                 cov, linear, nonlin, c2, v_sup, sup_terms = fit_data
             else:
-                white = white_2
+                white = given
         if not aside and better is not None:
             # the covariance above is the model's with the log's 2-pole shape (or no filter): where the data roll
             # off with another shape, the drift terms take up the difference and overshoot the long cluster
@@ -669,9 +674,7 @@ def _fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None
             # chi^2 5.5 for 7 dof). A first-order shape that fits better than that model is judged again under the
             # covariance of its own, by the same rules; it replaces the log's (or no filter) only if the data
             # exclude that there
-            white = data_filter(better)
-            fit_data = iterate(0.0)
-            info2, aside, _, _ = decide(*fit_data[:3])
+            info2, aside, fit_data = under_own_model(better)
             if aside:
                 filter_info = info2
                 cov, linear, nonlin, c2, v_sup, sup_terms = fit_data
@@ -822,12 +825,13 @@ def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, 
         pad = 0.5 * (hi_l - lo_l)
         designs = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc)))
                    for fc in np.exp(np.linspace(lo_l - pad, hi_l + pad, 13))]
-    lo1, hi1 = FILTER_ORDERS[1] / tau[-1], FIRST_ORDER_MAX / tau0 if tau0 else 0.0
-    if int(white.get("filter_order") or 2) == 2 and hi1 > lo1 and first_order is not False:
+    grid1 = _cutoff_grid(1, tau, tau0) if tau0 else np.empty(0)
+    if int(white.get("filter_order") or 2) == 2 and grid1.size and first_order is not False:
         ones = [_columns(linear, nonlin, tau, dict(white, filter_hz=float(fc), filter_order=1))
-                for fc in np.exp(np.linspace(math.log(lo1), math.log(hi1), 21))]
+                for fc in np.exp(grid1)]
         # only a first-order roll-off the data show (its best cut-off inside the range, as the order's choice
-        # asks): one pressed against the range's top is no roll-off below a tenth of the sample rate
+        # asks, the profile's `interior`): one pressed against the range's top is no roll-off below a tenth of
+        # the sample rate
         if first_order is None:
             first_order = int(np.argmin([prob.solve(A1)[1] for A1 in ones])) < len(ones) - 3
         if first_order:
@@ -959,13 +963,19 @@ def _profile_filter(prob, linear, nonlin, tau0, sampling, given=None, level=0.95
     plain = prob.solve(_columns(linear, nonlin, prob.tau, None))[1]
     given_c2 = (prob.solve(_columns(linear, nonlin, prob.tau, white_filter_of(dict(given, sample_hz=sample_hz))))[1]
                 if given else None)
-    return {order: _profile_filter_order(prob, linear, nonlin, tau0, sample_hz, level, order, lo_k, plain, given_c2)
-            for order, lo_k in FILTER_ORDERS.items()}
+    return {order: _profile_filter_order(prob, linear, nonlin, tau0, sample_hz, level, order, plain, given_c2)
+            for order in FILTER_ORDERS}
 
 
-def _profile_filter_order(prob, linear, nonlin, tau0, sample_hz, level, order, lo_k, plain, given_c2):
+def _cutoff_grid(order, tau, tau0) -> np.ndarray:
+    """The log cut-offs profiled for a roll-off of ``order``: from FILTER_ORDERS[order] / tau_max to 3 / tau0
+    (2-pole) or FIRST_ORDER_MAX / tau0 (first-order); empty where the record is too short for that range."""
+    lo, hi = FILTER_ORDERS[order] / tau[-1], (3.0 if order == 2 else FIRST_ORDER_MAX) / tau0
+    return np.linspace(math.log(lo), math.log(hi), 41 if order == 2 else 21) if hi > lo else np.empty(0)
+
+
+def _profile_filter_order(prob, linear, nonlin, tau0, sample_hz, level, order, plain, given_c2):
     tau = prob.tau
-    lo, hi = lo_k / tau[-1], (3.0 if order == 2 else FIRST_ORDER_MAX) / tau0
     extra = {} if order == 2 else {"filter_order": order}
 
     def chi(lf):
@@ -974,9 +984,9 @@ def _profile_filter_order(prob, linear, nonlin, tau0, sample_hz, level, order, l
 
     out = {"chi2_plain": plain, "filter_hz": None, "chi2": plain, "interior": False, "ci95": [None, None],
            "filter_order": order, "chi2_given": given_c2}
-    if not hi > lo:
+    grid = _cutoff_grid(order, tau, tau0)
+    if grid.size == 0:
         return out
-    grid = np.linspace(math.log(lo), math.log(hi), 41 if order == 2 else 21)
     vals = np.array([chi(g) for g in grid])
     i = int(np.argmin(vals))
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
