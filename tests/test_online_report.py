@@ -62,6 +62,24 @@ def test_quick_refit_between_selections_and_state_round_trip():
         assert 0.5 < quick[e]["std"][p] / full[e]["std"][p] < 2.0
 
 
+def test_a_report_asked_again_before_new_samples_is_the_same_and_new_samples_renew_it():
+    truth = [{"effect": "white_noise", "N": 3.0e-4}, {"effect": "bias_instability", "B": 2.0e-5}]
+    y = synthesize_axis(truth, FS, int(900 * FS), np.random.default_rng(8))
+    est = make_estimator("octave", rate_hz=FS)
+    est.update(y[: y.size // 2])
+    first = est.terms()
+    by_effect(first)["white_noise"]["N"] = -1.0  # what a caller does with its copy does not reach the next report
+    again = est.terms()
+    fresh = from_state_dict(est.state_dict())  # the same samples, no cached report
+    assert again == fresh.terms() and by_effect(again)["white_noise"]["N"] > 0
+    est.update(y[y.size // 2: y.size // 2 + y.size // 10])
+    fresh.update(y[y.size // 2: y.size // 2 + y.size // 10])
+    later = est.terms()
+    assert later != again  # the new samples are in it, exactly as in an estimator that made no report twice
+    assert later == fresh.terms()
+    est.new_segment()  # a junction with no new sample changes nothing; the next samples then count as a piece
+    assert est.terms() == later
+
 class Sink:
     def __init__(self):
         self.sent = {}

@@ -147,6 +147,7 @@ class OctaveBankEstimator:
         self._buf: list[float] = []
         self._cache: dict = {}  # Cholesky factors of the GLS covariance (derived data, not state)
         self._structure = None  # selected model (companion.estimators.report.Structure; derived, not state)
+        self._report_cache = None  # the last report and what it was made from (derived, not state)
         self.n_rejected = 0
 
     # ------------------------------------------------------------------ updates

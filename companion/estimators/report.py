@@ -39,6 +39,7 @@ the number of samples; a few ms), which is what ``companion run`` does between s
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -281,8 +282,22 @@ def rescaled_cov(st: Structure, tau, avar, n):
 def estimator_report(est, candidates=None, full=False):
     """The report of an :class:`companion.estimators.octave_bank.OctaveBankEstimator` (``fit="model"``):
     a fresh selection when ``full`` or when due (no structure yet, or the data grew by RESELECT), else the
-    cached structure with a rescaled covariance. Caches the structure on ``est._structure``."""
+    cached structure with a rescaled covariance. Caches the structure on ``est._structure``, and the last
+    report on ``est._report_cache``: asked again before a new sample, it is returned as it was."""
     candidates = tuple(candidates or est.effects)
+    # the same samples, filter and request give the same report (between two checks in flight or while the
+    # vehicle moves no still sample arrives): the last one is returned, at no fitting cost
+    key = (est.n_samples, tuple(est.segments()) if hasattr(est, "segments") else (), bool(full), candidates,
+           getattr(est, "filter_hz", None), getattr(est, "sampling", None))
+    last = getattr(est, "_report_cache", None)
+    if last is not None and last[0] == key and last[1] is getattr(est, "_structure", None):
+        return copy.deepcopy(last[2])
+    out = _estimator_report(est, candidates, full)
+    est._report_cache = (key, getattr(est, "_structure", None), copy.deepcopy(out))
+    return out
+
+
+def _estimator_report(est, candidates, full):
     tau, avar, edf = est.avar()
     use = edf >= est.min_edf
     tau, avar, edf = tau[use], avar[use], edf[use]
