@@ -102,7 +102,9 @@ CLEARED = re.compile(r"cleared|recovered|healthy again|back to|\bOK\b")
 
 
 def find_logs(dirs: list[Path]) -> list[Path]:
-    out = []
+    """The real logs under ``dirs``, each once (../shared/data is always searched, and a folder named again or
+    inside another would otherwise count its logs twice)."""
+    out, seen = [], set()
     for d in dirs:
         if not d.exists():
             continue
@@ -110,7 +112,8 @@ def find_logs(dirs: list[Path]) -> list[Path]:
             name = p.name.lower()
             if "sim" in p.relative_to(d).parts[:-1]:
                 continue  # simulated logs kept beside the real ones are not real data
-            if p.is_file() and name.endswith(EXTS) and p.stat().st_size > 20_000:
+            if p.is_file() and name.endswith(EXTS) and p.stat().st_size > 20_000 and p.resolve() not in seen:
+                seen.add(p.resolve())
                 out.append(p)
     return out
 
