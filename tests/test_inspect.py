@@ -34,6 +34,19 @@ def test_inspect_json_exact_keys(tmp_path, capsys):
     assert doc["frames"] == n + 5 and doc["bad_bytes"] == 0  # 5 heartbeats at 1 Hz over 4.995 s
 
 
+@pytest.mark.parametrize("rate, slow", [(49.6, False), (50.0, False), (20.0, True), (45.0, True)])
+def test_a_nominal_50_hz_log_is_not_called_too_slow(tmp_path, capsys, rate, slow):
+    """An autopilot's nominal 50 Hz log measures 49.6-49.9 Hz (log171: 49.6): N is estimated there like at 50.0
+    Hz, so the 'log faster' note is for rates really below it."""
+    n = 2000
+    path = tmp_path / "a.tlog"
+    rng = np.random.default_rng(1)
+    write_imu_tlog(path, 2.0 + np.arange(n) / rate, rng.normal(0.0, 0.01, (n, 3)), np.full((n, 3), 0.3))
+    assert main(["inspect", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert ("aliased together" in text) is slow, text
+    assert "even at rest throughout" in text  # 40-100 s: far from the hours B and K need
+
 def test_inspect_no_imu_and_bad_inputs(tmp_path, capsys):
     path = tmp_path / "hb.tlog"
     with TlogWriter(path) as w:
