@@ -7,8 +7,8 @@ FIT_MIN_RATE_HZ = 10.0
 FIT_MIN_SECONDS = 60.0
 #: Below this rate the short-tau part of the Allan curve (Q, N) is out of reach: inspect says to log faster.
 SHORT_TAU_RATE_HZ = 50.0
-#: ... measured with this tolerance: a log written at a nominal 50 Hz measures 49.6-49.9 Hz (the autopilot's
-#: scheduler), and is no slower than one that measures 50.0
+#: Both rate limits are applied with this tolerance: a log written at a nominal 50 Hz measures 49.6-49.9 Hz (the
+#: autopilot's scheduler), and is no slower than one that measures 50.0
 RATE_TOLERANCE = 0.95
 #: Bias instability and rate random walk need hours of data: inspect notes a shorter longest segment.
 LONG_TERMS_S = 3600.0
