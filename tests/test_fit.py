@@ -103,7 +103,7 @@ def test_quantization_only_where_its_slope_is(seed):
     """White noise + a 19.7 Hz line at 100 Hz sampling (lifts the 0.02 s octave, as on the ADIS16405 z axes):
     no quantization term stands in for the line (AVAR does not fall like tau^-2 from the smallest cluster
     time; without that rule one did, with the roll-off search of `analyze`); with a real quantization term
-    (3 Q^2 / tau^2 dominating the first octaves) it is found."""
+    (3 Q^2 / tau^2 dominating the first octaves) it is found. Nor for a line near the Nyquist frequency."""
     rng = np.random.default_rng(seed)
     n, rate = 400_000, 100.0
 
@@ -116,6 +116,12 @@ def test_quantization_only_where_its_slope_is(seed):
     line = synthesize_axis([{"effect": "white_noise", "N": 7e-4},
                             {"effect": "sinusoid", "amplitude": 6e-3, "freq_hz": 19.7}], rate, n, rng)
     assert fit(line).term("quantization") is None
+    # a line near the Nyquist frequency (an aliased vibration) lifts the smallest cluster time alone: AVAR falls
+    # like tau^-1.6 over the first octave and like white noise after it (taken as quantization in 10 of 10
+    # seeds before the second octave was asked to fall too)
+    nyq = synthesize_axis([{"effect": "white_noise", "N": 7e-4},
+                           {"effect": "sinusoid", "amplitude": 5e-3, "freq_hz": 49.0}], rate, 40_000, rng)
+    assert fit(nyq).term("quantization") is None
     q = synthesize_axis([{"effect": "white_noise", "N": 7e-4}, {"effect": "quantization", "Q": 1e-3}], rate, n, rng)
     fq = fit(q)
     assert fq.term("quantization") is not None

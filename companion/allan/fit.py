@@ -84,6 +84,14 @@ GM_MIN_SAMPLES = 3.0
 #: filter). Without that region a quantization term only stands in for something else at short tau (an output
 #: line near the Nyquist frequency, a filter's bump) and moves N.
 QUANT_SLOPE = -1.5
+#: ... and, where there is a third, between the second and third at least as fast as tau^QUANT_SLOPE2: a
+#: quantization term that passes the first test is at least 1.41x the white noise at the smallest cluster time,
+#: so the next octave still falls like tau^-1.34 or faster, where white noise alone falls like tau^-1. An output
+#: line near the Nyquist frequency lifts the smallest cluster time alone (point samples alternate, pairs
+#: average it out) and passes the first test; it fails this one, and a quantization term standing in for it
+#: pulled N 10 % low (10 Hz, 60 s, a line at 4.9 Hz of half the white power: N's interval covered the truth in
+#: 22 of 40 records)
+QUANT_SLOPE2 = -1.2
 #: relative uncertainty of a modelled low-pass filter's shape, per unit of its bend 1 - AVAR tau / N^2
 FILTER_SHAPE_ERROR = 0.25
 #: uncertainty of the bias-instability (flicker) AVAR at the first cluster times, in units of the excess a
@@ -465,10 +473,15 @@ def _record_for(tau_d: dict[str, float]) -> dict[str, float]:
 
 def quantization_slope(tau, avar) -> bool:
     """True when AVAR at the two smallest cluster times falls like quantization noise (log-log slope at most
-    QUANT_SLOPE): the region a quantization term needs before it is a candidate of the automatic selection."""
+    QUANT_SLOPE) and, where there is a third, still falls faster than white noise between the second and third
+    (QUANT_SLOPE2): the region a quantization term needs before it is a candidate of the automatic selection."""
     if len(tau) < 2 or not (avar[0] > 0 and avar[1] > 0 and tau[1] > tau[0]):
         return False
-    return math.log(avar[1] / avar[0]) / math.log(tau[1] / tau[0]) <= QUANT_SLOPE
+    if math.log(avar[1] / avar[0]) / math.log(tau[1] / tau[0]) > QUANT_SLOPE:
+        return False
+    if len(tau) < 3 or not (avar[2] > 0 and tau[2] > tau[1]):
+        return True
+    return math.log(avar[2] / avar[1]) / math.log(tau[2] / tau[1]) <= QUANT_SLOPE2
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
