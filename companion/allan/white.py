@@ -159,8 +159,8 @@ def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0
     # each point's variance its estimate's, 2 model^2 / EDF, the points correlated as neighbouring octaves of the
     # overlapping estimator are (OCTAVE_CORRELATION). On a short record the region holds a few long cluster
     # times, and N from them is less precise than the global fit's interval says (60 s at 10 Hz: 4 points from
-    # 1.6 s, N's spread 10 % on white noise, predicted 10 %; the scaled interval covered 78 % of the local
-    # refits of records with a line near the Nyquist frequency, the refit's own 100 %)
+    # 1.6 s, N's spread 10 % on white noise, predicted 10 %; the scaled interval covered 25 of 33 local
+    # refits of records with a line near the Nyquist frequency, the refit's own 33)
     k = np.abs(np.subtract.outer(np.arange(sel.shape[0]), np.arange(sel.shape[0])))
     corr = np.asarray(OCTAVE_CORRELATION + (0.0,))[np.minimum(k, len(OCTAVE_CORRELATION))]
     u = w * g * np.sqrt(2.0 * mod**2 / e)
