@@ -163,7 +163,7 @@ def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0
     # refits of records with a line near the Nyquist frequency, the refit's own 33)
     k = np.abs(np.subtract.outer(np.arange(sel.shape[0]), np.arange(sel.shape[0])))
     corr = np.asarray(OCTAVE_CORRELATION + (0.0,))[np.minimum(k, len(OCTAVE_CORRELATION))]
-    u = w * g * np.sqrt(2.0 * mod**2 / e)
+    u = g * np.sqrt(e / 2.0) / mod  # w g sd(a), sd(a) = model sqrt(2 / EDF)
     sd_n2 = math.sqrt(float(u @ corr @ u)) / float(np.sum(w * g**2))
     lo, hi = (c * ratio for c in wn["ci95"]["N"])
     lo, hi = min(lo, math.sqrt(max(n2 - Z95 * sd_n2, 0.0))), max(hi, math.sqrt(n2 + Z95 * sd_n2))

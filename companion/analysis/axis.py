@@ -11,7 +11,7 @@ from companion.allan.adev import cluster_sizes
 from companion.allan.confidence import adev_ci, edf_model, edf_simple
 from companion.allan.lsb import lsb_report
 from companion.allan.pooled import pooled_cluster_sizes, pooled_edf, pooled_oavar
-from companion.analysis.limits import FIT_MIN_RATE_HZ, RATE_TOLERANCE
+from companion.analysis.limits import FIT_MIN_RATE_HZ, fast_enough
 from companion.analysis.taus import parse_taus
 
 
@@ -68,7 +68,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     edf0 = np.array([edf_simple(int(c) + 2 * int(mm), mm, 0) for c, mm in zip(counts[keep], m_fit[keep])])
     fit = fit_avar(tau_f[keep], avar_f[keep], edf0, effects=effects, n=n, rate_hz=rate_hz, m=m_fit[keep],
                    level=level, segments=lengths if pooled else None, white_filter=white_filter,
-                   detect_filter=sampling if rate_hz >= RATE_TOLERANCE * FIT_MIN_RATE_HZ and keep.sum() >= 5 else None)
+                   detect_filter=sampling if fast_enough(rate_hz, FIT_MIN_RATE_HZ) and keep.sum() >= 5 else None)
     from companion.allan.fit import upper_bounds
     from companion.estimators.report import bounds_for_fit
 

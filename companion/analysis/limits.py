@@ -12,3 +12,9 @@ SHORT_TAU_RATE_HZ = 50.0
 RATE_TOLERANCE = 0.95
 #: Bias instability and rate random walk need hours of data: inspect notes a shorter longest segment.
 LONG_TERMS_S = 3600.0
+
+
+def fast_enough(rate_hz: float, limit_hz: float) -> bool:
+    """Whether a measured rate reaches a rate limit (FIT_MIN_RATE_HZ, SHORT_TAU_RATE_HZ) within RATE_TOLERANCE;
+    False for a rate that is not a number."""
+    return rate_hz >= RATE_TOLERANCE * limit_hz

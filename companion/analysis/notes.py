@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from companion.analysis.limits import LONG_TERMS_S, RATE_TOLERANCE, SHORT_TAU_RATE_HZ
+from companion.analysis.limits import LONG_TERMS_S, SHORT_TAU_RATE_HZ, fast_enough
 from companion.health.dead import dead_gyro_text
 
 
@@ -32,7 +32,7 @@ def notes(res) -> list[str]:
             continue
         a, b = s.longest_segment()
         longest = float(s.t[b - 1] - s.t[a]) if b > a else 0.0
-        if t.rate_hz < RATE_TOLERANCE * SHORT_TAU_RATE_HZ:
+        if not fast_enough(t.rate_hz, SHORT_TAU_RATE_HZ):
             out.append(f"{lab}: only {t.rate_hz:.3g} Hz: the Allan curve starts at tau = {1 / t.rate_hz:.3g} s, "
                        "so quantisation and white noise (Q, N) are aliased together; " + _faster_hint(fmt, s.key.message))
         if longest < LONG_TERMS_S:

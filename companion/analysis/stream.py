@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from companion.analysis.axis import analyze_axis
-from companion.analysis.limits import FIT_MIN_RATE_HZ, FIT_MIN_SECONDS, RATE_TOLERANCE
+from companion.analysis.limits import FIT_MIN_RATE_HZ, FIT_MIN_SECONDS, fast_enough
 from companion.samples import GYRO_AXES
 
 
@@ -30,7 +30,7 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
              "ranges_s": [[float(stream.t[a]), float(stream.t[b - 1])] for a, b in ranges if b > a],
              "timing": {"gaps": t.gaps, "duplicates": t.duplicates, "backwards": t.backwards, "resets": t.resets},
              "filters_hz": dict(filters or {}), "warnings": [], "axes": {}}
-    if not (rate >= RATE_TOLERANCE * FIT_MIN_RATE_HZ):
+    if not fast_enough(rate, FIT_MIN_RATE_HZ):
         entry["warnings"].append(f"only {rate:.3g} Hz (< {FIT_MIN_RATE_HZ:g} Hz): the Allan curve starts at "
                                  f"{1 / rate if rate > 0 else float('inf'):.3g} s, N is aliased with every faster effect")
     if secs < FIT_MIN_SECONDS:
