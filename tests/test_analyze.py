@@ -2,6 +2,7 @@
 plot, constant axes, user errors (one line, exit 2)."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -127,3 +128,38 @@ def test_bound_of_a_left_out_random_walk_holds():
     b = [x for x in out["bounds"] if x["effect"] == "random_walk"]
     assert len(b) == 1 and b[0]["bound"]
     assert truth["K"] <= b[0]["K"] < 3.0 * truth["K"]
+
+
+def test_plot_draws_an_unresolved_n_as_its_bound_touching_the_data():
+    """Where N is not resolved (a 1 Hz low-pass at 50 Hz, then a random walk above the white level wherever the
+    filter passes it) the report holds N's bound, not a term: the figure draws it (else the sum of the resolved
+    terms misses the short-tau points with nothing saying why). The bound is the least filter-corrected
+    AVAR x tau (with its one-sided confidence margin), so its line reaches a measured point and stays within
+    the measured band's upper edge: the white part cannot exceed the data."""
+    pytest.importorskip("matplotlib")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from companion.plots.adev_plot import draw_axis
+    from companion.sim.filtered import filtered_white_noise
+    from companion.sim.synth import synthesize_axis
+
+    fs, fc, n = 50.0, 1.0, 30000
+    y = filtered_white_noise(n, 1e-3, fs, fc, "point", 300)
+    y = y + synthesize_axis([{"effect": "random_walk", "K": 2e-3}], fs, n, np.random.default_rng(400))
+    r = analyze_axis(y, fs, white_filter={"filter_hz": fc, "sample_hz": fs})
+    assert not any(t["effect"] == "white_noise" for t in r["terms"])
+    assert any(t["effect"] == "white_noise" and t["bound"] for t in r["bounds"])
+    fig, ax = plt.subplots()
+    draw_axis(ax, "gx", r)
+    lines = [ln for ln in ax.get_lines() if ln.get_label().startswith("white noise not resolved: N <")]
+    assert len(lines) == 1
+    assert any(ln.get_label() == "sum of fitted terms (without N)" for ln in ax.get_lines())
+    tt, yy = lines[0].get_data()
+    tau, adev = np.asarray(r["tau"]), np.asarray(r["adev"]) * 180.0 / math.pi * 3600.0  # deg/h, as drawn
+    line = np.exp(np.interp(np.log(tau), np.log(tt), np.log(yy)))
+    hi = np.asarray(r["adev_hi"]) * 180.0 / math.pi * 3600.0
+    assert np.any(line >= adev) and np.all(line <= 1.01 * hi)
+    plt.close(fig)

@@ -68,7 +68,17 @@ def draw_axis(ax, axis: str, r: dict) -> None:
             total += av
             ax.loglog(tt, np.sqrt(av) * f, ":", lw=1.2, color=_COLORS.get(t["effect"]),
                       label=f"{_LABEL[t['effect']]}: not resolved by the record, kept in the model")
-        ax.loglog(tt, np.sqrt(total) * f, "-", lw=1.6, color="tab:cyan", label="sum of fitted terms")
+        nb = next((t for t in r.get("bounds") or [] if t["effect"] == "white_noise"), None)
+        if nb is not None:
+            # N not resolved: its bound is the least filter-corrected AVAR x tau, so the line touches the data
+            # there and lies above them elsewhere; without it the sum below would miss the short-tau points
+            # with nothing on the figure saying why
+            plain = {k: v for k, v in nb.items() if k not in ("ci95", "std", "bound")}
+            ax.loglog(tt, np.sqrt(avar_term(plain, tt)) * f, "-.", lw=1.2, color=_COLORS["white_noise"],
+                      label=f"white noise not resolved: N < {units.to_datasheet('N', nb['N'], axis):.3g} "
+                            f"{units.datasheet_unit('N', axis)} (a bound, not in the sum)")
+        ax.loglog(tt, np.sqrt(total) * f, "-", lw=1.6, color="tab:cyan",
+                  label="sum of fitted terms" + (" (without N)" if nb is not None else ""))
         lo_v, hi_v = np.asarray(r["adev_lo"]) * f, np.asarray(r["adev_hi"]) * f
         lo_v, hi_v = lo_v[np.isfinite(lo_v) & (lo_v > 0)], hi_v[np.isfinite(hi_v)]
         if lo_v.size and hi_v.size:
