@@ -102,8 +102,11 @@ CLEARED = re.compile(r"cleared|recovered|healthy again|back to|\bOK\b")
 
 
 def find_logs(dirs: list[Path]) -> list[Path]:
-    """The real logs under ``dirs``, each once (../shared/data is always searched, and a folder named again or
-    inside another would otherwise count its logs twice)."""
+    """The real logs under ``dirs``, each once: by content, not by path (../shared/data is always searched, a
+    folder named again or inside another would count its logs twice, and a public log fetched again under
+    another name -- ../shared/data's pyulog_sample.ulg is pyulog's test/sample.ulg -- is the same flight)."""
+    import hashlib
+
     out, seen = [], set()
     for d in dirs:
         if not d.exists():
@@ -112,9 +115,11 @@ def find_logs(dirs: list[Path]) -> list[Path]:
             name = p.name.lower()
             if "sim" in p.relative_to(d).parts[:-1]:
                 continue  # simulated logs kept beside the real ones are not real data
-            if p.is_file() and name.endswith(EXTS) and p.stat().st_size > 20_000 and p.resolve() not in seen:
-                seen.add(p.resolve())
-                out.append(p)
+            if p.is_file() and name.endswith(EXTS) and p.stat().st_size > 20_000:
+                digest = hashlib.sha1(p.read_bytes()).hexdigest()
+                if digest not in seen:
+                    seen.add(digest)
+                    out.append(p)
     return out
 
 
