@@ -222,3 +222,55 @@ def test_bias_instability_interval_allows_for_a_random_walk_left_out():
     lo, hi = b["ci95"]["B"]
     assert lo <= truth["B"] <= hi
     assert hi / lo < 1.3  # widened by the envelope, not made useless
+
+
+
+_SHORT_NBK = [{"effect": "white_noise", "N": 1.16e-4}, {"effect": "bias_instability", "B": 1.0e-4},
+              {"effect": "random_walk", "K": 6e-5}]
+
+
+def _short_nbk_fit(seed):
+    fs, n = 10.0, 600
+    m = cluster_sizes(n, "octave")
+    y = synthesize_axis(_SHORT_NBK, fs, n, np.random.default_rng(seed))
+    tau, av = oavar(y, fs, m=m)[:2]
+    return fit_avar(tau, av, edf_simple(n + 1, m, 0), n=n, rate_hz=fs, m=m)
+
+
+def test_n_interval_allows_for_a_flicker_the_selection_left_out():
+    """60 s at 10 Hz (a 10 Hz plane log's still) of white noise, flicker and a random walk that meet within the
+    record: the selection keeps N and K in about a third of the records and leaves B out; the flicker's share
+    at the short cluster times then goes into N (+3 % on average there). N's interval is the envelope over the
+    model with N, B and K forced in, whose covariance keeps B's column even where B comes out at zero there (it
+    still shares the points with N). Over 2000 records (seeds 5000-6999) those selections' intervals covered N
+    in 92.6 % without the column, 95.9 % with it (all records 94.9 -> 96.5 %). This record (seed 5130): N
+    1.064 x the truth, [1.005, 1.131] x without the column, [0.990, 1.150] x with it."""
+    fr = _short_nbk_fit(5130)
+    assert [t["effect"] for t in fr.terms] == ["white_noise", "random_walk"]
+    w = fr.term("white_noise")
+    lo, hi = (x / 1.16e-4 for x in w["ci95"]["N"])
+    assert w["N"] / 1.16e-4 > 1.05 and lo <= 1.0 <= hi and hi / lo < 1.25
+
+
+def test_n_interval_coverage_on_short_records_with_every_term():
+    """The same records, 300 of them (seeds 5000-5299): N's interval covers the truth in 93-99 % of all (at 95 %
+    the binomial sd of 300 records is 1.3 %; measured 97.0 %) and misses in at most 10 of the ~107 where the
+    selection left B out (the binomial 97.5 % quantile of 107 at 95 %; measured 4), at a median relative width
+    below 0.2 (measured 0.159: widened where needed, not made useless)."""
+    truth = 1.16e-4
+    nk = [0, 0]
+    allc, width = 0, []
+    for s in range(5000, 5300):
+        fr = _short_nbk_fit(s)
+        w = fr.term("white_noise")
+        lo, hi = w["ci95"]["N"]
+        ok = lo <= truth <= hi
+        allc += ok
+        width.append((hi - lo) / w["N"])
+        if [t["effect"] for t in fr.terms] == ["white_noise", "random_walk"]:
+            nk[0] += 1
+            nk[1] += ok
+    assert 80 <= nk[0] <= 140
+    assert nk[0] - nk[1] <= 10, f"N covered in {nk[1]} of {nk[0]} selections without B"
+    assert 0.93 <= allc / 300 <= 0.99
+    assert np.median(width) < 0.2
