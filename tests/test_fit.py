@@ -241,15 +241,16 @@ def test_n_interval_allows_for_a_flicker_the_selection_left_out():
     """60 s at 10 Hz (a 10 Hz plane log's still) of white noise, flicker and a random walk that meet within the
     record: the selection keeps N and K in about a third of the records and leaves B out; the flicker's share
     at the short cluster times then goes into N (+3 % on average there). N's interval is the envelope over the
-    model with N, B and K forced in, whose covariance keeps B's column even where B comes out at zero there (it
-    still shares the points with N). Over 2000 records (seeds 5000-6999) those selections' intervals covered N
-    in 92.6 % without the column, 95.9 % with it (all records 94.9 -> 96.5 %). This record (seed 5130): N
-    1.064 x the truth, [1.005, 1.131] x without the column, [0.990, 1.150] x with it."""
+    model with N, B and K forced in, where B comes out at zero in many of them; B still shares the points with
+    N, and could only pull it down, so N's lower end comes from the covariance with B's column in. Over 2000
+    records (seeds 5000-6999) those selections' intervals covered N in 92.6 % without it, 95.9 % with it (all
+    records 94.9 -> 96.4 %). This record (seed 5130): N 1.064 x the truth, [1.005, 1.131] x without,
+    [0.990, 1.131] x with it (the upper end as before)."""
     fr = _short_nbk_fit(5130)
     assert [t["effect"] for t in fr.terms] == ["white_noise", "random_walk"]
     w = fr.term("white_noise")
     lo, hi = (x / 1.16e-4 for x in w["ci95"]["N"])
-    assert w["N"] / 1.16e-4 > 1.05 and lo <= 1.0 <= hi and hi / lo < 1.25
+    assert w["N"] / 1.16e-4 > 1.05 and lo <= 1.0 <= hi and hi / lo < 1.2
 
 
 def test_n_interval_coverage_on_short_records_with_every_term():

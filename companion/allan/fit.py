@@ -867,20 +867,39 @@ def _profile_white_ci(ci, prob, prob_ci, linear, nonlin, tau, white, fc_ci, c2, 
 
 def forced_intervals(prob, sup, nonlin, tau, white, level) -> dict:
     """Intervals (scaled chi-square, in ``prob``'s theta units) of the linear terms in the model with the
-    effects ``sup`` forced in, for each term with a positive estimate there, from that model's whole covariance
-    (a term at zero included): the other half of the selection envelope (:func:`_selection_envelope` offline;
+    effects ``sup`` forced in, for each term with a positive estimate there, each end widened by the terms
+    estimated at zero that pull it that way: the other half of the selection envelope (:func:`_selection_envelope` offline;
     the online report uses it the same way)."""
     A_s = _columns(sup, nonlin, tau, white)
     th_s, _ = prob.solve(A_s)
-    if not np.any(th_s > 0):
+    act = th_s > 0
+    if not act.any():
         return {}
-    # the covariance of the whole forced model, its terms estimated at zero included: such a term still shares
-    # the points with the others. Leaving its column out gave the selected model's covariance back: on 60 s at
-    # 10 Hz of white noise + flicker + random walk, the selection kept N and K in 712 of 2000 records, B came
-    # out at zero in the forced model in many of them, and N (+3 % there, the flicker's share) was covered in
-    # 92.6 % of them; with the column in, 95.9 %
-    cov_s = prob.cov_theta(A_s)
-    return {e: _scaled_chi2_ci(th_s[k], cov_s[k, k], level) for k, e in enumerate(sup) if th_s[k] > 0}
+    cov_a = np.zeros((len(th_s), len(th_s)))
+    cov_a[np.ix_(act, act)] = prob.cov_theta(A_s[:, act])
+    out = {e: _scaled_chi2_ci(th_s[k], cov_a[k, k], level) for k, e in enumerate(sup) if act[k]}
+    if act.all():
+        return out
+    # a term estimated at zero here still shares the points with the others: were it above zero, another
+    # would move by cov[k, z] / cov[z, z] per unit of it (the whole model's covariance). It can only go up, so
+    # it widens one end: each end of an interval comes from the covariance of the active terms and the zero
+    # terms that pull the estimate that way. Without them the forced model gave the selected model's
+    # covariance back: on 60 s at 10 Hz of white noise + flicker + random walk, the selection kept N and K in
+    # 712 of 2000 records, B came out at zero in the forced model in many of them, and N (+3 % there, the
+    # flicker's share) was covered in 92.6 % of them
+    cov_f = prob.cov_theta(A_s)
+    for k, e in enumerate(sup):
+        if not act[k]:
+            continue
+        ends = list(out[e])
+        for side, sign in ((0, -1.0), (1, 1.0)):
+            cols = act | (~act & (sign * cov_f[k] > 0))
+            if np.array_equal(cols, act):
+                continue
+            kk = int(np.count_nonzero(cols[:k]))
+            ends[side] = _scaled_chi2_ci(th_s[k], prob.cov_theta(A_s[:, cols])[kk, kk], level)[side]
+        out[e] = tuple(ends)
+    return out
 
 
 def _selection_envelope(terms, prob, sup, nonlin, tau, white, scale, level):
