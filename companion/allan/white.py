@@ -191,7 +191,11 @@ def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: flo
         if note:
             notes.append(note)
     wn = next((t for t in terms if t["effect"] == "white_noise" and not t.get("bound")), None)
-    if wn is None or white_resolved(terms, tau):
+    # an interval that reaches zero does not resolve N either: the fit could trade all of it into the other
+    # terms (a 90-s public plane still at 10 Hz, where AVAR falls like 1 / tau^2 to 2 s: N 1.43 [0, 2.61]
+    # deg/sqrt(h) beside a quantization term)
+    lo_zero = wn is not None and not wn.get("ci95", {}).get("N", [1.0])[0] > 0
+    if wn is None or (white_resolved(terms, tau) and not lo_zero):
         return terms, notes
     filt = white_filter_of(wn) or dict(white_filter or {})
     ub, at = white_bound(tau, avar, edf, filt)
@@ -201,8 +205,10 @@ def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: flo
     b.update(filt)
     r = np.asarray(avar, dtype=float) * np.asarray(tau, dtype=float)
     rising = bool(np.all(np.diff(r[: max(3, r.shape[0] // 2)]) > 0))
-    why = ("ADEV sqrt(tau) rises from the first cluster time on (a heavy low-pass filter, then drift)" if rising
+    why = ("its 95 % interval reaches 0 (the fit does not separate it from the other terms)" if lo_zero
+           else "ADEV sqrt(tau) rises from the first cluster time on (a heavy low-pass filter, then drift)" if rising
            else "white noise dominates no octave point above the low-pass corner")
     notes.append(f"N not resolved: {why}; N < {ub:.3g} (SI), the least filter-corrected AVAR x tau, at {at:.3g} s "
-                 f"(a fitted N, {wn['N']:.3g}, would be a trade between the filter and the drift terms)")
+                 + (f"(the fitted N, {wn['N']:.3g}, had [0, {wn['ci95']['N'][1]:.3g}])" if lo_zero else
+                    f"(a fitted N, {wn['N']:.3g}, would be a trade between the filter and the drift terms)"))
     return [b if t is wn else t for t in terms if not (t["effect"] == "white_noise" and t is not wn)], notes
