@@ -70,9 +70,9 @@ def draw_axis(ax, axis: str, r: dict) -> None:
                       label=f"{_LABEL[t['effect']]}: not resolved by the record, kept in the model")
         nb = next((t for t in r.get("bounds") or [] if t["effect"] == "white_noise"), None)
         if nb is not None:
-            # N not resolved: its bound is the least filter-corrected AVAR x tau, so the line touches the data
-            # there and lies above them elsewhere; without it the sum below would miss the short-tau points
-            # with nothing on the figure saying why
+            # N not resolved: its bound is the least filter-corrected AVAR x tau (with its one-sided margin), so
+            # the line reaches the data there and lies below them elsewhere; without it the sum below would miss
+            # the short-tau points with nothing on the figure saying why
             plain = {k: v for k, v in nb.items() if k not in ("ci95", "std", "bound")}
             ax.loglog(tt, np.sqrt(avar_term(plain, tt)) * f, "-.", lw=1.2, color=_COLORS["white_noise"],
                       label=f"white noise not resolved: N < {units.to_datasheet('N', nb['N'], axis):.3g} "
