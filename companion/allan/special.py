@@ -18,11 +18,13 @@ from statistics import NormalDist
 
 import numpy as np
 
-__all__ = ["brentq", "minimize_scalar_bounded", "gammainc_p", "gammainc_q", "chi2_cdf", "chi2_sf", "chi2_ppf"]
+__all__ = ["brentq", "minimize_scalar_bounded", "gammainc_p", "gammainc_q", "chi2_cdf", "chi2_sf", "chi2_ppf", "Z95"]
 
 _EPS = 2.220446049250313e-16
 _FPMIN = 1e-300
 _STD_NORMAL = NormalDist()
+#: two-sided 95 % standard normal quantile
+Z95 = 1.959963984540054
 
 
 def brentq(f, a: float, b: float, xtol: float = 2e-12, rtol: float = 4 * _EPS, maxiter: int = 100) -> float:

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from companion.allan.special import chi2_ppf
+from companion.allan.special import Z95, chi2_ppf
 from companion.allan.terms import avar_term, avar_white_noise, white_filter_of
 
 #: white noise must make at least this share of the fitted AVAR ...
@@ -29,8 +29,6 @@ MIN_POINTS = 2
 #: correlation of overlapping Allan variance estimates of white noise 0, 1, 2, 3, 4 octaves apart
 #: (companion.allan.confidence.oavar_covariance; the same to 0.01 for 600 samples at 10 Hz and 1e5 at 100 Hz)
 OCTAVE_CORRELATION = (1.0, 0.53, 0.19, 0.07, 0.02)
-#: two-sided 95 % normal quantile
-Z95 = 1.959963984540054
 
 
 def _shape(white_term, tau):

@@ -39,6 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from companion.allan.special import Z95
+
 #: flag when evidence = -log10(Bonferroni p) reaches this (per-IMU false-alarm probability 1e-4)
 EVIDENCE_THRESHOLD = 4.0
 #: ... and the fitted last/first ratio of the worst test reaches this
@@ -49,7 +51,6 @@ MIN_FLIGHTS = 5
 TREND_PARAMS = ("N", "B", "K")
 #: smallest relative standard error of one flight's ln p (an interval reported as a point)
 MIN_REL_SD = 1e-3
-Z95 = 1.959963984540054
 
 
 @dataclass

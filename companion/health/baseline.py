@@ -16,12 +16,12 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from companion.allan.special import Z95
 from companion.allan.terms import LINEAR_PARAM, avar_term
 from companion.health.noise import quantized_ceiling
 
 #: parameter -> effect, for the linear terms (Miao 2014 eq. (3.5): x = [Q N B K R]).
 PARAM_EFFECT = {p: e for e, p in LINEAR_PARAM.items()}
-Z95 = 1.959963984540054
 
 
 def params_from_terms(terms: Iterable[Mapping]) -> dict[str, tuple[float, float]]:

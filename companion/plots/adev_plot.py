@@ -73,8 +73,7 @@ def draw_axis(ax, axis: str, r: dict) -> None:
             # N not resolved: its bound is the least filter-corrected AVAR x tau (with its one-sided margin), so
             # the line reaches the data there and lies below them elsewhere; without it the sum below would miss
             # the short-tau points with nothing on the figure saying why
-            plain = {k: v for k, v in nb.items() if k not in ("ci95", "std", "bound")}
-            ax.loglog(tt, np.sqrt(avar_term(plain, tt)) * f, "-.", lw=1.2, color=_COLORS["white_noise"],
+            ax.loglog(tt, np.sqrt(avar_term(nb, tt)) * f, "-.", lw=1.2, color=_COLORS["white_noise"],
                       label=f"white noise not resolved: N < {units.to_datasheet('N', nb['N'], axis):.3g} "
                             f"{units.datasheet_unit('N', axis)} (a bound, not in the sum)")
         ax.loglog(tt, np.sqrt(total) * f, "-", lw=1.6, color="tab:cyan",
