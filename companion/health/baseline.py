@@ -239,6 +239,12 @@ class Baseline:
     def get_levels(self, imu: int, axis: str):
         return self.levels.get((int(imu), str(axis)))
 
+    def drop_imu(self, imu: int) -> None:
+        """Forget one IMU's terms, levels and stream (its baseline is learned again)."""
+        self.axes = {k: v for k, v in self.axes.items() if k[0] != int(imu)}
+        self.levels = {k: v for k, v in self.levels.items() if k[0] != int(imu)}
+        self.meta.pop(int(imu), None)
+
     def has_imu(self, imu: int) -> bool:
         return any(k[0] == int(imu) for k in self.axes)
 

@@ -191,6 +191,20 @@ class Channel:
     def stop_learning(self) -> None:
         self.learn = {}
 
+    def forget_rest(self, learning: bool) -> bool:
+        """The motion gate found that what it took for rest was vibration (MotionGate.mislearned): the still
+        data queued and fed so far are dropped (fresh estimators, the baseline learned afresh when
+        ``learning``) and so are the fault detectors' still references (learned from the same blocks), unless
+        a fault is active (its alarm stays). True when the fault references were learned afresh."""
+        self.make_estimators(learning=learning)
+        self._fed_end_t, self._junction, self.next_check_t = None, True, None
+        self.current = {}
+        self.restart_settling()
+        if self.faults.active():
+            return False
+        self.faults = self._new_faults()
+        return True
+
     def restart_settling(self) -> None:
         """Motion or a time discontinuity: drop the look-ahead and settle again."""
         self.pending, self.pending_stats, self.still_run_s = None, None, 0.0

@@ -14,6 +14,15 @@ stay quiet is faulty, not moving).
   noise on this and on another IMU); alone, two axes of this gyro above it and the accel axis std above
   1.5x its reference.
 
+The references are learned from the blocks the gate calls still, so a vehicle vibrating from its first block
+on (an engine running on the ground with no armed state to tell) teaches the gate that vibration is rest.
+Vibration cannot make the accelerometer quieter than the sensor's own noise, so ``QUIET_BLOCKS`` blocks in a
+row with every accel axis ``QUIETER`` x below the reference show that what was learned as rest was not:
+the reference becomes their level and :attr:`MotionGate.mislearned` tells the caller to drop what it
+learned and fed under the old one. Sampling alone cannot do it (the std of a 10-sample block is 4x below
+its truth with probability about 5e-5 per axis, three axes and three blocks in a row about 1e-39; blocks of
+fewer than ``QUIET_MIN_SAMPLES`` samples do not count, nor does an accel that stops (std exactly 0).
+
 Inputs: the block (rows ``t, gyro, accel``), its BlockStats, this IMU's noise ratios and the other IMUs'
 (:class:`Peer`); output: still or not. State: the still accel reference (mean and per-axis std).
 """
@@ -28,6 +37,9 @@ import numpy as np
 from companion.health.faults import BlockStats
 
 REF_WEIGHT = 0.05  # EWMA weight of a still block in the accel reference
+QUIETER = 4.0  # every accel axis this many times quieter than the reference ...
+QUIET_BLOCKS = 3  # ... in this many blocks in a row: the reference was learned under vibration
+QUIET_MIN_SAMPLES = 8  # a block's std from fewer samples is too loose for that test
 
 
 @dataclass
@@ -56,6 +68,9 @@ class MotionGate:
         self.cfg = cfg
         self.ref_accel: np.ndarray | None = None
         self.ref_accel_std: np.ndarray | None = None
+        self._quiet: list[np.ndarray] = []  # accel stds of the blocks in a row far quieter than the reference
+        self.mislearned = False  # set when the reference was found learned under vibration (the caller resets it)
+        self.ratio = 1.0  # by how much the reference was too high, when it was
 
     def still(self, data: np.ndarray, st: BlockStats, mine: np.ndarray | None, peers: Sequence[Peer],
               settling: bool) -> bool:
@@ -77,6 +92,15 @@ class MotionGate:
             if np.any((ratio > cfg.accel_std_factor) & (a_std > cfg.accel_std_min)):
                 return False
             accel_up = float(ratio.max())
+            if a.shape[0] >= QUIET_MIN_SAMPLES and np.all(a_std > 0) and np.all(a_std * QUIETER < self.ref_accel_std):
+                self._quiet.append(a_std)
+                if len(self._quiet) >= QUIET_BLOCKS:
+                    quiet = np.mean(self._quiet, axis=0)
+                    self.ratio = float(np.min(self.ref_accel_std / quiet))
+                    self.ref_accel_std, self._quiet, self.mislearned = quiet, [], True
+                    return False  # the break: what follows settles and is fed under the new reference
+            else:
+                self._quiet = []
         # rotation, by consensus of the IMUs
         means = [rotation(st)] + [rotation(p.stats) for p in peers]
         rot = np.array(means)

@@ -79,6 +79,7 @@ class Pipeline:
         self._final: dict = {}  # (imu, axis) -> ((estimator id, fed_s), summary terms)
         self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
         self.failed: str | None = None  # a user-facing error found in the data (the caller reports it)
+        self._learned_here: set[int] = set()  # IMUs whose baseline was learned in this run
         self._tick = True
         self._decode = None
         # the autopilot's filter parameters (INS_GYRO_FILTER, IMU_GYRO_CUTOFF, ...) and the log format they
@@ -312,6 +313,8 @@ class Pipeline:
         st = ch.stats(data)
         still = (not self.armed) and ch.is_still(data, st, self._peers(ch))
         t_end = float(data[-1, 0])
+        if ch.gate.mislearned:
+            self._forget_rest(ch, t_end)
         self._report(ch.on_block(data, st, still), t_end)
         self._report(self.group.compare(ch.imu, self.channels, self.armed), t_end)
         if rate_event == "first":
@@ -329,6 +332,22 @@ class Pipeline:
             self._confirm_bias(ch, float(pending[-1, 0]))
             if ch.feed(pending):
                 self._learn_done(ch)
+
+    def _forget_rest(self, ch: Channel, t: float) -> None:
+        """The gate's rest reference was learned under vibration: what was fed under it goes, and a baseline
+        learned from it in this run is learned again (a loaded or restored one stays)."""
+        ch.gate.mislearned = False
+        if ch.rate_hz is None:  # nothing learned or fed yet
+            return
+        relearn = ch.imu in self._learned_here
+        if relearn:
+            self.baseline.drop_imu(ch.imu)
+            self._learned_here.discard(ch.imu)
+        refs = ch.forget_rest(learning=not self._has_baseline(ch))
+        self.log(f"IMU{ch.imu}: at {t:.1f} s the accelerometer is {ch.gate.ratio:.0f}x quieter than what was taken "
+                 f"for rest: the still data so far were vibration; estimators"
+                 + (", baseline" if relearn else "") + (" and fault references" if refs else "") + " learned afresh")
+        self._set_state(ch)
 
     def _peers(self, ch: Channel) -> list:
         """The other IMUs' latest blocks, when close in time (the motion consensus)."""
@@ -368,6 +387,7 @@ class Pipeline:
             if ax in ch.learned_levels:
                 self.baseline.set_levels(ch.imu, ax, *ch.learned_levels[ax])
         self.baseline.meta[ch.imu] = stream_meta(ch)
+        self._learned_here.add(ch.imu)
         b = self.baseline.get(ch.imu, "gx") or {}
         n = b.get("N", (math.nan, math.nan))[0]
         self.log(f"IMU{ch.imu}: baseline learned from {ch.learned_s:.0f} s of still data (gx N {n:.3g} rad/s/sqrt(Hz))")

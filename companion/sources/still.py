@@ -9,8 +9,8 @@ is slower than 16 Hz, so that a window holds 16 of its samples):
    widened by ``guard_s`` on each side (motors spin up before take-off and down after landing), is out;
 2. **motion** from *every* IMU stream of the log, accelerometer and gyro: per window and axis the standard
    deviation and the mean. The noise floor of each stream is the 10th percentile of its window standard
-   deviations (the quietest tenth of the log; at least half an LSB for quantised formats and a tenth of the
-   median spread); a window moves when, in any IMU,
+   deviations (the quietest tenth of the log; of the windows whose values vary at all, and at least half an
+   LSB for quantised formats); a window moves when, in any IMU,
 
    - an axis' standard deviation exceeds ``threshold`` x its floor (3x: the spread of a 50-sample
      standard deviation is about 10 %), or exceeds an absolute limit (gyro 0.05 rad/s, accel 0.5 m/s^2:
@@ -129,6 +129,24 @@ def _bin_stats(b: np.ndarray, v: np.ndarray, nb: int):
     return cnt, mean, std
 
 
+FLOOR_QUIETEST = 5  # the floor is at most twice the 5th quietest window's spread
+
+
+def _floor(std: np.ndarray) -> float:
+    """The noise floor of one axis from its window standard deviations: the 10th percentile of the windows
+    whose values vary at all (a quantised sensor at rest can show windows of identical values, std 0), or
+    twice the ``FLOOR_QUIETEST``-th quietest where that is lower: a log that is mostly flight holds its rest
+    in fewer than a tenth of its windows, and its 10th percentile is then the flight's (or the engine's on the
+    ground) level. Twice the 5th quietest of 16-sample windows at rest is their level or more (the 5th of
+    thousands is about 0.5x it), so a long rest log keeps its 10th percentile. (A tenth of the median spread,
+    an earlier guard, made it worse: on a public plane log, 12-25x the gyro's rest level, which let engine
+    vibration on the ground in as still.)"""
+    c = np.sort(std[std > 0])
+    if c.size == 0:
+        return 0.0
+    return float(min(np.percentile(c, 10), 2.0 * c[min(FLOOR_QUIETEST, c.size) - 1]))
+
+
 def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: float,
                     use_gyro: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(moving, has_data) per window for one IMU stream."""
@@ -145,11 +163,8 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
         good = has & np.all(np.isfinite(std), axis=1)
         if good.sum() < 3:
             continue
-        floor = np.nanpercentile(std[good], 10, axis=0)
-        # a quantised sensor at rest can show windows of identical values (std 0): the floor is at least
-        # half an LSB, and never below a tenth of the median window spread
+        floor = np.array([_floor(c) for c in std[good].T])
         floor = np.maximum(floor, 0.5 * (lsb or 0.0))
-        floor = np.maximum(floor, 0.1 * np.nanmedian(std[good], axis=0))
         floor = np.maximum(floor, 1e-12)
         with np.errstate(invalid="ignore"):
             mv = np.any((std > threshold * floor) | (std > abs_std), axis=1)
