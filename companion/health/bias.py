@@ -16,9 +16,15 @@ per second: the reference lags it by <= 0.03 deg/s, far inside the allowance (be
 0 false alarms in 100 h with warm-ups).
 
 Drift. e, an EWMA of x over ``DRIFT_TAU_BLOCKS``, against the bias mu0 of the reference period:
-|e - mu0| - 4 sigma_e > ``DRIFT_TOL`` (0.3 deg/s: 3x the warm-up, far above the bias wander of a
-MEMS gyro between restarts of a few hours) for ``DRIFT_HOLD`` blocks flags a drift; it clears below
-0.7 x the tolerance. A drift of D deg/s per s is flagged about 0.3 / D s after it starts.
+|e - mu0| - 4 sigma_e > ``DRIFT_TOL`` (0.3 deg/s: 3x the warm-up) for ``DRIFT_HOLD`` blocks flags a drift;
+it clears below 0.7 x the tolerance. A drift of D deg/s per s is flagged about 0.3 / D s after it starts.
+
+Restarts. A run restored from the state file compares the bias within the run only: the autopilot calibrates
+the gyro offsets at boot (ArduPilot's INS_GYR_CAL) and the temperature at the next boot is not the last one's,
+so the bias the last run ended on is no reference for the next (a public rover log's bias wandered 1.2 deg/s
+in one run: its state, replayed on the same log, read as a 1.2 deg/s jump at the start). :meth:`BiasDetector.restart`
+takes the mean of the first ``RESTART_BLOCKS`` still blocks of the new run as the jump's and the drift's
+reference; an active bias fault stays as it was.
 
 Temperature. Where the block carries the IMU temperature (``BlockStats.temperature``), every still-block
 mean is first corrected by the bias the temperature explains (companion.health.thermal: a slope learned
@@ -47,6 +53,7 @@ DRIFT_TAU_BLOCKS = 20.0
 DRIFT_TOL = 0.3 * DEG
 DRIFT_HOLD = 5
 HIST_BLOCKS = 90
+RESTART_BLOCKS = 10  # still blocks whose mean is the bias reference after a restart
 RAMP_NATS = 4.0  # log-likelihood margin for naming a ramp (drift) rather than a step (jump)
 
 
@@ -72,6 +79,24 @@ class BiasDetector:
         self.drift_count = 0
         self.drift_value = math.nan
         self.drift_r = math.nan  # the reference when the drift was flagged
+        self.mu0 = math.nan  # the drift's reference bias of this run after a restart (else the AxisRef's mu)
+        self._restart: list | None = None  # means of the still blocks after a restart, until RESTART_BLOCKS
+
+    def restart(self) -> None:
+        """A new run restored from the state: the references are taken afresh from the next
+        ``RESTART_BLOCKS`` still blocks (the module docstring, Restarts), unless a bias fault is active."""
+        if self.state == FAULT or self.drift_state == FAULT:
+            return
+        self.r = self.e = self.mu0 = math.nan
+        self.up.s = self.down.s = 0.0
+        self.run, self.post = [], []
+        self.drift_count = 0
+        self.hist.clear()
+        self.hist_t.clear()
+        self._restart = []
+
+    def _mu(self, ref: AxisRef) -> float:
+        return self.mu0 if math.isfinite(self.mu0) else ref.mu
 
     @property
     def state(self) -> int:
@@ -112,10 +137,21 @@ class BiasDetector:
             return []
         out = []
         x = x_raw - self.thermal.correction(temp)  # the residual the temperature does not explain
+        if self._restart is not None:
+            self._restart.append(x)
+            self.hist.append(x_raw)
+            self.hist_t.append(temp)
+            if len(self._restart) < RESTART_BLOCKS:
+                return []
+            self.mu0 = float(np.mean(self._restart))
+            self.r = self.e = self.mu0
+            self._restart = None
+            return []
+        mu = self._mu(ref)
         if math.isnan(self.r):
-            self.r = ref.mu
+            self.r = mu
         if math.isnan(self.e):
-            self.e = ref.mu  # the reference period's mean (30 blocks), not one noisy block
+            self.e = mu  # the reference period's mean (30 blocks), not one noisy block
         lim = self.limits
         # the block mean's spread around the reference: white noise, the Allan-predicted wander, and the
         # wander measured on the vehicle (vibration, small real motion, temperature) while nothing was flagged
@@ -140,7 +176,7 @@ class BiasDetector:
                     self.up.s = self.down.s = 0.0
                     if self.drift_state == OK:
                         self.drift_state, self.drift_count, self.drift_r = FAULT, 0, self.r
-                        self.drift_value = (x - ref.mu) / DEG
+                        self.drift_value = (x - mu) / DEG
                         out.append("bias_drift")
                 else:
                     out.append("bias_jump")
@@ -165,13 +201,13 @@ class BiasDetector:
         # the EWMA averages the white part down, not a slow wander (correlated over tens of blocks)
         white = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + extra_var
         sig_e = math.sqrt(white / (2.0 * DRIFT_TAU_BLOCKS) + self.wander)
-        off = self.e - ref.mu
+        off = self.e - mu
         tol = max(DRIFT_TOL, lim.bias_drift)
         if self.drift_state == OK:
             self.drift_count = self.drift_count + 1 if abs(off) - 4.0 * sig_e > tol else 0
             if self.drift_count >= DRIFT_HOLD and self.state == OK:  # not while a jump is flagged
                 self.drift_state, self.drift_count, self.drift_value = FAULT, 0, off / DEG
-                self.drift_r = ref.mu
+                self.drift_r = mu
                 out.append("bias_drift")
         else:
             last = list(self._hist_c())[-DRIFT_HOLD:]
@@ -210,7 +246,8 @@ class BiasDetector:
         return {"up": self.up.state_dict(), "down": self.down.state_dict(), "r": f(self.r), "e": f(self.e),
                 "value": f(self.value), "drift_state": self.drift_state, "drift_count": self.drift_count,
                 "drift_value": f(self.drift_value), "drift_r": f(self.drift_r), "hist": list(self.hist),
-                "hist_t": [f(v) for v in self.hist_t], "thermal": self.thermal.state_dict(), "wander": self.wander}
+                "hist_t": [f(v) for v in self.hist_t], "thermal": self.thermal.state_dict(), "wander": self.wander,
+                "mu0": f(self.mu0), "restart": self._restart}
 
     def load_state_dict(self, d: Mapping) -> None:
         g = lambda k: math.nan if d.get(k) is None else float(d[k])  # noqa: E731
@@ -226,3 +263,5 @@ class BiasDetector:
             temps = [math.nan] * len(self.hist)
         self.hist_t = deque(temps, maxlen=HIST_BLOCKS)
         self.thermal.load_state_dict(d.get("thermal") or {})
+        self.mu0 = g("mu0")
+        self._restart = [float(v) for v in d["restart"]] if d.get("restart") is not None else None
