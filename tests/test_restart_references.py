@@ -74,3 +74,33 @@ def test_an_active_bias_fault_is_kept_across_a_restart():
     assert any("gyro Y bias jump" in x for x in _alarms(p1))
     p2 = _restored(p1)
     assert p2.channels[0].faults.axes["gy"].bias.state != 0  # still FAULT, not silently cleared
+
+
+def test_a_gyro_dead_in_the_last_run_is_said_again_at_the_next_start_and_a_saturation_is_not():
+    p1 = _fresh()
+    rng = np.random.default_rng(4)
+    t = 1.0 + np.arange(int(60 * RATE)) / RATE
+    g = np.zeros((t.size, 3))  # a float message reading exactly 0 on every axis: dead
+    a = G + rng.normal(0.0, 0.01, (t.size, 3))
+    p1.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t, g, a)
+    dead = [x for x in _alarms(p1) if "dead" in x]
+    assert len(dead) == 3, p1.transitions
+    p2 = _restored(p1)
+    sink = p2.reporter.sink
+    p2.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t[:int(3 * RATE)], g[:int(3 * RATE)], a[:int(3 * RATE)])
+    again = [x for _, x in p2.transitions if "dead" in x]
+    assert sorted(again) == sorted(dead), p2.transitions
+    assert all(any(x in s for _, s in sink.texts) for x in dead)  # sent as STATUSTEXT
+    assert p2.transitions[0][0] < 3.0  # at the first block
+
+    # a saturation of the last run's motion is not said again (nor is a bias fault: judged within a run)
+    p3 = _fresh()
+    _rest(p3, 8, 1.0, 60.0, [0.0, 0.0, 0.0])
+    t2 = 61.0 + np.arange(int(5 * RATE)) / RATE
+    g2 = np.zeros((t2.size, 3))
+    g2[:, 0] = 40.0  # rad/s, beyond the limit
+    p3.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t2, g2, G + np.zeros((t2.size, 3)))
+    assert any("saturated" in x for _, x in p3.transitions), p3.transitions
+    p4 = _restored(p3)
+    _rest(p4, 9, 1.0, 3.0, [0.0, 0.0, 0.0])
+    assert not [x for _, x in p4.transitions if "saturated at" in x], p4.transitions

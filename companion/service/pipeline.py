@@ -40,6 +40,9 @@ import numpy as np
 from companion.health.baseline import Baseline
 from companion.health.detector import DEGRADING, LEARNING, STATE_NAMES
 from companion.health.faults import FAULT, FaultEvent
+
+# the per-axis faults that describe the sensor itself, said again after a restart while they last
+SENSOR_FAULTS = ("dead", "stuck", "noise", "spikes", "resolution")
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
 from companion.service.baseline_match import check_baseline, stream_meta
@@ -80,6 +83,7 @@ class Pipeline:
         self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
         self.failed: str | None = None  # a user-facing error found in the data (the caller reports it)
         self._learned_here: set[int] = set()  # IMUs whose baseline was learned in this run
+        self._restored: dict[int, list] = {}  # IMU -> the per-axis faults active when its state was saved
         self._tick = True
         self._decode = None
         # the autopilot's filter parameters (INS_GYRO_FILTER, IMU_GYRO_CUTOFF, ...) and the log format they
@@ -316,6 +320,8 @@ class Pipeline:
         if ch.gate.mislearned:
             self._forget_rest(ch, t_end)
         self._report(ch.on_block(data, st, still), t_end)
+        if ch.imu in self._restored:
+            self._announce_restored(ch, t_end)
         self._report(self.group.compare(ch.imu, self.channels, self.armed), t_end)
         if rate_event == "first":
             if self.baseline_fixed and self._has_baseline(ch):
@@ -412,6 +418,21 @@ class Pipeline:
             if ev.kind != "disagree" and len(self.channels) == 2 and self.group.active():
                 # another fault may tell which of the two disagrees
                 self._report(self.group.name(self.channels, self.armed), t)
+
+    def _announce_restored(self, ch: Channel, t: float) -> None:
+        """The faults a restored state holds as active were said in the run that saved it, not in this one:
+        those its detectors still hold after this run's first block are said again (STATUSTEXT and log, as
+        when found), so that the next flight's ground station hears of a gyro that died in the last one. Only
+        what describes the sensor (SENSOR_FAULTS): a saturation was the last run's motion, a bias fault is
+        judged within a run."""
+        for kind, ax in self._restored.pop(ch.imu):
+            af = ch.faults.axes.get(ax)
+            if kind not in SENSOR_FAULTS or af is None or af.states().get(kind) != FAULT:
+                continue
+            crit = kind == "stuck" or (kind == "dead" and ch.faults.detail_of(kind, ax) != "")
+            ev = FaultEvent(ch.imu, ax, kind, FAULT, ch.faults.value_of(kind, ax), ch.faults.detail_of(kind, ax), crit)
+            self.log(f"IMU{ch.imu}: {ev.text()} (active when the state was saved)")
+            self._report([ev], t)
 
     def _confirm_bias(self, ch: Channel, t: float) -> None:
         """A bias jump is flagged on the block that holds the step, often part-way (a 1 deg/s step half a
@@ -557,5 +578,8 @@ class Pipeline:
             elif not ch.learn:  # no baseline for this IMU and nothing being learned: learn afresh
                 ch.relearn()
         self.channels = channels
+        self._restored = {imu: [ka for ka in ch.faults.active() if ka[1] in ch.faults.axes]
+                          for imu, ch in channels.items()}
+        self._restored = {imu: v for imu, v in self._restored.items() if v}
         if d.get("sysid") is not None and self.sysid is None:
             self.sysid = int(d["sysid"])
