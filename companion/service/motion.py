@@ -92,7 +92,8 @@ class MotionGate:
             if np.any((ratio > cfg.accel_std_factor) & (a_std > cfg.accel_std_min)):
                 return False
             accel_up = float(ratio.max())
-            if a.shape[0] >= QUIET_MIN_SAMPLES and np.all(a_std > 0) and np.all(a_std * QUIETER < self.ref_accel_std):
+            quieter = np.all(a_std > 0) and np.all(a_std * QUIETER < self.ref_accel_std)
+            if a.shape[0] >= QUIET_MIN_SAMPLES and quieter:
                 self._quiet.append(a_std)
                 if len(self._quiet) >= QUIET_BLOCKS:
                     quiet = np.mean(self._quiet, axis=0)

@@ -40,9 +40,6 @@ import numpy as np
 from companion.health.baseline import Baseline
 from companion.health.detector import DEGRADING, LEARNING, STATE_NAMES
 from companion.health.faults import FAULT, FaultEvent
-
-# the per-axis faults that describe the sensor itself, said again after a restart while they last
-SENSOR_FAULTS = ("dead", "stuck", "noise", "spikes", "resolution")
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
 from companion.service.baseline_match import check_baseline, stream_meta
@@ -51,6 +48,9 @@ from companion.service.config import PipelineConfig  # noqa: F401  (re-exported:
 from companion.service.blocks import RATE_CHANGE
 from companion.service.imu_group import ImuGroup
 from companion.timebase import period_of
+
+# the per-axis faults that describe the sensor itself, said again after a restart while they last
+SENSOR_FAULTS = ("dead", "stuck", "noise", "spikes", "resolution")
 
 FAST_PARAMS = ("Q", "N")
 SLOW_PARAMS = ("B", "K", "R")

@@ -9,8 +9,9 @@ is slower than 16 Hz, so that a window holds 16 of its samples):
    widened by ``guard_s`` on each side (motors spin up before take-off and down after landing), is out;
 2. **motion** from *every* IMU stream of the log, accelerometer and gyro: per window and axis the standard
    deviation and the mean. The noise floor of each stream is the 10th percentile of its window standard
-   deviations (the quietest tenth of the log; of the windows whose values vary at all, and at least half an
-   LSB for quantised formats); a window moves when, in any IMU,
+   deviations (the quietest tenth of the log; of the windows whose values vary at all, at most twice the 5th
+   quietest window's for a log that is mostly flight, and at least half an LSB for quantised formats); a
+   window moves when, in any IMU,
 
    - an axis' standard deviation exceeds ``threshold`` x its floor (3x: the spread of a 50-sample
      standard deviation is about 10 %), or exceeds an absolute limit (gyro 0.05 rad/s, accel 0.5 m/s^2:
