@@ -275,3 +275,27 @@ def test_n_interval_coverage_on_short_records_with_every_term():
     assert nk[0] - nk[1] <= 10, f"N covered in {nk[1]} of {nk[0]} selections without B"
     assert 0.93 <= allc / 300 <= 0.99
     assert np.median(width) < 0.2
+
+
+def test_a_ramp_does_not_displace_white_noise_from_the_selection():
+    """White noise and a warm-up ramp (a public 10 Hz plane log's gyro: N 1.05e-4 rad/s/sqrt(Hz), R 1.9e-5
+    rad/s^2 over 103 s). The ramp, tried after the base terms, took the place of the random walk that had stood
+    in for it and of white noise with it: the model was the ramp alone (chi^2 526 for 9 dof on the log), and the
+    model error added for that misfit (70-75 % on all 20 seeds here) stayed when white noise came back. A base
+    term now comes back where it lowers the BIC: no model error, N and R resolved, N's interval covering. (R's
+    own interval covers in only 11 of these 20, its estimate within 10 %: not what this test is about.)"""
+    from companion.allan.adev import oavar
+
+    fs, n, N, R = 10.0, 1033, 1.05e-4, 1.9e-5
+    cover = 0
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        y = rng.normal(0.0, N * np.sqrt(fs), n) + R * np.arange(n) / fs
+        tau, av, edf, _ = oavar(y, fs)
+        fr = fit_avar(tau, av, edf, None, n=n, rate_hz=fs)
+        assert fr.model_error == 0.0, (seed, fr.notes)
+        w, r = fr.term("white_noise"), fr.term("ramp")
+        assert w is not None and r is not None, (seed, [t["effect"] for t in fr.terms])
+        assert abs(w["N"] / N - 1.0) < 0.15 and abs(r["R"] / R - 1.0) < 0.1
+        cover += w["ci95"]["N"][0] <= N <= w["ci95"]["N"][1]
+    assert cover >= 17, cover  # a 95 % interval: 17 of 20 at the binomial 2 % (measured 19)

@@ -26,7 +26,8 @@ slope region stands in for an output line or a filter's bump and moves N), ramp 
 tau_c pinned to the edge of the range is not identified) are tried in turn (a sinusoid, same way, only
 when ``effects`` names it) and kept only if they lower the BIC by more than EXTRA_BIC_MARGIN = 10
 ("very strong" evidence, Kass & Raftery 1995): with ~18 strongly correlated points, plain BIC lets a ramp
-stand in for a random walk in about one seed out of five. A backward pass then drops any term whose
+stand in for a random walk in about one seed out of five. A forward pass then brings back any base term
+whose return lowers the BIC (an extra term may have displaced it), and a backward pass drops any term whose
 removal costs less than its penalty (a term picked early may have stood in for one picked later).
 A slope region absent from the data simply leaves its coefficient at 0: never NaN.
 
@@ -269,6 +270,26 @@ def _select(prob, tau, effects, n_pts, auto):
             linear = [x for x, kp in zip(cand_lin, keep) if kp]
             nonlin = cand_nl
             bic, c2 = bic_n, c2n
+    # forward pass over the base effects: an extra term may have taken the place of a base one that the data
+    # still need beside it (a public plane log's warm-up ramp displaced the random walk that had stood in for
+    # it, white noise with it: the model was the ramp alone, chi^2 526 for 9 dof where white noise + ramp
+    # gives 12, and the misfit inflation that followed hid the ramp from the selection); a base effect comes
+    # back when it lowers the BIC
+    while True:
+        best_add = None
+        for e in base:
+            if e in linear:
+                continue
+            lin2 = [x for x in LINEAR_EFFECTS if x in linear or x == e]
+            th2, c2a = prob.solve(_columns(lin2, nonlin, tau, prob.white))
+            if th2[lin2.index(e)] <= 0:
+                continue
+            gain = (c2 - c2a) - math.log(n_pts)  # > 0: better with it
+            if gain > 0 and (best_add is None or gain > best_add[0]):
+                best_add = (gain, [x for x, t in zip(lin2, th2[:len(lin2)]) if t > 0], c2a)
+        if best_add is None:
+            break
+        _, linear, c2 = best_add
     # backward pass: a term added early may have stood in for one added later (e.g. a quantization or a
     # bias-instability term for a Gauss-Markov bump); drop any term whose removal does not cost its
     # penalty (ln n for a base term, ln n + EXTRA_BIC_MARGIN for an extra one)
