@@ -99,8 +99,7 @@ def fit_magnitudes(meas: Measured, A: np.ndarray, s_fixed: np.ndarray, iters: in
         c, _ = nnls(M / norms, w * rhs, maxiter=50 * k)
         c = c / norms
         s_new = np.maximum(s_fixed + A @ c, floor)
-        r = a / np.maximum(s_new, 1e-300)
-        d = float(np.add.reduce(nu * (r - 1.0 - np.log(r))))  # likelihood.deviance, inline (hot loop)
+        d = deviance(meas, s_new)
         if d < best[0] * (1.0 - 1e-12):
             best, since = (d, c, s_new), 0
         else:

@@ -198,6 +198,11 @@ class ImuFaults:
                 "bias_drift": af.bias.drift_value, "spikes": af.spikes.value,
                 "saturation": af.saturation.value, "resolution": af.resolution.value}[kind]
 
+    def event_of(self, kind: str, axis: str) -> FaultEvent:
+        """The FAULT event of an active per-axis fault as its detector said it: value, words, severity."""
+        crit = kind in ("stuck", "dead") and self.axes[axis].stuck.critical
+        return FaultEvent(self.imu, axis, kind, FAULT, self.value_of(kind, axis), self.detail_of(kind, axis), crit)
+
     def detail_of(self, kind: str, axis: str) -> str:
         """The words that go with an active fault beside its value ("float"/"moving" of a zero reading)."""
         return self.axes[axis].stuck.detail if kind == "dead" and axis in self.axes else ""

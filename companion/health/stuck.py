@@ -248,6 +248,11 @@ class StuckDetector:
     def state(self) -> int:
         return FAULT if FAULT in (self.cusum.state, self.two.state, self.vib.state) else OK
 
+    @property
+    def critical(self) -> bool:
+        """The fault's severity: critical, except an integer axis reading 0 at rest (below resolution or dead)."""
+        return not (self.kind == "dead" and self.detail == "")
+
     def update(self, obs: Observation) -> list[FaultEvent]:
         """One block of one axis (any motion state); the state change, if any (critical, except an integer
         axis reading 0 at rest), or the escalation of such an axis to "dead" when it reads 0 in motion."""
@@ -263,8 +268,7 @@ class StuckDetector:
             if zero and (self.coded_lsb is None or not (obs.ref is not None and obs.ref.ready)):
                 self.kind = "dead"
                 self.detail = "float" if self.coded_lsb is None else ("" if obs.still else "moving")
-            return [obs.event(self.kind, FAULT, detail=self.detail,
-                              critical=not (self.kind == "dead" and self.detail == ""))]
+            return [obs.event(self.kind, FAULT, detail=self.detail, critical=self.critical)]
         kind, detail = self.kind, self.detail
         self.kind, self.detail = "stuck", ""
         return [obs.event(kind, OK, detail=detail, critical=True)]

@@ -426,11 +426,9 @@ class Pipeline:
         what describes the sensor (SENSOR_FAULTS): a saturation was the last run's motion, a bias fault is
         judged within a run."""
         for kind, ax in self._restored.pop(ch.imu):
-            af = ch.faults.axes.get(ax)
-            if kind not in SENSOR_FAULTS or af is None or af.states().get(kind) != FAULT:
+            if ch.faults.axes[ax].states().get(kind) != FAULT:
                 continue
-            crit = kind == "stuck" or (kind == "dead" and ch.faults.detail_of(kind, ax) != "")
-            ev = FaultEvent(ch.imu, ax, kind, FAULT, ch.faults.value_of(kind, ax), ch.faults.detail_of(kind, ax), crit)
+            ev = ch.faults.event_of(kind, ax)
             self.log(f"IMU{ch.imu}: {ev.text()} (active when the state was saved)")
             self._report([ev], t)
 
@@ -546,7 +544,7 @@ class Pipeline:
             elif kind == "rate":
                 ev = FaultEvent(ch.imu, "", kind, FAULT, ch.faults.value_of(kind, ""), ch.faults.timing.detail)
             else:
-                ev = FaultEvent(ch.imu, ax, kind, FAULT, ch.faults.value_of(kind, ax), ch.faults.detail_of(kind, ax))
+                ev = ch.faults.event_of(kind, ax)
             out.append(ev.text())
         return out
 
@@ -578,8 +576,7 @@ class Pipeline:
             elif not ch.learn:  # no baseline for this IMU and nothing being learned: learn afresh
                 ch.relearn()
         self.channels = channels
-        self._restored = {imu: [ka for ka in ch.faults.active() if ka[1] in ch.faults.axes]
-                          for imu, ch in channels.items()}
-        self._restored = {imu: v for imu, v in self._restored.items() if v}
+        sensor = {imu: [(k, ax) for k, ax in ch.faults.active() if k in SENSOR_FAULTS] for imu, ch in channels.items()}
+        self._restored = {imu: v for imu, v in sensor.items() if v}
         if d.get("sysid") is not None and self.sysid is None:
             self.sysid = int(d["sysid"])
