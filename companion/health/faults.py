@@ -232,6 +232,11 @@ CARRY = 6  # samples of the previous block carried into a block's spike search (
 #: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
 #: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
 DD_NU_PER_SAMPLE = 2.0 / (140.0 / 36.0)
+#: A reference block whose v2 is above KNOCK x the median of the reference blocks is not rest: a knock or a
+#: touch the motion gate passed as still. At rest that is chance only far in the tail (chi^2 with 4 dof above
+#: 8.4x its mean: 1e-6). Left out of the rest level (AxisRef.rest) that a collapse of the noise is judged
+#: against; kept in the noise level that a rise is judged against (see AxisRef).
+KNOCK = 10.0
 
 
 @dataclass
@@ -396,10 +401,18 @@ class AxisRef:
     * ``sigma2``: white-noise variance (pooled v2), ``nu``: chi-square dof of one block's v2, the smaller of
       the white-noise figure and the one measured from the spread of v2 (coarse rounding spreads it)
     * ``mu``: mean rate (the bias at the start), ``spike_rate``: outliers per sample
+    * ``rest``: the same white-noise level and dof from the blocks that are not knocks (v2 at most ``KNOCK``
+      x the median), for the stuck detector. Why two: one knock among a public copter log's 30 reference
+      blocks (400x the others) made the mean 15x the rest level, and after a restart the same rest read as a
+      collapse of the noise (stuck). Left out of the level a noise *rise* is judged against, the roll gyro of
+      a parked plane rocking in the wind (bursts 10x its rest, the accelerometer quiet, one IMU) became a
+      noise fault; a rest level never above the mean only makes a collapse harder to claim.
     """
 
     sigma2: float = math.nan
     nu: float = math.nan
+    sigma2_rest: float = math.nan
+    nu_rest: float = math.nan
     mu: float = math.nan
     spike_rate: float = 0.0
     blocks: int = 0
@@ -411,6 +424,13 @@ class AxisRef:
     @property
     def ready(self) -> bool:
         return math.isfinite(self.sigma2)
+
+    @property
+    def rest(self) -> "RestLevel":
+        """The rest level (knocks left out); the plain level for a reference saved without one."""
+        if math.isfinite(self.sigma2_rest):
+            return RestLevel(self.sigma2_rest, self.nu_rest)
+        return RestLevel(self.sigma2, self.nu)
 
     def add(self, v2: float, m2: float, mean: float, spikes: int, n: int, ref_blocks: int) -> bool:
         """Add one quiet block; returns True when the reference becomes ready."""
@@ -426,32 +446,55 @@ class AxisRef:
         if self.blocks < ref_blocks:
             return False
         v = np.asarray(self._v2)
-        s2 = float(v.mean())
         nu_white = DD_NU_PER_SAMPLE * max(m2, 1.0)
-        if s2 > 0:
-            rel = float(v.var(ddof=1)) / (s2 * s2)
-            nu_emp = 2.0 / rel if rel > 0 else nu_white
-            # the spread of a variance estimated from ref_blocks values is itself uncertain: keep 70 %
-            nu = min(nu_white, 0.7 * nu_emp)
-        else:
-            nu = nu_white
-        self.sigma2, self.nu = s2, max(nu, 2.0)
+        self.sigma2, self.nu = _pooled(v, nu_white)
+        med = float(np.median(v))
+        rest = v[v <= KNOCK * med] if med > 0 else v
+        self.sigma2_rest, self.nu_rest = _pooled(rest, nu_white) if rest.size >= 2 else (self.sigma2, self.nu)
         self.mu = float(np.mean(self._mu))
         self.spike_rate = self._spk / max(self._samples, 1)
         self._v2 = self._mu = None
         return True
 
     def state_dict(self) -> dict:
-        return {"sigma2": _f(self.sigma2), "nu": _f(self.nu), "mu": _f(self.mu), "spike_rate": self.spike_rate,
+        return {"sigma2": _f(self.sigma2), "nu": _f(self.nu), "sigma2_rest": _f(self.sigma2_rest),
+                "nu_rest": _f(self.nu_rest), "mu": _f(self.mu), "spike_rate": self.spike_rate,
                 "blocks": self.blocks, "v2": self._v2, "means": self._mu, "spk": self._spk, "samples": self._samples}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.sigma2, self.nu, self.mu = _nan(d.get("sigma2")), _nan(d.get("nu")), _nan(d.get("mu"))
+        self.sigma2_rest, self.nu_rest = _nan(d.get("sigma2_rest")), _nan(d.get("nu_rest"))
         self.spike_rate = float(d.get("spike_rate", 0.0))
         self.blocks = int(d.get("blocks", 0))
         self._v2 = list(d["v2"]) if d.get("v2") is not None else None
         self._mu = list(d["means"]) if d.get("means") is not None else None
         self._spk, self._samples = int(d.get("spk", 0)), int(d.get("samples", 0))
+
+
+@dataclass(frozen=True)
+class RestLevel:
+    """A white-noise variance and the chi-square dof of one block's v2 against it."""
+
+    sigma2: float
+    nu: float
+
+    @property
+    def ready(self) -> bool:
+        return math.isfinite(self.sigma2)
+
+
+def _pooled(v: np.ndarray, nu_white: float) -> tuple[float, float]:
+    """The pooled variance of the reference blocks' v2 and the dof of one block's v2: the smaller of the
+    white-noise figure and the one measured from the spread of v2 (coarse rounding spreads it)."""
+    s2 = float(v.mean())
+    if s2 > 0:
+        rel = float(v.var(ddof=1)) / (s2 * s2)
+        nu_emp = 2.0 / rel if rel > 0 else nu_white
+        # the spread of a variance estimated from ref_blocks values is itself uncertain: keep 70 %
+        nu = min(nu_white, 0.7 * nu_emp)
+    else:
+        nu = nu_white
+    return s2, max(nu, 2.0)
 
 
 def _f(x: float):

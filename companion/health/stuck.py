@@ -1,8 +1,9 @@
 """Stuck (frozen) gyro axis: the output repeats its value (codes) and its variance collapses.
 
 Statistic: u = v2 / sigma0^2, the block's white-noise variance from second differences (faults.BlockStats)
-over the reference sigma0^2 learned from still data; nu v2 / sigma^2 ~ chi2(nu) (nu from the reference,
-smaller under coarse rounding, faults.AxisRef). The CUSUM (faults eq. (1)) of the LLR of a variance
+over the reference sigma0^2 learned from still data, its rest level (a knock among the reference blocks
+left out: faults.AxisRef.rest); nu v2 / sigma^2 ~ chi2(nu) (nu from the reference, smaller under coarse
+rounding). The CUSUM (faults eq. (1)) of the LLR of a variance
 collapse by ``r1`` = 1/10
 
     llr = (nu / 2) * (ln 10 - 9 u)
@@ -274,7 +275,8 @@ class StuckDetector:
         return [obs.event(kind, OK, detail=detail, critical=True)]
 
     def _step(self, obs: Observation) -> bool:
-        j, st, ref = obs.col, obs.stats, obs.ref
+        # judged against the rest level (the reference with knocks left out: faults.AxisRef.rest)
+        j, st, ref = obs.col, obs.stats, obs.ref.rest
         v2, changes, n = float(st.v2[j]), int(st.changes[j]), st.n
         self.equal_run = self.equal_run + 1 if (changes == 0 and n >= 50) else 0
         if not obs.still and n >= 2 and changes >= (n - 1) // 2:
