@@ -96,7 +96,7 @@ def _brute_force_cov(terms, m, n, rate_hz):
     for t in terms:
         if t["effect"] == "quantization":
             gamma += t["Q"] ** 2 * np.eye(n_phase)
-        elif t["effect"] != "ramp":  # deterministic: no covariance (R = 0 here)
+        elif t["effect"] != "ramp":  # deterministic: no covariance of its own, the cross term below
             gamma += _gcov(t, h, tau0)
     ops = []
     for k in m:
@@ -106,12 +106,15 @@ def _brute_force_cov(terms, m, n, rate_hz):
         D[i, i], D[i, i + k], D[i, i + 2 * k] = 1.0, -2.0, 1.0
         ops.append(D)
     tau = np.asarray(m) * tau0
+    r2 = sum(t["R"] ** 2 for t in terms if t["effect"] == "ramp")
     out = np.zeros((len(m), len(m)))
     gd = [gamma @ D.T for D in ops]
     for a, Da in enumerate(ops):
         for b, Db in enumerate(ops):
             c = Da @ gd[b]
-            out[a, b] = 2.0 * np.sum(c * c) / (4 * tau[a] ** 2 * tau[b] ** 2 * Da.shape[0] * Db.shape[0])
+            # a ramp R adds R tau^2 to every second difference: + 4 (R tau_a^2)(R tau_b^2) 1' D_a Gamma D_b' 1
+            v = 2.0 * np.sum(c * c) + 4.0 * r2 * tau[a] ** 2 * tau[b] ** 2 * np.sum(c)
+            out[a, b] = v / (4 * tau[a] ** 2 * tau[b] ** 2 * Da.shape[0] * Db.shape[0])
     return out
 
 
@@ -145,3 +148,19 @@ def test_covariance_equals_the_matrix_computation_for_any_record_length(seed):
             d = np.sqrt(np.outer(np.diag(ref), np.diag(ref)))
             assert np.max(np.abs(ours - ref) / d) < tol  # in units of the estimates' standard deviations
         assert len(confidence._PAIR_FORMS) > 0
+
+
+def test_covariance_of_the_longest_clusters_and_a_ramp_equals_the_matrix_computation():
+    """Where the record clips the lags (the longest clusters: a few clusters left) the pair counts change
+    over the number of clusters, not over m; summed with a Riemann step of m/32 the longest point's variance
+    under a ramp came out 37 % low and its correlation with the next point above 1, and a ramp's interval
+    covered the truth in 11 of 20 records. White noise and a ramp (a warm-up), octave clusters to half the
+    record (m >= 64: the Riemann step): the covariance of the matrices, within 1 % of each point's sd."""
+    rate, n = 10.0, 1033
+    terms = [{"effect": "white_noise", "N": 1.05e-4}, {"effect": "ramp", "R": 1.9e-5}]
+    m = np.array([1, 2, 4, 8, 16, 32, 64, 128, 256, 512])
+    ours = oavar_covariance(terms, m, n, rate)
+    ref = _brute_force_cov(terms, m, n, rate)
+    d = np.sqrt(np.outer(np.diag(ref), np.diag(ref)))
+    assert np.max(np.abs(ours - ref) / d) < 0.01, np.round((ours - ref) / d, 3)
+    assert np.linalg.eigvalsh(ours / d).min() > -1e-9  # a covariance
