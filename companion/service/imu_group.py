@@ -20,6 +20,11 @@ from companion.health.disagreement import PairDisagreement
 from companion.health.faults import AXES, FAULT, OK, FaultEvent, Observation
 
 MIN_ALIGNED = 10  # samples both IMUs cover before a pair is tested
+SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
+
+
+def _period(t: np.ndarray) -> float:
+    return float(np.median(np.diff(t))) if t.size > 1 else 0.0
 
 
 class ImuGroup:
@@ -56,20 +61,29 @@ class ImuGroup:
             t_done = self.pair_done.get(key, -math.inf)
             if t_end < t_done - self.reset_s:  # reboot: time starts again
                 t_done = -math.inf
-            mask = (ti > t_done) & (ti <= t_end) & (ti >= tj[0])
+            gi_all = np.concatenate([b[1] for b in ci.recent])
+            gj_all = np.concatenate([b[1] for b in cj.recent])
+            # compared at the instants of the slower stream, the faster one interpolated there: each block's
+            # mean then comes from the same instants on both sides. The other way round a 2 Hz snapshot
+            # stream (a PX4 log's vehicle_imu) was interpolated between its snapshots at a 220 Hz stream's
+            # instants, and in flight the line between two snapshots half a second apart is no rate: a
+            # healthy pair "disagreed" on a public log
+            pi_, pj_ = _period(ti), _period(tj)
+            base_i = pi_ >= pj_ or pj_ <= SAME_RATE * pi_  # IMU i's instants unless IMU j is clearly slower
+            (ts, gs), (tf, gf), pf = ((ti, gi_all), (tj, gj_all), pj_) if base_i else ((tj, gj_all), (ti, gi_all), pi_)
+            mask = (ts > t_done) & (ts <= t_end) & (ts >= tf[0])
             if np.count_nonzero(mask) < MIN_ALIGNED:
                 continue
-            t = ti[mask]
-            k = np.clip(np.searchsorted(tj, t), 1, tj.size - 1)
-            period = float(np.median(np.diff(tj))) if tj.size > 1 else 0.0
-            near = np.minimum(np.abs(tj[k] - t), np.abs(tj[k - 1] - t))
-            ok = near <= 1.5 * period
+            t = ts[mask]
+            k = np.clip(np.searchsorted(tf, t), 1, tf.size - 1)
+            near = np.minimum(np.abs(tf[k] - t), np.abs(tf[k - 1] - t))
+            ok = near <= 1.5 * pf
             if np.count_nonzero(ok) < MIN_ALIGNED:
                 self.pair_done[key] = t_end
                 continue
-            gi = np.concatenate([b[1] for b in ci.recent])[mask][ok]
-            gj_all = np.concatenate([b[1] for b in cj.recent])
-            gj = np.column_stack([np.interp(t[ok], tj, gj_all[:, a]) for a in range(3)])
+            g_slow = gs[mask][ok]
+            g_fast = np.column_stack([np.interp(t[ok], tf, gf[:, a]) for a in range(3)])
+            gi, gj = (g_slow, g_fast) if base_i else (g_fast, g_slow)
             self.pair_done[key] = t_end
             nv = [ci.faults.noise_ref(ax) for ax in AXES] + [cj.faults.noise_ref(ax) for ax in AXES]
             ready = all(v is not None for v in nv)

@@ -1,0 +1,70 @@
+"""Two IMUs logged at very different rates (a PX4 log: sensor_combined at ~220 Hz, vehicle_imu at 2 Hz): the
+disagreement test compares them at the slower stream's instants.
+
+Found on a public PX4 log (flight-review-rs' battery_brownout.ulg): the 2 Hz stream was interpolated between
+its snapshots, half a second apart, at the fast stream's instants; in flight that line is no rate, and the
+healthy pair "disagreed" on gyro Y twice."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from companion.mavlink.reporter import Reporter
+from companion.samples import StreamKey
+from companion.service.config import PipelineConfig
+from companion.service.pipeline import Pipeline
+from sinks import RecordingSink
+
+G = np.array([0.0, 0.0, -9.80665])
+
+
+def _flight_rate(t, seed):
+    """A flight's body rates (rad/s): a few sinusoids of 0.3-3 Hz, 0.2-1 rad/s each, per axis."""
+    rng = np.random.default_rng(seed)
+    out = np.zeros((t.size, 3))
+    for a in range(3):
+        for _ in range(4):
+            out[:, a] += rng.uniform(0.2, 1.0) * np.sin(2 * math.pi * rng.uniform(0.3, 3.0) * t + rng.uniform(0, 6.3))
+    return out
+
+
+def _fly(slow_hz, seed, bias=0.0, seconds=120.0):
+    """IMU0 at 200 Hz and IMU1 at ``slow_hz`` sampling the same rotation (each with its own noise), armed
+    after 30 s at rest; IMU1's X axis ``bias`` rad/s off from 60 s."""
+    p = Pipeline(PipelineConfig(), Reporter(RecordingSink(), 1.0))
+    rng = np.random.default_rng(100 + seed)
+    t_fast = np.arange(0.0, seconds, 1 / 200.0) + 1.0
+    t_slow = np.arange(0.0, seconds, 1 / slow_hz) + 1.0 + 0.0013
+    streams = []
+    for k, t in ((0, t_fast), (1, t_slow)):
+        w = np.where((t > 31.0)[:, None], _flight_rate(t, seed), 0.0) + rng.normal(0.0, 2e-3, (t.size, 3))
+        if k == 1:
+            w[t >= 60.0, 0] += bias
+        a = G + rng.normal(0.0, 0.02, (t.size, 3)) + np.where((t > 31.0)[:, None], 0.5, 0.0)
+        streams.append((StreamKey(1, 1, "HIGHRES_IMU", k), t, w, a))
+    step = 1.0
+    for s0 in np.arange(1.0, seconds + 1.0, step):
+        if abs(s0 - 31.0) < 1e-9:
+            p.on_heartbeat(1, 2, 3, 128)  # armed: a quadrotor (MAV_TYPE 2) of ArduPilot (3)
+        for key, t, w, a in streams:
+            sel = (t >= s0) & (t < s0 + step)
+            if sel.any():
+                p.on_samples(key, t[sel], w[sel], a[sel])
+    return p
+
+
+def test_a_healthy_pair_at_200_and_2_hz_does_not_disagree_in_flight():
+    for seed in range(3):
+        p = _fly(2.0, seed)
+        assert not [x for _, x in p.transitions if "disagree" in x], p.transitions
+
+
+def test_a_pair_at_200_and_10_hz_is_compared_at_the_slow_instants_and_a_biased_imu_is_named():
+    for seed in range(2):
+        healthy = _fly(10.0, seed)
+        assert not [x for _, x in healthy.transitions if "disagree" in x], healthy.transitions
+        biased = _fly(10.0, seed, bias=15.0 * math.pi / 180.0)
+        named = [x for _, x in biased.transitions if "disagree" in x]
+        assert any("gyro X disagrees" in x for x in named), biased.transitions
