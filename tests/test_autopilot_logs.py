@@ -507,3 +507,34 @@ def test_undefined_type_is_skipped_like_dfreader_and_reported(tmp_path, capsys):
     assert log.counts()["IMU"] == n - 1 and log.bad_bytes > 0
     assert main(["inspect", str(p)]) == 0
     assert "bytes outside valid messages skipped" in capsys.readouterr().out
+
+
+def test_post_filter_batches_are_named_for_their_own_imu():
+    """INS_LOG_BAT_OPT 4 (before and after the filters): ArduPilot writes the post-filter batch of IMU k as
+    instance k + the number of IMUs. A public Copter 4.7 log with two IMUs and INS_LOG_BAT_MASK 1 carries
+    instances 0 and 2; 2 (a quarter of 0's spread) was read as a third IMU."""
+    from companion.sources.dataflash import isb_name
+
+    assert isb_name(True, 0, 4, 2) == ("ISB_GYRO", 0)
+    assert isb_name(True, 2, 4, 2) == ("ISB_GYRO_POST", 0)
+    assert isb_name(False, 3, 4, 2) == ("ISB_ACCEL_POST", 1)
+    assert isb_name(True, 1, 2, 2) == ("ISB_GYRO_POST", 1)  # post-filter only: the sensor's own number
+    assert isb_name(True, 2, 0, 3) == ("ISB_GYRO", 2)  # raw batches: as written
+    from companion.analysis.filters import filters_from_params
+
+    assert filters_from_params({"INS_GYRO_FILTER": 34.0}, "ISB_GYRO_POST", "dataflash") == {"gyro": 34.0}
+    assert filters_from_params({"INS_GYRO_FILTER": 34.0}, "ISB_GYRO", "dataflash") == {}
+
+
+def test_run_replays_the_imu_messages_not_the_batch_bursts(shared_data):
+    """The batch sampler's bursts outnumber a log's IMU messages; replayed as IMU 0 they gave no block (a
+    second of kHz data every few seconds) and left IMU 0 unwatched. run takes the IMU messages."""
+    from companion.mavlink.reporter import Reporter
+    from companion.service.config import PipelineConfig
+    from companion.service.pipeline import Pipeline
+    from companion.service.replay import replay_log
+    from sinks import RecordingSink
+
+    p = Pipeline(PipelineConfig(), Reporter(RecordingSink(), 1.0))
+    replay_log(shared_data / "ardupilot" / "methodic_backend_log_80k.bin", p)
+    assert p.channels and all(ch.message == "IMU" for ch in p.channels.values())

@@ -20,7 +20,7 @@ FILTER_PARAMS = {"INS_GYRO_FILTER": ("gyro",), "INS_ACCEL_FILTER": ("accel",),
                  "IMU_GYRO_CUTOFF": ("gyro",), "IMU_ACCEL_CUTOFF": ("accel",),
                  "INS_MPU6K_FILTER": ("gyro", "accel")}
 #: messages whose samples come from the filtered signal, per log format (None: MAVLink, a tlog or a live link)
-FILTERED_MESSAGES = {"dataflash": ("IMU",), "ulog": ("sensor_combined", "sensor_gyro", "vehicle_imu"),
+FILTERED_MESSAGES = {"dataflash": ("IMU", "ISB_GYRO_POST", "ISB_ACCEL_POST"), "ulog": ("sensor_combined", "sensor_gyro", "vehicle_imu"),
                      None: ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")}
 #: messages that carry the filtered signal averaged over the output interval (delta angle / dt)
 AVERAGED_MESSAGES = ("sensor_combined", "vehicle_imu")

@@ -163,7 +163,10 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
     """Feed a DataFlash .bin, a ULog .ulg or a CSV file to ``pipeline`` in message-time order.
 
     Per IMU instance the stream with the most samples is replayed (a ULog holds sensor_combined,
-    sensor_gyro and vehicle_imu of the same IMU; a DataFlash log its IMU and the batch sampler's bursts).
+    sensor_gyro and vehicle_imu of the same IMU). A DataFlash log's batch-sampler bursts (ISB_*) are not
+    replayed: a kHz burst of a second every few seconds is no stream for the blocks of a live monitor (the
+    bursts outnumber the IMU messages, were chosen, gave no block and left the IMU unwatched); ``analyze``
+    reads them.
     The log's armed state becomes a HEARTBEAT (base_mode armed flag) at every transition and once a
     second, exactly as a live vehicle sends them; a source without armed state sends none.
     """
@@ -172,7 +175,7 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
     res = load(path, time_unit=time_unit)  # time_unit: of a CSV's time column
     best: dict = {}
     for s in res.imu_streams():
-        if not np.all(np.isfinite(s.gyro[:1])):
+        if not np.all(np.isfinite(s.gyro[:1])) or s.key.message.startswith("ISB_"):
             continue
         cur = best.get(s.key.instance)
         if cur is None or s.samples > cur.samples:

@@ -131,13 +131,13 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
 
     log = df.open_log(path)
     raws, extras = df.imu_raw_streams(log)
-    isb, bursts = df.isb_raw_streams(log)
+    meta = df.log_metadata(log)
+    isb, bursts = df.isb_raw_streams(log, meta["params"], len({r.key.instance for r in raws}) or None)
     streams = sorted((build_stream(r, split_periods) for r in raws + isb), key=lambda s: s.key)
     counts = log.counts()
     imu_n = int(sum(r.t.shape[0] for r in raws))
     totals = {"frames": int(sum(counts.values())), "bad_bytes": int(log.bad_bytes), "bad_frames": 0,
               "imu_messages": imu_n}
-    meta = df.log_metadata(log)
     meta["format"] = "dataflash"
     meta["identity"] = df.log_identity(log, meta)
     meta["isb_bursts"] = bursts

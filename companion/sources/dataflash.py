@@ -36,7 +36,11 @@ Batch sampler (``INS_LOG_BAT_*``): an ``ISBH`` header (``type`` 0 accel / 1 gyro
 header's sequence number, ``seqno``, ``x/y/z`` int16[32]: value = int16 / ``mul``, rad/s or m/s^2).
 Each (type, instance) becomes its own stream ``ISB_GYRO``/``ISB_ACCEL`` of bursts (sample ``k`` of a
 burst at ``SampleUS + k / smp_rate``; the timing rules split the bursts into segments); the other
-sensor's columns are NaN.
+sensor's columns are NaN. Batches sampled after the autopilot's filters (``INS_LOG_BAT_OPT`` bit 1, or
+bit 2: before and after, the post-filter ones numbered from the number of IMUs on) are
+``ISB_GYRO_POST``/``ISB_ACCEL_POST`` of their own sensor's instance: a public Copter 4.7 log with two IMUs
+and ``INS_LOG_BAT_MASK`` 1 carries instances 0 and 2, 2 being IMU 0 filtered (a quarter of its spread), not
+a third IMU.
 
 Log metadata (:func:`log_metadata`): ``PARM`` (name -> last value), armed state from ``EV`` ids 10
 (armed) / 11 (disarmed) and ``ARM`` (``ArmState``), ``MODE`` changes, ``MSG`` texts, ``ERR``.
@@ -391,8 +395,25 @@ def imu_raw_streams(log: DataFlashLog):
     return out, extras
 
 
-def isb_raw_streams(log: DataFlashLog):
-    """Batch-sampler bursts (ISBH/ISBD) as one RawStream per (sensor type, instance)."""
+#: INS_LOG_BAT_OPT bits: 1 the batches are sampled after the filters; 2 before and after, the post-filter
+#: batches written with the instance plus the number of gyros (a 2-IMU log's instance 2 is IMU 0 filtered)
+BAT_OPT_POST, BAT_OPT_PRE_POST = 2, 4
+
+
+def isb_name(is_gyro: bool, instance: int, opt: int, n_imu: int) -> tuple[str, int]:
+    """(message, instance) of a batch: ``ISB_GYRO``/``ISB_ACCEL`` of the raw sensor, ``..._POST`` after the
+    filters (``opt``: INS_LOG_BAT_OPT; with pre and post, an instance from ``n_imu`` on is the post-filter
+    batch of instance - ``n_imu``)."""
+    post = bool(opt & BAT_OPT_POST) or (bool(opt & BAT_OPT_PRE_POST) and instance >= n_imu)
+    if opt & BAT_OPT_PRE_POST and instance >= n_imu:
+        instance -= n_imu
+    return ("ISB_GYRO" if is_gyro else "ISB_ACCEL") + ("_POST" if post else ""), instance
+
+
+def isb_raw_streams(log: DataFlashLog, params: dict | None = None, imu_instances: int | None = None):
+    """Batch-sampler bursts (ISBH/ISBD) as one RawStream per (sensor type, instance). With ``params``
+    (the log's PARM) the post-filter batches (``INS_LOG_BAT_OPT``) are ``ISB_GYRO_POST``/``ISB_ACCEL_POST``
+    of their sensor's instance (``imu_instances``: the number of IMUs, for the pre+post numbering)."""
     from companion.samples import StreamKey
     from companion.sources.decode import RawStream
 
@@ -435,12 +456,17 @@ def isb_raw_streams(log: DataFlashLog):
         per.setdefault(key, []).append((t, vals / mul, mul))
         bursts.append({"type": key[0], "instance": key[1], "samples": int(idx.shape[0]), "expected": cnt,
                        "rate_hz": rate, "t0": t0, "mul": mul})
+    try:
+        opt = int(float((params or {}).get("INS_LOG_BAT_OPT", 0)))
+    except (TypeError, ValueError):
+        opt = 0
+    n_imu = imu_instances or (max(i for _, i in per) // 2 + 1 if per else 1)
     for (typ, inst), parts in sorted(per.items()):
         t = np.concatenate([p[0] for p in parts])
         v = np.concatenate([p[1] for p in parts])
         nan = np.full_like(v, np.nan)
         is_gyro = typ == 1
-        key = StreamKey(0, 0, "ISB_GYRO" if is_gyro else "ISB_ACCEL", inst)
+        key = StreamKey(0, 0, *isb_name(is_gyro, inst, opt, n_imu))
         lsb = 1.0 / parts[0][2]
         out.append(RawStream(key, t, v if is_gyro else nan, nan if is_gyro else v, None, True,
                              lsb if is_gyro else None, None if is_gyro else lsb, 1e-6))
