@@ -243,7 +243,8 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
 
     ``config``: None, a dict (the whole configuration; its ``streams:`` list overrides scales) or a
     YAML path. ``require_imu``: raise :class:`CompanionError` when no stream is an IMU. ``time_unit``
-    ("s", "ms", "us"): the unit of a CSV's time column (default: seconds, ms/us refused).
+    ("s", "ms", "us"): the unit of a CSV's time column (default: seconds, ms/us refused). A log spanning
+    reboots has its boot sessions laid end to end (:func:`companion.sources.sessions.join_sessions`).
     Any user-caused problem raises :class:`CompanionError` (one line).
     """
     from companion.sources.connection import parse_connection
@@ -267,4 +268,6 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
     else:
         parse_connection(s, baud)  # raises the 'unknown source' error
         raise CompanionError(f"{s}: unknown source")  # pragma: no cover - parse_connection raised
-    return _check_has_imu(res, require_imu)
+    from companion.sources.sessions import join_sessions
+
+    return join_sessions(_check_has_imu(res, require_imu))
