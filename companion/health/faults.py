@@ -135,7 +135,9 @@ class Observation:
     * ``vibration``: the same IMU's accelerometer second-difference variance over its still reference (three
       axes pooled; nan before the reference or without an accelerometer): what the rest of the sensor sees;
       ``accel_quiet``: that accelerometer's second differences all stayed within ``SPIKE_K`` of their still
-      scale in the block (False when unknown): no knock or jolt of the vehicle in it.
+      scale in the block (False when unknown): no knock or jolt of the vehicle in it; ``accel_knock``: it
+      moved beyond that scale for more than ``KNOCK_RUN`` samples in a row (the block's own robust scale
+      before the reference exists): a knock or a touch, not an isolated glitch of the sensor.
     """
 
     imu: int = 0
@@ -152,6 +154,7 @@ class Observation:
     noise_other: float | None = None
     vibration: float = math.nan
     accel_quiet: bool = False
+    accel_knock: bool = False
 
     @property
     def col(self) -> int:
@@ -232,6 +235,10 @@ CARRY = 6  # samples of the previous block carried into a block's spike search (
 #: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
 #: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
 DD_NU_PER_SAMPLE = 2.0 / (140.0 / 36.0)
+#: an accelerometer beyond SPIKE_K of its scale over more than this many second differences (outliers at most
+#: two samples apart: a ringing knock crosses zero) moved: a knock lasts several samples (a public PX4 log's
+#: taps on a standing vehicle: 6-10 at 200 Hz, 20-40 sigma), an isolated outlier of the sensor 3 (+1, -2, +1)
+KNOCK_RUN = 3
 #: A reference block whose v2 is above KNOCK x the median of the reference blocks is not rest: a knock or a
 #: touch the motion gate passed as still. At rest that is chance only far in the tail (chi^2 with 4 dof above
 #: 8.4x its mean: 1e-6). Left out of the rest level (AxisRef.rest) that a collapse of the noise is judged

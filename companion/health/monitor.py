@@ -15,7 +15,7 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.bias import BiasDetector
-from companion.health.faults import (AXES, FAULT, KIND_CODE, OK, PRIORITY, SPIKE_K, AxisRef, BlockStats,
+from companion.health.faults import (AXES, FAULT, KIND_CODE, KNOCK_RUN, OK, PRIORITY, SPIKE_K, AxisRef, BlockStats,
                                      FaultDetector, FaultEvent, Observation, fault_mask)
 from companion.health.limits import FaultLimits
 from companion.health.noise import NoiseDetector
@@ -77,6 +77,7 @@ class ImuFaults:
         self.accel_ref = math.nan  # pooled accel second-difference variance of still blocks ((m/s^2)^2)
         self._accel = [0.0, 0]  # its sum and block count while it is learned
         self.accel_quiet = False  # the last block's accelerometer had no outlier against that reference
+        self.accel_knock = False  # ... and outliers over more samples than an isolated glitch's (faults.KNOCK_RUN)
 
     # ------------------------------------------------------------------ inputs
     def dd_scale_ref(self) -> np.ndarray | None:
@@ -96,7 +97,7 @@ class ImuFaults:
         """The block's accelerometer second-difference variance (three axes pooled) over that of the first
         ``ref_blocks`` still blocks (learned meanwhile, like the gyro references): 1 while the vehicle
         vibrates as it did then, below 1 when the vibration fell (an engine stopped), nan when unknown."""
-        self.accel_quiet = False
+        self.accel_quiet = self.accel_knock = False
         if accel is None or accel.shape[0] < 5:
             return math.nan
         dd = accel[2:] - 2.0 * accel[1:-1] + accel[:-2]
@@ -106,7 +107,12 @@ class ImuFaults:
         if math.isfinite(self.accel_ref):
             # per axis the second differences' variance is 6 / 3 of the pooled figure: a knock or a jolt of the
             # vehicle shows there, a glitch of the gyro alone does not (spikes.py weighs a spike's size only then)
-            self.accel_quiet = bool(np.max(np.abs(dd)) <= SPIKE_K * math.sqrt(2.0 * self.accel_ref))
+            bar = SPIKE_K * math.sqrt(2.0 * self.accel_ref)
+            self.accel_quiet = bool(np.max(np.abs(dd)) <= bar)
+        else:  # before the reference: the block's own robust scale (the median absolute dd of each axis)
+            bar = SPIKE_K * 1.4826 * np.median(np.abs(dd), axis=0)
+        out = np.any(np.abs(dd) > bar, axis=1) if np.all(np.asarray(bar) > 0) else np.zeros(dd.shape[0], bool)
+        self.accel_knock = bool(_longest_cluster(out) > KNOCK_RUN)
         if not math.isfinite(self.accel_ref):
             if still:
                 self._accel[0] += v
@@ -125,6 +131,7 @@ class ImuFaults:
         obs.y = y
         obs.vibration = self.vibration(accel, still)
         obs.accel_quiet = self.accel_quiet
+        obs.accel_knock = self.accel_knock
         ev = self.timing.update(obs)
         for ax, af in self.axes.items():
             o = obs.at(ax, af.ref)
@@ -225,3 +232,14 @@ class ImuFaults:
         self.quiet_blocks = int(d.get("quiet_blocks", 0))
         self.accel_ref = math.nan if d.get("accel_ref") is None else float(d["accel_ref"])
         self._accel = [float(v) for v in (d.get("accel_learn") or [0.0, 0])]
+
+
+def _longest_cluster(mask: np.ndarray, gap: int = 2) -> int:
+    """The longest extent (samples, first to last) of the ``mask``'s True samples with at most ``gap`` False
+    ones between neighbours: a ringing knock's second differences cross zero between their outliers."""
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        return 0
+    cut = np.flatnonzero(np.diff(idx) > gap + 1)
+    starts, ends = idx[np.r_[0, cut + 1]], idx[np.r_[cut, idx.size - 1]]
+    return int((ends - starts).max()) + 1
