@@ -52,6 +52,11 @@ EXPLAIN: dict[str, dict[str, str]] = {
                      "dronekit-la (5.7 deg/s for 0.5 s) finds nothing before the crash",
     },
     "7-9-2014_14": {"saturated": CRASH},
+    # public PX4 logs (github.com/PX4/flight-review-rs and Auterion/px4-ulog-rs test fixtures)
+    "fixtures_ekf_failure": {"saturated": "TRUE: crash/impact at 115 s: accel std 27-33 m/s^2 and 302 m/s^2 (30 g) "
+                             "in that second, one Y sample of 49 rad/s beyond the sensor's 2000 deg/s range"},
+    "6ba1abc7-b433-4029-b8f5-3b2bb12d3b6c": {"rate": "TRUE: PX4 SITL log whose sensor_combined stream has 1186 gaps "
+                                             "in 26 s of data: the timestamps really are irregular (the simulator's lockstep)"},
     "sample_logging_tagged": {"disagrees": "PX4 SITL, three simulated gyros logged at 1 Hz for 11 s: single "
                               "samples taken at different instants while the vehicle moves"},
     "22-12-2014_37": {"disagrees": "in flight: 1 s means differ by 0.1-1 deg/s, one block of 8 deg/s in a "
