@@ -169,12 +169,16 @@ class _Problem:
         return np.linalg.solve(self.L, x) if np.ndim(x) == 1 else np.linalg.solve(self.L, x)
 
     def solve(self, A):
-        Aw = self._w(A)
-        scale = np.maximum(np.sqrt((Aw**2).sum(axis=0)), 1e-300)
-        theta, _ = nnls(Aw / scale, self.vw, max_iter=50 * A.shape[1] + 50)
-        theta = theta / scale
-        r = self.vw - Aw @ theta
-        return theta, float(r @ r)
+        # a candidate whose covariance is ~0 at some point (a term that vanishes there) whitens to 1e150 and
+        # beyond: its chi^2 is inf (the candidate loses), not a RuntimeWarning on the user's screen
+        with np.errstate(over="ignore", invalid="ignore"):
+            Aw = self._w(A)
+            scale = np.maximum(np.sqrt((Aw**2).sum(axis=0)), 1e-300)
+            theta, _ = nnls(Aw / scale, self.vw, max_iter=50 * A.shape[1] + 50)
+            theta = theta / scale
+            r = self.vw - Aw @ theta
+            c2 = float(r @ r)
+        return theta, (c2 if math.isfinite(c2) else math.inf)
 
     def cov_theta(self, A):
         Aw = self._w(A)
