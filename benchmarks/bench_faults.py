@@ -73,7 +73,7 @@ class Sink:
     def send_named_value_float(self, *a):
         pass
 
-    def send_statustext(self, sev, text):
+    def send_statustext(self, sev, text, time_boot_ms=None):
         self.texts.append((sev, text))
 
 

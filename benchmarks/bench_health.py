@@ -46,7 +46,7 @@ class NullSink:
     def send_named_value_float(self, *a):
         pass
 
-    def send_statustext(self, *a):
+    def send_statustext(self, *a, **kw):
         pass
 
 

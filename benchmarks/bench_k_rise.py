@@ -36,7 +36,7 @@ class Sink:
     def send_named_value_float(self, *a):
         pass
 
-    def send_statustext(self, *a):
+    def send_statustext(self, *a, **kw):
         pass
 
 

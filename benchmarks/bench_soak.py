@@ -48,7 +48,7 @@ class CountSink:
     def send_named_value_float(self, *a):
         self.nvf += 1
 
-    def send_statustext(self, sev, text):
+    def send_statustext(self, sev, text, time_boot_ms=None):
         self.texts.append(text)
 
 

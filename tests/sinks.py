@@ -14,6 +14,6 @@ class RecordingSink:
         self.values[name] = value
         self.msgs.append((ms, name, float(value)))
 
-    def send_statustext(self, sev, text):
+    def send_statustext(self, sev, text, time_boot_ms=None):
         self.texts.append((sev, text))
         self.msgs.append(("T", sev, text))

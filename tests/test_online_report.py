@@ -87,7 +87,7 @@ class Sink:
     def send_named_value_float(self, ms, name, value):
         self.sent[name] = value
 
-    def send_statustext(self, sev, text):
+    def send_statustext(self, sev, text, time_boot_ms=None):
         pass
 
 

@@ -16,7 +16,7 @@ class ListSink:
     def send_named_value_float(self, time_boot_ms, name, value):
         self.nvf.append((time_boot_ms, name, value))
 
-    def send_statustext(self, severity, text):
+    def send_statustext(self, severity, text, time_boot_ms=None):
         self.texts.append((severity, text))
 
 
@@ -88,7 +88,7 @@ def test_pymavlink_decodes_what_we_send():
         def send_named_value_float(self, ms, name, value):
             mav.named_value_float_send(ms, name.encode(), value)
 
-        def send_statustext(self, sev, text):
+        def send_statustext(self, sev, text, time_boot_ms=None):
             mav.statustext_send(sev, text.encode())
 
     r = Reporter(MavSink(), 1.0)
@@ -102,3 +102,15 @@ def test_pymavlink_decodes_what_we_send():
     assert msgs[0].time_boot_ms == 12500
     assert msgs[1].get_type() == "STATUSTEXT" and msgs[1].severity == 4
     assert msgs[1].text == "IMU0 gyro X degrading: N 2.1x baseline"
+
+
+def test_a_replay_stamps_a_statustext_with_the_time_of_what_it_reports():
+    """A replay's sink took the time of its last NAMED_VALUE_FLOAT for a STATUSTEXT: the first alarms of a
+    public PX4 log (before any value was sent) were written at t = 0 s into the replay's tlog and echoed so."""
+    from companion.service.runner import ReplaySink
+
+    said = []
+    sink = ReplaySink(echo=said.append)
+    r = Reporter(sink, 1.0)
+    r.statustext("IMU0 gyro Y spikes 0.11 %", 4, t_s=15.2)
+    assert sink.t == 15.2 and said == ["STATUSTEXT sev=4 t=15s: IMU0 gyro Y spikes 0.11 %"]

@@ -49,7 +49,7 @@ from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.state import save_state, load_state
 class Sink:
     def send_named_value_float(self, *a): pass
-    def send_statustext(self, *a): pass
+    def send_statustext(self, *a, **kw): pass
 p = Pipeline(PipelineConfig.from_mapping({"baseline_s": 60}), Reporter(Sink(), 1.0))
 rng = np.random.default_rng(0)
 key = StreamKey(1, 1, "RAW_IMU", 0)

@@ -296,7 +296,7 @@ class Link:
         self.values_sent += 1
         self._report(self._mav().named_value_float_send, int(time_boot_ms), name.encode("ascii"), float(value))
 
-    def send_statustext(self, severity: int, text: str) -> None:
+    def send_statustext(self, severity: int, text: str, time_boot_ms: int | None = None) -> None:
         self.texts += 1
         self._report(self._mav().statustext_send, int(severity), text.encode("ascii", "replace")[:50])
 

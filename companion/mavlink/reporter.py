@@ -58,7 +58,7 @@ MAV_SEVERITY_INFO = 6
 
 class Sink(Protocol):
     def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None: ...
-    def send_statustext(self, severity: int, text: str) -> None: ...
+    def send_statustext(self, severity: int, text: str, time_boot_ms: int | None = None) -> None: ...
 
 
 def value_name(imu: int, axis: str, param: str) -> str:
@@ -223,7 +223,9 @@ class Reporter:
             i += 1
         return sent
 
-    def statustext(self, text: str, severity: int = MAV_SEVERITY_WARNING) -> None:
-        """One STATUSTEXT (cut to 50 characters, the MAVLink 1 field size)."""
-        self.sink.send_statustext(int(severity), text[:50])
+    def statustext(self, text: str, severity: int = MAV_SEVERITY_WARNING, t_s: float | None = None) -> None:
+        """One STATUSTEXT (cut to 50 characters, the MAVLink 1 field size); ``t_s``: the message time of what
+        it reports (a replay's tlog writes it there; a live link sends it now)."""
+        ms = None if t_s is None else int(round(t_s * 1000.0)) & 0xFFFFFFFF
+        self.sink.send_statustext(int(severity), text[:50], time_boot_ms=ms)
         self.texts += 1

@@ -337,7 +337,7 @@ class Pipeline:
             self._report(ch.on_quiet(pending_stats, self._bias_extra_var(ch), pending), float(pending[-1, 0]))
             self._confirm_bias(ch, float(pending[-1, 0]))
             if ch.feed(pending):
-                self._learn_done(ch)
+                self._learn_done(ch, float(pending[-1, 0]))
 
     def _forget_rest(self, ch: Channel, t: float) -> None:
         """The gate's rest reference was learned under vibration: what was fed under it goes, and a baseline
@@ -385,7 +385,7 @@ class Pipeline:
     def _has_baseline(self, ch: Channel) -> bool:
         return self.baseline is not None and self.baseline.has_imu(ch.imu)
 
-    def _learn_done(self, ch: Channel) -> None:
+    def _learn_done(self, ch: Channel, t: float | None = None) -> None:
         if self.baseline is None:
             self.baseline = Baseline("learned")
         for ax, params in ch.learned_terms().items():
@@ -397,7 +397,7 @@ class Pipeline:
         b = self.baseline.get(ch.imu, "gx") or {}
         n = b.get("N", (math.nan, math.nan))[0]
         self.log(f"IMU{ch.imu}: baseline learned from {ch.learned_s:.0f} s of still data (gx N {n:.3g} rad/s/sqrt(Hz))")
-        self.reporter.statustext(f"IMU{ch.imu} gyro baseline learned", MAV_SEVERITY_NOTICE)
+        self.reporter.statustext(f"IMU{ch.imu} gyro baseline learned", MAV_SEVERITY_NOTICE, t)
 
     # ------------------------------------------------------------------ reports
     def _report(self, events: Iterable[FaultEvent], t: float) -> None:
@@ -411,7 +411,7 @@ class Pipeline:
                 sev = MAV_SEVERITY_CRITICAL if ev.critical else MAV_SEVERITY_WARNING
             else:
                 sev = MAV_SEVERITY_NOTICE
-            self.reporter.statustext(text, sev)
+            self.reporter.statustext(text, sev, t)
             ch = self.channels.get(ev.imu)
             if ch is not None:
                 self._set_state(ch)
@@ -465,7 +465,7 @@ class Pipeline:
             text = tr.text()
             self.transitions.append((t, text))
             self.log(text)
-            self.reporter.statustext(text, MAV_SEVERITY_WARNING if tr.state == DEGRADING else MAV_SEVERITY_NOTICE)
+            self.reporter.statustext(text, MAV_SEVERITY_WARNING if tr.state == DEGRADING else MAV_SEVERITY_NOTICE, t)
         if error:
             self.failed = error
             return

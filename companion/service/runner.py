@@ -28,7 +28,9 @@ class ReplaySink:
         if self.writer is not None:
             self.writer.write(self.writer.mav.named_value_float_encode(int(time_boot_ms), name.encode(), float(value)), self.t)
 
-    def send_statustext(self, severity, text):
+    def send_statustext(self, severity, text, time_boot_ms=None):
+        if time_boot_ms is not None:  # the time of what it reports, not of the last NAMED_VALUE_FLOAT
+            self.t = time_boot_ms / 1000.0
         self.texts.append(text)
         if self.echo:
             self.echo(f"STATUSTEXT sev={severity} t={self.t:.0f}s: {text}")
