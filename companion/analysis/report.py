@@ -38,8 +38,8 @@ def format_table(report: dict) -> str:
             lines.append(f"  WARNING: {w}")
         for group, names in (("gyro", GYRO_AXES), ("accel", ACCEL_AXES)):
             axes = [a for a in names if a in st["axes"]]
-            if not axes:
-                continue
+            if not axes or all(st["axes"][a]["status"] == "absent" for a in axes):
+                continue  # no header for a sensor the stream does not carry (a batch of accelerometer data)
             ref = axes[0]
             u = {p: units.datasheet_unit(p, ref) for p in ("N", "B", "K")}
             lines.append(f"  {group:<5} {'N [' + u['N'] + ']':<28}{'B [' + u['B'] + ']':<26}"

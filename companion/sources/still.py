@@ -262,7 +262,9 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
             short += t1 - t0
     sel = StillSelection(keep, method, total_s=t_hi - t_lo, min_segment_s=min_segment_s, outside_s=outside)
     # accounting in time: samples actually present inside the kept intervals (gaps inside them excluded)
-    ref = max(imus, key=lambda s: s.samples)
+    # (the stream that covers the most time: a batch sampler's kHz bursts have the most samples and cover a
+    # second in ten, and the headline said 7 s where the IMU streams had 44)
+    ref = max(imus, key=lambda s: (s.timing.duration_s, s.samples))
     covered = _covered(ref, keep)
     sel.still_s = covered
     sel.gap_s = float((~has).sum() * window_s) + sum(b - a for a, b in keep) - covered
