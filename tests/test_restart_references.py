@@ -140,3 +140,20 @@ def test_a_knock_among_the_reference_blocks_does_not_make_the_rest_stuck_in_this
         g[t >= 30.0, 1] = g[t >= 30.0, 1][0]
         p3.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t, g, G + rng.normal(0.0, 0.01, (t.size, 3)))
         assert any("gyro Y stuck" in x for x in _alarms(p3)), _alarms(p3)
+
+
+def test_irregular_timing_is_judged_afresh_after_a_restart():
+    """A stream whose timing is irregular: named in the first run; after a restart judged again and named
+    again (the restored fault had no value: "rate nan Hz" in the summary, and no STATUSTEXT)."""
+    rng = np.random.default_rng(11)
+    t = 1.0 + np.cumsum(rng.uniform(0.4, 1.6, int(60 * RATE)) / RATE)  # intervals scattered by +-60 %
+    g = rng.normal(0.0, SIG, (t.size, 3))
+    a = G + rng.normal(0.0, 0.01, (t.size, 3))
+    p1 = _fresh()
+    p1.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t, g, a)
+    first = [x for x in _alarms(p1) if "timing" in x]
+    assert first, p1.transitions
+    p2 = _restored(p1)
+    p2.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t, g, a)
+    assert [x for x in _alarms(p2) if "timing" in x] == first, p2.transitions
+    assert not any("nan" in x for _, x in p2.transitions)
