@@ -18,10 +18,10 @@ FS = 200.0
 G = np.array([0.0, 0.0, -9.80665])
 
 
-def _run(seed, taps=(), glitches=(), glitch_accel=False, seconds=100.0):
+def _run(seed, taps=(), glitches=(), glitch_accel=0.0, seconds=100.0):
     """At rest at 200 Hz; ``taps``: times of a knock (a damped 60 Hz ring of the accelerometer, 0.3 m/s^2
     decaying in 30 ms: 6 sigma or more for ~10 samples, and a one-sample jump of gyro X and Y, as on the log); ``glitches``: times of a one-sample gyro Y outlier of
-    0.3 rad/s (and of the accelerometer, 0.3 m/s^2 = 20 sigma, with ``glitch_accel``: a corrupted IMU sample)."""
+    0.3 rad/s (and of the accelerometer by ``glitch_accel`` m/s^2: a corrupted IMU sample)."""
     rng = np.random.default_rng(seed)
     t = 1.0 + np.arange(int(seconds * FS)) / FS
     g = rng.normal(0.0, 2e-3, (t.size, 3))
@@ -35,8 +35,7 @@ def _run(seed, taps=(), glitches=(), glitch_accel=False, seconds=100.0):
     for t0 in glitches:
         k = int(np.argmin(np.abs(t - t0)))
         g[k, 1] += 0.3
-        if glitch_accel:
-            a[k, 2] += 0.3
+        a[k, 2] += glitch_accel
     p = Pipeline(PipelineConfig(), Reporter(RecordingSink(), 1.0))
     p.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t, g, a)
     return [x for _, x in p.transitions if "spikes" in x and "cleared" not in x]
@@ -52,4 +51,6 @@ def test_isolated_glitches_are_spikes_with_or_without_the_accelerometer():
     ts = (60.2, 61.1, 62.5, 63.3, 64.8, 70.2, 71.1, 72.5)  # after the still references (30 blocks) exist
     for seed in range(3):
         assert any("gyro Y spikes" in x for x in _run(seed, glitches=ts)), seed
-        assert any("gyro Y spikes" in x for x in _run(seed, glitches=ts, glitch_accel=True)), seed
+        # the accelerometer's glitch with it, 20 sigma or 200: the gate does not take one sample for motion
+        for acc in (0.3, 3.0):
+            assert any("gyro Y spikes" in x for x in _run(seed, glitches=ts, glitch_accel=acc)), (seed, acc)
