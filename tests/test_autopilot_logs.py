@@ -520,6 +520,10 @@ def test_post_filter_batches_are_named_for_their_own_imu():
     assert isb_name(False, 3, 4, 2) == ("ISB_ACCEL_POST", 1)
     assert isb_name(True, 1, 2, 2) == ("ISB_GYRO_POST", 1)  # post-filter only: the sensor's own number
     assert isb_name(True, 2, 0, 3) == ("ISB_GYRO", 2)  # raw batches: as written
+    from companion.sources.dataflash import bat_opt
+
+    assert [bat_opt(p) for p in ({"INS_LOG_BAT_OPT": 4.0}, {}, None, {"INS_LOG_BAT_OPT": float("inf")},
+                                 {"INS_LOG_BAT_OPT": float("nan")})] == [4, 0, 0, 0, 0]  # a damaged PARM
     from companion.analysis.filters import filters_from_params
 
     assert filters_from_params({"INS_GYRO_FILTER": 34.0}, "ISB_GYRO_POST", "dataflash") == {"gyro": 34.0}

@@ -410,6 +410,14 @@ def isb_name(is_gyro: bool, instance: int, opt: int, n_imu: int) -> tuple[str, i
     return ("ISB_GYRO" if is_gyro else "ISB_ACCEL") + ("_POST" if post else ""), instance
 
 
+def bat_opt(params: dict | None) -> int:
+    """INS_LOG_BAT_OPT from the log's parameters; 0 where absent or damaged (nan, inf, not a number)."""
+    try:
+        return int(float((params or {}).get("INS_LOG_BAT_OPT", 0)))
+    except (TypeError, ValueError, OverflowError):
+        return 0
+
+
 def isb_raw_streams(log: DataFlashLog, params: dict | None = None, imu_instances: int | None = None):
     """Batch-sampler bursts (ISBH/ISBD) as one RawStream per (sensor type, instance). With ``params``
     (the log's PARM) the post-filter batches (``INS_LOG_BAT_OPT``) are ``ISB_GYRO_POST``/``ISB_ACCEL_POST``
@@ -456,10 +464,7 @@ def isb_raw_streams(log: DataFlashLog, params: dict | None = None, imu_instances
         per.setdefault(key, []).append((t, vals / mul, mul))
         bursts.append({"type": key[0], "instance": key[1], "samples": int(idx.shape[0]), "expected": cnt,
                        "rate_hz": rate, "t0": t0, "mul": mul})
-    try:
-        opt = int(float((params or {}).get("INS_LOG_BAT_OPT", 0)))
-    except (TypeError, ValueError):
-        opt = 0
+    opt = bat_opt(params)
     n_imu = imu_instances or (max(i for _, i in per) // 2 + 1 if per else 1)
     for (typ, inst), parts in sorted(per.items()):
         t = np.concatenate([p[0] for p in parts])
