@@ -58,3 +58,18 @@ def test_one_session_is_left_as_it_is(tmp_path):
     p = _log(tmp_path / "one.bin", [(10.0, 60.0)])
     (s,) = load(p).streams
     assert s.t[0] == pytest.approx(10.0)
+
+
+def test_a_damaged_timestamp_is_no_boot_session(tmp_path):
+    """One sample at 1.2e13 s (a mutated log) stepped back from: not a reboot to lay end to end (the shift
+    of 1.2e13 s left the next samples equal at float64's 2 ms resolution there)."""
+    from dataclasses import replace
+
+    from companion.sources.sessions import join_sessions
+
+    res = load(_log(tmp_path / "one.bin", [(10.0, 60.0)]))
+    s = res.streams[0]
+    t = s.t.copy()
+    t[100] = 1.2e13
+    out = join_sessions(replace(res, streams=[replace(s, t=t)]))
+    assert np.array_equal(out.streams[0].t, t) and "sessions" not in out.meta

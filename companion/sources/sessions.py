@@ -24,6 +24,10 @@ from dataclasses import replace
 import numpy as np
 
 SESSION_GAP_S = 60.0  # s between the end of one session and the start of the next, once joined
+#: a time since boot beyond this (116 days; time_boot_ms wraps at 49.7) is a damaged timestamp, not a boot:
+#: the log is left as it is (a mutated log's one sample at 1.2e13 s made a "session" whose end pushed the next
+#: by 1.2e13 s, where float64 time has a resolution of 2 ms and consecutive samples became equal)
+MAX_TIME_S = 1e7
 RESET_S = 1.0  # a step back by more than this is a reboot (the timing rules' smallest reset threshold)
 
 
@@ -47,6 +51,8 @@ def join_sessions(res):
     if len(ref_sess) < 2:
         return res
     spans = [(float(ref.t[a]), float(ref.t[b - 1])) for a, b in ref_sess]
+    if any(not (abs(a) < MAX_TIME_S and abs(b) < MAX_TIME_S) for a, b in spans):
+        return res
     offsets, end = [0.0], spans[0][1]
     for a, b in spans[1:]:
         offsets.append(end + SESSION_GAP_S - a)
