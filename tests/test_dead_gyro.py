@@ -91,3 +91,23 @@ def test_real_rover_log_dead_gyro_named_by_inspect_and_analyze():
     assert "gyro dead: X, Y, Z exactly 0 in all 8578 samples" in r.stdout
     r = companion("analyze", str(REAL), "--quiet")
     assert r.returncode != 0 and "gyro dead" in r.stderr
+
+
+def test_a_float_gyro_reading_exactly_zero_at_10_and_25_hz_is_named_dead():
+    """A dead float gyro at a low log rate (a tlog's HIGHRES_IMU at 10 Hz; a DataFlash log's 25 Hz IMU): a
+    block never held the 50 equal values the equal-values rule asked for, and nothing was said in a minute.
+    Now 100 equal values in a row however they fall into blocks: 10 s at 10 Hz, 4 s at 25 Hz."""
+    from companion.mavlink.reporter import Reporter
+    from companion.samples import StreamKey
+    from companion.service.config import PipelineConfig
+    from companion.service.pipeline import Pipeline
+    from sinks import RecordingSink
+
+    for rate, within in ((10.0, 13.0), (25.0, 6.0)):
+        p = Pipeline(PipelineConfig(), Reporter(RecordingSink(), 1.0))
+        rng = np.random.default_rng(0)
+        t = 1.0 + np.arange(int(60 * rate)) / rate
+        a = np.array([0.0, 0.0, -9.80665]) + rng.normal(0.0, 0.02, (t.size, 3))
+        p.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t, np.zeros((t.size, 3)), a)
+        dead = [(tt, x) for tt, x in p.transitions if "reads exactly 0: dead" in x]
+        assert len(dead) == 3 and max(tt for tt, _ in dead) <= within, (rate, p.transitions)

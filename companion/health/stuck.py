@@ -80,6 +80,10 @@ MIN_OUTSIDE = 10  # samples beyond two codes seen at rest before that evidence c
 H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
 H_OFF = 10.0
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
+#: ... a block of fewer samples than this counts as that share of one (a 10 Hz block as a fifth): a float gyro
+#: reading exactly 0.0 at 10 or 25 Hz (a tlog's HIGHRES_IMU, a DataFlash log's 25 Hz IMU) never made a block
+#: of 50 equal values and was never named; now after 100 equal values, 10 s at 10 Hz
+EQUAL_MIN_SAMPLES = 50
 VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
 RUN_BLOCKS = 256  # blocks of a run of codes kept (the windows of its evidence end there)
 WINDOWS = tuple(range(1, 33)) + (48, 64, 96, 128, 192, 256, 1 << 30)  # the run's last blocks weighed
@@ -278,7 +282,9 @@ class StuckDetector:
         # judged against the rest level (the reference with knocks left out: faults.AxisRef.rest)
         j, st, ref = obs.col, obs.stats, obs.ref.rest
         v2, changes, n = float(st.v2[j]), int(st.changes[j]), st.n
-        self.equal_run = self.equal_run + 1 if (changes == 0 and n >= 50) else 0
+        # in samples, at most EQUAL_MIN_SAMPLES per block: a block of 50 or more counts as one, a smaller one as
+        # its share
+        self.equal_run = self.equal_run + min(n, EQUAL_MIN_SAMPLES) if (changes == 0 and n >= 2) else 0
         if not obs.still and n >= 2 and changes >= (n - 1) // 2:
             self.alive = True
         # an integer axis seen alive reads 0 at rest by resolution: named again only after a long run
@@ -307,7 +313,7 @@ class StuckDetector:
             if llr <= 0.0 and self.cusum.state == OK and math.isfinite(step) and step > 0:
                 self.lsb = min(self.lsb, step)  # the resolution, learned from blocks without evidence
                 self.quantised = self.quantised or changes < n - 1
-            if self.equal_run >= equal_blocks and self.cusum.state == OK:
+            if self.equal_run >= equal_blocks * EQUAL_MIN_SAMPLES and self.cusum.state == OK:
                 llr = max(llr, 2.0 * H_ON)
             before = self.state
             self.cusum.step(llr)
@@ -323,7 +329,7 @@ class StuckDetector:
                 self.vib.step(vib)
             return self.state != before
         # no reference yet: only the equal-values rule
-        if self.cusum.state == OK and self.equal_run >= equal_blocks:
+        if self.cusum.state == OK and self.equal_run >= equal_blocks * EQUAL_MIN_SAMPLES:
             self.cusum.state, self.cusum.s = FAULT, 0.0
             return True
         if self.cusum.state == FAULT and changes > 0.5 * n:
