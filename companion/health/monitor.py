@@ -211,8 +211,19 @@ class ImuFaults:
         return FaultEvent(self.imu, axis, kind, FAULT, self.value_of(kind, axis), self.detail_of(kind, axis), crit)
 
     def detail_of(self, kind: str, axis: str) -> str:
-        """The words that go with an active fault beside its value ("float"/"moving" of a zero reading)."""
+        """The words that go with an active fault beside its value ("float"/"moving" of a zero reading, the
+        timing's rate or jitter)."""
+        if kind == "rate":
+            return self.timing.detail
         return self.axes[axis].stuck.detail if kind == "dead" and axis in self.axes else ""
+
+    def restart(self) -> None:
+        """A new run restored from the state: what is judged within a run only starts afresh, the bias
+        (health/bias.py, Restarts) and the timing (health/timing.py); the noise references are the sensor's
+        and are kept."""
+        for af in self.axes.values():
+            af.bias.restart()
+        self.timing.restart()
 
     def noise_ref(self, axis: str) -> float | None:
         r = self.axes[axis].ref

@@ -75,9 +75,14 @@ class TimingDetector:
         return {"state": self.state, "ref_rate": None if math.isnan(self.ref_rate) else self.ref_rate,
                 "count": self.count}
 
-    def load_state_dict(self, d: Mapping) -> None:
-        """Nothing is carried across a restart: the timing is the new run's stream's (its rate is what the
+    def restart(self) -> None:
+        """A new run restored from the state: the timing is the new run's stream's (its rate is what the
         ground station requested this time), judged afresh and said again if it is still irregular. A
         restored FAULT had no value and stayed silent: a public SITL log replayed with its own state ended
         with "FAULT: IMU0 gyro rate nan Hz" in the summary and no STATUSTEXT."""
-        del d
+        self.state, self.count, self.ref_rate, self._rates = OK, 0, math.nan, []
+        self.value, self.detail = math.nan, ""
+
+    def load_state_dict(self, d: Mapping) -> None:
+        self.state, self.count = int(d.get("state", OK)), int(d.get("count", 0))
+        self.ref_rate = math.nan if d.get("ref_rate") is None else float(d["ref_rate"])

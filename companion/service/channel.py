@@ -438,6 +438,5 @@ class Channel:
         ch.detector.load_state_dict(c["detector"])
         if c.get("faults") is not None:
             ch.faults.load_state_dict(c["faults"])
-            for af in ch.faults.axes.values():  # the bias is compared within a run (health/bias.py, Restarts)
-                af.bias.restart()
+            ch.faults.restart()
         return ch

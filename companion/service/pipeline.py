@@ -541,8 +541,6 @@ class Pipeline:
             elif kind == "allan":
                 r, p = ch.allan_worst(ax)
                 ev = FaultEvent(ch.imu, ax, kind, FAULT, detail=f"degrading: {p} {r:.1f}x baseline")
-            elif kind == "rate":
-                ev = FaultEvent(ch.imu, "", kind, FAULT, ch.faults.value_of(kind, ""), ch.faults.timing.detail)
             else:
                 ev = ch.faults.event_of(kind, ax)
             out.append(ev.text())
