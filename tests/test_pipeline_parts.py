@@ -55,6 +55,22 @@ def test_block_cutter_array_path_equals_one_row_path():
     assert seen == counts2["samples"] == t.size - 2
 
 
+def test_a_2_hz_stream_with_jitter_has_blocks_not_a_gap_every_other_sample():
+    # telemetry at 2 Hz (a stream's default rate) and a PX4 log's vehicle_imu: intervals of 0.5 s +- a few ms;
+    # with the fixed 0.5 s gap threshold half of them were gaps, each dropping the partial block
+    rng = np.random.default_rng(1)
+    t = 3.0 + np.arange(240) * 0.5 + rng.uniform(-0.01, 0.01, 240)
+    t[120:] += 3.0  # one real gap (six periods)
+    rows = np.column_stack([t, rng.normal(size=(t.size, 6))])
+    for chunks in ([(k, k + 1) for k in range(t.size)], [(0, t.size)]):
+        c = BlockCutter(1.0, 1.0, 0.5, 0.0)
+        blocks = [ev for a, b in chunks for ev in c.cut(rows[a:b]) if ev[0] == "block"]
+        assert abs(c.rate_hz - 2.0) < 0.05
+        # before the rate is known (8 clean intervals) the 0.5 s threshold stands in for the period
+        assert 1 <= c.counts["gaps"] <= 20, c.counts
+        assert len(blocks) >= 70, len(blocks)
+
+
 def model():
     return {"rate_hz": 100.0, "axes": {a: [
         {"effect": "white_noise", "N": 2 * LSB / 10.0},

@@ -7,7 +7,8 @@ Timestamp rules (:func:`companion.sources.timing.classify_steps`, the rules of t
 the live thresholds ``reset_s`` and ``gap_s`` given to :func:`~companion.sources.timing.step_rules`): a
 timestamp more than ``reset_s`` behind the last one is an autopilot reboot (the partial block is dropped);
 a repeated one is a duplicate and one slightly behind goes backwards (both dropped and counted); an
-interval longer than ``gap_s`` is a gap (the partial block is dropped). A block closes at the first sample with ``t - t0 >= block_s - period / 2``.
+interval longer than ``gap_s`` (and, once the rate is known, than GAP_PERIODS periods) is a gap (the partial
+block is dropped). A block closes at the first sample with ``t - t0 >= block_s - period / 2``.
 
 The rate is 1 / :func:`companion.sources.timing.period_of` of the last 64 intervals, taken at the first
 block close with 8 intervals and re-taken at every close; a change of more than 20 % is reported.
@@ -24,6 +25,10 @@ from companion.sources.timing import BACKWARD, DUPLICATE, OK, RESET, classify_st
 
 RATE_CHANGE = 0.2  # relative change of the rate that restarts the estimators
 MIN_INTERVALS = 8  # intervals before the rate is taken
+#: once the rate is known a gap is an interval longer than ``gap_s`` and than GAP_PERIODS periods: at 2 Hz (a
+#: telemetry stream at its default rate, a PX4 log's vehicle_imu) half the intervals are a little over 0.5 s,
+#: and with ``gap_s`` alone each was a gap that dropped the block: the stream never had a full block
+GAP_PERIODS = 2.5
 
 
 class BlockCutter:
@@ -31,6 +36,7 @@ class BlockCutter:
 
     def __init__(self, block_s: float, reset_s: float, gap_s: float, time_res: float = 0.0):
         self.block_s, self.time_res = float(block_s), time_res
+        self.reset_s, self.gap_s = float(reset_s), float(gap_s)
         # the period is unknown until the first blocks: the configured thresholds stand in for it
         self.rules = step_rules(0.0, time_res, reset_s=reset_s, gap_s=gap_s)
         self.last_t: float | None = None
@@ -43,6 +49,13 @@ class BlockCutter:
 
     def period(self) -> float:
         return 1.0 / self.rate_hz if self.rate_hz else (float(np.median(self.dts)) if self.dts else 0.0)
+
+    def step_rules(self):
+        """The timestamp rules at the current rate (GAP_PERIODS)."""
+        gap = max(self.gap_s, GAP_PERIODS / self.rate_hz) if self.rate_hz else self.gap_s
+        if gap != self.rules.gap_s:
+            self.rules = step_rules(0.0, self.time_res, reset_s=self.reset_s, gap_s=gap)
+        return self.rules
 
     def drop(self) -> None:
         """Forget the partial block (a time discontinuity)."""
@@ -58,7 +71,7 @@ class BlockCutter:
         """
         t = rows[:, 0]
         n = t.shape[0]
-        kinds = classify_steps(t, self.last_t, self.rules)
+        kinds = classify_steps(t, self.last_t, self.step_rules())
         i = 0
         while i < n:
             if self.last_t is not None:
@@ -88,8 +101,11 @@ class BlockCutter:
                     self.dts.extend(np.diff(t[i:end])[-self.dts.maxlen:].tolist())
             self.counts["samples"] += end - i
             self.last_t = float(t[end - 1])
+            rules = self.rules
             yield from self._blocks(rows, i, end)
             i = end
+            if i < n and self.step_rules() is not rules:  # the rate was taken or changed: its gap rule from here
+                kinds[i:] = classify_steps(t[i:], self.last_t, self.rules)
 
     def _blocks(self, rows: np.ndarray, i: int, end: int) -> Iterator[tuple]:
         t = rows[:, 0]
@@ -124,7 +140,7 @@ class BlockCutter:
         n = t.shape[0]
         if n == 0 or self.rate_hz is None or self.last_t is None:
             return 0
-        if classify_steps(t[:1], self.last_t, self.rules)[0] != OK:
+        if classify_steps(t[:1], self.last_t, self.step_rules())[0] != OK:
             return 0
         t0 = float(t[0]) if self._t0 is None else self._t0
         x = self.block_s - 0.5 * self.period()

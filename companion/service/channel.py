@@ -42,6 +42,12 @@ from companion.sources.timing import stamp_resolution
 INT16_MESSAGES = tuple(name for name, lay in IMU_LAYOUTS.items() if lay.dtype["xgyro"].kind == "i")
 COLUMNS = {ax: 1 + i for i, ax in enumerate(GYRO_AXES + ACCEL_AXES)}  # column of each axis in a row
 TEMP_COLUMN = 7  # the IMU temperature (degC, nan where the source has none)
+#: the closed blocks kept for the IMU disagreement test: the last three, and older ones within RECENT_S of the
+#: newest. A pair is tested at the slower stream's instants once MIN_ALIGNED of them are new
+#: (service.imu_group); a stream logged at 2 Hz (a PX4 log's vehicle_imu, a telemetry tlog) has 6 samples in
+#: three 1-s blocks, and with three blocks only it was never compared with its twin
+RECENT_MIN_BLOCKS = 3
+RECENT_S = 12.0
 
 
 class Channel:
@@ -74,7 +80,7 @@ class Channel:
         self.pending_stats: BlockStats | None = None
         self.still_run_s = 0.0
         self.last_stats: BlockStats | None = None  # of the last closed block (motion consensus between IMUs)
-        self.recent: deque = deque(maxlen=3)  # (t, gyro) of the last closed blocks (IMU disagreement)
+        self.recent: deque = deque()  # (t, gyro) of the last closed blocks (IMU disagreement; RECENT_S)
         self._tail: np.ndarray | None = None  # (t, gyro) of the last block's last samples (the spike search)
         self._blocks = {"blocks_still": 0, "blocks_moving": 0, "blocks_fed": 0}
         self.current: dict[str, dict[str, tuple[float, float]]] = {}
@@ -251,6 +257,8 @@ class Channel:
         """Every closed block: remember it (motion consensus, disagreement) and run the per-block detectors."""
         self.last_stats = st
         self.recent.append((data[:, 0].copy(), data[:, 1:4].copy()))
+        while len(self.recent) > RECENT_MIN_BLOCKS and self.recent[0][0][-1] < data[-1, 0] - RECENT_S:
+            self.recent.popleft()
         return self.faults.on_block(st, data[:, 0], still, data[:, 1:4], data[:, 4:7])
 
     def settle(self, data: np.ndarray, st: BlockStats, still: bool) -> tuple[np.ndarray | None, BlockStats | None]:
