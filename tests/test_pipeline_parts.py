@@ -56,7 +56,7 @@ def test_block_cutter_array_path_equals_one_row_path():
 
 
 def test_a_2_hz_stream_with_jitter_has_blocks_not_a_gap_every_other_sample():
-    # telemetry at 2 Hz (a stream's default rate) and a PX4 log's vehicle_imu: intervals of 0.5 s +- a few ms;
+    # telemetry at 2 Hz and a PX4 log's vehicle_imu: intervals of 0.5 s +- a few ms;
     # with the fixed 0.5 s gap threshold half of them were gaps, each dropping the partial block
     rng = np.random.default_rng(1)
     t = 3.0 + np.arange(240) * 0.5 + rng.uniform(-0.01, 0.01, 240)

@@ -231,6 +231,9 @@ def gauss_mean_llr(x: float, sigma: float, delta: float) -> float:
 # --------------------------------------------------------------------------------------------- block statistics
 SPIKE_K = 6.0  # outlier threshold in robust sigmas of the second differences (see spikes.py)
 LOCAL_MIN = 8  # second differences per quarter of a block before the quarter's own scale is used
+#: a block's noise (v2) needs this many samples; a shorter block feeds no reference and no noise, bias,
+#: spikes or rest-stuck test (a stream below 4 Hz in 1-s blocks)
+MIN_NOISE_SAMPLES = 5
 CARRY = 6  # samples of the previous block carried into a block's spike search (a spike's shape and isolation)
 #: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
 #: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
@@ -297,7 +300,7 @@ def block_stats(y: np.ndarray, dd_scale_ref: np.ndarray | None = None, k: float 
     dy = np.abs(np.diff(y, axis=0)) if n > 1 else np.zeros((0, y.shape[1]))
     changes = np.count_nonzero(dy, axis=0)
     step = np.where(changes > 0, np.min(np.where(dy > 0, dy, np.inf), axis=0, initial=np.inf), np.nan)
-    if n < 5:
+    if n < MIN_NOISE_SAMPLES:
         z = np.zeros(y.shape[1])
         return BlockStats(n, mean, rms, np.full(y.shape[1], np.nan), z, z, z, top, top_run, changes, step,
                           spike_size=z, spike_size_solo=z)

@@ -26,7 +26,7 @@ from companion.sources.timing import BACKWARD, DUPLICATE, OK, RESET, classify_st
 RATE_CHANGE = 0.2  # relative change of the rate that restarts the estimators
 MIN_INTERVALS = 8  # intervals before the rate is taken
 #: once the rate is known a gap is an interval longer than ``gap_s`` and than GAP_PERIODS periods: at 2 Hz (a
-#: telemetry stream at its default rate, a PX4 log's vehicle_imu) half the intervals are a little over 0.5 s,
+#: telemetry stream at 2 Hz, a PX4 log's vehicle_imu) half the intervals are a little over 0.5 s,
 #: and with ``gap_s`` alone each was a gap that dropped the block: the stream never had a full block
 GAP_PERIODS = 2.5
 

@@ -27,7 +27,7 @@ import numpy as np
 from companion.estimators import from_state_dict as estimator_from_state, make_estimator
 from companion.health.baseline import check_params, risen_params, rounding_ceiling, supported_params
 from companion.health.detector import DEGRADING, LEARNING, HealthDetector, Transition
-from companion.health.faults import CARRY, FAULT, OK, BlockStats, FaultEvent, block_stats
+from companion.health.faults import CARRY, FAULT, MIN_NOISE_SAMPLES, OK, BlockStats, FaultEvent, block_stats
 from companion.health.monitor import ImuFaults
 from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.service.baseline_match import units_mismatch
@@ -116,6 +116,18 @@ class Channel:
         coded = self.gyro_lsb if self.message in INT16_MESSAGES else None
         return ImuFaults(self.imu, self.cfg.gyro_limit, max(1, int(round(self.cfg.fault_ref_s / self.cfg.block_s))),
                          stamp_res=self.time_res, limits=self.cfg.faults, coded_lsb=coded)
+
+    def too_slow(self) -> str | None:
+        """What a stream too slow for the per-IMU fault tests is watched for, in words; None when it is not."""
+        if not self.rate_hz:
+            return None
+        per_block = int(math.floor(self.cfg.block_s * self.rate_hz + 0.5)) + 1
+        if per_block >= MIN_NOISE_SAMPLES:
+            return None
+        return (f"IMU{self.imu}: at {self.rate_hz:.1f} Hz a {self.cfg.block_s:g}-s block holds {per_block} samples, "
+                f"fewer than the {MIN_NOISE_SAMPLES} the noise, bias, spikes and stuck-at-rest tests need: only a dead "
+                "gyro, a gyro frozen in flight, a disagreement with another IMU and the Allan terms are watched "
+                "(stream it at 4 Hz or more)")
 
     # ------------------------------------------------------------------ rate changes
     def switch_rate(self, new_rate: float, t_block: np.ndarray) -> bool:

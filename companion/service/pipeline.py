@@ -330,6 +330,8 @@ class Pipeline:
                     return
             ch.make_estimators(learning=not self._has_baseline(ch))
             self.log(f"IMU{ch.imu}: {ch.rate_hz:.1f} Hz")
+            if ch.too_slow():
+                self.log(ch.too_slow())
         if ch.rate_hz is None:
             return
         pending, pending_stats = ch.settle(data, st, still)
@@ -522,7 +524,7 @@ class Pipeline:
         for imu, ch in sorted(self.channels.items()):
             row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
                    "health": STATE_NAMES[self.health(ch)], "counts": ch.counts, "axes": {},
-                   "faults": self.fault_texts(ch)}
+                   "faults": self.fault_texts(ch), "notes": [n for n in (ch.too_slow(),) if n]}
             if ch.fast and ch.fed_s > 0:
                 ch.flush()
                 for ax in ch.axes:

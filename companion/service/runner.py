@@ -114,6 +114,8 @@ def summary_lines(pipeline) -> list[str]:
                    f"{c['duplicates']} duplicates")
         for text in r.get("faults") or ():
             out.append(f"  FAULT: {text}")
+        for text in r.get("notes") or ():
+            out.append(f"  note: {text}")
         for ax, d in r["axes"].items():
             out.append(f"  {ax}: " + summary_line(d["terms"], ax, d["baseline"]))
     for t, text in pipeline.transitions:

@@ -1,9 +1,11 @@
-"""Two IMUs logged at very different rates (a PX4 log: sensor_combined at ~220 Hz, vehicle_imu at 2 Hz): the
-disagreement test compares them at the slower stream's instants.
+"""Streams far slower than the IMU: a PX4 log's vehicle_imu at 2 Hz beside sensor_combined at ~220 Hz, a
+telemetry stream at 2 Hz.
 
-Found on a public PX4 log (flight-review-rs' battery_brownout.ulg): the 2 Hz stream was interpolated between
-its snapshots, half a second apart, at the fast stream's instants; in flight that line is no rate, and the
-healthy pair "disagreed" on gyro Y twice."""
+The disagreement test compares two IMUs at the slower stream's instants. Found on a public PX4 log
+(flight-review-rs' battery_brownout.ulg): the 2 Hz stream was interpolated between its snapshots, half a second
+apart, at the fast stream's instants; in flight that line is no rate, and the healthy pair "disagreed" on gyro Y
+twice. Then a 2 Hz stream was never compared at all (too few samples in the recent blocks, and half its
+intervals counted as gaps)."""
 
 from __future__ import annotations
 
@@ -77,3 +79,16 @@ def test_a_biased_imu_logged_at_2_hz_is_named_against_its_200_hz_twin():
         biased = _fly(2.0, seed, bias=15.0 * math.pi / 180.0)
         named = [x for _, x in biased.transitions if "disagree" in x]
         assert any("gyro X disagrees" in x for x in named), biased.transitions
+
+
+
+def test_a_stream_too_slow_for_the_per_imu_tests_is_said_so():
+    # a 1-s block of a 2 Hz stream holds 3 samples, fewer than a block's noise needs: the tests that read it
+    # (noise, bias, spikes, stuck at rest) never learn a reference; the user is told what is watched instead
+    from companion.service.runner import summary_lines
+
+    p = _fly(2.0, 0, seconds=60.0)
+    notes = {r["imu"]: r["notes"] for r in p.summary()}
+    assert notes[0] == [] and len(notes[1]) == 1 and "2.0 Hz a 1-s block holds 3 samples" in notes[1][0], notes
+    assert any(line.startswith("  note: IMU1: at 2.0 Hz") for line in summary_lines(p))
+    assert not [r for r in _fly(10.0, 0, seconds=40.0).summary() if r["notes"]]
