@@ -18,7 +18,7 @@ import pytest
 
 from companion.health.baseline import check_params
 from companion.health.detector import DEGRADING, HEALTHY, HealthDetector, log_ratio_bound
-from companion.health.faults import AxisRef, Observation, block_stats
+from companion.health.faults import REF_MAX_FACTOR, AxisRef, Observation, block_stats
 from companion.health.noise import NoiseDetector, quantized_ceiling, quantized_var
 
 LSB = 1e-3
@@ -50,9 +50,11 @@ def _blocks(rng, n_blocks, sigma, offsets, n=10):
 
 
 def _ref(rng, sigma, offset):
+    """The still reference: 30 blocks and on until it holds faults.NU_REF_MIN dof (170 blocks of 10 samples)."""
     ref = AxisRef()
-    for st in _blocks(rng, 30, sigma, [offset]):
-        ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), int(st.spikes[0]), st.n, 30)
+    for st in _blocks(rng, 30 * REF_MAX_FACTOR, sigma, [offset]):
+        if ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), int(st.spikes[0]), st.n, 30):
+            break
     assert ref.ready
     return ref
 

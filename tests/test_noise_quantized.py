@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import companion.health.noise as noise
-from companion.health.faults import AxisRef, Observation, chi2_llr
+from companion.health.faults import REF_MAX_FACTOR, AxisRef, Observation, chi2_llr
 from companion.health.noise import NoiseDetector, quantized_moments, quantized_var, v2_var
 
 LSB = 1e-3
@@ -48,20 +48,30 @@ def _stats(y):
 
 
 def _run(seed, sigma, n_blocks, fault_at=None, with_samples=True):
-    """Learn the reference on the first 30 blocks, test the rest; (alarms, block of the first alarm after
-    ``fault_at`` counted from it, or None)."""
-    rng = np.random.default_rng(seed)
-    t, y = _blocks(rng, n_blocks, sigma, fault_at)
-    ref, det = AxisRef(), NoiseDetector()
-    alarms, first = 0, None
-    for k in range(n_blocks):
-        st = _stats(y[k])
-        obs = Observation(0, st, t=t[k:k + 1], axis="gx", ref=ref,
-                          y=y[k][:, None] if with_samples else None)
-        if not ref.ready:
+    """Learn the reference (30 blocks and on to faults.NU_REF_MIN dof), then test ``n_blocks`` blocks, the
+    fault from the ``fault_at``-th of them; (alarms, block of the first alarm after the fault counted from it,
+    or None)."""
+    def learned(t, y):
+        ref, det = AxisRef(), NoiseDetector()
+        k = 0
+        while not ref.ready:
+            st = _stats(y[k])
+            obs = Observation(0, st, t=t[k:k + 1], axis="gx", ref=ref, y=y[k][:, None] if with_samples else None)
             det.learn(obs)
             ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), 0, N, 30)
-            continue
+            k += 1
+        return ref, det, k
+
+    total = n_blocks + 30 * REF_MAX_FACTOR
+    _, _, k0 = learned(*_blocks(np.random.default_rng(seed), total, sigma))
+    t, y = _blocks(np.random.default_rng(seed), total, sigma, None if fault_at is None else k0 + fault_at)
+    ref, det, k1 = learned(t, y)  # the same blocks up to the fault: the same reference
+    assert k1 == k0
+    alarms, first = 0, None
+    for k in range(n_blocks):
+        st = _stats(y[k0 + k])
+        obs = Observation(0, st, t=t[k0 + k:k0 + k + 1], axis="gx", ref=ref,
+                          y=y[k0 + k][:, None] if with_samples else None)
         if det.update(obs) and det.state == 1:
             alarms += 1
             if fault_at is not None and k >= fault_at and first is None:
@@ -118,21 +128,25 @@ def test_x2_is_flagged_within_the_llr_bound_and_faster_than_the_ceiling():
     assert np.median(new) <= 0.8 * np.median(old), (new, old)
 
 
-def _park(seed, sigma, off, n_blocks=260):
+def _park(seed, sigma, off, n_blocks=230):
     """The reference learned with the bias at a code's centre, then the bias moved by ``off`` LSB over 20
-    blocks and parked there (a little random walk): the alarms."""
+    blocks and parked there (a little random walk) for ``n_blocks`` blocks after the reference: the alarms."""
     rng = np.random.default_rng(seed)
-    t = np.arange(n_blocks, dtype=float) + 1.0
-    bias = 7.0 + np.clip((t - 30.0) / 20.0, 0.0, 1.0) * off + np.cumsum(0.005 * rng.standard_normal(n_blocks))
-    y = np.round(bias[:, None] + sigma * rng.standard_normal((n_blocks, N))) * LSB
-    ref, det, alarms = AxisRef(), NoiseDetector(), 0
-    for k in range(n_blocks):
-        st = _stats(y[k])
-        obs = Observation(0, st, t=t[k:k + 1], axis="gx", ref=ref, y=y[k][:, None])
+    ref, det, alarms, k, t = AxisRef(), NoiseDetector(), 0, 0, 0.0
+    walk = 0.0
+    while k < n_blocks:
+        t += 1.0
+        walk += 0.005 * rng.standard_normal()
+        bias = 7.0 + (min(k / 20.0, 1.0) * off if ref.ready else 0.0) + walk
+        y = np.round(bias + sigma * rng.standard_normal(N)) * LSB
+        st = _stats(y)
+        obs = Observation(0, st, t=np.array([t]), axis="gx", ref=ref, y=y[:, None])
         if not ref.ready:
             det.learn(obs)
             ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), 0, N, 30)
-        elif det.update(obs) and det.state == 1:
+            continue
+        k += 1
+        if det.update(obs) and det.state == 1:
             alarms += 1
     return alarms
 

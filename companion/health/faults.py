@@ -234,6 +234,15 @@ LOCAL_MIN = 8  # second differences per quarter of a block before the quarter's 
 #: a block's noise (v2) needs this many samples; a shorter block feeds no reference and no noise, bias,
 #: spikes or rest-stuck test (a stream below 4 Hz in 1-s blocks)
 MIN_NOISE_SAMPLES = 5
+#: The fault references are learned over ``ref_blocks`` still blocks and on until the noise they hold has
+#: NU_REF_MIN chi-square degrees of freedom (white second differences; at most REF_MAX_FACTOR x ref_blocks
+#: blocks). A reference below the truth by a factor persists in every test against it: the noise test's CUSUM
+#: (noise.py) drifts up on a healthy gyro once the reference is 22 % low. 30 blocks of 50 Hz hold 756 dof (22 %
+#: is 4.3 standard errors), 30 blocks of 10 Hz 123 (1.7): a healthy copter streamed at 10 Hz was called noisy
+#: 5 times in 48 IMU-hours. With 700 dof at every rate the 10 Hz reference takes about 3 minutes of rest, a 4 Hz
+#: one (5 samples a block) 8.
+NU_REF_MIN = 700.0
+REF_MAX_FACTOR = 16
 CARRY = 6  # samples of the previous block carried into a block's spike search (a spike's shape and isolation)
 #: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
 #: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
@@ -430,6 +439,7 @@ class AxisRef:
     _mu: list | None = None
     _spk: int = 0
     _samples: int = 0
+    _nu_sum: float = 0.0
 
     @property
     def ready(self) -> bool:
@@ -452,8 +462,9 @@ class AxisRef:
         self._mu.append(mean)
         self._spk += int(spikes)
         self._samples += int(n)
+        self._nu_sum += DD_NU_PER_SAMPLE * max(m2, 1.0)
         self.blocks += 1
-        if self.blocks < ref_blocks:
+        if self.blocks < ref_blocks or (self._nu_sum < NU_REF_MIN and self.blocks < REF_MAX_FACTOR * ref_blocks):
             return False
         v = np.asarray(self._v2)
         nu_white = DD_NU_PER_SAMPLE * max(m2, 1.0)
@@ -469,13 +480,15 @@ class AxisRef:
     def state_dict(self) -> dict:
         return {"sigma2": _f(self.sigma2), "nu": _f(self.nu), "sigma2_rest": _f(self.sigma2_rest),
                 "nu_rest": _f(self.nu_rest), "mu": _f(self.mu), "spike_rate": self.spike_rate,
-                "blocks": self.blocks, "v2": self._v2, "means": self._mu, "spk": self._spk, "samples": self._samples}
+                "blocks": self.blocks, "v2": self._v2, "means": self._mu, "spk": self._spk, "samples": self._samples,
+                "nu_sum": self._nu_sum}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.sigma2, self.nu, self.mu = _nan(d.get("sigma2")), _nan(d.get("nu")), _nan(d.get("mu"))
         self.sigma2_rest, self.nu_rest = _nan(d.get("sigma2_rest")), _nan(d.get("nu_rest"))
         self.spike_rate = float(d.get("spike_rate", 0.0))
         self.blocks = int(d.get("blocks", 0))
+        self._nu_sum = float(d.get("nu_sum", 0.0))
         self._v2 = list(d["v2"]) if d.get("v2") is not None else None
         self._mu = list(d["means"]) if d.get("means") is not None else None
         self._spk, self._samples = int(d.get("spk", 0)), int(d.get("samples", 0))

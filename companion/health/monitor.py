@@ -2,7 +2,8 @@
 
 ``ImuFaults.on_block`` runs the checks valid on every block (stuck, spikes, saturation, timing: still or
 moving, armed or not); ``ImuFaults.on_quiet`` the ones valid only on still, settled blocks (noise, bias
-jump/drift, resolution) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them.
+jump/drift, resolution) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them
+(and on, on a slow stream, until they hold faults.NU_REF_MIN degrees of freedom).
 Disagreement lives with the pairs of IMUs (disagreement.py, driven by service/imu_group.py) and the Allan
 rise with detector.py; both feed ``set_external`` so that one code per IMU is reported.
 """
@@ -25,7 +26,7 @@ from companion.health.spikes import SpikeDetector
 from companion.health.stuck import StuckDetector
 from companion.health.timing import TimingDetector
 
-REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detectors
+REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detectors (at least: faults.NU_REF_MIN)
 
 
 class AxisFaults:
