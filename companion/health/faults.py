@@ -239,10 +239,11 @@ MIN_NOISE_SAMPLES = 5
 #: blocks). A reference below the truth by a factor persists in every test against it: the noise test's CUSUM
 #: (noise.py) drifts up on a healthy gyro once the reference is 22 % low. 30 blocks of 50 Hz hold 756 dof (22 %
 #: is 4.3 standard errors), 30 blocks of 10 Hz 123 (1.7): a healthy copter streamed at 10 Hz was called noisy
-#: 5 times in 48 IMU-hours. With 700 dof at every rate the 10 Hz reference takes about 3 minutes of rest, a 4 Hz
-#: one (5 samples a block) 8.
+#: 5 times in 48 IMU-hours. With 700 dof the 10 Hz reference takes about 3 minutes of rest; a 4 Hz one (5 samples
+#: a block, 1.5 dof) stops at the cap, 5 minutes and 370 dof (22 % is 3 standard errors there): a longer blind
+#: start for the tests that need a reference, against false alarms every few hours (3 in 18 IMU-hours at 4 Hz).
 NU_REF_MIN = 700.0
-REF_MAX_FACTOR = 16
+REF_MAX_FACTOR = 8
 CARRY = 6  # samples of the previous block carried into a block's spike search (a spike's shape and isolation)
 #: 1/efficiency of the second-difference variance: var(mean(dd^2)/6) = 3.89 sigma^4 / m for white noise
 #: (autocovariances of dd: 6, -4, 1 sigma^2), i.e. nu = 2 m / 3.89 chi-square degrees of freedom.
