@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from companion.health.faults import REF_MAX_FACTOR, block_stats
+from companion.health.faults import block_stats
 from companion.health.monitor import ImuFaults
 
 LSB = 1e-3  # int16 mrad/s
@@ -19,14 +19,9 @@ def _plane_block(rng, n=11, sigma=0.36 * LSB, level=0.3 * LSB):
     return np.round(rng.normal(level, sigma, (n, 3)) / LSB) * LSB
 
 
-def _learn(f, rng, make, accel=None, blocks=None):
-    """Still blocks until the references are learned (``blocks``: that many instead): 30 and on, at 10 Hz, until
-    they hold faults.NU_REF_MIN degrees of freedom."""
+def _learn(f, rng, make, accel=None, blocks=30):
     t0 = 0.0
-    k = 0
-    while (k < blocks) if blocks is not None else not all(a.ref.ready for a in f.axes.values()):
-        assert k < 30 * REF_MAX_FACTOR
-        k += 1
+    for _ in range(blocks):
         y = make(rng)
         st = block_stats(y, f.dd_scale_ref())
         a = None if accel is None else accel(rng, y.shape[0])

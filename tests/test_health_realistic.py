@@ -50,12 +50,13 @@ def _blocks(rng, n_blocks, sigma, offsets, n=10):
 
 
 def _ref(rng, sigma, offset):
-    """The still reference: 30 blocks and on until it holds faults.NU_REF_MIN dof (170 blocks of 10 samples)."""
+    """The still reference, its noise level to faults.NU_REF_MIN dof (170 blocks of 10 samples)."""
     ref = AxisRef()
     for st in _blocks(rng, 30 * REF_MAX_FACTOR, sigma, [offset]):
-        if ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), int(st.spikes[0]), st.n, 30):
+        ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), int(st.spikes[0]), st.n, 30)
+        if ref.noise_ready:
             break
-    assert ref.ready
+    assert ref.ready and ref.noise_ready
     return ref
 
 

@@ -48,13 +48,13 @@ def _stats(y):
 
 
 def _run(seed, sigma, n_blocks, fault_at=None, with_samples=True):
-    """Learn the reference (30 blocks and on to faults.NU_REF_MIN dof), then test ``n_blocks`` blocks, the
+    """Learn the reference (the noise level: 30 blocks and on to faults.NU_REF_MIN dof), then test ``n_blocks`` blocks, the
     fault from the ``fault_at``-th of them; (alarms, block of the first alarm after the fault counted from it,
     or None)."""
     def learned(t, y):
         ref, det = AxisRef(), NoiseDetector()
         k = 0
-        while not ref.ready:
+        while not ref.noise_ready:
             st = _stats(y[k])
             obs = Observation(0, st, t=t[k:k + 1], axis="gx", ref=ref, y=y[k][:, None] if with_samples else None)
             det.learn(obs)
@@ -137,11 +137,11 @@ def _park(seed, sigma, off, n_blocks=230):
     while k < n_blocks:
         t += 1.0
         walk += 0.005 * rng.standard_normal()
-        bias = 7.0 + (min(k / 20.0, 1.0) * off if ref.ready else 0.0) + walk
+        bias = 7.0 + (min(k / 20.0, 1.0) * off if ref.noise_ready else 0.0) + walk
         y = np.round(bias + sigma * rng.standard_normal(N)) * LSB
         st = _stats(y)
         obs = Observation(0, st, t=np.array([t]), axis="gx", ref=ref, y=y[:, None])
-        if not ref.ready:
+        if not ref.noise_ready:
             det.learn(obs)
             ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), 0, N, 30)
             continue

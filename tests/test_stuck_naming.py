@@ -299,7 +299,7 @@ def test_nearly_white_codes_count_as_independent_samples():
     # sample is an independent one; the share is read from the same still samples as their spread
     rng = np.random.default_rng(2)
     refs, dets = [AxisRef() for _ in AXES], [StuckDetector(LSB) for _ in AXES]
-    for _ in range(600):  # the reference takes ~170 of them (faults.NU_REF_MIN), the spread the rest
+    for _ in range(400):
         y = np.round(0.2 + rng.normal(0.0, 0.36, (10, 3))) * LSB
         scale = np.array([math.sqrt(6 * r.sigma2) for r in refs]) if all(r.ready for r in refs) else None
         st = block_stats(y, scale)

@@ -234,14 +234,14 @@ LOCAL_MIN = 8  # second differences per quarter of a block before the quarter's 
 #: a block's noise (v2) needs this many samples; a shorter block feeds no reference and no noise, bias,
 #: spikes or rest-stuck test (a stream below 4 Hz in 1-s blocks)
 MIN_NOISE_SAMPLES = 5
-#: The fault references are learned over ``ref_blocks`` still blocks and on until the noise they hold has
-#: NU_REF_MIN chi-square degrees of freedom (white second differences; at most REF_MAX_FACTOR x ref_blocks
-#: blocks). A reference below the truth by a factor persists in every test against it: the noise test's CUSUM
-#: (noise.py) drifts up on a healthy gyro once the reference is 22 % low. 30 blocks of 50 Hz hold 756 dof (22 %
-#: is 4.3 standard errors), 30 blocks of 10 Hz 123 (1.7): a healthy copter streamed at 10 Hz was called noisy
-#: 5 times in 48 IMU-hours. With 700 dof the 10 Hz reference takes about 3 minutes of rest; a 4 Hz one (5 samples
-#: a block, 1.5 dof) stops at the cap, 5 minutes and 370 dof (22 % is 3 standard errors there): a longer blind
-#: start for the tests that need a reference, against false alarms every few hours (3 in 18 IMU-hours at 4 Hz).
+#: The noise test's level is learned from the reference's blocks and on until they hold NU_REF_MIN chi-square
+#: degrees of freedom (white second differences; at most REF_MAX_FACTOR x ref_blocks blocks); the other tests
+#: start from the reference of ref_blocks as before. A level below the truth by a factor persists in every test
+#: against it: the noise test's CUSUM (noise.py) drifts up on a healthy gyro once it is 22 % low. 30 blocks of
+#: 50 Hz hold 756 dof (22 % is 4.3 standard errors), 30 blocks of 10 Hz 123 (1.7): a healthy copter streamed at
+#: 10 Hz was called noisy 5 times in 48 IMU-hours, at 4 Hz 3 times in 18. With 700 dof the 10 Hz level takes
+#: about 3 minutes of rest; a 4 Hz one (5 samples a block, 1.5 dof) stops at the cap, 5 minutes and 370 dof (22 %
+#: is 3 standard errors there).
 NU_REF_MIN = 700.0
 REF_MAX_FACTOR = 8
 CARRY = 6  # samples of the previous block carried into a block's spike search (a spike's shape and isolation)
@@ -436,6 +436,8 @@ class AxisRef:
     mu: float = math.nan
     spike_rate: float = 0.0
     blocks: int = 0
+    noise_sigma2: float = math.nan  # the noise test's level: these blocks and on to NU_REF_MIN dof
+    noise_nu: float = math.nan
     _v2: list | None = None
     _mu: list | None = None
     _spk: int = 0
@@ -447,6 +449,11 @@ class AxisRef:
         return math.isfinite(self.sigma2)
 
     @property
+    def noise_ready(self) -> bool:
+        """The noise test's level is learned (with the reference from 50 Hz up, up to minutes later below)."""
+        return math.isfinite(self.noise_sigma2)
+
+    @property
     def rest(self) -> "RestLevel":
         """The rest level (knocks left out); the plain level for a reference saved without one."""
         if math.isfinite(self.sigma2_rest):
@@ -454,35 +461,44 @@ class AxisRef:
         return RestLevel(self.sigma2, self.nu)
 
     def add(self, v2: float, m2: float, mean: float, spikes: int, n: int, ref_blocks: int) -> bool:
-        """Add one quiet block; returns True when the reference becomes ready."""
-        if self.ready or not math.isfinite(v2):
+        """Add one quiet block; returns True when the reference becomes ready. Once it is, blocks still go to
+        the noise test's level until that holds NU_REF_MIN dof (noise_ready)."""
+        if self.noise_ready or not math.isfinite(v2):
             return False
+        nu_white = DD_NU_PER_SAMPLE * max(m2, 1.0)
+        self._nu_sum += nu_white
         if self._v2 is None:
             self._v2, self._mu = [], []
         self._v2.append(v2)
+        if self.ready:
+            if self._nu_sum >= NU_REF_MIN or len(self._v2) >= REF_MAX_FACTOR * ref_blocks:
+                self.noise_sigma2, self.noise_nu = _pooled(np.asarray(self._v2), nu_white)
+                self._v2 = None
+            return False
         self._mu.append(mean)
         self._spk += int(spikes)
         self._samples += int(n)
-        self._nu_sum += DD_NU_PER_SAMPLE * max(m2, 1.0)
         self.blocks += 1
-        if self.blocks < ref_blocks or (self._nu_sum < NU_REF_MIN and self.blocks < REF_MAX_FACTOR * ref_blocks):
+        if self.blocks < ref_blocks:
             return False
         v = np.asarray(self._v2)
-        nu_white = DD_NU_PER_SAMPLE * max(m2, 1.0)
         self.sigma2, self.nu = _pooled(v, nu_white)
         med = float(np.median(v))
         rest = v[v <= KNOCK * med] if med > 0 else v
         self.sigma2_rest, self.nu_rest = _pooled(rest, nu_white) if rest.size >= 2 else (self.sigma2, self.nu)
         self.mu = float(np.mean(self._mu))
         self.spike_rate = self._spk / max(self._samples, 1)
-        self._v2 = self._mu = None
+        self._mu = None
+        if self._nu_sum >= NU_REF_MIN:
+            self.noise_sigma2, self.noise_nu = self.sigma2, self.nu
+            self._v2 = None
         return True
 
     def state_dict(self) -> dict:
         return {"sigma2": _f(self.sigma2), "nu": _f(self.nu), "sigma2_rest": _f(self.sigma2_rest),
                 "nu_rest": _f(self.nu_rest), "mu": _f(self.mu), "spike_rate": self.spike_rate,
                 "blocks": self.blocks, "v2": self._v2, "means": self._mu, "spk": self._spk, "samples": self._samples,
-                "nu_sum": self._nu_sum}
+                "noise_sigma2": _f(self.noise_sigma2), "noise_nu": _f(self.noise_nu), "nu_sum": self._nu_sum}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.sigma2, self.nu, self.mu = _nan(d.get("sigma2")), _nan(d.get("nu")), _nan(d.get("mu"))
@@ -493,6 +509,10 @@ class AxisRef:
         self._v2 = list(d["v2"]) if d.get("v2") is not None else None
         self._mu = list(d["means"]) if d.get("means") is not None else None
         self._spk, self._samples = int(d.get("spk", 0)), int(d.get("samples", 0))
+        if "noise_sigma2" in d:
+            self.noise_sigma2, self.noise_nu = _nan(d.get("noise_sigma2")), _nan(d.get("noise_nu"))
+        else:  # saved before the noise level was kept apart: the reference's, as then
+            self.noise_sigma2, self.noise_nu = self.sigma2, self.nu
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 ``ImuFaults.on_block`` runs the checks valid on every block (stuck, spikes, saturation, timing: still or
 moving, armed or not); ``ImuFaults.on_quiet`` the ones valid only on still, settled blocks (noise, bias
 jump/drift, resolution) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them
-(and on, on a slow stream, until they hold faults.NU_REF_MIN degrees of freedom).
+(the noise test's level on, on a slow stream, until it holds faults.NU_REF_MIN degrees of freedom).
 Disagreement lives with the pairs of IMUs (disagreement.py, driven by service/imu_group.py) and the Allan
 rise with detector.py; both feed ``set_external`` so that one code per IMU is reported.
 """
@@ -26,7 +26,7 @@ from companion.health.spikes import SpikeDetector
 from companion.health.stuck import StuckDetector
 from companion.health.timing import TimingDetector
 
-REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detectors (at least: faults.NU_REF_MIN)
+REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detectors
 
 
 class AxisFaults:
@@ -161,6 +161,10 @@ class ImuFaults:
                 continue
             if af.stuck.state == FAULT:
                 continue
+            if not af.ref.noise_ready and af.spikes.state == OK:  # the noise test's level goes on (slow streams)
+                af.noise.learn(obs.at(ax, af.ref))
+                af.ref.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n,
+                           self.ref_blocks)
             o = obs.at(ax, af.ref, extra_var=(extra_var or {}).get(ax, 0.0))
             for det in af.quiet:
                 ev += det.update(o)

@@ -348,7 +348,7 @@ class NoiseDetector:
         step = float(obs.stats.step[obs.col]) if obs.stats.step is not None else math.nan
         if math.isfinite(step) and step > 0.0 and self.cusum.state == OK:
             self.lsb = min(self.lsb, step)
-        if not self._built and obs.ref is not None and obs.ref.ready:
+        if not self._built and obs.ref is not None and obs.ref.noise_ready:
             self._build()
         return [obs.event(self.kind, self.state, self.value)] if self._step(obs) else []
 
@@ -376,7 +376,7 @@ class NoiseDetector:
                 mean, nu = self.model.moments(b, sb2, float(obs.stats.m2[j]), y.shape[0], floor=not tracked)
                 return mean * self.lsb * self.lsb, nu
             self.track = None
-        return self.reference_var(ref.sigma2), ref.nu
+        return self.reference_var(ref.noise_sigma2), ref.noise_nu
 
     def _follow(self, a: float, r: float, t: float) -> tuple[float, float, bool]:
         """The bias' offset (LSB, unfolded) and its variance from this block's mean ``a`` (variance ``r``) and
@@ -398,7 +398,7 @@ class NoiseDetector:
 
     def _step(self, obs: Observation) -> bool:
         ref, v2 = obs.ref, float(obs.stats.v2[obs.col])
-        if not (ref.ready and ref.sigma2 > 0 and math.isfinite(v2)):
+        if not (ref.noise_ready and ref.noise_sigma2 > 0 and math.isfinite(v2)):
             return False
         v0, nu = self.expected(obs)
         u = v2 / v0
