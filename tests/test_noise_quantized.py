@@ -13,7 +13,6 @@ drifting across the code grid (a random walk plus a sweep of 0.003 LSB/s: severa
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -21,6 +20,7 @@ import pytest
 import companion.health.noise as noise
 from companion.health.faults import REF_MAX_FACTOR, AxisRef, Observation, chi2_llr
 from companion.health.noise import NoiseDetector, quantized_moments, quantized_var, v2_var
+from noise_blocks import learn_or_test, one_axis_stats as _stats
 
 LSB = 1e-3
 N = 10  # samples per block (1 s at 10 Hz)
@@ -38,27 +38,17 @@ def _blocks(rng, n_blocks, sigma, fault_at=None, factor=2.0, q=0.002, sweep=0.00
     return t, y
 
 
-def _stats(y):
-    """The BlockStats fields the noise test reads, for one axis (gx) of one block."""
-    dd = y[2:] - 2.0 * y[1:-1] + y[:-2]
-    dy = np.abs(np.diff(y))
-    step = float(dy[dy > 0].min()) if np.any(dy > 0) else math.nan
-    return SimpleNamespace(n=y.size, v2=np.array([np.mean(dd * dd) / 6.0]), m2=np.array([float(dd.size)]),
-                           mean=np.array([y.mean()]), step=np.array([step]))
-
-
 def _run(seed, sigma, n_blocks, fault_at=None, with_samples=True):
-    """Learn the reference (the noise level: 30 blocks and on to faults.NU_REF_MIN dof), then test ``n_blocks`` blocks, the
-    fault from the ``fault_at``-th of them; (alarms, block of the first alarm after the fault counted from it,
-    or None)."""
+    """Learn the reference (the noise level: 30 blocks and on to faults.NU_REF_MIN dof), then test ``n_blocks``
+    blocks, the fault from the ``fault_at``-th of them; (alarms, block of the first alarm after the fault counted
+    from it, or None)."""
     def learned(t, y):
         ref, det = AxisRef(), NoiseDetector()
         k = 0
         while not ref.noise_ready:
-            st = _stats(y[k])
-            obs = Observation(0, st, t=t[k:k + 1], axis="gx", ref=ref, y=y[k][:, None] if with_samples else None)
-            det.learn(obs)
-            ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), 0, N, 30)
+            obs = Observation(0, _stats(y[k]), t=t[k:k + 1], axis="gx", ref=ref,
+                              y=y[k][:, None] if with_samples else None)
+            learn_or_test(ref, det, obs)
             k += 1
         return ref, det, k
 
@@ -139,15 +129,11 @@ def _park(seed, sigma, off, n_blocks=230):
         walk += 0.005 * rng.standard_normal()
         bias = 7.0 + (min(k / 20.0, 1.0) * off if ref.noise_ready else 0.0) + walk
         y = np.round(bias + sigma * rng.standard_normal(N)) * LSB
-        st = _stats(y)
-        obs = Observation(0, st, t=np.array([t]), axis="gx", ref=ref, y=y[:, None])
-        if not ref.noise_ready:
-            det.learn(obs)
-            ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), 0, N, 30)
+        alarm = learn_or_test(ref, det, Observation(0, _stats(y), t=np.array([t]), axis="gx", ref=ref, y=y[:, None]))
+        if alarm is None:
             continue
         k += 1
-        if det.update(obs) and det.state == 1:
-            alarms += 1
+        alarms += alarm
     return alarms
 
 

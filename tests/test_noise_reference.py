@@ -10,23 +10,15 @@ reference). Float white noise here (the plain reference, no rounding)."""
 from __future__ import annotations
 
 import json
-import math
-from types import SimpleNamespace
 
 import numpy as np
 
 import companion.health.faults as faults
 from companion.health.faults import NU_REF_MIN, AxisRef, Observation
 from companion.health.noise import NoiseDetector
+from noise_blocks import learn_or_test, one_axis_stats as _stats
 
 SIGMA = 3e-3  # rad/s: white, float (no code grid)
-
-
-def _stats(y):
-    dd = y[2:] - 2.0 * y[1:-1] + y[:-2]
-    dy = np.abs(np.diff(y))
-    return SimpleNamespace(n=y.size, v2=np.array([np.mean(dd * dd) / 6.0]), m2=np.array([float(dd.size)]),
-                           mean=np.array([y.mean()]), step=np.array([float(dy[dy > 0].min())]))
 
 
 def _run(seed, n, blocks, ref_scale=1.0, fault_at=None, factor=2.0):
@@ -38,14 +30,12 @@ def _run(seed, n, blocks, ref_scale=1.0, fault_at=None, factor=2.0):
     while k < blocks:
         s = SIGMA * (ref_scale if not ref.noise_ready else factor if fault_at is not None and k >= fault_at else 1.0)
         y = s * rng.standard_normal(n)
-        st = _stats(y)
-        obs = Observation(0, st, t=np.array([k + 1.0]), axis="gx", ref=ref, y=y[:, None])
-        if not ref.noise_ready:
-            det.learn(obs)
-            ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), 0, n, 30)
+        alarm = learn_or_test(ref, det, Observation(0, _stats(y), t=np.array([k + 1.0]), axis="gx", ref=ref,
+                                                    y=y[:, None]))
+        if alarm is None:
             continue
         k += 1
-        if det.update(obs) and det.state == 1:
+        if alarm:
             alarms += 1
             if fault_at is not None and first is None and k > fault_at:
                 first = k - fault_at

@@ -151,20 +151,16 @@ class ImuFaults:
         obs = self.observe(st, t)
         obs.y = y
         for j, (ax, af) in enumerate(self.axes.items()):
-            if not af.ref.ready:
-                if af.stuck.state == OK and af.spikes.state == OK:
-                    af.noise.learn(obs.at(ax, af.ref))
-                    af.ref.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n,
-                               self.ref_blocks)
-                    # the bias wander of the reference period counts too; its temperature is the model's origin
-                    af.bias.add_reference(float(st.mean[j]), float(st.temperature))
-                continue
-            if af.stuck.state == FAULT:
-                continue
-            if not af.ref.noise_ready and af.spikes.state == OK:  # the noise test's level goes on (slow streams)
+            learning = not af.ref.ready
+            # the reference's blocks, and on for the noise test's level until it holds NU_REF_MIN dof (slow streams)
+            if not af.ref.noise_ready and af.stuck.state == OK and af.spikes.state == OK:
                 af.noise.learn(obs.at(ax, af.ref))
                 af.ref.add(float(st.v2[j]), float(st.m2[j]), float(st.mean[j]), int(st.spikes[j]), st.n,
                            self.ref_blocks)
+                if learning:  # the bias wander of the reference period counts too; its temperature is the origin
+                    af.bias.add_reference(float(st.mean[j]), float(st.temperature))
+            if learning or af.stuck.state == FAULT:
+                continue
             o = obs.at(ax, af.ref, extra_var=(extra_var or {}).get(ax, 0.0))
             for det in af.quiet:
                 ev += det.update(o)

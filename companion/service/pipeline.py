@@ -330,8 +330,9 @@ class Pipeline:
                     return
             ch.make_estimators(learning=not self._has_baseline(ch))
             self.log(f"IMU{ch.imu}: {ch.rate_hz:.1f} Hz")
-            if ch.too_slow():
-                self.log(ch.too_slow())
+            slow = ch.too_slow()
+            if slow:
+                self.log(slow)
         if ch.rate_hz is None:
             return
         pending, pending_stats = ch.settle(data, st, still)
