@@ -80,6 +80,21 @@ def test_period_of_ms_stamped_streams_and_lost_samples():
     assert np.isnan(period_of([], 1e-3))
 
 
+def test_period_of_late_messages_split_a_period_without_biasing_it():
+    """A telemetry stream at 2 Hz whose late messages split one period into 0.12 + 0.88 s or 0.22 + 0.78 s
+    (the shared ArduSub tlog): the short part alone was kept and took the rate 3 % high on 64 intervals."""
+    from companion.sources.timing import period_of
+
+    rng = np.random.default_rng(3)
+    for seed in range(20):
+        t = 10.0 + np.arange(400) * 0.5 + rng.normal(0, 2e-4, 400)
+        late = rng.choice(np.arange(5, 395), 6, replace=False)
+        t[late] += rng.uniform(0.25, 0.4, late.size)  # a message held back by a quarter to 0.4 s
+        d = np.diff(t)
+        assert 1.0 / period_of(d[:64]) == pytest.approx(2.0, rel=2e-3)
+        assert 1.0 / period_of(d) == pytest.approx(2.0, rel=1e-3)
+
+
 def _messy(rng, n, period, res):
     """Timestamps with duplicates, small steps back, gaps, long gaps and a reboot, stamped at ``res``."""
     t = 5.0 + np.arange(n) * period + rng.normal(0, 0.05 * period, n)
