@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
@@ -92,3 +93,31 @@ def test_a_stream_too_slow_for_the_per_imu_tests_is_said_so():
     assert notes[0] == [] and len(notes[1]) == 1 and "2.0 Hz a 1-s block holds 3 samples" in notes[1][0], notes
     assert any(line.startswith("  note: IMU1: at 2.0 Hz") for line in summary_lines(p))
     assert not [r for r in _fly(10.0, 0, seconds=40.0).summary() if r["notes"]]
+
+
+def test_a_still_2_hz_stream_with_jitter_is_one_record_for_the_estimators():
+    # consecutive 1-s blocks of a 2 Hz stream are one period (0.5 s) apart, which was also the junction
+    # threshold (half a block): timestamp jitter made every other pair of blocks a junction, the estimators
+    # saw pieces of a few seconds and the shared ArduSub tlog's z axis a bias instability from tau <= 4 s.
+    # Late messages (a period split into 0.1-0.4 s + the rest) took the rate 3 % high.
+    n_true = 3e-4  # rad/s/sqrt(Hz): white rate noise of std N sqrt(fs) at 2 Hz
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        t = 5.0 + np.arange(800) * 0.5 + rng.normal(0.0, 3e-4, 800)
+        late = rng.choice(np.arange(10, 790), 8, replace=False)
+        t[late] += rng.uniform(0.1, 0.4, late.size)
+        w = rng.normal(0.0, n_true * math.sqrt(2.0), (t.size, 3))
+        a = G + rng.normal(0.0, 0.02, (t.size, 3))
+        p = Pipeline(PipelineConfig(), Reporter(RecordingSink(), 1.0))
+        key = StreamKey(1, 1, "HIGHRES_IMU", 0)
+        for s0 in np.arange(5.0, 405.0, 1.0):
+            sel = (t >= s0) & (t < s0 + 1.0)
+            p.on_samples(key, t[sel], w[sel], a[sel])
+        ch = p.channels[0]
+        assert ch.rate_hz == pytest.approx(2.0, rel=2e-3)
+        for ax in ("gx", "gy", "gz"):
+            assert len(ch.fast[ax].segments()) == 1, ch.fast[ax].segments()
+            terms = {x["effect"]: x for x in p.final_terms(ch, ax)}
+            # about 750 samples: N's relative sd about 3 %; 4 sd
+            assert terms["white_noise"]["N"] == pytest.approx(n_true, rel=0.12)
+            assert terms["bias_instability"]["bound"], terms["bias_instability"]

@@ -52,7 +52,10 @@ class BlockCutter:
 
     def step_rules(self):
         """The timestamp rules at the current rate (GAP_PERIODS)."""
-        gap = max(self.gap_s, GAP_PERIODS / self.rate_hz) if self.rate_hz else self.gap_s
+        # before the rate is taken, the median interval so far stands in for the period: at 2 Hz half the
+        # intervals exceed a gap_s of 0.5 s by a few ms, and the first blocks were gaps until 8 intervals were in
+        period = 1.0 / self.rate_hz if self.rate_hz else (float(np.median(self.dts)) if self.dts else 0.0)
+        gap = max(self.gap_s, GAP_PERIODS * period)
         if gap != self.rules.gap_s:
             self.rules = step_rules(0.0, self.time_res, reset_s=self.reset_s, gap_s=gap)
         return self.rules

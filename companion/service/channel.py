@@ -298,9 +298,12 @@ class Channel:
         takes :meth:`learned_terms`)."""
         self._blocks["blocks_fed"] += 1
         # a block between this one and the last fed one was not fed (moving, settling, a gap): the junction
-        # is at least half a block long; consecutive fed blocks are one sample period apart
+        # is longer than a block less half a period; consecutive fed blocks are one sample period apart (two
+        # where a sample was lost). Half a block alone is one period at 2 Hz, where jitter made every other
+        # pair of blocks a junction and the estimators lost every cluster time beyond a few seconds
         t0 = float(data[0, 0])
-        if self._junction or (self._fed_end_t is not None and t0 - self._fed_end_t > 0.5 * self.cfg.block_s):
+        joined = 0.5 * self.cfg.block_s + 1.5 / self.rate_hz
+        if self._junction or (self._fed_end_t is not None and t0 - self._fed_end_t > joined):
             self._junctions.add(len(self._queue))
         self._junction = False
         self._fed_end_t = float(data[-1, 0])

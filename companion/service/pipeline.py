@@ -58,6 +58,23 @@ STATE_FORMAT = "companion-run-state"
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
 CONFIRM_BLOCKS = 3  # still blocks after a bias jump is flagged before its size is confirmed
 OFF_RATE_BLOCKS = 3  # consecutive blocks at one new rate before the channel switches to it
+FEW_INTERVALS = 8  # a block with fewer intervals (a stream below 8 Hz) is off rate only when every one is
+
+
+def block_off_rate(d: np.ndarray, rate_hz: float, resolution: float = 0.0) -> float | None:
+    """The rate of a block with intervals ``d`` when it is off the stream's ``rate_hz`` by more than
+    RATE_CHANGE, else None. A block of a slow stream holds two or three intervals, and one late message splits
+    a period into a short and a long interval (a 2 Hz telemetry stream: 0.13 + 0.87 s) that no period rule
+    reads on its own: such a block is off rate only when all its intervals are off the period, the same way
+    (a stream requested at another rate); the blocks held back for it cost the estimators their long taus."""
+    p = period_of(d, resolution)
+    if not (p > 0) or abs(1.0 / (p * rate_hz) - 1.0) <= RATE_CHANGE:
+        return None
+    if d.shape[0] < FEW_INTERVALS:
+        k = d * rate_hz  # the intervals in periods of the stream
+        if not (np.all(k < 1.0 / (1.0 + RATE_CHANGE)) or np.all(k > 1.0 + RATE_CHANGE)):
+            return None
+    return 1.0 / p
 
 
 class Pipeline:
@@ -288,11 +305,10 @@ class Pipeline:
             return rate_event == "changed"
         if ch.rate_hz is None or data.shape[0] < 3:
             return False
-        p = period_of(np.diff(data[:, 0]), ch.time_res)
-        if not (p > 0) or abs(1.0 / (p * ch.rate_hz) - 1.0) <= RATE_CHANGE:
+        r = block_off_rate(np.diff(data[:, 0]), ch.rate_hz, ch.time_res)
+        if r is None:
             ch.off_rate = []
             return False
-        r = 1.0 / p
         if ch.off_rate and abs(r / ch.off_rate[-1] - 1.0) > RATE_CHANGE:
             ch.off_rate = []
         ch.off_rate.append(r)
