@@ -380,6 +380,7 @@ def run_draws(args):
     names = {"N": "white_noise", "B": "bias_instability", "K": "random_walk"}
     found = {p: 0 for p in names}
     inside = {p: 0 for p in names}
+    zero = {p: 0 for p in names}  # found, but the interval reaches 0: `companion analyze` reports its bound
     held = {p: [0, 0, 0] for p in names}  # missing terms: count, fit's / report rule's bound above the truth
     missing = []
     strong = {p: [0, 0, 0] for p in names}  # draws with lambda >= 9: count, found, covered
@@ -438,6 +439,7 @@ def run_draws(args):
             found[p] += 1
             strong[p][1] += lam >= 9.0
             lo, hi = t["ci95"][p]
+            zero[p] += not lo > 0
             inside[p] += lo <= truth[p] <= hi
             strong[p][2] += lam >= 9.0 and lo <= truth[p] <= hi
             (det if ok else undet)[p][1] += 1
@@ -454,6 +456,7 @@ def run_draws(args):
         print(f"  {p}: found {found[p]}/{draws}, 95 % interval covers the truth in {inside[p]}/{draws} "
               f"({100 * inside[p] / draws:.0f} %); where its expected evidence lambda >= 9: found "
               f"{strong[p][1]}/{strong[p][0]}, covers {strong[p][2]}/{strong[p][0]}"
+              + (f"; found with an interval reaching 0 (analyze: a bound) in {zero[p]}" if zero[p] else "")
               + (f"; left out in {held[p][0]}, its 95 % upper bound above the truth in {held[p][1]} "
                  f"(the online report's rule: {held[p][2]})" if held[p][0] else ""))
         dd, uu = det[p], undet[p]

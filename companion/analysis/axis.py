@@ -11,6 +11,7 @@ from companion.allan.adev import cluster_sizes
 from companion.allan.confidence import adev_ci, edf_model, edf_simple
 from companion.allan.lsb import lsb_report
 from companion.allan.pooled import pooled_cluster_sizes, pooled_edf, pooled_oavar
+from companion.allan.terms import LINEAR_PARAM
 from companion.analysis.limits import FIT_MIN_RATE_HZ, fast_enough
 from companion.analysis.taus import parse_taus
 
@@ -106,11 +107,24 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     if any(t.get("bound") for t in terms):
         bounds = [x for x in bounds if x["effect"] != "white_noise"] + [t for t in terms if t.get("bound")]
         terms = [t for t in terms if not t.get("bound")]
+    # a selected term whose interval (the selection envelope included) reaches 0 is not told from the others:
+    # its bound (the interval's upper end), as the online report gives it; the model keeps it (drawn)
+    unsure = [t for t in terms if t["effect"] in LINEAR_PARAM and t["effect"] != "white_noise"
+              and not t.get("ci95", {}).get(LINEAR_PARAM[t["effect"]], [1.0])[0] > 0]
+    for t in unsure:
+        par = LINEAR_PARAM[t["effect"]]
+        top = float(t["ci95"][par][1])
+        bounds = [x for x in bounds if x["effect"] != t["effect"]]
+        bounds.append({"effect": t["effect"], par: top, "std": dict(t.get("std", {})), "ci95": {par: [0.0, top]},
+                       "bound": True, "selected": True})
+        notes.append(f"{par} ({t['effect']}) is in the fitted model but its 95 % interval reaches 0: reported as "
+                     "its upper bound")
+    terms = [t for t in terms if t not in unsure]
     out.update(tau=tau.tolist(), adev=adev.tolist(), adev_lo=lo.tolist(), adev_hi=hi.tolist(),
                terms=terms, bounds=bounds, edf=edf.tolist(),
                # terms the record is too short to resolve but the fit kept in its model (reported as bounds):
                # the plot draws them, so that the sum it shows is the model N was fitted with
-               unresolved=[{k: v for k, v in t.items() if k != "ci95"} for t in fit.nuisance],
+               unresolved=[{k: v for k, v in t.items() if k != "ci95"} for t in list(fit.nuisance) + unsure],
                fit={"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
                     "model_error": fit.model_error, "tau_min": float(tau_f[keep][0]) if keep.any() else None,
                     "filter": fit.filter,

@@ -12,11 +12,13 @@ A correlated term the data show is therefore in the model, and its power does no
 
 Report. For every linear candidate (Q, N, B, K, R):
 
-- *resolved*: the term is in the selected model and the lower end of its 95 % interval is above 0:
+- *resolved*: the term is in the selected model and the lower end of its 95 % interval (the selection
+  envelope below included) is above 0:
   ``{"effect", p: value, "std": {p: 1-sigma}, "ci95": {p: [lo, hi]}, "bound": False}``;
 - otherwise a one-sided 95 % *upper bound*: the term is added to the selected model, the GLS is solved
   with theta = p^2 >= 0, and ``ub^2 = max(theta, 0) + 1.645 sd(theta)`` (sd from the inverse Fisher
-  information of the GLS; at theta = 0 the marginal with theta freed):
+  information of the GLS; at theta = 0 the marginal with theta freed; for a selected term whose interval
+  reaches 0, at least the interval's upper end, and ``"selected": True``):
   ``{"effect", p: ub, "std": {p: ...}, "ci95": {p: [0, ub]}, "bound": True}``.
 
 A bias instability or random walk the record is too short to resolve (fit_avar's record rule) stays in the
@@ -211,15 +213,20 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     # (solved only when that model has more terms: the selected one with N, B and K in is the same model)
     sup = [x for x in LINEAR_EFFECTS if x in mod or (x in BASE_EFFECTS and x in candidates)]
     forced = forced_intervals(prob, sup, st.nonlin, tau, st.white, level) if set(sup) != set(mod) else {}
-    resolved = {}
+    resolved, unsure = {}, {}
     for j, e in enumerate(st.linear):
         if theta[j] <= 0:
             continue
         lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
+        if e in forced:
+            lo, hi = min(lo, forced[e][0]), max(hi, forced[e][1])
+        # resolved only when the envelope, too, stays clear of 0: a term whose interval reaches 0 in the model
+        # with N, B and K in is not told from the others; it stays in the model and its bound (at least the
+        # envelope's upper end) is reported
+        if lo <= 0 < theta[j]:
+            unsure[e] = hi
         if lo > 0:
             p = LINEAR_PARAM[e]
-            if e in forced:
-                lo, hi = min(lo, forced[e][0]), max(hi, forced[e][1])
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
             if e == "white_noise" and st.white:
                 # N and a cut-off found in the data are correlated: N's profile interval over it (and over the
@@ -246,10 +253,12 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
         i = lin.index(e)
         var = _marginal_var(prob, A2, th2, i)
         th_i = max(float(th2[i]), 0.0)
-        ub = th_i + Z_UPPER * math.sqrt(max(var, 0.0))
+        ub = max(th_i + Z_UPPER * math.sqrt(max(var, 0.0)), unsure.get(e, 0.0))
         ub_p = math.sqrt(ub * scale)
         sd_p = math.sqrt((th_i + math.sqrt(max(var, 0.0))) * scale) - math.sqrt(th_i * scale)
         out.append({"effect": e, p: ub_p, "std": {p: sd_p}, "ci95": {p: [0.0, ub_p]}, "bound": True})
+        if e in unsure:
+            out[-1]["selected"] = True  # in the model, not resolved: kept there between selections
     for k, (e, shape) in enumerate(st.nonlin):
         j = len(mod) + k
         if theta[j] <= 0:
@@ -328,7 +337,7 @@ def _estimator_report(est, candidates, full):
     out = report(tau, avar, st, candidates, cov=cov)
     # between selections: a selected term the current data no longer resolve leaves the structure for this
     # refit (kept in, an unsupported column lets the correlated GLS trade it against N: N 10 % low measured)
-    gone = [t["effect"] for t in out if t.get("bound") and t["effect"] in st.linear]
+    gone = [t["effect"] for t in out if t.get("bound") and t["effect"] in st.linear and not t.get("selected")]
     if gone and len(gone) < len(st.linear):
         from dataclasses import replace
 
