@@ -17,11 +17,13 @@ stay quiet is faulty, not moving).
 The references are learned from the blocks the gate calls still, so a vehicle vibrating from its first block
 on (an engine running on the ground with no armed state to tell) teaches the gate that vibration is rest.
 Vibration cannot make the accelerometer quieter than the sensor's own noise, so ``QUIET_BLOCKS`` blocks in a
-row with every accel axis ``QUIETER`` x below the reference show that what was learned as rest was not:
-the reference becomes their level and :attr:`MotionGate.mislearned` tells the caller to drop what it
-learned and fed under the old one. Sampling alone cannot do it (the std of a 10-sample block is 4x below
-its truth with probability about 5e-5 per axis, three axes and three blocks in a row about 1e-39; blocks of
-fewer than ``QUIET_MIN_SAMPLES`` samples do not count, nor does an accel that stops (std exactly 0).
+row with an accel axis ``QUIETER`` x below its reference show that what was learned as rest on that axis was
+not (vibration, or a first block taken with the vehicle in hand): the axis' reference becomes their level and
+:attr:`MotionGate.mislearned` tells the caller to drop what it learned and fed under the old one. Sampling
+alone cannot do it (the std of a 10-sample block is 4x below its truth with probability about 5e-5, three
+blocks in a row about 1e-13 per axis; blocks of fewer than ``QUIET_MIN_SAMPLES`` samples do not count, nor
+does an axis that stops (std exactly 0), and a quantised axis' smallest nonzero std, one sample of 10-50 off
+the others, is 0.14-0.3 LSB, not 4x below a reference of a noise that moves it).
 
 Inputs: the block (rows ``t, gyro, accel``), its BlockStats, this IMU's noise ratios and the other IMUs'
 (:class:`Peer`); output: still or not. State: the still accel reference (mean and per-axis std).
@@ -37,7 +39,7 @@ import numpy as np
 from companion.health.faults import BlockStats
 
 REF_WEIGHT = 0.05  # EWMA weight of a still block in the accel reference
-QUIETER = 4.0  # every accel axis this many times quieter than the reference ...
+QUIETER = 4.0  # an accel axis this many times quieter than its reference ...
 QUIET_BLOCKS = 3  # ... in this many blocks in a row: the reference was learned under vibration
 QUIET_MIN_SAMPLES = 8  # a block's std from fewer samples is too loose for that test
 GLITCH_K = 10.0  # robust sigmas: an isolated accelerometer sample this far off is a glitch, not motion
@@ -97,7 +99,7 @@ class MotionGate:
         self.cfg = cfg
         self.ref_accel: np.ndarray | None = None
         self.ref_accel_std: np.ndarray | None = None
-        self._quiet: list[np.ndarray] = []  # accel stds of the blocks in a row far quieter than the reference
+        self._quiet: list[list] = []  # per accel axis: its stds in the blocks in a row far quieter than its reference
         self.mislearned = False  # set when the reference was found learned under vibration (the caller resets it)
         self.ratio = 1.0  # by how much the reference was too high, when it was
 
@@ -121,16 +123,25 @@ class MotionGate:
             if np.any((ratio > cfg.accel_std_factor) & (a_std > cfg.accel_std_min)):
                 return False
             accel_up = float(ratio.max())
-            quieter = np.all(a_std > 0) and np.all(a_std * QUIETER < self.ref_accel_std)
-            if a.shape[0] >= QUIET_MIN_SAMPLES and quieter:
-                self._quiet.append(a_std)
-                if len(self._quiet) >= QUIET_BLOCKS:
-                    quiet = np.mean(self._quiet, axis=0)
-                    self.ratio = float(np.min(self.ref_accel_std / quiet))
-                    self.ref_accel_std, self._quiet, self.mislearned = quiet, [], True
-                    return False  # the break: what follows settles and is fed under the new reference
-            else:
-                self._quiet = []
+            # per axis: a log that starts with the vehicle in hand taught one axis a reference 60x its rest
+            # level (a parked plane's first block, accel Y 0.41 m/s^2 against 0.007), and for a minute the
+            # gate took knocks on that axis for rest
+            moves = np.ptp(a, axis=0) > 0  # an axis that stops (every value equal) says nothing of its noise
+            quieter = moves & (a_std * QUIETER < self.ref_accel_std)
+            if a.shape[0] < QUIET_MIN_SAMPLES:
+                quieter[:] = False
+            self._quiet = [x if q else [] for x, q in zip(self._quiet, quieter)] if self._quiet else [[] for _ in quieter]
+            for k in np.flatnonzero(quieter):
+                self._quiet[k].append(float(a_std[k]))
+            done = [k for k in range(len(self._quiet)) if len(self._quiet[k]) >= QUIET_BLOCKS]
+            if done:
+                ref = self.ref_accel_std.copy()
+                for k in done:
+                    ref[k] = float(np.mean(self._quiet[k]))
+                self.ratio = float(np.max(self.ref_accel_std[done] / ref[done]))
+                self.ref_accel_std, self.mislearned = ref, True
+                self._quiet = [[] for _ in quieter]
+                return False  # the break: what follows settles and is fed under the new reference
         # rotation, by consensus of the IMUs
         means = [rotation(st)] + [rotation(p.stats) for p in peers]
         rot = np.array(means)
