@@ -297,10 +297,10 @@ class Channel:
         """Queue a still block for the estimators; True when the baseline learning is complete (the caller
         takes :meth:`learned_terms`)."""
         self._blocks["blocks_fed"] += 1
-        # a block between this one and the last fed one was not fed (moving, settling, a gap): the junction
-        # is longer than a block less half a period; consecutive fed blocks are one sample period apart (two
-        # where a sample was lost). Half a block alone is one period at 2 Hz, where jitter made every other
-        # pair of blocks a junction and the estimators lost every cluster time beyond a few seconds
+        # a block between this one and the last fed one was not fed (moving, settling, a gap): the junction is
+        # then about a block long, where consecutive fed blocks are one sample period apart (two where a sample
+        # was lost); the threshold lies between. Half a block alone is one period at 2 Hz, where jitter made
+        # every other pair of blocks a junction and the estimators lost every cluster time beyond a few seconds
         t0 = float(data[0, 0])
         joined = 0.5 * self.cfg.block_s + 1.5 / self.rate_hz
         if self._junction or (self._fed_end_t is not None and t0 - self._fed_end_t > joined):

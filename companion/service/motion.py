@@ -99,7 +99,7 @@ class MotionGate:
         self.cfg = cfg
         self.ref_accel: np.ndarray | None = None
         self.ref_accel_std: np.ndarray | None = None
-        self._quiet: list[list] = []  # per accel axis: its stds in the blocks in a row far quieter than its reference
+        self._quiet: list[list] = [[], [], []]  # per accel axis: its stds in the blocks in a row far quieter than its reference
         self.mislearned = False  # set when the reference was found learned under vibration (the caller resets it)
         self.ratio = 1.0  # by how much the reference was too high, when it was
 
@@ -130,17 +130,16 @@ class MotionGate:
             quieter = moves & (a_std * QUIETER < self.ref_accel_std)
             if a.shape[0] < QUIET_MIN_SAMPLES:
                 quieter[:] = False
-            self._quiet = [x if q else [] for x, q in zip(self._quiet, quieter)] if self._quiet else [[] for _ in quieter]
-            for k in np.flatnonzero(quieter):
-                self._quiet[k].append(float(a_std[k]))
-            done = [k for k in range(len(self._quiet)) if len(self._quiet[k]) >= QUIET_BLOCKS]
+            for k, q in enumerate(quieter):
+                self._quiet[k] = self._quiet[k] + [float(a_std[k])] if q else []
+            done = [k for k in range(3) if len(self._quiet[k]) >= QUIET_BLOCKS]
             if done:
                 ref = self.ref_accel_std.copy()
                 for k in done:
                     ref[k] = float(np.mean(self._quiet[k]))
                 self.ratio = float(np.max(self.ref_accel_std[done] / ref[done]))
                 self.ref_accel_std, self.mislearned = ref, True
-                self._quiet = [[] for _ in quieter]
+                self._quiet = [[], [], []]
                 return False  # the break: what follows settles and is fed under the new reference
         # rotation, by consensus of the IMUs
         means = [rotation(st)] + [rotation(p.stats) for p in peers]
