@@ -13,7 +13,9 @@ without a licence allowing redistribution are used locally only).
 
     python benchmarks/bench_reallogs.py [DIR ...] [--json OUT] [--jobs 2] [--skip-analyze]
 
-Prints one row per alarm and a summary: logs, log-hours, alarms by kind.
+Prints one row per alarm and a summary: logs, log-hours, alarms by kind; with analyze, run's N against
+analyze's on every gyro axis where both resolve it (each from its own still data: run's motion gate, analyze's
+still selection), and the axes more than 10 % apart.
 """
 
 from __future__ import annotations
@@ -103,6 +105,9 @@ KINDS = (
 )
 ALARM = re.compile(r"^\s+at (-?\d+) s: (IMU(\d+) gyro(?: ([XYZ]))? (.*))$")
 HEAD = re.compile(r"^IMU(\d+) \(([^,]+), ([\d.]+) Hz\).*?(\d+) samples")
+#: a summary line of run's Allan terms: "  gx: N 0.229 +- 0.0064 deg/sqrt(h); ..." or "  gx: N < 0.667 deg/sqrt(h)"
+N_LINE = re.compile(r"^  (g[xyz]): N (<\s*)?([\d.eE+-]+)")
+RAD_TO_DEG_SQRT_H = 180.0 / 3.141592653589793 * 60.0
 CLEARED = re.compile(r"cleared|recovered|healthy again|back to|\bOK\b")
 
 
@@ -152,9 +157,13 @@ def run_log(path: Path, analyze: bool) -> dict:
         m = HEAD.match(line)
         if m:
             imu, msg, rate, n = int(m[1]), m[2], float(m[3]), int(m[4])
-            row["imus"].append({"imu": imu, "message": msg, "rate_hz": rate, "samples": n})
+            row["imus"].append({"imu": imu, "message": msg, "rate_hz": rate, "samples": n, "N": {}})
             if rate > 0:
                 row["duration_s"] = max(row["duration_s"], n / rate)
+            continue
+        m = N_LINE.match(line)
+        if m and row["imus"]:
+            row["imus"][-1]["N"][m[1]] = (float(m[3]), bool(m[2]))
             continue
         m = ALARM.match(line)
         if m:
@@ -170,6 +179,7 @@ def run_log(path: Path, analyze: bool) -> dict:
             out = Path(tmp) / "a.json"
             a = companion("analyze", str(path), "--json", str(out), "--quiet")
             row["analyze_rc"] = a.returncode
+            row["analyze_n"] = analyze_n(out) if a.returncode == 0 and out.exists() else []
             lines = [ln for ln in (a.stderr + a.stdout).splitlines() if ln.strip()]
             row["analyze_note"] = ""
             for ln in lines:
@@ -181,6 +191,38 @@ def run_log(path: Path, analyze: bool) -> dict:
     for al in row["alarms"]:
         al["explanation"] = explain(path.name, al)
     return row
+
+
+def analyze_n(path: Path) -> list[dict]:
+    """Per analysed stream of an analyze JSON: message, instance and the gyro axes' N (deg/sqrt(h), bound?)."""
+    out = []
+    for st in json.loads(path.read_text()).get("streams", []):
+        n = {}
+        for ax in ("gx", "gy", "gz"):
+            a = (st.get("axes") or {}).get(ax) or {}
+            for t in list(a.get("terms") or []) + list(a.get("bounds") or []):
+                if t.get("effect") == "white_noise" and "N" in t:
+                    n[ax] = (float(t["N"]) * RAD_TO_DEG_SQRT_H, bool(t.get("bound")))
+                    break
+        out.append({"message": st.get("message"), "instance": st.get("instance"), "N": n})
+    return out
+
+
+def n_pairs(row: dict) -> list[tuple]:
+    """(log, IMU, axis, analyze's N, run's N) where both resolve N: run's IMU k against analyze's stream of
+    the same message and instance k (the message alone when it names one stream)."""
+    out = []
+    streams = row.get("analyze_n") or []
+    for imu in row["imus"]:
+        same = [s for s in streams if s["message"] == imu["message"]]
+        match = [s for s in same if s["instance"] == imu["imu"]] or (same if len(same) == 1 else [])
+        if not match:
+            continue
+        for ax, (vr, br) in imu["N"].items():
+            va = match[0]["N"].get(ax)
+            if va and not va[1] and not br and va[0] > 0:
+                out.append((row["name"], imu["imu"], ax, va[0], vr))
+    return out
 
 
 def explain(name: str, alarm: dict) -> str:
@@ -246,6 +288,17 @@ def report(rows: list[dict], args, t0: float) -> int:
           f"({true} true, {n_al - true} false; {unexplained} unexplained): "
           + ", ".join(f"{k} {v}" for k, v in sorted(by_kind.items(), key=lambda kv: -kv[1]))
           + (f"; {time.time() - t0:.0f} s wall" if t0 else ""))
+    pairs = [p for r in rows for p in n_pairs(r)]
+    if pairs:
+        ratios = sorted(p[4] / p[3] for p in pairs)
+        w5 = sum(abs(x - 1.0) <= 0.05 for x in ratios)
+        w10 = sum(abs(x - 1.0) <= 0.10 for x in ratios)
+        print(f"run's N against analyze's (each from its own still data), {len(pairs)} axes on "
+              f"{len(set(p[0] for p in pairs))} logs: {ratios[0]:.2f}-{ratios[-1]:.2f}x, median "
+              f"{ratios[len(ratios) // 2]:.3f}, within 5 %: {w5}, within 10 %: {w10}; beyond 10 %:")
+        for name, imu, ax, va, vr in pairs:
+            if abs(vr / va - 1.0) > 0.10:
+                print(f"    {name[-44:]:44s} IMU{imu} {ax}  analyze {va:.3f}  run {vr:.3f}  ({vr / va:.2f}x)")
     if args.json and not args.from_json:
         Path(args.json).write_text(json.dumps({"rows": rows, "hours": hours, "imu_hours": imu_hours,
                                                "by_kind": by_kind}, indent=1))
