@@ -85,6 +85,20 @@ def test_run_names_the_dead_gyro(tmp_path):
     assert "stuck" not in r.stdout
 
 
+def test_a_record_too_short_to_name_a_dead_gyro_says_it_read_exactly_zero(tmp_path):
+    # a public rover log holds 1.5 s of a gyro reading exactly 0 (77 samples): `analyze` says "gyro dead",
+    # `run` said nothing; its summary now notes it, for the dead IMU only
+    p = dead_log(tmp_path / "short.bin", seconds=1.5)
+    r = companion("run", "--source", str(p), "--no-state", "--quiet")
+    assert r.returncode == 0, r.stderr
+    notes = [ln for ln in r.stdout.splitlines() if "read exactly 0 in all" in ln]
+    assert len(notes) == 1 and notes[0].strip().startswith("note: IMU1: gyro X, Y, Z read exactly 0 in all 75 samples"), r.stdout
+    # long enough, the dead test names it and no note repeats it
+    p = dead_log(tmp_path / "long.bin", seconds=20.0, armed_throughout=False)
+    r = companion("run", "--source", str(p), "--no-state", "--quiet")
+    assert "IMU1 gyro X reads exactly 0: dead" in r.stdout and "read exactly 0 in all" not in r.stdout, r.stdout
+
+
 @pytest.mark.skipif(not REAL.exists(), reason="local copy of the public erlerobot/logs rover log absent")
 def test_real_rover_log_dead_gyro_named_by_inspect_and_analyze():
     r = companion("inspect", str(REAL))
