@@ -7,8 +7,9 @@ Rules (applied in arrival order, never resampling, never reordering):
 - **duplicate**: a timestamp equal to the newest one so far -> sample dropped, counted;
 - **backwards**: a timestamp behind the newest one by less than ``reset_s`` -> dropped, counted;
 - **rate**: ``P0`` = median of the kept intervals; the period ``P`` is the mean of the intervals
-  ``<= 1.5 P0 + r`` (``r`` = timestamp resolution, 1 ms for ``time_boot_ms``), so a 400 Hz stream
-  stamped in whole milliseconds (intervals of 2 and 3 ms) gets 2.5 ms, not 2 or 3;
+  within ``P0 +- (0.5 P0 + r)`` (``r`` = timestamp resolution, 1 ms for ``time_boot_ms``), so a 400 Hz
+  stream stamped in whole milliseconds (intervals of 2 and 3 ms) gets 2.5 ms, not 2 or 3, and a late
+  message's short and long intervals (0.12 + 0.88 s at 2 Hz) are both left out;
 - **gap**: an interval ``> 1.5 P + r`` (1-ms jitter is not a gap); a gap longer than
   ``split_periods`` (default 10) periods also splits the segment (Allan analysis needs contiguous
   samples), shorter gaps are only counted;
