@@ -1,7 +1,7 @@
 """Rate drop and irregular timing of one IMU stream (message time).
 
-Per block: the rate 1 / period (:func:`companion.timebase.period_of`: the mean of the intervals within half
-their median, plus the timestamp resolution, of it) and the jitter: the rms of each interval's distance to
+Per block: the rate 1 / period (:func:`companion.timebase.period_of`: the mean of the intervals no farther from
+their median than half of it plus the timestamp resolution) and the jitter: the rms of each interval's distance to
 the nearest whole number of periods, less the timestamp resolution ``stamp_res`` (1 ms for
 ``time_boot_ms``: a 400 Hz stream stamped in whole ms steps 2, 3, 2, 3 ms and is regular), over the
 period (a lost message leaves an interval of exactly two periods and no jitter: losses on the link are
