@@ -17,6 +17,10 @@ Further modes (docs/analysis.md quotes them):
                                                coverage of N's 95 % interval on white noise through a 2-pole
                                                low-pass, point-sampled (50 Hz, f_c 20 Hz) or averaged (250 Hz,
                                                f_c 30 Hz): cut-off from the log, or found in the data
+    python benchmarks/bench_fit.py plain [seeds=200] [seconds=20,60,600]
+                                               unfiltered white noise (+ B) analysed as a source without a
+                                               cut-off is (the roll-off looked for in the data): roll-offs
+                                               claimed where there is none, N's error and coverage
     python benchmarks/bench_fit.py draws [draws=100] [set=0]
                                                random N/B/K (2 h at 50 Hz): every term found, coverage;
                                                a term left out: whether its 95 % upper bound holds; each
@@ -112,7 +116,7 @@ def main():
 
 if __name__ == "__main__":
     mode = sys.argv[1] if len(sys.argv) > 1 else ""
-    if mode in ("real", "filtered", "draws", "short", "preset", "gm", "shape"):
+    if mode in ("real", "filtered", "draws", "short", "plain", "preset", "gm", "shape"):
         from bench_fit_real import main_mode  # noqa: E402
 
         main_mode(mode, sys.argv[2:])
