@@ -222,6 +222,8 @@ def run_plain(args):
     ``companion analyze`` analyses a source without a cut-off (a CSV, a HIGHRES_IMU tlog): the roll-off looked
     for in the data (``detect_filter="point"``). How often a roll-off is claimed where there is none, N's error
     and the coverage of its 95 % interval, for ``seconds`` records (default 20, 60, 600)."""
+    from companion.analysis.axis import analyze_axis
+    from companion.estimators import make_estimator
     from companion.sim.synth import synthesize_axis
 
     seeds = int(args[0]) if args else 200
@@ -230,26 +232,34 @@ def run_plain(args):
     b_true = n_true / math.sqrt(0.4413 * 20.0)
     for secs in lengths:
         n = int(fs * secs)
-        m = cluster_sizes(n, "octave")
-        edf = edf_simple(n + 1, m, 0)
         err, cover, claimed, t0 = [], 0, 0, time.time()
+        on_off, on_cover, on_n = [], 0, 0
         for s in range(seeds):
             y = synthesize_axis([{"effect": "white_noise", "N": n_true}, {"effect": "bias_instability", "B": b_true}],
                                 fs, n, np.random.default_rng(30_000 + s))
-            tau, av = oavar(y, fs, m=m)[:2]
-            fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m, detect_filter="point")
-            claimed += fr.filter is not None
-            t = fr.term("white_noise")
+            a = analyze_axis(y, fs, sampling="point")  # what `companion analyze` reports, its rules on N included
+            claimed += (a["fit"] or {}).get("filter") is not None
+            t = next((x for x in a["terms"] if x["effect"] == "white_noise"), None)
             if t is None:
                 continue
             err.append(t["N"] / n_true - 1)
             lo, hi = t["ci95"]["N"]
             cover += lo <= n_true <= hi
+            # the online report (what `run` sends) on the same record
+            est = make_estimator(rate_hz=fs, forgetting_s=None, sampling="point")
+            est.update(y)
+            w = next((x for x in est.terms(full=True) if x["effect"] == "white_noise" and not x.get("bound")), None)
+            if w is not None:
+                on_n += 1
+                on_off.append(abs(w["N"] / t["N"] - 1))
+                on_cover += w["ci95"]["N"][0] <= n_true <= w["ci95"]["N"][1]
         e = np.array(err) * 100
+        d = np.array(on_off) * 100 if on_off else np.zeros(1)
         print(f"unfiltered white noise + B (crossing at 20 s), point samples at {fs:g} Hz, {seeds} x {secs:g} s "
               f"({time.time() - t0:.0f} s): roll-off claimed in {claimed}/{seeds}; N resolved in {len(e)}, error "
               f"median {np.median(e):+.2f} %, sd {np.std(e):.2f} %, coverage {cover}/{len(e)} "
-              f"({100 * cover / max(len(e), 1):.1f} %)")
+              f"({100 * cover / max(len(e), 1):.1f} %); online: resolved in {on_n}, |online - offline| median "
+              f"{np.median(d):.2f} %, max {d.max():.2f} %, coverage {on_cover}/{on_n} ({100 * on_cover / max(on_n, 1):.1f} %)")
 
 
 def run_short(args):
