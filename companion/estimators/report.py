@@ -223,9 +223,9 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
         # resolved only when the envelope, too, stays clear of 0: a term whose interval reaches 0 in the model
         # with N, B and K in is not told from the others; it stays in the model and its bound (at least the
         # envelope's upper end) is reported
-        if lo <= 0 < theta[j]:
+        if lo <= 0:
             unsure[e] = hi
-        if lo > 0:
+        else:
             p = LINEAR_PARAM[e]
             v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
             if e == "white_noise" and st.white:

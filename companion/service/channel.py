@@ -90,26 +90,24 @@ class Channel:
         # {"gyro": Hz, "accel": Hz}: the autopilot's low-pass cut-offs of these data (from the log's parameters
         # or PARAM_VALUE), modelled in the estimators' white-noise term unless the estimator config names one
         self.filters: dict[str, float] = {}
-        # gyro samples this run and whether any axis ever read other than exactly 0 (the all-zero note)
-        self.gyro_seen = 0
-        self.gyro_moved = False
+        self.gyro_moved = False  # any gyro axis read other than exactly 0 this run (the all-zero note)
 
     def see(self, gyro: np.ndarray) -> None:
-        """Every arriving gyro row (n, 3), before any timestamp rule: counts them and notes a non-zero value."""
-        self.gyro_seen += int(gyro.shape[0])
+        """Every arriving gyro row (n, 3): notes a non-zero value."""
         if not self.gyro_moved and gyro.size:
             self.gyro_moved = bool(np.any(gyro != 0.0))
 
     def all_zero(self) -> str | None:
         """A note when every gyro sample of the run read exactly 0 but no fault says so (a record too short for
         the dead test: a 2-s public rover log of 77 zeros was silent where analyze said 'gyro dead'); else None."""
-        if self.gyro_moved or self.gyro_seen == 0 or self.faults.active():
+        n = self.cutter.counts["samples"]
+        if self.gyro_moved or n == 0 or self.faults.active():
             return None
-        dur = f" ({self.gyro_seen / self.rate_hz:.1f} s)" if self.rate_hz else ""
+        dur = f" ({n / self.rate_hz:.1f} s)" if self.rate_hz else ""
         why = ("dead, or a gyro quieter than the message's 1 mrad/s at rest" if self.message in INT16_MESSAGES
                else "dead, absent or not started (a live gyro's float never reads exactly 0)")
-        return (f"IMU{self.imu}: gyro X, Y, Z read exactly 0 in all {self.gyro_seen} samples{dur}: {why}; too few "
-                "for the dead test to name it")
+        return (f"IMU{self.imu}: gyro X, Y, Z read exactly 0 in all {n} samples{dur}: {why}; too few for the dead "
+                "test to name it")
 
     # ------------------------------------------------------------------ read-only views
     @property
