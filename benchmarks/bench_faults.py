@@ -146,7 +146,6 @@ def run_case(kind, seed, max_delay, preset=None):
         model, sig, rate, white = preset_sigma(preset)
     axis = AXES[rng.integers(3)]
     s_tot = total_sigma(sig[axis])
-    h = None
     imus, imu = 1, 0
     sched = Schedule()
     t_f = float(rng.uniform(360.0, 480.0))

@@ -177,7 +177,7 @@ def measure(t, gyro, temp, fs, still, flight):
             out["hf_ground"][i] = math.sqrt(np.sum(p[band].mean(1)) * (f[1] - f[0]))
         if flight.sum() > 20 * fs:
             runs_f = [(a, b) for a, b in _runs(flight) if b - a >= 256]
-            ps, cs = [], []
+            ps = []
             for a, b in runs_f:
                 f, p = signal.welch(gyro[i, a:b], fs=fs, nperseg=256, axis=0)
                 ps.append(p * (b - a))

@@ -32,7 +32,6 @@ def _plain(v):
 def test_dataclass_and_estimator_defaults_equal_the_schema():
     from companion.estimators.miao_shakf import MiaoSHAKF
     from companion.estimators.octave_bank import OctaveBankEstimator
-    from companion.health.detector import DetectorConfig
     from companion.mavlink.link import LinkConfig
     from companion.service.pipeline import PipelineConfig
 

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from companion.gap import run_gap
-from companion.gap.candidates import fit_terms
 from companion.gap.compare import measure
 from companion.gap.selection import RECAL_PENALTY
 from companion.gap.trend import detrend, detrended_measure, residual_random_walk

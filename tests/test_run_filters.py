@@ -11,7 +11,6 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.mavlink.reporter import Reporter
 from companion.mavlink.tlog_writer import TlogWriter
-from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.replay import replay_log, replay_tlog
 from companion.sim.dataflash_writer import write_imu_log
