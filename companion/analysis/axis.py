@@ -49,7 +49,8 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     allv = np.concatenate(pieces)
     if np.all(allv == allv[0]):
         out["status"] = "constant"
-        out["note"] = "all samples equal (" + ("all zero" if allv[0] == 0 else f"{allv[0]:g}") + "): no noise to analyse"
+        out["note"] = ("all samples equal (" + ("all zero" if allv[0] == 0 else f"{allv[0]:g}") + "): no noise to "
+                       "analyse; a sensor at rest reads noise, so this one is frozen, dead or below its resolution")
         return out
     from companion.allan.fit import fit_avar  # scipy.optimize/stats: only where a fit runs (start-up time)
 

@@ -33,6 +33,7 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     summary = {"source": str(spec), "notes": inspect_notes(res), "selection": sel.to_dict(),
                "format": res.meta.get("format", "tlog/csv/live"),
                "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
+    summary["notes"] += [n for n in sel.notes if sel.intervals]
     dead = dead_gyros(streams)
     if not sel.intervals:
         # a dead gyro is said first: it is the reason to look at this log, whatever the armed state says

@@ -20,7 +20,10 @@ is slower than 16 Hz, so that a window holds 16 of its samples):
      m/s^2 (a slow tilt of ~0.1 deg), or the gyro mean leaves the median of the still windows by more than
      5 x its standard error + 0.005 rad/s (a slow turn);
 
-   moving windows are widened by ``guard_s``;
+   moving windows are widened by ``guard_s``. Where two or more IMU instances carry gyros, one instance's
+   gyro alone (every accelerometer still, another gyro still that would have seen the same excursion: at
+   least twice its own limits) is that gyro's change, not motion: the window stays still for the others and
+   is left out of that instance's streams only (:attr:`StillSelection.excluded`, with a note);
 3. windows without samples are **gaps**; still runs shorter than ``min_segment_s`` are left out (unless the
    run is the whole record: a short bench recording is still, only short; analyze warns about its length).
 
@@ -58,6 +61,9 @@ class StillSelection:
     outside_s: float = 0.0  # before --start / after --end
     min_segment_s: float = 10.0
     notes: list[str] = field(default_factory=list)
+    # IMU instance -> intervals inside ``intervals`` left out of that instance's streams only: its gyro alone
+    # showed motion there (see select_still)
+    excluded: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
 
     def ranges(self, stream, min_samples: int = 16) -> list[tuple[int, int]]:
         """Half-open index ranges of ``stream`` inside the still intervals and inside its contiguous
@@ -65,7 +71,8 @@ class StillSelection:
         t = stream.t
         segs = stream.segments or [(0, stream.samples)]
         out = []
-        for t0, t1 in self.intervals:
+        key = getattr(stream, "key", None)
+        for t0, t1 in _minus(self.intervals, self.excluded.get(key.instance, []) if key is not None else []):
             a = int(np.searchsorted(t, t0, side="left"))
             b = int(np.searchsorted(t, t1, side="left"))
             for s0, s1 in segs:
@@ -73,6 +80,9 @@ class StillSelection:
                 if hi - lo >= min_samples:
                     out.append((lo, hi))
         return sorted(set(out))
+
+    def excluded_s(self, instance: int) -> float:
+        return float(sum(b - a for a, b in self.excluded.get(instance, [])))
 
     def describe(self) -> str:
         k = len(self.intervals)
@@ -95,7 +105,25 @@ class StillSelection:
         return {"method": self.method, "intervals": [[float(a), float(b)] for a, b in self.intervals],
                 "still_s": self.still_s, "moving_s": self.moving_s, "armed_s": self.armed_s, "gap_s": self.gap_s,
                 "short_s": self.short_s, "outside_s": self.outside_s, "total_s": self.total_s,
-                "description": self.describe(), "notes": list(self.notes)}
+                "description": self.describe(), "notes": list(self.notes),
+                "excluded": {str(i): [[float(a), float(b)] for a, b in iv] for i, iv in self.excluded.items()}}
+
+
+def _minus(intervals, cut) -> list[tuple[float, float]]:
+    """``intervals`` with the intervals ``cut`` taken out (both sorted, non-overlapping)."""
+    out = []
+    for a, b in intervals:
+        for c, d in cut:
+            if d <= a or c >= b:
+                continue
+            if c > a:
+                out.append((a, c))
+            a = max(a, d)
+            if a >= b:
+                break
+        if a < b:
+            out.append((a, b))
+    return out
 
 
 def armed_intervals(transitions, t_end: float) -> list[tuple[float, float]]:
@@ -125,6 +153,14 @@ def _bin_stats(b: np.ndarray, v: np.ndarray, nb: int):
         s2 = np.bincount(b, weights=(x - ref) ** 2, minlength=nb)
         mu = np.where(ok, s1 / np.maximum(cnt, 1), np.nan)
         var = np.where(ok, (s2 - cnt * mu**2) / np.maximum(cnt - 1, 1), np.nan)
+        # a bin whose values are all equal (a frozen sensor) has std exactly 0, not the rounding residue of
+        # the sums: that residue (1e-10 and less) counted as the quietest "moving" spread and set the axis'
+        # noise floor, so every window of the same axis at rest was 3x above it and called motion
+        lo_v = np.full(nb, np.inf)
+        hi_v = np.full(nb, -np.inf)
+        np.minimum.at(lo_v, b, x)
+        np.maximum.at(hi_v, b, x)
+        var = np.where(hi_v > lo_v, var, np.where(ok, 0.0, np.nan))
         mean[:, j] = mu + ref
         std[:, j] = np.sqrt(np.maximum(var, 0))
     return cnt, mean, std
@@ -149,13 +185,16 @@ def _floor(std: np.ndarray) -> float:
 
 
 def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: float,
-                    use_gyro: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """(moving, has_data) per window for one IMU stream."""
+                    use_gyro: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """(moving by the accelerometer, moving by the gyro, has_data, gyro evidence) per window for one IMU
+    stream; the evidence: the largest |mean - still median| and std over the axes (rad/s), and the largest
+    limits those are tested against (``dev_lim``, ``sd_lim``), or {} without gyro tests."""
     b = np.floor((stream.t - t0) / window_s).astype(np.int64)
     inside = (b >= 0) & (b < nb)
     b = b[inside]
-    moving = np.zeros(nb, dtype=bool)
+    moving = {"gyro": np.zeros(nb, dtype=bool), "accel": np.zeros(nb, dtype=bool)}
     has = np.bincount(b, minlength=nb) >= 2
+    evidence = {}
     for kind, v, abs_std, lsb in (("gyro", stream.gyro[inside], ABS_GYRO_STD, stream.gyro_lsb),
                                   ("accel", stream.accel[inside], ABS_ACCEL_STD, stream.accel_lsb)):
         if v.shape[0] == 0 or not np.all(np.isfinite(v[:, 0])) or (kind == "gyro" and not use_gyro):
@@ -164,11 +203,12 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
         good = has & np.all(np.isfinite(std), axis=1)
         if good.sum() < 3:
             continue
-        floor = np.array([_floor(c) for c in std[good].T])
-        floor = np.maximum(floor, 0.5 * (lsb or 0.0))
+        floor0 = np.array([_floor(c) for c in std[good].T])
+        floor = np.maximum(floor0, 0.5 * (lsb or 0.0))
         floor = np.maximum(floor, 1e-12)
         with np.errstate(invalid="ignore"):
-            mv = np.any((std > threshold * floor) | (std > abs_std), axis=1)
+            sd_lim = np.minimum(threshold * floor, abs_std)
+            mv = np.any(std > sd_lim, axis=1)
             se = floor / np.sqrt(np.maximum(cnt, 1))[:, None]
             if kind == "accel":
                 step = np.abs(np.diff(mean, axis=0))
@@ -177,10 +217,22 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
                 mv[1:] |= jump
                 mv[:-1] |= jump
             else:
-                ref = np.nanmedian(mean[good & ~mv], axis=0) if np.any(good & ~mv) else np.nanmedian(mean[good], axis=0)
-                mv |= np.any(np.abs(mean - ref) > 5.0 * se + GYRO_MEAN_OFFSET, axis=1)
-        moving |= mv & good
-    return moving, has
+                # a window of identical values is a frozen gyro, whatever value it holds, where a live one
+                # varies at rest (a float message; an integer one whose noise floor is half a step or more --
+                # a gyro quieter than the step reads one code at rest): never still, and never part of the level
+                # at rest the means are tested against (a gyro frozen at 20 deg/s for most of a log made that
+                # level 20 deg/s)
+                # (an axis that never varies is dead throughout: health.dead names it, it says nothing of motion)
+                varies = (floor0 > 0) & (np.full(floor0.shape, not lsb) | (floor0 >= 0.5 * (lsb or 0.0)))
+                frozen = good & np.any((std == 0) & varies, axis=1)
+                base = good & ~mv & ~frozen
+                ref = np.nanmedian(mean[base], axis=0) if np.any(base) else np.nanmedian(mean[good], axis=0)
+                dev, dev_lim = np.abs(mean - ref), 5.0 * se + GYRO_MEAN_OFFSET
+                mv |= np.any(dev > dev_lim, axis=1) | frozen
+                evidence = {"frozen": frozen, "dev": np.nan_to_num(np.nanmax(dev, axis=1, initial=0.0)), "sd": np.nan_to_num(np.nanmax(std, axis=1, initial=0.0)),
+                            "dev_lim": np.nanmax(dev_lim, axis=1, initial=0.0), "sd_lim": float(np.max(sd_lim))}
+        moving[kind] |= mv & good
+    return moving["accel"], moving["gyro"], has, evidence
 
 
 def _dilate(mask: np.ndarray, k: int) -> np.ndarray:
@@ -229,11 +281,47 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
     nb = max(1, int(np.ceil((hi - lo) / window_s)))
     has = np.zeros(nb, dtype=bool)
     moving = np.zeros(nb, dtype=bool)
+    by_gyro = {}  # instance -> [windows its gyro calls moving, windows with data, its streams' gyro evidence]
     for s in imus:
-        mv, h = _moving_windows(s, lo, window_s, nb, threshold, use_gyro)
+        acc_mv, gyr_mv, h, ev = _moving_windows(s, lo, window_s, nb, threshold, use_gyro)
         has |= h
         if not use_all:
-            moving |= mv
+            moving |= acc_mv
+            e = by_gyro.setdefault(s.key.instance, [np.zeros(nb, dtype=bool), np.zeros(nb, dtype=bool), []])
+            e[0] |= gyr_mv
+            e[1] |= h
+            if ev:
+                e[2].append(ev)
+    lone = {}  # instance -> its windows left out of its own streams
+    if by_gyro:
+        # a rotation or a vibration reaches every gyro of the airframe: where two or more IMU instances carry
+        # gyro data, one instance's gyro alone (every accelerometer still, another instance's gyro still) is
+        # that gyro's doing -- frozen at a rate, biased, noisy -- not motion: the window stays still for the
+        # others and is left out of that instance's own streams only (a gyro stuck at 20 deg/s took its
+        # healthy twin's 20 minutes at rest out of the analysis). With one instance (or streams that share
+        # one: a log's IMU and batch messages of the same sensor) its gyro counts alone, as before.
+        # The other gyro is a witness only where it would have seen what this one shows (a frozen gyro aside):
+        # the excursion (mean or spread) at least twice the limit the witness is tested against -- a gyro 7x noisier than its twin
+        # does not see the small rotation the quiet one does (a public Pixhawk log's last 3 s before handling).
+        gm = np.array([v[0] for v in by_gyro.values()])
+        gh = np.array([v[1] for v in by_gyro.values()])
+        alone = (gm.sum(axis=0) == 1) & ~moving
+        seen = np.zeros(nb, dtype=bool)
+        for i, (mv_i, _, ev_i) in by_gyro.items():
+            for j, (mv_j, h_j, ev_j) in by_gyro.items():
+                if j == i or not ev_i or not ev_j:
+                    continue
+                dev = np.max([e["dev"] for e in ev_i], axis=0)
+                sd = np.max([e["sd"] for e in ev_i], axis=0)
+                lim_dev = np.min([e["dev_lim"] for e in ev_j], axis=0)
+                lim_sd = min(e["sd_lim"] for e in ev_j)
+                frozen = np.any([e["frozen"] for e in ev_i], axis=0)
+                seen |= mv_i & h_j & ~mv_j & ((dev > 2.0 * lim_dev) | (sd > 2.0 * lim_sd) | frozen)
+        alone &= seen
+        moving |= gm.any(axis=0) & ~alone
+        for i, mv_i in zip(by_gyro, gm):
+            if np.any(mv_i & alone):
+                lone[i] = mv_i & alone
     armed = np.zeros(nb, dtype=bool)
     armed_iv = armed_intervals(meta.get("armed") or [], t_hi)
     if not use_all:
@@ -261,6 +349,17 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         else:
             short += t1 - t0
     sel = StillSelection(keep, method, total_s=t_hi - t_lo, min_segment_s=min_segment_s, outside_s=outside)
+    for i, w in sorted(lone.items()):
+        cut = [(lo + a * window_s, min(lo + b * window_s, hi)) for a, b in _runs(_dilate(w, g) & still)]
+        cut = [(a, b) for a, b in _minus(keep, _minus(keep, cut))]  # only what lies inside the kept intervals
+        if not cut:
+            continue
+        sel.excluded[i] = cut
+        span = f"{cut[0][0]:.0f}-{cut[-1][1]:.0f} s" if len(cut) > 1 else f"{cut[0][0]:.0f}-{cut[0][1]:.0f} s"
+        sel.notes.append(f"IMU instance {i}: in {sel.excluded_s(i):.0f} s (within {span}) its gyro alone left its "
+                         "level at rest (mean or spread) while the accelerometers and another IMU's gyro were still: "
+                         "the gyro changed (frozen at a rate, a bias step, more noise; `companion run` judges its "
+                         "health), the vehicle did not move; left out of that IMU's analysis only")
     # accounting in time: samples actually present inside the kept intervals (gaps inside them excluded)
     # (the stream that covers the most time: a batch sampler's kHz bursts have the most samples and cover a
     # second in ten, and the headline said 7 s where the IMU streams had 44)
