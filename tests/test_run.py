@@ -158,10 +158,36 @@ def test_replay_cli_with_corrupt_state_file(tmp_path, capsys):
     assert "not usable" in cap.err and "Traceback" not in cap.err
     assert "IMU0 (RAW_IMU, 100.0 Hz): healthy" in cap.out
     assert json.loads((tmp_path / "state.json").read_text())["format"] == "companion-run-state"
-    # second run: restored from the state, the baseline is kept (no second "baseline learned")
-    rc = main(["run", "--source", str(tmp_path / "x.tlog"), "--state", str(tmp_path / "state.json")])
+    # second run, the next log: restored from the state, the baseline is kept (no second "baseline learned")
+    g, a = still(rng, 9_000)
+    write_imu_tlog(tmp_path / "y.tlog", 1.0 + np.arange(9_000) / FS, g, a)
+    rc = main(["run", "--source", str(tmp_path / "y.tlog"), "--state", str(tmp_path / "state.json")])
     cap = capsys.readouterr()
     assert rc == 0 and "state restored" in cap.err and "baseline learned" not in cap.out
+
+
+def test_a_log_replayed_again_into_its_state_is_refused(tmp_path, capsys):
+    """The same log (or a renamed copy) replayed into the state that holds it would feed every sample twice
+    (the still time doubles, the intervals narrow by sqrt(2)): one error line, the state untouched."""
+    from companion.mavlink.tlog_writer import write_imu_tlog
+
+    rng = np.random.default_rng(3)
+    g, a = still(rng, 6_000)
+    write_imu_tlog(tmp_path / "x.tlog", 1.0 + np.arange(6_000) / FS, g, a)
+    state = tmp_path / "state.json"
+    assert main(["run", "--source", str(tmp_path / "x.tlog"), "--state", str(state), "--quiet", "--baseline-s", "30"]) == 0
+    capsys.readouterr()
+    before = state.read_bytes()
+    (tmp_path / "copy.tlog").write_bytes((tmp_path / "x.tlog").read_bytes())
+    for name in ("x.tlog", "copy.tlog"):
+        rc = main(["run", "--source", str(tmp_path / name), "--state", str(state), "--quiet"])
+        cap = capsys.readouterr()
+        lines = [x for x in cap.err.splitlines() if x.startswith("companion: error")]
+        assert rc == 2 and len(lines) == 1 and "already holds this log" in lines[0], cap.err
+        assert "Traceback" not in cap.err
+        assert state.read_bytes() == before
+    # without the state it replays as any log
+    assert main(["run", "--source", str(tmp_path / "x.tlog"), "--no-state", "--quiet"]) == 0
 
 
 @pytest.mark.parametrize("argv, msg", [

@@ -98,6 +98,9 @@ class Pipeline:
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
         self._final: dict = {}  # (imu, axis) -> ((estimator id, fed_s), summary terms)
         self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
+        # logs replayed into this state (service.state.fingerprint): the same log replayed again into it would
+        # feed its data twice
+        self.replayed: list[dict] = []
         self.failed: str | None = None  # a user-facing error found in the data (the caller reports it)
         self._learned_here: set[int] = set()  # IMUs whose baseline was learned in this run
         self._restored: dict[int, list] = {}  # IMU -> the per-axis faults active when its state was saved
@@ -571,7 +574,7 @@ class Pipeline:
         chans = {str(imu): ch.state_dict() for imu, ch in self.channels.items() if ch.rate_hz is not None}
         return {"format": STATE_FORMAT, "version": 1, "sysid": self.sysid,
                 "baseline": self.baseline.to_dict() if self.baseline is not None else None, "channels": chans,
-                **self.group.state_dict()}
+                "replayed": list(self.replayed), **self.group.state_dict()}
 
     def load_state_dict(self, d: Mapping) -> None:
         """Restore a saved state; raises ValueError (caller warns and starts fresh) if it is not ours."""
@@ -594,6 +597,7 @@ class Pipeline:
             elif not ch.learn:  # no baseline for this IMU and nothing being learned: learn afresh
                 ch.relearn()
         self.channels = channels
+        self.replayed = [dict(r) for r in d.get("replayed") or [] if isinstance(r, Mapping) and "sha256" in r]
         sensor = {imu: [(k, ax) for k, ax in ch.faults.active() if k in SENSOR_FAULTS] for imu, ch in channels.items()}
         self._restored = {imu: v for imu, v in sensor.items() if v}
         if d.get("sysid") is not None and self.sysid is None:

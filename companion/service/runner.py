@@ -90,10 +90,26 @@ def replay(src: str, pcfg, period: float, baseline, scales, writer, state: Path 
     restore(pipeline, state, relearn, warn, log)
     from companion.sources.kind import kind_of
 
-    if kind_of(src) == "tlog":  # frame order with its HEARTBEATs (armed state)
-        totals = replay_tlog(src, pipeline, scales, stop=stop)
-    else:
-        totals = replay_log(src, pipeline, stop=stop, time_unit=time_unit)
+    fp = None
+    if state is not None:
+        from companion.service.state import fingerprint
+
+        try:
+            fp = fingerprint(src)
+        except OSError:
+            fp = None  # the reader says what is wrong with the file
+        if fp is not None and any(r.get("sha256") == fp["sha256"] for r in pipeline.replayed):
+            raise CompanionError(f"{src}: the state file {state} already holds this log's data (replayed into it "
+                                 "before): replaying it again would count every sample twice and narrow the "
+                                 "intervals; give another --state file or --no-state")
+    try:
+        if kind_of(src) == "tlog":  # frame order with its HEARTBEATs (armed state)
+            totals = replay_tlog(src, pipeline, scales, stop=stop)
+        else:
+            totals = replay_log(src, pipeline, stop=stop, time_unit=time_unit)
+    finally:
+        if fp is not None:  # (an interrupted replay fed part of it: that part must not be fed again either)
+            pipeline.replayed.append(fp)
     return pipeline, sink, totals
 
 

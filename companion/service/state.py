@@ -9,6 +9,7 @@ start (the bad file is kept next to it as ``<name>.bad`` for inspection).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -41,6 +42,24 @@ def save_state(path, state: dict) -> None:
             os.close(dfd)
     except OSError:
         pass
+
+
+FINGERPRINT_BYTES = 1 << 20
+
+
+def fingerprint(path) -> dict:
+    """What identifies a log's content whatever its name or place: its size and the SHA-256 of its size and
+    its first and last ``FINGERPRINT_BYTES`` (a copy or a renamed file is the same log; reading a 1-GB log
+    whole for this is not needed)."""
+    path = Path(path)
+    size = path.stat().st_size
+    h = hashlib.sha256(str(size).encode())
+    with open(path, "rb") as fh:
+        h.update(fh.read(FINGERPRINT_BYTES))
+        if size > FINGERPRINT_BYTES:
+            fh.seek(max(FINGERPRINT_BYTES, size - FINGERPRINT_BYTES))
+            h.update(fh.read())
+    return {"sha256": h.hexdigest(), "size": size, "name": path.name}
 
 
 def load_state(path, restore: Callable[[dict], None], warn: Callable[[str], None]) -> bool:
