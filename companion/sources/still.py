@@ -301,10 +301,10 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         # healthy twin's 20 minutes at rest out of the analysis). With one instance (or streams that share
         # one: a log's IMU and batch messages of the same sensor) its gyro counts alone, as before.
         # The other gyro is a witness only where it would have seen what this one shows (a frozen gyro aside):
-        # the excursion (mean or spread) at least twice the limit the witness is tested against -- a gyro 7x noisier than its twin
-        # does not see the small rotation the quiet one does (a public Pixhawk log's last 3 s before handling).
+        # the excursion (mean or spread) at least twice the limit the witness is tested against -- a gyro 7x
+        # noisier than its twin does not see the small rotation the quiet one does (a public Pixhawk log's
+        # last 3 s before handling).
         gm = np.array([v[0] for v in by_gyro.values()])
-        gh = np.array([v[1] for v in by_gyro.values()])
         alone = (gm.sum(axis=0) == 1) & ~moving
         seen = np.zeros(nb, dtype=bool)
         for i, (mv_i, _, ev_i) in by_gyro.items():
