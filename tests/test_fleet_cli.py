@@ -272,3 +272,31 @@ def test_simulate_format_errors_are_one_line(tmp_path, capsys):
                  "--message", "HIGHRES_IMU"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "DataFlash" in err[0]
+
+
+def test_logs_grouped_by_system_id_alone_are_said_to_be_possibly_different_vehicles(tmp_path, capsys):
+    """Logs without a board id (old DataFlash logs, CSVs) all become vehicle sys0: the report says that its
+    trends may compare different vehicles, and not when the folders name the vehicles."""
+    rng = np.random.default_rng(8)
+    logs = tmp_path / "logs"
+    t = np.arange(3000) / 50.0
+    for k, name in enumerate(("rover_a", "plane_b")):
+        (logs / name).mkdir(parents=True)
+        d = np.column_stack([rng.normal(0, 2e-3 * (1 + k), (t.size, 3)), 9.81 * np.array([0, 0, -1]) + rng.normal(0, 0.02, (t.size, 3))])
+        with open(logs / name / "flight.csv", "w") as f:
+            f.write("time_s,gx,gy,gz,ax,ay,az\n")
+            np.savetxt(f, np.column_stack([t, d]), delimiter=",", fmt="%.10g")
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--axes", "gx", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["fleet", "report", "--db", db]) == 0
+    out = capsys.readouterr().out
+    notes = [x for x in out.splitlines() if x.startswith("note: vehicle sys0:")]
+    assert len(notes) == 1 and "2 logs with no board id" in notes[0] and "different vehicles" in notes[0], out
+    assert "--vehicle dir" in notes[0]
+    db2 = str(tmp_path / "g.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db2, "--workers", "0", "--axes", "gx", "--quiet",
+                 "--vehicle", "dir"]) == 0
+    capsys.readouterr()
+    assert main(["fleet", "report", "--db", db2]) == 0
+    assert "note: vehicle" not in capsys.readouterr().out

@@ -45,6 +45,16 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
         tr = imu_trend(series, flights, threshold, min_rise)
         w = tr.worst
         times = [r["start_time"] for r in rows if r["start_time"] is not None]
+        logs = {r["hash"]: r for r in rows}.values()
+        by_mtime = sum(r.get("start_source") == "mtime" for r in logs)
+        identity_note = None
+        if flights >= 2 and vehicle == f"sys{sysid}" and not any(r.get("board_id") for r in logs):
+            # no board id in any of its logs: the logs are grouped by MAVLink system id alone (every
+            # DataFlash log without a boot banner id is sys0), and may be different vehicles' IMUs
+            identity_note = (f"{flights} logs with no board id, grouped by system id {sysid} alone: they may come "
+                             "from different vehicles"
+                             + (f"; {by_mtime} ordered by file time (no time of day in the log)" if by_mtime else "")
+                             + "; where each vehicle's logs sit in their own folder, fleet analyze --vehicle dir")
         last_n = {}
         for (axis, p), (idx, v, lo, hi) in series.items():
             if p == "N" and len(v):
@@ -56,7 +66,7 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
             "t": float(w.t) if w else None, "dispersion": float(w.phi) if w else None,
             "tests": len(tr.tests), "note": tr.note,
             "first_flight": min(times) if times else None, "last_flight": max(times) if times else None,
-            "last_N": last_n,
+            "last_N": last_n, "identity_note": identity_note,
             "_series": series, "_tests": tr.tests})
     entries.sort(key=lambda e: (not e["flagged"], -e["evidence"], e["vehicle"], e["sysid"], e["message"], e["imu"]))
     return entries

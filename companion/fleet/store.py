@@ -208,7 +208,7 @@ class FleetStore:
             "SELECT r.vehicle, r.sysid, r.compid, r.message, r.imu, r.axis, r.status, r.hash, r.still_s, "
             "r.rate_hz, r.temp_min, r.temp_max, "
             + ", ".join(f"r.{p}, r.{p}_lo, r.{p}_hi" for p in PARAMS)
-            + ", l.start_time, l.path FROM results r JOIN logs l ON l.hash = r.hash WHERE l.status = 'ok' "
+            + ", l.start_time, l.start_source, l.board_id, l.path FROM results r JOIN logs l ON l.hash = r.hash WHERE l.status = 'ok' "
             "ORDER BY r.vehicle, r.sysid, r.compid, r.message, r.imu, l.start_time, l.path, r.axis")
         names = [d[0] for d in cur.description]
         for row in cur:
