@@ -45,7 +45,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("compensate", help="ARIMA random-error compensation (STF, SR-UKF, SR-RSUKF) and ADEV",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("source", help=".tlog, .csv/.csv.gz, or a connection string (with --duration)")
+    p.add_argument("source", help=".tlog, DataFlash .bin, PX4 .ulg, .csv (each optionally .gz), or a "
+                   "connection string (with --duration)")
     p.add_argument("--axis", required=True, help=f"axis to compensate: {', '.join(AXES)}")
     p.add_argument("--method", default="all", help="stf, srukf, srrsukf, all, or a comma list (default all)")
     p.add_argument("--json", metavar="OUT", help="write ADEVs and fitted parameters as JSON (SI units)")

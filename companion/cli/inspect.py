@@ -1,4 +1,4 @@
-"""``companion inspect SOURCE``: what IMU streams a log, CSV file or live link holds."""
+"""``companion inspect SOURCE``: what IMU streams a log (.tlog, .bin, .ulg), CSV file or live link holds."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ TOTAL_KEYS = ("frames", "bad_bytes", "bad_frames")
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("inspect", help="list the IMU streams of a tlog, CSV file or live link",
+    p = subparsers.add_parser("inspect", help="list the IMU streams of a log (.tlog, .bin, .ulg, .csv) or live link",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", metavar="SOURCE", help=".tlog, .bin, .ulg, .csv (each optionally .gz), or a connection string")
