@@ -130,6 +130,9 @@ def run(args) -> int:
     if axis not in AXES:
         raise CompanionError(f"unknown --axis {args.axis!r}; expected one of {', '.join(AXES)}")
     methods = parse_methods(args.method)
+    from companion.cli.source_options import warn_ignored_options
+
+    warn_ignored_options(args, [args.source], "compensate")
     res = load(args.source, args.config, duration=args.duration)
     t, z, rate, label = select_series(res, axis, args.stream, args.max_samples)
     progress = Progress("compensate", enabled=not args.quiet and z.shape[0] > 50_000)

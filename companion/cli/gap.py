@@ -219,6 +219,9 @@ def run(args) -> int:
             check_output_path(path, opt)
     if args.plot:
         check_plot_path(args.plot)
+    from companion.cli.source_options import warn_ignored_options
+
+    warn_ignored_options(args, [args.measured], "gap")
     for opt in ("lsb", "cutoff"):
         v = getattr(args, opt)
         if v is not None and not (v > 0 and math.isfinite(v)):

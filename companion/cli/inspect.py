@@ -131,8 +131,11 @@ def run(args) -> int:
     from companion.cli.output import check_output_path
     from companion.sources import load
 
+    from companion.cli.source_options import warn_ignored_options
+
     if args.json:
         check_output_path(args.json, "--json")
+    warn_ignored_options(args, [args.source], "inspect")
     res = load(args.source, config=args.config, duration=args.duration, baud=args.baud, require_imu=False,
                time_unit=getattr(args, "time_unit", None))
     print(render(res), flush=True)
