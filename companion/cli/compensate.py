@@ -148,6 +148,7 @@ def run(args) -> int:
         report = result.to_json(axis)
         report["stream"] = label
         write_text(args.json, to_json(report) + "\n", "JSON")
+        print(f"wrote {args.json}")  # every file written is named, as analyze, gap and simulate do
     if args.out:
         cols = [t, z] + [m.x for m in result.methods.values()]
         header = ",".join(["time_s", f"{axis}_raw"] + [f"{axis}_{name}" for name in result.methods])
@@ -155,12 +156,14 @@ def run(args) -> int:
             np.savetxt(args.out, np.column_stack(cols), delimiter=",", header=header, comments="", fmt="%.9g")
         except OSError as exc:
             raise CompanionError(f"{args.out}: cannot write CSV ({exc.strerror or exc})") from None
+        print(f"wrote {args.out}")
     if args.plot:
         from companion.plots.compensation_plot import plot_compensation
 
         gyro = axis in GYRO_AXES
         plot_compensation(result, t, z, args.plot, title=f"{label} {axis}",
                           unit_scale=180.0 / np.pi if gyro else 1.0, unit="deg/s" if gyro else "m/s^2")
+        print(f"wrote {args.plot}")
     if bad:
         print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)
         return 1
