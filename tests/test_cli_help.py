@@ -24,3 +24,43 @@ def test_subcommand_help(name, capsys):
 
 def test_no_command_prints_help(capsys):
     assert main([]) == 2
+
+
+def _help(argv, capsys) -> str:
+    with pytest.raises(SystemExit) as exc:
+        main(argv + ["--help"])
+    assert exc.value.code == 0
+    return " ".join(capsys.readouterr().out.split())  # argparse wraps lines: compare on single spaces
+
+
+def test_help_names_every_log_format(capsys):
+    top = _help([], capsys)
+    assert ".bin" in top and ".ulg" in top  # the epilog and inspect's one-liner
+    comp = _help(["compensate"], capsys)
+    assert ".bin" in comp and ".ulg" in comp
+
+
+@pytest.mark.parametrize("cmd", [["simulate"], ["sim-autopilot"]])
+def test_preset_help_lists_every_shipped_preset(cmd, capsys):
+    from companion.sim import PRESET_DIR
+
+    text = _help(cmd, capsys)
+    names = sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+    assert "px4" in names
+    assert ", ".join(names) + " or a preset YAML" in text
+
+
+def test_fleet_simulate_options_have_help(capsys):
+    text = _help(["fleet", "simulate"], capsys)
+    for opt in ("OUT_DIR folder for the logs", "--vehicles V number of vehicles", "--flights F flights per vehicle",
+                "--seed SEED random seed"):
+        assert opt in text, opt
+
+
+def test_directory_and_unknown_source_are_named(tmp_path, capsys):
+    assert main(["analyze", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a directory" in err and "fleet analyze" in err
+    assert main(["analyze", "nonsense"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown source" in err and ".bin" in err and ".ulg" in err

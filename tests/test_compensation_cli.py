@@ -30,6 +30,8 @@ def test_compensate_writes_json_csv_and_plot(imu_csv, tmp_path, capsys):
     assert rc == 0
     printed = capsys.readouterr().out
     assert "SR-RSUKF" in printed and "ADEV ratio" in printed
+    for f in (out_json, out_csv, out_png):  # every file written is named, as the other commands do
+        assert f"wrote {f}\n" in printed
     rep = json.loads(out_json.read_text())
     assert rep["axis"] == "gy" and set(rep["methods"]) == {"stf", "srukf", "srrsukf"}
     from companion.allan.adev import oadev

@@ -92,6 +92,14 @@ def test_user_errors_are_one_line(raw_imu_tlog, tmp_path, capsys, args, msg):
     assert msg in err and err.count("\n") == 1
 
 
+def test_datasheet_on_an_accel_axis_names_the_datasheet(tmp_path, capsys):
+    # the data file does not exist: the axis is refused before the data are read
+    assert main(["gap", str(tmp_path / "x.tlog"), "--datasheet", "MPU-6000", "--axis", "ax"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "None" not in err
+    assert "datasheet MPU-6000: no terms for axis ax" in err and "gyro-only" in err
+
+
 def test_missing_model_file(tmp_path, capsys):
     assert main(["gap", str(tmp_path / "x.csv"), "--model", str(tmp_path / "none.yaml"), "--axis", "gx"]) == 2
     assert "none.yaml" in capsys.readouterr().err

@@ -185,6 +185,40 @@ def test_time_unit_ms_and_us(tmp_path):
         assert s.rate_hz == pytest.approx(100.0, rel=1e-6)
 
 
+@pytest.mark.parametrize("value", ["-5", "nan"])
+def test_negative_min_still_is_refused(tmp_path, capsys, value):
+    # refused before the source is read: the file need not exist
+    assert main(["analyze", str(tmp_path / "x.tlog"), "--min-still", value]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--min-still must be a number of seconds >= 0" in err
+
+
+def test_source_options_for_another_kind_of_source_warn_once(tmp_path, capsys):
+    t, g, a = _data(n=300)
+    write_imu_tlog(tmp_path / "s.tlog", t, g, a)
+    assert main(["inspect", str(tmp_path / "s.tlog"), "--time-unit", "ms", "--duration", "3"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["companion inspect: warning: --time-unit applies to CSV sources only: ignored",
+                   "companion inspect: warning: --duration applies to live links (connection strings) only: ignored"]
+    p = tmp_path / "ms.csv"
+    rows = "\n".join(",".join(f"{v:.9g}" for v in (ti * 1e3, *gi, *ai)) for ti, gi, ai in zip(t, g, a))
+    p.write_text("time_s,gx,gy,gz,ax,ay,az\n" + rows + "\n")
+    assert main(["inspect", str(p), "--time-unit", "ms"]) == 0
+    assert capsys.readouterr().err == ""  # applies: no warning
+
+
+def test_source_options_name_the_sources_they_skip():
+    from types import SimpleNamespace
+
+    from companion.cli.source_options import ignored_option_warnings
+
+    args = SimpleNamespace(time_unit="ms", duration=None)
+    assert ignored_option_warnings(args, ["a.csv", "b.tlog", "c.BIN"]) == [
+        "--time-unit applies to CSV sources only: ignored for b.tlog, c.BIN"]
+    assert ignored_option_warnings(args, ["a.csv.gz"]) == []
+    assert ignored_option_warnings(SimpleNamespace(time_unit=None, duration=5.0), ["udpin:0.0.0.0:14550"]) == []
+
+
 def test_absurd_rate_refused_with_reason(tmp_path, capsys):
     t, g, a = _data(n=300)
     p = tmp_path / "ghz.csv"

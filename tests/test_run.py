@@ -190,6 +190,25 @@ def test_a_log_replayed_again_into_its_state_is_refused(tmp_path, capsys):
     assert main(["run", "--source", str(tmp_path / "x.tlog"), "--no-state", "--quiet"]) == 0
 
 
+def test_run_baseline_learned_line_in_datasheet_units(tmp_path, capsys):
+    from companion.mavlink.tlog_writer import write_imu_tlog
+    from companion.units import to_datasheet
+
+    rng = np.random.default_rng(2)
+    g, a = still(rng, 9_000)
+    write_imu_tlog(tmp_path / "x.tlog", 1.0 + np.arange(9_000) / FS, g, a)
+    assert main(["run", "--source", str(tmp_path / "x.tlog"), "--no-state", "--baseline-s", "60"]) == 0
+    cap = capsys.readouterr()
+    line = next(x for x in (cap.out + cap.err).splitlines() if "baseline learned from" in x)
+    # deg/sqrt(h) first, as every other console figure; SI only in brackets
+    head, si = line.split(" deg/sqrt(h) [")
+    assert si.endswith(" rad/s/sqrt(Hz)])")
+    n_si = float(si.split()[0])
+    n_deg = float(head.rsplit("gx N ", 1)[1])
+    assert n_deg == pytest.approx(to_datasheet("N", n_si), rel=2e-2)
+    assert n_deg == pytest.approx(to_datasheet("N", N), rel=0.1)  # the simulated white noise
+
+
 @pytest.mark.parametrize("argv, msg", [
     (["run", "--source", "nonsense"], "unknown source"),
     (["run", "--source", "missing.tlog"], "no such file"),

@@ -4,6 +4,7 @@ stream and axis, as a table in datasheet units, a JSON report (SI), a plot and a
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from companion.cli.output import to_json, write_text
@@ -113,7 +114,13 @@ def run(args) -> int:
     bad = [a for a in axes if a not in AXES]
     if bad or not axes:
         raise CompanionError(f"bad --axes {args.axes!r}: expected a comma list of {', '.join(AXES)}")
+    # a negative (or NaN) shortest stretch would quietly mean "every still stretch"; say what is accepted
+    if not (math.isfinite(args.min_still) and args.min_still >= 0):
+        raise CompanionError(f"--min-still must be a number of seconds >= 0, got {args.min_still:g}")
     sources = args.source if isinstance(args.source, (list, tuple)) else [args.source]
+    from companion.cli.source_options import warn_ignored_options
+
+    warn_ignored_options(args, sources, "analyze")
     report = {"source": str(sources[0]) if len(sources) == 1 else ", ".join(map(str, sources)),
               "sources": [], "streams": []}
     failed = []

@@ -45,7 +45,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("compensate", help="ARIMA random-error compensation (STF, SR-UKF, SR-RSUKF) and ADEV",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("source", help=".tlog, .csv/.csv.gz, or a connection string (with --duration)")
+    p.add_argument("source", help=".tlog, DataFlash .bin, PX4 .ulg, .csv (each optionally .gz), or a "
+                   "connection string (with --duration)")
     p.add_argument("--axis", required=True, help=f"axis to compensate: {', '.join(AXES)}")
     p.add_argument("--method", default="all", help="stf, srukf, srrsukf, all, or a comma list (default all)")
     p.add_argument("--json", metavar="OUT", help="write ADEVs and fitted parameters as JSON (SI units)")
@@ -129,6 +130,9 @@ def run(args) -> int:
     if axis not in AXES:
         raise CompanionError(f"unknown --axis {args.axis!r}; expected one of {', '.join(AXES)}")
     methods = parse_methods(args.method)
+    from companion.cli.source_options import warn_ignored_options
+
+    warn_ignored_options(args, [args.source], "compensate")
     res = load(args.source, args.config, duration=args.duration)
     t, z, rate, label = select_series(res, axis, args.stream, args.max_samples)
     progress = Progress("compensate", enabled=not args.quiet and z.shape[0] > 50_000)
@@ -144,6 +148,7 @@ def run(args) -> int:
         report = result.to_json(axis)
         report["stream"] = label
         write_text(args.json, to_json(report) + "\n", "JSON")
+        print(f"wrote {args.json}")  # every file written is named, as analyze, gap and simulate do
     if args.out:
         cols = [t, z] + [m.x for m in result.methods.values()]
         header = ",".join(["time_s", f"{axis}_raw"] + [f"{axis}_{name}" for name in result.methods])
@@ -151,12 +156,14 @@ def run(args) -> int:
             np.savetxt(args.out, np.column_stack(cols), delimiter=",", header=header, comments="", fmt="%.9g")
         except OSError as exc:
             raise CompanionError(f"{args.out}: cannot write CSV ({exc.strerror or exc})") from None
+        print(f"wrote {args.out}")
     if args.plot:
         from companion.plots.compensation_plot import plot_compensation
 
         gyro = axis in GYRO_AXES
         plot_compensation(result, t, z, args.plot, title=f"{label} {axis}",
                           unit_scale=180.0 / np.pi if gyro else 1.0, unit="deg/s" if gyro else "m/s^2")
+        print(f"wrote {args.plot}")
     if bad:
         print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)
         return 1

@@ -121,9 +121,11 @@ def register(subparsers) -> None:
     s = sub.add_parser("simulate", help="a synthetic fleet in which chosen IMUs degrade",
                        description=SIM_DESCRIPTION, epilog=SIM_EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    s.add_argument("out_dir", metavar="OUT_DIR")
-    s.add_argument("--vehicles", type=int, required=True, metavar="V")
-    s.add_argument("--flights", type=int, required=True, metavar="F")
+    s.add_argument("out_dir", metavar="OUT_DIR", help="folder for the logs (vehicle_NNN/flight_FFF.tlog or .bin) and "
+                   "fleet_truth.json; created when missing, existing files of the same names are overwritten")
+    s.add_argument("--vehicles", type=int, required=True, metavar="V", help="number of vehicles (>= 1)")
+    s.add_argument("--flights", type=int, required=True, metavar="F",
+                   help="flights per vehicle (>= 1), one log each, a day apart")
     s.add_argument("--imus", type=int, default=3, help="IMUs per vehicle (default 3)")
     s.add_argument("--degrading", type=int, default=3, help="IMUs that degrade (default 3)")
     s.add_argument("--rise", type=float, default=1.5, help="last/first flight ratio of the degrading parameter (1.5)")
@@ -136,7 +138,8 @@ def register(subparsers) -> None:
     s.add_argument("--format", choices=("tlog", "bin"), default="tlog",
                    help="tlog: telemetry logs (default); bin: ArduPilot DataFlash logs (IMU messages, float "
                         "rad/s, board id in the boot banner, start time in a GPS record)")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="random seed: the same seed and options write the same "
+                   "fleet (default 0)")
     s.set_defaults(func=run_simulate)
 
 

@@ -219,6 +219,9 @@ def run(args) -> int:
             check_output_path(path, opt)
     if args.plot:
         check_plot_path(args.plot)
+    from companion.cli.source_options import warn_ignored_options
+
+    warn_ignored_options(args, [args.measured], "gap")
     for opt in ("lsb", "cutoff"):
         v = getattr(args, opt)
         if v is not None and not (v > 0 and math.isfinite(v)):
@@ -228,8 +231,22 @@ def run(args) -> int:
         from companion.datasheets import model_terms
 
         terms, sheet = model_terms(args.datasheet)
+        # the datasheet table holds gyro figures only, so its model has the three gyro axes
+        model_axes = list(GYRO_AXES)
     else:
         model = load_model(args.model)  # before the data: a wrong model path fails fast
+        model_axes = list(model.axes)
+    # the axis is checked before the data are read: a wrong --axis fails at once, not after a long load
+    axes = [args.axis] if args.axis else [a for a in GYRO_AXES if a in model_axes]
+    for a in axes:
+        if a in model_axes:
+            continue
+        if sheet is not None:
+            raise CompanionError(f"datasheet {sheet['name']}: no terms for axis {a}; datasheet models are gyro-only "
+                                 f"(has: {', '.join(model_axes)}); for an accelerometer axis give --model")
+        raise CompanionError(f"{args.model}: no terms for axis {a} (has: {', '.join(model_axes) or 'none'})")
+    if not axes:
+        raise CompanionError(f"{args.model}: no gyro axis; give --axis")
     st, ranges, sel, meta = load_measured(args.measured, args)
     rate = float(st.rate_hz)
     if sheet is not None:
@@ -238,12 +255,6 @@ def run(args) -> int:
             (f", B from {sheet['si']['B_from']}" if sheet["si"]["B"] else ", no bias stability given") + ")"
     else:
         source_model = args.model
-    axes = [args.axis] if args.axis else [a for a in GYRO_AXES if a in model.axes]
-    for a in axes:
-        if a not in model.axes:
-            raise CompanionError(f"{args.model}: no terms for axis {a} (has: {', '.join(model.axes) or 'none'})")
-    if not axes:
-        raise CompanionError(f"{args.model}: no gyro axis; give --axis")
     cutoff = args.cutoff if args.cutoff is not None else log_cutoff(st, meta)
     # PX4 sensor_combined carries gyro_rad = integral / integral_dt: each value is a mean over its interval
     integrated = meta.get("format") == "ulog" and st.key.message == "sensor_combined"

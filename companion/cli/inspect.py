@@ -1,4 +1,4 @@
-"""``companion inspect SOURCE``: what IMU streams a log, CSV file or live link holds."""
+"""``companion inspect SOURCE``: what IMU streams a log (.tlog, .bin, .ulg), CSV file or live link holds."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ TOTAL_KEYS = ("frames", "bad_bytes", "bad_frames")
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("inspect", help="list the IMU streams of a tlog, CSV file or live link",
+    p = subparsers.add_parser("inspect", help="list the IMU streams of a log (.tlog, .bin, .ulg, .csv) or live link",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", metavar="SOURCE", help=".tlog, .bin, .ulg, .csv (each optionally .gz), or a connection string")
@@ -131,8 +131,11 @@ def run(args) -> int:
     from companion.cli.output import check_output_path
     from companion.sources import load
 
+    from companion.cli.source_options import warn_ignored_options
+
     if args.json:
         check_output_path(args.json, "--json")
+    warn_ignored_options(args, [args.source], "inspect")
     res = load(args.source, config=args.config, duration=args.duration, baud=args.baud, require_imu=False,
                time_unit=getattr(args, "time_unit", None))
     print(render(res), flush=True)

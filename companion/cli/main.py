@@ -33,7 +33,8 @@ typical use:
   companion run --source udpin:0.0.0.0:14550     live gyro health on the companion computer
 
 Sources are pymavlink connection strings (udpin:HOST:PORT, udpout:, tcp:, tcpin:, a serial device
-with --baud), .tlog files, or CSV files (time_s,gx,gy,gz,ax,ay,az; gyro rad/s, accel m/s^2).
+with --baud), .tlog files, ArduPilot DataFlash .bin logs, PX4 .ulg logs, or CSV files
+(time_s,gx,gy,gz,ax,ay,az; gyro rad/s, accel m/s^2); each file optionally gzip-compressed (.gz).
 """
 
 

@@ -27,7 +27,10 @@ def add_vehicle_options(p) -> None:
     """--imus, flight, handling, warm-up and IMU-spread options (times in s since the simulation start)."""
     g = p.add_argument_group("vehicle (times in s since the simulation start)")
     g.add_argument("--imus", type=int, default=None, metavar="N", help="number of IMUs, 1-3: RAW_IMU, +SCALED_IMU2, +SCALED_IMU3 (default 1, or the preset's)")
-    g.add_argument("--preset", metavar="NAME|FILE", help="realistic autopilot data (companion.sim.realism): copter, plane, rover or a preset "
+    from companion.sim import preset_names
+
+    g.add_argument("--preset", metavar="NAME|FILE", help="realistic autopilot data (companion.sim.realism): "
+                   f"{', '.join(preset_names())} or a preset "
                    "YAML: gyro low-pass at the sensor rate and decimation, vibration per IMU and flight phase, IMU timing skew, "
                    "temperature-driven bias, sensor LSB; its noise model is used when no model is given")
     g.add_argument("--arm-at", type=float, metavar="S", help="arm (and fly) at S")

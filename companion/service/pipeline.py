@@ -48,6 +48,7 @@ from companion.service.config import PipelineConfig  # noqa: F401  (re-exported:
 from companion.service.blocks import RATE_CHANGE
 from companion.service.imu_group import ImuGroup
 from companion.timebase import period_of
+from companion.units import datasheet_unit, to_datasheet
 
 # the per-axis faults that describe the sensor itself, said again after a restart while they last
 SENSOR_FAULTS = ("dead", "stuck", "noise", "spikes", "resolution")
@@ -419,7 +420,9 @@ class Pipeline:
         self._learned_here.add(ch.imu)
         b = self.baseline.get(ch.imu, "gx") or {}
         n = b.get("N", (math.nan, math.nan))[0]
-        self.log(f"IMU{ch.imu}: baseline learned from {ch.learned_s:.0f} s of still data (gx N {n:.3g} rad/s/sqrt(Hz))")
+        # the datasheet unit, as every other figure on the console; SI in brackets for the state file's value
+        self.log(f"IMU{ch.imu}: baseline learned from {ch.learned_s:.0f} s of still data (gx N "
+                 f"{to_datasheet('N', n, 'gx'):.3g} {datasheet_unit('N', 'gx')} [{n:.3g} rad/s/sqrt(Hz)])")
         self.reporter.statustext(f"IMU{ch.imu} gyro baseline learned", MAV_SEVERITY_NOTICE, t)
 
     # ------------------------------------------------------------------ reports

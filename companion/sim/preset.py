@@ -7,12 +7,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from companion.errors import CompanionError
-from companion.sim.realism import PRESET_DIR, PRESETS, Realism, _err
+from companion.sim import PRESET_DIR
+from companion.sim.realism import PRESETS, Realism, _err
 
 
 def load_preset(name_or_path) -> dict:
     """A preset YAML as ``{"model": NoiseModel, "vehicle": {...}, "realism": Realism, "source": str}``;
-    ``name_or_path`` is ``copter``, ``plane``, ``rover``, ``px4`` or a path to a file of the same form."""
+    ``name_or_path`` is a shipped preset's name (``copter``, ``plane``, ``rover``, ``px4``: the YAML files of
+    ``companion/sim/presets``) or a path to a file of the same form."""
     import yaml
 
     from companion.sim.model import model_from_dict

@@ -43,15 +43,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from pathlib import Path
 
 import numpy as np
 
 from companion.errors import CompanionError
+from companion.sim import preset_names
 
 DECIMATIONS = ("latest", "average")
-PRESET_DIR = Path(__file__).with_name("presets")
-PRESETS = ("copter", "plane", "rover", "px4")
+PRESETS = preset_names()
 
 
 def _err(msg: str) -> CompanionError:

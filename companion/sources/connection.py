@@ -10,8 +10,9 @@ Accepted (pymavlink's syntax)::
     /dev/ttyACM0, /dev/serial/by-id/..., COM3   a serial device, with --baud (default 115200)
 
 Anything else is refused with one clear line. Files are never handed to
-``mavutil.mavlink_connection`` (it EXECUTES paths containing ``/bin/`` or ending ``.elf``): tlogs and
-CSVs are opened by :mod:`companion.sources.tlog` and :mod:`companion.sources.csvfile`.
+``mavutil.mavlink_connection`` (it EXECUTES paths containing ``/bin/`` or ending ``.elf``): tlogs,
+DataFlash logs, ULogs and CSVs are opened by :mod:`companion.sources.tlog`,
+:mod:`companion.sources.dataflash`, :mod:`companion.sources.ulog` and :mod:`companion.sources.csvfile`.
 """
 
 from __future__ import annotations
@@ -53,8 +54,12 @@ def parse_connection(spec: str, baud: int | None = None) -> tuple[str, str]:
         if baud is not None and int(baud) <= 0:
             raise CompanionError(f"--baud must be positive, got {baud}")
         return "serial", s
-    raise CompanionError(f"{s}: unknown source; expected a .tlog, .csv/.csv.gz file or a connection string "
-                         "(udpin:HOST:PORT, udpout:, udp:, tcp:, tcpin:, or a serial device with --baud)")
+    if os.path.isdir(s):  # the generic 'unknown source' would not say what is wrong with a folder
+        raise CompanionError(f"{s}: is a directory; expected a log file (.tlog, .bin, .ulg, .csv, each optionally "
+                             ".gz) or a connection string ('companion fleet analyze' takes directories of logs)")
+    raise CompanionError(f"{s}: unknown source; expected a .tlog, DataFlash .bin, PX4 .ulg or .csv file (each "
+                         "optionally .gz) or a connection string (udpin:HOST:PORT, udpout:, udp:, tcp:, tcpin:, "
+                         "or a serial device with --baud)")
 
 
 def _resolve(kind_prefix: str, host: str, port: int, spec: str) -> None:
