@@ -157,3 +157,16 @@ def test_gap_over_the_resolved_cluster_times_leaves_out_the_octaves_beyond_a_ten
     assert res.resolved_tau_max == pytest.approx(3.2)
     assert meas.tau[-1] > 3.2 and res.gap_after > 2.0
     assert res.gap_after_resolved == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("seconds, note", [(40.0, True), (3600.0, False)])
+def test_a_random_walk_named_from_a_record_too_short_to_resolve_it_says_so(seconds, note):
+    """The gap workflow names a long-tau rise from any record that shows it; where the record is shorter than
+    the analysis needs to resolve the term (companion.allan.fit.record_needed), it says that the size is not
+    pinned (analyze bounds it on the same data); on an hour it does not."""
+    rw = {"effect": "random_walk", "K": 3e-3 if seconds < 100 else 6.0e-5}
+    y = synthesize_axis([BASE[0], rw], RATE, int(seconds * RATE), np.random.default_rng(11))
+    res = run_gap(y, RATE, [BASE[0]], simulate=False, lowpass=False)
+    assert "random_walk" in {a["effect"] for a in res.added}
+    said = [n for n in res.notes if n.startswith("random_walk is named from")]
+    assert bool(said) == note, res.notes

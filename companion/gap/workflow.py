@@ -731,7 +731,9 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
         else:
             res.sim_avar_after, res.gap_sim_after, res.sim_check_after = _sim_checks(res.terms_after, meas,
                                                                                      seed + 1, t_series)
-    _resolved_gap(res, meas, max(len(s_) for s_ in y_segs) / rate_hz)
+    record_s = max(len(s_) for s_ in y_segs) / rate_hz
+    _resolved_gap(res, meas, record_s)
+    _record_rule_notes(res, record_s, rate_hz)
     resolved_over = res.gap_after_resolved is not None and res.gap_after_resolved > NOISE_FLOOR_G
     if changed and (res.gap_after > NOISE_FLOOR_G or resolved_over):
         # how often the model after, on a record like this one, leaves a gap as large (companion.gap.null)
@@ -748,6 +750,22 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
                              f"tenth of the record) G = {res.gap_after_resolved:.2f} > {NOISE_FLOOR_G}, although G "
                              f"over all of them is {res.gap_after:.2f}" + nl)
     return res
+
+
+def _record_rule_notes(res: GapResult, record_s: float, rate_hz: float) -> None:
+    """A long-tau term added from a record shorter than the analysis needs to resolve it
+    (:func:`companion.allan.fit.record_needed`): the gap is real, its size is not pinned -- `companion analyze`
+    reports a bound for it on the same data, and the two must not read as a contradiction."""
+    from companion.allan.fit import record_needed
+
+    added = {a["effect"] for a in res.added}
+    plain = [t for t in res.terms_after if t.get("effect") in ("white_noise", "bias_instability", "random_walk",
+                                                                "quantization", "ramp")]
+    for effect, need in record_needed(plain, 1.0 / rate_hz).items():
+        if effect in added and need > record_s:
+            res.notes.append(f"{effect} is named from {record_s:.3g} s of data, shorter than the {need:.3g} s a "
+                             "resolved value needs (the analysis' record rule): the curve rises there, but the "
+                             "size is not pinned; `companion analyze` gives it as a bound on the same data")
 
 
 def _resolved_gap(res: GapResult, meas: Measured, record_s: float) -> None:
