@@ -57,7 +57,7 @@ def _analyze(store_path, folder, workers, quiet=True):
     from companion.fleet.store import FleetStore
 
     with FleetStore(store_path) as store:
-        work, _, _ = plan(store, discover([folder]))
+        work = plan(store, discover([folder]))[0]
         prog = Progress(len(work), enabled=not quiet)
         if workers == 0:
             _warm()

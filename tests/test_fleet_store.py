@@ -81,15 +81,15 @@ def test_plan_skips_known_and_duplicate_content_and_reports_unreadable(tmp_path)
         (tmp_path / name).write_bytes(data)
     logs = discover([str(tmp_path)])
     with FleetStore(tmp_path / "f.sqlite") as s:
-        work, skipped, unreadable = plan(s, logs)
+        work, skipped, unreadable, dup = plan(s, logs)
         assert [w.log.path.rsplit("/", 1)[1] for w in work] == ["a.tlog", "b.tlog", "d.tlog"]
-        assert skipped == 1 and unreadable == []  # c.tlog is a.tlog's content
+        assert skipped == 0 and dup == 1 and unreadable == []  # c.tlog is a.tlog's content, not in the database
         s.record(work[0].hash, _result(work[0].log.path), work[0].log.size, work[0].log.mtime)
 
         def hasher(paths):  # as on a cluster where one file cannot be read
             return {p: ("error: Permission denied" if p.endswith("d.tlog") else "h" + p[-6]) for p in paths}
 
-        work, skipped, unreadable = plan(s, logs, hasher=hasher)
+        work, skipped, unreadable, dup = plan(s, logs, hasher=hasher)
         assert [w.log.path.rsplit("/", 1)[1] for w in work] == ["b.tlog", "c.tlog"]
-        assert skipped == 1  # a.tlog: its hash came from the paths table, no re-hashing
+        assert skipped == 1 and dup == 0  # a.tlog: its hash came from the paths table, no re-hashing
         assert unreadable == [(str(tmp_path / "d.tlog"), "cannot read (Permission denied)")]

@@ -184,12 +184,13 @@ def run_analyze(args) -> int:
             if args.scheduler:  # a cluster: hash the files on the workers, next to the storage
                 client, cluster = open_client(None, args.scheduler)
                 hasher = hash_on_cluster(client)
-            work, skipped, unreadable = plan(store, logs, retry_failed=args.retry_failed, hasher=hasher)
+            work, skipped, unreadable, duplicates = plan(store, logs, retry_failed=args.retry_failed, hasher=hasher)
             for path, reason in unreadable[:10]:
                 print(f"warning: {path}: {reason}; skipped", file=sys.stderr)
             print(f"{len(logs)} log(s): {len(work)} to analyse, {skipped} already in {args.db}"
+                  + (f", {duplicates} duplicate(s) (the same content as another log given)" if duplicates else "")
                   + (f", {len(unreadable)} unreadable" if unreadable else ""), file=sys.stderr)
-            progress = FleetProgress(len(work), skipped, enabled=not args.quiet)
+            progress = FleetProgress(len(work), skipped + duplicates, enabled=not args.quiet)
             stats = None
             if work and args.workers == 0 and not args.scheduler:
                 stats = run_serial(store, work, progress, axes, args.vehicle, args.time_limit)
@@ -198,7 +199,7 @@ def run_analyze(args) -> int:
                     client, cluster = open_client(args.workers or os.cpu_count() or 1, None)
                 stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit,
                                  batch=args.batch)
-            rc = _finish(args, store, stats, progress, skipped)
+            rc = _finish(args, store, stats, progress, skipped, duplicates)
     finally:
         if client is not None:
             close_client(client, cluster)
@@ -207,12 +208,12 @@ def run_analyze(args) -> int:
     return rc
 
 
-def _finish(args, store, stats, progress, skipped) -> int:
+def _finish(args, store, stats, progress, skipped, duplicates=0) -> int:
     from companion.fleet.runner import describe
 
     if stats is not None:
         progress.close()
-        stats.skipped = skipped
+        stats.skipped, stats.duplicates = skipped, duplicates
         for path, reason in stats.failures[:10]:
             print(f"failed: {path}: {reason}", file=sys.stderr)
         if len(stats.failures) > 10:

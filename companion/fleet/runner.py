@@ -37,7 +37,8 @@ class Work:
 @dataclass
 class RunStats:
     total: int = 0  # logs given
-    skipped: int = 0  # already in the database (or a duplicate content)
+    skipped: int = 0  # already in the database
+    duplicates: int = 0  # the same content as another log of this run
     done: int = 0  # analysed and recorded ok in this run
     failed: int = 0  # analysed and recorded failed in this run
     elapsed_s: float = 0.0
@@ -116,8 +117,9 @@ def hash_on_cluster(client, chunk: int = 100):
 
 
 def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 4,
-         hasher=None) -> tuple[list[Work], int, list[tuple[str, str]]]:
-    """(work to do, number skipped, unreadable [(path, reason)]) for ``logs`` against ``store``.
+         hasher=None) -> tuple[list[Work], int, list[tuple[str, str]], int]:
+    """(work to do, number already in the database, unreadable [(path, reason)], number of duplicates: the
+    same content as another of ``logs``) for ``logs`` against ``store``.
 
     Content hashes come from the ``paths`` table when a path's size and mtime are unchanged, else from
     ``hasher(paths) -> {path: hex or "error: reason"}`` (default: threads in this process).
@@ -142,12 +144,15 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
             unreadable.append((p, "cannot read (" + h[7:] + ")"))
         else:
             hashes[p] = h
-    work, seen, skipped = [], set(), 0
+    work, seen, skipped, duplicates = [], set(), 0, 0
     for lf in logs:
         h = hashes.get(lf.path)
         if h is None:
             continue
         st = store.status(h)
+        if h in seen and not (st == "ok" or (st == "failed" and not retry_failed)):
+            duplicates += 1
+            continue
         if h in seen or st == "ok" or (st == "failed" and not retry_failed):
             skipped += 1
             if st is not None and store.cached_hash(lf.path, lf.size, lf.mtime) != h:
@@ -155,7 +160,7 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
             continue
         seen.add(h)
         work.append(Work(lf, h))
-    return work, skipped, unreadable
+    return work, skipped, unreadable, duplicates
 
 
 def _record(store, stats: RunStats, w: Work, result: dict) -> None:
@@ -347,7 +352,8 @@ def close_client(client, cluster) -> None:
 
 def describe(stats: RunStats) -> str:
     s = (f"{stats.done} analysed, {stats.failed} failed, {stats.skipped} already in the database, "
-         f"{stats.elapsed_s:.1f} s")
+         + (f"{stats.duplicates} duplicate(s) of another log given, " if stats.duplicates else "")
+         + f"{stats.elapsed_s:.1f} s")
     if stats.done + stats.failed and stats.elapsed_s > 0:
         s += f" ({stats.rate:.2f} logs/s" + (f" on {stats.workers} workers)" if stats.workers else " in-process)")
     if stats.stopped:
