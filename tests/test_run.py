@@ -304,6 +304,34 @@ def test_link_identity_and_replies_only_to_the_imu_sender():
 
 
 @pytest.mark.network
+def test_a_first_rate_below_the_request_is_not_yet_a_drop_and_a_later_one_is():
+    """The first IMU data may come before the first request took effect: said as 'not yet', not counted as a
+    rate drop nor blamed on another client; once the rate was as asked, a fall below it is both."""
+    from companion.mavlink.link import Link, LinkConfig
+    from companion.sources.connection import open_connection
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    conn = open_connection(f"udpin:127.0.0.1:{port}")
+    now, said = [0.0], []
+    try:
+        link = Link(conn, LinkConfig(rate_hz=100.0, retry_s=5.0), sysid=1, clock=lambda: now[0], log=said.append)
+        link.acked = True  # SET_MESSAGE_INTERVAL accepted: 100 Hz is what is asked
+        for t, hz in ((1.0, 50.0), (2.0, 100.0), (10.0, 100.0), (11.0, 40.0), (20.0, 100.0)):
+            now[0] = t
+            link.last_imu_wall = t
+            link.check_rate(hz)
+        assert link.rate_drops == 1, said
+        assert [x.split(":")[0] for x in said] == ["IMU rate 50.0 Hz, not yet the 100 Hz asked for",
+                                                   "IMU rate 100 Hz, as asked",
+                                                   "IMU rate 40.0 Hz, below the 100 Hz asked for (another client's stream request?)",
+                                                   "IMU rate back to 100 Hz"]
+    finally:
+        conn.close()
+
+
+@pytest.mark.network
 def test_link_asks_again_when_data_stops_and_falls_back():
     """Wall-clock logic of the link with a fake clock: heartbeat every second, requests every retry_s while
     there is no data, REQUEST_DATA_STREAM added to the third request when two went unanswered, quiet while data flows."""

@@ -236,6 +236,7 @@ class Link:
         self._given_up_at: float | None = None  # the rate the autopilot kept after three requests
         self.rate_low = False  # the measured rate is below what we asked for (another client's request)
         self.rate_drops = 0  # times it fell below, each answered by asking again
+        self._rate_reached = False  # the rate was as asked at least once (before, a low rate is no "drop")
         self.rate_requests = 0
         self._rate_request_wall: float | None = None
         self._loss_warned = False
@@ -394,18 +395,26 @@ class Link:
             self._given_up_at = None
             if self.rate_low:
                 self.rate_low = False
-                if self.rate_drops == 1:
+                if not self._rate_reached:
+                    self.log(f"IMU rate {measured_hz:.0f} Hz, as asked")
+                elif self.rate_drops == 1:
                     self.log(f"IMU rate back to {measured_hz:.0f} Hz")
+            self._rate_reached = True
             return
         if self._given_up_at is not None and abs(measured_hz / self._given_up_at - 1.0) <= 0.2:
             return
         self._given_up_at = None
         if not self.rate_low:
             self.rate_low = True
-            self.rate_drops += 1
-            if self.rate_drops == 1:  # said once; the count is in the exit line
-                self.log(f"IMU rate {measured_hz:.1f} Hz, below the {target:.0f} Hz asked for (another client's stream "
-                     f"request?): asking again")
+            if not self._rate_reached:
+                # the first data may come before the first request took effect (the autopilot streams at its
+                # own rate until then): not yet a drop, and no other client to suspect
+                self.log(f"IMU rate {measured_hz:.1f} Hz, not yet the {target:.0f} Hz asked for: asking again")
+            else:
+                self.rate_drops += 1
+                if self.rate_drops == 1:  # said once; the count is in the exit line
+                    self.log(f"IMU rate {measured_hz:.1f} Hz, below the {target:.0f} Hz asked for (another client's "
+                             "stream request?): asking again")
         if self._rate_request_wall is not None and now - self._rate_request_wall < self.cfg.retry_s:
             return
         if self._unanswered >= 3:
