@@ -229,7 +229,8 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
                 ref = np.nanmedian(mean[base], axis=0) if np.any(base) else np.nanmedian(mean[good], axis=0)
                 dev, dev_lim = np.abs(mean - ref), 5.0 * se + GYRO_MEAN_OFFSET
                 mv |= np.any(dev > dev_lim, axis=1) | frozen
-                evidence = {"frozen": frozen, "dev": np.nan_to_num(np.nanmax(dev, axis=1, initial=0.0)), "sd": np.nan_to_num(np.nanmax(std, axis=1, initial=0.0)),
+                evidence = {"frozen": frozen, "dev": np.nan_to_num(np.nanmax(dev, axis=1, initial=0.0)),
+                            "sd": np.nan_to_num(np.nanmax(std, axis=1, initial=0.0)),
                             "dev_lim": np.nanmax(dev_lim, axis=1, initial=0.0), "sd_lim": float(np.max(sd_lim))}
         moving[kind] |= mv & good
     return moving["accel"], moving["gyro"], has, evidence
