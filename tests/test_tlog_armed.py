@@ -168,6 +168,8 @@ def test_ground_station_companion_gimbal_and_other_system_heartbeats_do_not_coun
     assert res.meta["armed_source"][0]["heartbeats"] == sum(1 for _, sysid, comp, *_ in hb if (sysid, comp) == (1, 1))
     sel = select_still(res.imu_streams(), res.meta)
     assert sel.method == "armed state + motion" and len(sel.intervals) == 1 and sel.still_s > 199.0
+    assert main(["inspect", str(path)]) == 0
+    assert "log: armed state (HEARTBEAT of sys1/comp1, 200 messages): never armed" in capsys.readouterr().out
 
 
 def test_two_vehicles_with_imus_each_armed_on_its_own(tmp_path):
@@ -200,6 +202,8 @@ def test_no_vehicle_heartbeat_is_no_armed_state(tmp_path, capsys):
     res = load(path)
     assert not res.meta["has_armed_state"] and res.meta["armed"] == []
     assert select_still(res.imu_streams(), res.meta).method == "motion (no armed state in this source)"
+    assert main(["inspect", str(path)]) == 0
+    assert "log: armed state: none (no autopilot HEARTBEAT from sys1" in capsys.readouterr().out
 
 
 def test_armed_after_a_reboot_lands_in_its_boot_session(tmp_path):
@@ -233,5 +237,7 @@ def test_real_ardusub_tlog_vehicle_never_armed_though_gcs_and_companion_say_arme
     assert res.meta["has_armed_state"] and armed_intervals(res.meta["armed"], 1e9) == []
     assert res.meta["armed_source"] == [{"sysid": 1, "compid": 1, "heartbeats": len(autopilot),
                                          "clock": "RAW_IMU[0] sys1/comp1"}]
+    assert main(["inspect", str(log)]) == 0
+    assert f"log: armed state (HEARTBEAT of sys1/comp1, {len(autopilot)} messages): never armed" in capsys.readouterr().out
     sel = _analyze_selection(log, tmp_path)
     assert sel["method"] == "armed state + motion" and sel["armed_s"] == 0.0
