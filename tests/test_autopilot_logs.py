@@ -73,9 +73,31 @@ def test_shared_dataflash_equals_dfreader(shared_data, name):
 
 
 def test_inspect_prints_log_parameters_and_armed_state(shared_data, capsys):
-    assert main(["inspect", str(shared_data / "ardupilot" / "dronekit_log171.bin")]) == 0
+    """The armed period, not the arming time alone ("72.6 s armed" read as a duration): from the EV arm event
+    (id 10; no disarm event; this old EV has no time field: the IMU message before it gives its time) to the
+    last IMU sample, as pymavlink's DFReader reads the log."""
+    from pymavlink import DFReader
+
+    path = shared_data / "ardupilot" / "dronekit_log171.bin"
+    r = DFReader.DFReader_binary(str(path))
+    arm, end, last_imu = None, 0.0, None
+    while True:
+        m = r.recv_match(type=["EV", "IMU", "IMU2", "IMU3"])
+        if m is None:
+            break
+        if m.get_type() == "EV":
+            assert m.Id != 11  # never disarmed in this log
+            if m.Id == 10 and arm is None:
+                arm = last_imu
+        else:
+            end = max(end, m.TimeMS * 1e-3)
+            if m.get_type() == "IMU":
+                last_imu = m.TimeMS * 1e-3
+    assert main(["inspect", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "INS_GYRO_FILTER 20" in out and "log: armed state: 72.6 s armed" in out
+    assert "INS_GYRO_FILTER 20" in out
+    assert (f"log: armed state: armed {arm:.1f}-{end:.1f} s ({end - arm:.0f} s in 1 period; still armed at the end "
+            "of the IMU data)") in out
 
 
 def test_shared_isbd_equals_dfreader(shared_data):

@@ -19,7 +19,8 @@ listened to for --duration s) and every axis: the overlapping
 Allan deviation with 95 % confidence intervals (EDF from the fitted noise model), and an automatic
 weighted fit of the IEEE 952 terms (white noise N, bias instability B, rate random walk K; quantization Q,
 ramp R and a Gauss-Markov term only when the data demand them), each with a 95 % interval.
-Only the still parts are analysed: the log's armed state (DataFlash EV/ARM, ULog vehicle_status) and a
+Only the still parts are analysed: the log's armed state (DataFlash EV/ARM, ULog vehicle_status, the
+vehicle autopilot's HEARTBEATs in a tlog) and a
 motion detector over the accelerometers and gyros of every IMU pick the still segments, and the Allan
 variance is pooled over them (no cluster crosses a gap); the report says what was used and what was left
 out. --start/--end restrict the time, --all skips the selection. A low-pass filter of the logged data

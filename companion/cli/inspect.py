@@ -17,9 +17,9 @@ and gyro zero only carries a compass); plus the frame totals (valid frames, bad 
 Sample times come from the messages' own timestamps; nothing is resampled or dropped silently
 (duplicates, backward steps and reboots are counted, see docs/ingestion.md).
 
-SOURCE is a .tlog file, an ArduPilot DataFlash .bin log (every IMU, batch-sampler bursts ISB_GYRO/ISB_ACCEL,
-parameters and armed state), a PX4 .ulg (sensor_combined, sensor_gyro, sensor_gyro_fifo, vehicle_imu), a CSV
-file (header time_s,gx,gy,gz,ax,ay,az; rad/s, m/s^2) -- each optionally gzip-compressed (.gz) -- or a
+SOURCE is a .tlog file (armed state from the vehicle autopilot's HEARTBEATs), an ArduPilot DataFlash .bin
+log (every IMU, batch-sampler bursts ISB_GYRO/ISB_ACCEL, parameters and armed state), a PX4 .ulg
+(sensor_combined, sensor_gyro, sensor_gyro_fifo, vehicle_imu), a CSV file (header time_s,gx,gy,gz,ax,ay,az; rad/s, m/s^2) -- each optionally gzip-compressed (.gz) -- or a
 pymavlink connection string (udpin:HOST:PORT, udpout:, udp:, tcp:, tcpin:, a serial device with --baud)
 listened to for --duration seconds."""
 
@@ -97,9 +97,12 @@ FILTER_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_MPU6K_FILTER", "INS
 
 
 def log_lines(res) -> list[str]:
-    """What an autopilot log says about its IMU data: filter parameters, armed periods, modes (one line each)."""
+    """What an autopilot log says about its IMU data: filter parameters, armed periods, modes (one line each);
+    for a tlog only its armed state."""
     meta = getattr(res, "meta", None) or {}
     fmt = meta.get("format")
+    if "armed_source" in meta:  # a tlog: only the armed state from its HEARTBEATs
+        return [tlog_armed_line(res)]
     if fmt not in ("dataflash", "ulog"):
         return []
     out = []
@@ -118,13 +121,47 @@ def log_lines(res) -> list[str]:
     if who:
         out.append("log: board " + ", ".join(who) if ident.get("board_id") else "log: " + ", ".join(who))
     if meta.get("has_armed_state"):
-        arm = [f"{t:.1f} s {'armed' if a else 'disarmed'}" for t, a in meta.get("armed") or []]
-        out.append("log: armed state: " + (", ".join(arm) if arm else "never armed"))
+        out.append("log: armed state: " + armed_text(meta.get("armed") or [], _imu_end(res)))
     if meta.get("modes"):
         k = len(meta["modes"])
         out.append(f"log: {k} mode {'entry' if k == 1 else 'entries'} ({', '.join(f'{t:.1f} s' for t, _ in meta['modes'][:5])}"
                    + (", ..." if k > 5 else "") + ")")
     return out
+
+
+def _imu_end(res) -> float | None:
+    """The time of the last IMU sample (where the still selection ends a log that is still armed)."""
+    ends = [float(s.t[-1]) for s in res.imu_streams() if s.samples]
+    return max(ends) if ends else None
+
+
+def armed_text(transitions, t_end: float | None, shown: int = 5) -> str:
+    """The armed periods of transitions [(t, armed)] as "armed 72.6-254.1 s (181 s in 1 period; ...)", or
+    "never armed". Periods, not transition times: "72.6 s armed" read as a duration. A log still armed
+    at its end is armed up to its last IMU sample (what the still selection leaves out)."""
+    from companion.sources.still import armed_intervals
+
+    last = max((t for t, _ in transitions), default=0.0)
+    iv = armed_intervals(transitions, t_end if t_end is not None else last)
+    if not iv:
+        return "never armed"
+    total = sum(b - a for a, b in iv)
+    text = "armed " + ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in iv[:shown]) + (", ..." if len(iv) > shown else "")
+    text += f" ({total:.0f} s in {len(iv)} period{'s' if len(iv) != 1 else ''}"
+    still_on = bool(sorted(transitions)[-1][1])
+    return text + ("; still armed at the end of the IMU data)" if still_on else ")")
+
+
+def tlog_armed_line(res) -> str:
+    """The armed-state line of a tlog: whose HEARTBEATs gave it, and the armed periods."""
+    meta = res.meta
+    src = meta.get("armed_source") or []
+    if not meta.get("has_armed_state") or not src:
+        systems = sorted({s.key.sysid for s in res.imu_streams()})
+        who = ", ".join(f"sys{k}" for k in systems) or "the IMU data"
+        return (f"log: armed state: none (no autopilot HEARTBEAT from {who}; still segments from motion only)")
+    whose = ", ".join(f"sys{d['sysid']}/comp{d['compid']}, {d['heartbeats']} messages" for d in src)
+    return f"log: armed state (HEARTBEAT of {whose}): " + armed_text(meta.get("armed") or [], _imu_end(res))
 
 
 def run(args) -> int:

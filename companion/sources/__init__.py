@@ -39,8 +39,9 @@ class LoadResult:
     streams: list[ImuStream]
     totals: dict = field(default_factory=dict)  # frames, bad_bytes, bad_frames, imu_messages
     messages: dict = field(default_factory=dict)  # message name -> valid frames (tlog / live)
-    # log metadata where the format has it (DataFlash, ULog): params {name: value}, armed [(t_s, bool)],
-    # has_armed_state, modes [(t_s, number)], messages [(t_s, text)], format, extra per-format keys
+    # log metadata where the format has it (DataFlash, ULog, tlog): params {name: value}, armed [(t_s, bool)],
+    # has_armed_state, modes [(t_s, number)], messages [(t_s, text)], format, extra per-format keys (a tlog:
+    # identity, armed_source [{sysid, compid, heartbeats, clock}]; no format key: MAVLink rules are the default)
     meta: dict = field(default_factory=dict)
 
     def imu_streams(self) -> list[ImuStream]:
@@ -114,8 +115,10 @@ def load_tlog(path, config=None, split_periods: float = _timing.SPLIT_PERIODS) -
     streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
     totals = {"frames": index.frames, "bad_bytes": index.bad_bytes, "bad_frames": index.bad_frames,
               "imu_messages": int(sum(r.t.shape[0] for r in raws))}
-    return LoadResult(str(path), streams, totals, dict(index.counts),
-                      {"identity": tlog.identity(index), "params": tlog.param_values(index)})
+    meta = {"identity": tlog.identity(index), "params": tlog.param_values(index)}
+    # the armed state of the systems whose IMUs are analysed (their autopilots' HEARTBEATs, on the IMU clock)
+    meta.update(tlog.armed_state(index, [s.key for s in streams if s.is_imu and s.samples]))
+    return LoadResult(str(path), streams, totals, dict(index.counts), meta)
 
 
 def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS, time_unit: str | None = None) -> LoadResult:

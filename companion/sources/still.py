@@ -5,7 +5,8 @@ hand carrying the vehicle) puts real rotation into the gyro and turns N into jun
 decides on a common time grid of ``window_s`` windows (default 1 s; longer when even the fastest IMU stream
 is slower than 16 Hz, so that a window holds 16 of its samples):
 
-1. **armed state** from the log (DataFlash ``EV``/``ARM``, ULog ``vehicle_status``): every armed window,
+1. **armed state** from the log (DataFlash ``EV``/``ARM``, ULog ``vehicle_status``, a tlog's vehicle
+   HEARTBEATs, :func:`companion.sources.tlog.armed_state`): every armed window,
    widened by ``guard_s`` on each side (motors spin up before take-off and down after landing), is out;
 2. **motion** from *every* IMU stream of the log, accelerometer and gyro: per window and axis the standard
    deviation and the mean. The noise floor of each stream is the 10th percentile of its window standard

@@ -266,3 +266,132 @@ def param_values(idx: FrameIndex) -> dict[str, float]:
             if np.isfinite(v):
                 out[name] = float(v)
     return out
+
+
+# --------------------------------------------------------------------------------------------------
+# armed state: the vehicle's HEARTBEATs, on its IMU messages' clock
+
+HEARTBEAT_ID = M.HEARTBEAT.msgid
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_AUTOPILOT_INVALID = 8
+#: HEARTBEAT types of components that are not a vehicle's autopilot (MAV_TYPE: GCS, onboard controller,
+#: gimbal, ADS-B, camera, charging station, FLARM, servo, OpenDroneID, battery, parachute, log, OSD, IMU,
+#: GPS, winch, illuminator, gripper). A ground station's HEARTBEAT may carry the armed bit (QGC sends
+#: base_mode 192 from sysid 255) and so may a companion computer's (type 18, base_mode 128 on a real
+#: ArduSub tlog), neither of which says anything about the vehicle.
+NOT_AUTOPILOT_TYPES = frozenset((6, 18, 26, 27, 30, 31, 32, 33, 34, 36, 37, 38, 39, 40, 41, 42, 44, 48))
+
+
+def vehicle_heartbeats(idx: FrameIndex, sysid: int, compid: int | None = None) -> tuple[np.ndarray, np.ndarray, int | None]:
+    """(frame indices, armed flags, component id) of the autopilot HEARTBEATs of system ``sysid``.
+
+    A HEARTBEAT counts when its autopilot is not MAV_AUTOPILOT_INVALID and its type is not in
+    :data:`NOT_AUTOPILOT_TYPES`. Where several components of the system send such HEARTBEATs, only one is
+    used (two sources of one flag could alternate): ``compid`` (the IMU messages' component) when it sends
+    any, else the one that sends the most."""
+    sel = np.flatnonzero((idx.msgid == HEARTBEAT_ID) & (idx.sysid == sysid))
+    empty = (np.zeros(0, np.int64), np.zeros(0, bool), None)
+    if not sel.size:
+        return empty
+    rec = idx.payloads(sel, M.HEARTBEAT.full_len).view(M.HEARTBEAT.dtype).reshape(-1)
+    ok = (rec["autopilot"] != MAV_AUTOPILOT_INVALID) & ~np.isin(rec["type"], list(NOT_AUTOPILOT_TYPES))
+    if not ok.any():
+        return empty
+    comps, counts = np.unique(idx.compid[sel][ok], return_counts=True)
+    comp = int(compid) if compid is not None and compid in comps else int(comps[np.argmax(counts)])
+    ok &= idx.compid[sel] == comp
+    return sel[ok], (rec["base_mode"][ok] & MAV_MODE_FLAG_SAFETY_ARMED) != 0, comp
+
+
+def imu_clock(idx: FrameIndex, key) -> tuple[np.ndarray, np.ndarray]:
+    """(frame indices, message times in s) of the IMU stream ``key`` (a StreamKey), in file order."""
+    layout = M.IMU_LAYOUTS[key.message]
+    sel = np.flatnonzero((idx.msgid == layout.msgid) & (idx.sysid == key.sysid) & (idx.compid == key.compid))
+    if not sel.size:
+        return sel, np.zeros(0)
+    rec = idx.payloads(sel, layout.full_len).view(layout.dtype).reshape(-1)
+    if layout.name not in M.FIXED_INSTANCE:
+        keep = rec["id"].astype(np.int64) == key.instance
+        sel, rec = sel[keep], rec[keep]
+    t = (rec["time_usec"].astype(np.float64) * 1e-6 if "time_usec" in rec.dtype.names
+         else rec["time_boot_ms"].astype(np.float64) * 1e-3)
+    return sel, t
+
+
+def to_message_time(idx: FrameIndex, frames: np.ndarray, clock_frames: np.ndarray, clock_t: np.ndarray) -> np.ndarray:
+    """Message times (the IMU stream's clock) of the frames ``frames``, which carry no time field.
+
+    Each frame takes the IMU message next to it in the file (the one before or after, whichever has the
+    closer record stamp) and that message's offset between its own time and its record stamp: t = stamp +
+    (t_imu - stamp_imu). The record stamp is when the ground station logged the frame; the offset moves
+    only with the link's latency (tens of ms) and jumps at a reboot, where the nearest message is already
+    on the new clock. Where either record stamp is not a plausible unix time (a writer that leaves it
+    zero), the frame takes the neighbouring message's time as it is."""
+    out = np.full(frames.shape[0], np.nan)
+    if not frames.size or not clock_frames.size:
+        return out
+    stamps = idx.stamp_us.astype(np.float64) * 1e-6
+    j = np.searchsorted(clock_frames, frames)  # the IMU message after each frame (file order)
+    after = np.minimum(j, clock_frames.shape[0] - 1)
+    before = np.maximum(j - 1, 0)
+    s = stamps[frames]
+    sa, sb = stamps[clock_frames[after]], stamps[clock_frames[before]]
+    k = np.where(np.abs(sa - s) < np.abs(sb - s), after, before)
+    sk = stamps[clock_frames[k]]
+    lo, hi = _UNIX_US[0] * 1e-6, _UNIX_US[1] * 1e-6
+    plausible = (s > lo) & (s < hi) & (sk > lo) & (sk < hi)
+    return clock_t[k] + np.where(plausible, s - sk, 0.0)
+
+
+def armed_state(idx: FrameIndex, imu_keys) -> dict:
+    """Armed state of the systems whose IMU streams ``imu_keys`` (StreamKeys, the analysed IMUs) a tlog holds:
+    ``{"armed": [(t_s, armed)], "has_armed_state": bool, "armed_source": [{"sysid", "compid",
+    "heartbeats", "clock"}]}``.
+
+    Per system: its autopilot's HEARTBEATs (:func:`vehicle_heartbeats`; other systems are ignored), the
+    first one's state and every change (and the state again at each reboot, where the time steps back, so
+    that the boot sessions can be laid end to end), each at the time of the first HEARTBEAT that shows it,
+    mapped to the clock of that system's IMU stream with the most messages (:func:`to_message_time`): the
+    still selection works on message time. A HEARTBEAT comes about once a second, so a change is seen up to
+    1 s late; the still selection's guard (3 s) covers that. Several systems: the union of their armed
+    periods (the still selection takes every IMU of the log on one time axis)."""
+    from companion.sources.sessions import RESET_S
+
+    by_sys: dict = {}
+    for key in imu_keys:
+        by_sys.setdefault(int(key.sysid), []).append(key)
+    per_sys, sources = [], []
+    for sysid, keys in sorted(by_sys.items()):
+        clocks = [(k, *imu_clock(idx, k)) for k in keys]
+        ref, cf, ct = max(clocks, key=lambda c: c[1].shape[0])
+        frames, armed, comp = vehicle_heartbeats(idx, sysid, ref.compid)
+        if not frames.size:
+            continue
+        t = to_message_time(idx, frames, cf, ct)
+        good = np.isfinite(t)
+        t, armed = t[good], armed[good]
+        if not t.size:
+            continue
+        # a change of state, and the first HEARTBEAT after a reboot (its time steps back with the IMU clock):
+        # join_sessions finds the boot session of each event by those steps back, in file order, and an
+        # arming after a reboot can be later on its clock than every event of the session before
+        change = np.r_[True, (armed[1:] != armed[:-1]) | (np.diff(t) < -RESET_S)]
+        per_sys.append([(float(a), bool(b)) for a, b in zip(t[change], armed[change])])
+        sources.append({"sysid": sysid, "compid": comp, "heartbeats": int(frames.size), "clock": ref.label()})
+    if len(per_sys) <= 1:
+        trans = per_sys[0] if per_sys else []
+    else:  # the union of the systems' armed periods as transitions
+        from companion.sources.still import armed_intervals
+
+        iv = sorted(iv for tr in per_sys for iv in armed_intervals(tr, np.inf))  # inf: armed to the end
+        merged: list = []
+        for a, b in iv:
+            if merged and a <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], b)
+            else:
+                merged.append([a, b])
+        t0 = min(tr[0][0] for tr in per_sys)
+        trans = [(t0, False)] if not merged or merged[0][0] > t0 else []
+        for a, b in merged:
+            trans += [(a, True)] + ([(b, False)] if np.isfinite(b) else [])
+    return {"armed": trans, "has_armed_state": bool(per_sys), "armed_source": sources}
