@@ -298,9 +298,10 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
     if by_gyro:
         # a rotation or a vibration reaches every gyro of the airframe: where two or more IMU instances carry
         # gyro data, one instance's gyro alone (every accelerometer still, another instance's gyro still) is
-        # that gyro's doing -- frozen at a rate, biased, noisy -- not motion: the window stays still for the
-        # others and is left out of that instance's own streams only (a gyro stuck at 20 deg/s took its
-        # healthy twin's 20 minutes at rest out of the analysis). With one instance (or streams that share
+        # that gyro's doing -- frozen at a rate, its bias drifting or stepping, noisy -- not motion: the window
+        # stays still for the others and is left out of that instance's own streams only (a gyro stuck at
+        # 20 deg/s took its healthy twin's 20 minutes at rest out of the analysis; a public ArduCopter tlog's
+        # IMU0 warming up, its bias 1 deg/s from its later level, took 130 s of rest from IMU1). With one instance (or streams that share
         # one: a log's IMU and batch messages of the same sensor) its gyro counts alone, as before.
         # The other gyro is a witness only where it would have seen what this one shows (a frozen gyro aside):
         # the excursion (mean or spread) at least twice the limit the witness is tested against -- a gyro 7x
@@ -360,8 +361,9 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         span = f"{cut[0][0]:.0f}-{cut[-1][1]:.0f} s" if len(cut) > 1 else f"{cut[0][0]:.0f}-{cut[0][1]:.0f} s"
         sel.notes.append(f"IMU instance {i}: in {sel.excluded_s(i):.0f} s (within {span}) its gyro alone left its "
                          "level at rest (mean or spread) while the accelerometers and another IMU's gyro were still: "
-                         "the gyro changed (frozen at a rate, a bias step, more noise; `companion run` judges its "
-                         "health), the vehicle did not move; left out of that IMU's analysis only")
+                         "the gyro changed (its bias drifting or stepping -- warm-up, a fault --, frozen at a rate, more "
+                         "noise; `companion run` judges its health), the vehicle did not move; left out of that IMU's "
+                         "analysis only")
     # accounting in time: samples actually present inside the kept intervals (gaps inside them excluded)
     # (the stream that covers the most time: a batch sampler's kHz bursts have the most samples and cover a
     # second in ten, and the headline said 7 s where the IMU streams had 44)
