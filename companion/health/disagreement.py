@@ -25,7 +25,9 @@ flags it anyway); a biased one above the floor about 10+ nats per block.
 
 Clearing is a separate, explicit rule (PX4 DataValidator style), not the CUSUMs' reverse statistic: an axis in
 FAULT clears after ``CLEAR_BLOCKS`` consecutive blocks whose residual is within the allowance both ways
-(|d| <= 0.75 floor, no evidence in either direction). The reverse CUSUM cleared in one block: an agreeing block's LLR is -(delta / sigma_d^2) 0.75 floor, hundreds of nats with sigma_d ~ 0.25
+(|d| <= 0.75 floor, no evidence in either direction), and never while the caller holds it (another fault on
+that axis of either IMU that moves a mean rate: service/imu_group.py). The reverse CUSUM cleared in one
+block: an agreeing block's LLR is -(delta / sigma_d^2) 0.75 floor, hundreds of nats with sigma_d ~ 0.25
 deg/s, while h is 15. A gyro frozen in flight agrees for a block whenever the vehicle's mean rate over
 that second passes near the frozen value, so the fault was named and cleared every few seconds (a user
 trial: 9 named/cleared pairs in 106 s), and each clear re-anchored the bias reference c at that block, until
@@ -38,7 +40,7 @@ With three IMUs the odd one out is the IMU whose two pairs disagree while the th
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -56,7 +58,8 @@ REF_TAU_BLOCKS = 60.0
 MOTION_RMS = 0.02  # rad/s: a block with this much (demeaned) rotation is fitted
 WARM_BLOCKS = 5
 #: consecutive agreeing blocks (1 s each) before a disagreement clears. A gyro frozen in flight agreed by
-#: chance for up to 7 blocks in a row in the trial's manoeuvres (true rate near the frozen value)
+#: chance for up to 7 blocks in a row in the trial's manoeuvres (true rate near the frozen value); a
+#: hover at that value lasts longer, which the caller's hold covers while the stuck detector names it
 CLEAR_BLOCKS = 30
 
 
@@ -85,17 +88,18 @@ class PairDisagreement:
     def state(self) -> int:
         return FAULT if any(self.axis_state(a) == FAULT for a in range(3)) else OK
 
-    def update(self, obs: Observation) -> list[FaultEvent]:
+    def update(self, obs: Observation, held: Sequence[bool] = (False, False, False)) -> list[FaultEvent]:
         """Aligned samples (m, 3) of both IMUs: ``obs.y`` of IMU i, ``obs.other`` of IMU j; ``obs.noise_var``
         the white variance expected of the residual (both IMUs' still references summed), ``obs.noise_other``
-        IMU j's own (the regressor's noise, corrected for in the fit). Returns the pair's state changes per
-        axis as events of IMU i with ``detail`` "IMU{j}" (which IMU is at fault is decided by the group)."""
-        changed = self._step(obs.y, obs.other, obs.noise_var, obs.noise_other)
+        IMU j's own (the regressor's noise, corrected for in the fit); ``held[a]``: axis a in FAULT does not
+        clear in this block (its cause persists). Returns the pair's state changes per axis as events of
+        IMU i with ``detail`` "IMU{j}" (which IMU is at fault is decided by the group)."""
+        changed = self._step(obs.y, obs.other, obs.noise_var, obs.noise_other, held)
         return [FaultEvent(self.i, AXES[a], self.kind, self.axis_state(a), float(self.value[a]), f"IMU{self.j}")
                 for a in changed]
 
     def _step(self, yi: np.ndarray, yj: np.ndarray, noise_var: float | None = None,
-              noise_j: float | None = None) -> list[int]:
+              noise_j: float | None = None, held: Sequence[bool] = (False, False, False)) -> list[int]:
         m = yi.shape[0]
         if m < 10:
             return []
@@ -134,9 +138,9 @@ class PairDisagreement:
             if was == OK:
                 self.up[a].step(capped(llr_up, H_ON, hold))
                 self.down[a].step(capped(llr_down, H_ON, hold))
-            elif llr_up <= 0.0 and llr_down <= 0.0:
+            elif llr_up <= 0.0 and llr_down <= 0.0 and not held[a]:
                 # one agreeing block is no evidence that the pair agrees again (the true rate of a turn
-                # passes near a frozen value for a second): only a run of them
+                # passes near a frozen value for a second): only a run of them, and none while held
                 self.agree[a] += 1
                 self.agree_sum[a] += d0[a]
                 if self.agree[a] >= CLEAR_BLOCKS:
