@@ -58,7 +58,7 @@ REF_TAU_BLOCKS = 60.0
 MOTION_RMS = 0.02  # rad/s: a block with this much (demeaned) rotation is fitted
 WARM_BLOCKS = 5
 #: consecutive agreeing blocks (1 s each) before a disagreement clears. A gyro frozen in flight agreed by
-#: chance for up to 7 blocks in a row in the trial's manoeuvres (true rate near the frozen value); a
+#: chance for up to 6 blocks in a row in the trial's manoeuvres (true rate near the frozen value); a
 #: hover at that value lasts longer, which the caller's hold covers while the stuck detector names it
 CLEAR_BLOCKS = 30
 
