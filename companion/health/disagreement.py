@@ -23,6 +23,16 @@ residual's variance is not used: in flight each IMU vibrates its own way, and at
 detector singles out a noisy one. A gyro frozen in flight shows its whole mean rate in d (and stuck.py
 flags it anyway); a biased one above the floor about 10+ nats per block.
 
+Clearing is a separate, explicit rule (PX4 DataValidator style), not the CUSUMs' reverse statistic: an axis in
+FAULT clears after ``CLEAR_BLOCKS`` consecutive blocks whose residual is within the allowance both ways
+(|d| <= 0.75 floor, no evidence in either direction), and never while the caller holds it (another fault on
+that axis of either IMU that moves a mean rate: service/imu_group.py). The reverse CUSUM cleared in one
+block: an agreeing block's LLR is -(delta / sigma_d^2) 0.75 floor, hundreds of nats with sigma_d ~ 0.25
+deg/s, while h is 15. A gyro frozen in flight agrees for a block whenever the vehicle's mean rate over
+that second passes near the frozen value, so the fault was named and cleared every few seconds (a user
+trial: 9 named/cleared pairs in 106 s), and each clear re-anchored the bias reference c at that block, until
+c had absorbed the offset and the frozen gyro "agreed" for good.
+
 With three IMUs the odd one out is the IMU whose two pairs disagree while the third pair agrees
 (service/imu_group.py names it: ``IMU1 gyro X disagrees with IMU0/IMU2``).
 """
@@ -30,7 +40,7 @@ With three IMUs the odd one out is the IMU whose two pairs disagree while the th
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -47,6 +57,10 @@ FIT_TAU_BLOCKS = 600.0
 REF_TAU_BLOCKS = 60.0
 MOTION_RMS = 0.02  # rad/s: a block with this much (demeaned) rotation is fitted
 WARM_BLOCKS = 5
+#: consecutive agreeing blocks (1 s each) before a disagreement clears. A gyro frozen in flight agreed by
+#: chance for up to 6 blocks in a row in the trial's manoeuvres (true rate near the frozen value); a
+#: hover at that value lasts longer, which the caller's hold covers while the stuck detector names it
+CLEAR_BLOCKS = 30
 
 
 class PairDisagreement:
@@ -64,6 +78,8 @@ class PairDisagreement:
         self.up = [Cusum(H_ON, H_OFF) for _ in range(3)]
         self.down = [Cusum(H_ON, H_OFF) for _ in range(3)]
         self.value = np.full(3, np.nan)  # residual at the transition (deg/s)
+        self.agree = [0, 0, 0]  # consecutive agreeing blocks of an axis in FAULT
+        self.agree_sum = np.zeros(3)  # their d0 summed: the bias reference after a clear is their mean
 
     def axis_state(self, a: int) -> int:
         return FAULT if FAULT in (self.up[a].state, self.down[a].state) else OK
@@ -72,17 +88,18 @@ class PairDisagreement:
     def state(self) -> int:
         return FAULT if any(self.axis_state(a) == FAULT for a in range(3)) else OK
 
-    def update(self, obs: Observation) -> list[FaultEvent]:
+    def update(self, obs: Observation, held: Sequence[bool] = (False, False, False)) -> list[FaultEvent]:
         """Aligned samples (m, 3) of both IMUs: ``obs.y`` of IMU i, ``obs.other`` of IMU j; ``obs.noise_var``
         the white variance expected of the residual (both IMUs' still references summed), ``obs.noise_other``
-        IMU j's own (the regressor's noise, corrected for in the fit). Returns the pair's state changes per
-        axis as events of IMU i with ``detail`` "IMU{j}" (which IMU is at fault is decided by the group)."""
-        changed = self._step(obs.y, obs.other, obs.noise_var, obs.noise_other)
+        IMU j's own (the regressor's noise, corrected for in the fit); ``held[a]``: axis a in FAULT does not
+        clear in this block (its cause persists). Returns the pair's state changes per axis as events of
+        IMU i with ``detail`` "IMU{j}" (which IMU is at fault is decided by the group)."""
+        changed = self._step(obs.y, obs.other, obs.noise_var, obs.noise_other, held)
         return [FaultEvent(self.i, AXES[a], self.kind, self.axis_state(a), float(self.value[a]), f"IMU{self.j}")
                 for a in changed]
 
     def _step(self, yi: np.ndarray, yj: np.ndarray, noise_var: float | None = None,
-              noise_j: float | None = None) -> list[int]:
+              noise_j: float | None = None, held: Sequence[bool] = (False, False, False)) -> list[int]:
         m = yi.shape[0]
         if m < 10:
             return []
@@ -116,13 +133,26 @@ class PairDisagreement:
             # or noise (still: the IMU's own noise detector singles it out); one violent second is not a
             # disagreement (evidence capped: ``disagree_hold_blocks`` blocks at least)
             hold = lim.disagree_hold_blocks
-            self.up[a].step(capped(floored_mean_llr(d[a], s, float(floor[a]), DELTA), H_ON, hold))
-            self.down[a].step(capped(floored_mean_llr(-d[a], s, float(floor[a]), DELTA), H_ON, hold))
+            llr_up = floored_mean_llr(d[a], s, float(floor[a]), DELTA)
+            llr_down = floored_mean_llr(-d[a], s, float(floor[a]), DELTA)
+            if was == OK:
+                self.up[a].step(capped(llr_up, H_ON, hold))
+                self.down[a].step(capped(llr_down, H_ON, hold))
+            elif llr_up <= 0.0 and llr_down <= 0.0 and not held[a]:
+                # one agreeing block is no evidence that the pair agrees again (the true rate of a turn
+                # passes near a frozen value for a second): only a run of them, and none while held
+                self.agree[a] += 1
+                self.agree_sum[a] += d0[a]
+                if self.agree[a] >= CLEAR_BLOCKS:
+                    for cu in (self.up[a], self.down[a]):
+                        cu.state, cu.s = OK, 0.0
+                    self.c[a] = self.agree_sum[a] / self.agree[a]
+            else:
+                self.agree[a], self.agree_sum[a] = 0, 0.0
             if self.axis_state(a) != was:
                 changed.append(a)
                 self.value[a] = d[a] / DEG
-                if self.axis_state(a) == OK:
-                    self.c[a] = d0[a]
+                self.agree[a], self.agree_sum[a] = 0, 0.0
             if self.axis_state(a) == FAULT or self.up[a].s > 0.25 * H_ON or self.down[a].s > 0.25 * H_ON:
                 evidence = True
         if not evidence:
@@ -144,13 +174,16 @@ class PairDisagreement:
         return {"i": self.i, "j": self.j, "S": self.S.tolist(), "T": self.T.tolist(), "E": self.E.tolist(),
                 "n_fit": self.n_fit,
                 "c": [None if np.isnan(v) else float(v) for v in self.c], "blocks": self.blocks,
-                "up": [c.state_dict() for c in self.up], "down": [c.state_dict() for c in self.down]}
+                "up": [c.state_dict() for c in self.up], "down": [c.state_dict() for c in self.down],
+                "agree": list(self.agree), "agree_sum": [float(v) for v in self.agree_sum]}
 
     def load_state_dict(self, d: Mapping) -> None:
         self.S, self.T, self.E = (np.asarray(d[k], dtype=float).reshape(3, 3) for k in ("S", "T", "E"))
         self.c = np.array([np.nan if v is None else float(v) for v in d["c"]])
         self.blocks = int(d.get("blocks", 0))
         self.n_fit = float(d.get("n_fit", 0.0))
+        self.agree = [int(v) for v in d.get("agree", [0, 0, 0])]
+        self.agree_sum = np.array([float(v) for v in d.get("agree_sum", [0.0, 0.0, 0.0])])
         for c, s in zip(self.up, d.get("up", [])):
             c.load_state_dict(s)
         for c, s in zip(self.down, d.get("down", [])):

@@ -6,7 +6,8 @@ blocks and still noise references, :class:`companion.service.channel.Channel`); 
 ``disagree`` FaultEvents of the named IMUs (the caller reports them). With three or more IMUs the odd one
 out is named (its pairs disagree, the others agree); with two both are suspects unless only one of them
 has another fault (:meth:`ImuGroup.name` again when another fault appears). The named IMUs' fault state
-gets the ``disagree`` kind (``ImuFaults.set_external``).
+gets the ``disagree`` kind (``ImuFaults.set_external``). A pair's disagreement on an axis is held (not
+cleared) while either IMU has a fault of ``CAUSES`` on that axis.
 """
 
 from __future__ import annotations
@@ -20,6 +21,10 @@ from companion.health.disagreement import PairDisagreement
 from companion.health.faults import AXES, FAULT, OK, FaultEvent, Observation
 
 MIN_ALIGNED = 10  # samples both IMUs cover before a pair is tested
+#: faults that move a gyro's mean rate: while one of them is active on an axis of either IMU of a pair, the
+#: pair's disagreement on that axis has its cause and is not cleared (a gyro frozen near the rate of a long
+#: hover agrees with the other IMU there: clearing would name the same fault again at the next turn)
+CAUSES = ("stuck", "dead", "saturation", "bias_jump", "bias_drift")
 SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
 
 
@@ -90,7 +95,8 @@ class ImuGroup:
             noise_var = (max(nv[:3]) + max(nv[3:])) if ready else None
             obs = Observation(i, y=gi, other=gj, other_imu=j, noise_var=noise_var,
                               noise_other=max(nv[3:]) if ready else None)
-            if pair.update(obs):
+            causes = {ax for c in (ci, cj) for kind, ax in c.faults.active() if kind in CAUSES}
+            if pair.update(obs, held=[ax in causes for ax in AXES]):
                 events += self.name(channels, armed)
         return events
 
