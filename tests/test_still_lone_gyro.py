@@ -96,3 +96,21 @@ def test_a_bias_step_on_one_gyro_at_rest_keeps_the_other_imus_data():
     r = sel.ranges(s1)
     assert r and (all(t[b - 1] < 450.0 for a, b in r) or all(t[a] >= 450.0 for a, b in r)), r
     assert 1 in sel.excluded
+
+
+def test_analyze_says_why_an_imu_frozen_throughout_the_rest_is_not_analysed(tmp_path, capsys):
+    """IMU1's gyro frozen from the flight on, and the only rest after it: analyze keeps IMU0 and says, for
+    IMU1, that its own gyro is why (not 'too short')."""
+    from companion.cli.main import main
+    from companion.sim.dataflash_writer import write_imu_log
+
+    (t, g0, a0), (_, g1, a1) = _flight(30, duration=400.0, flight=(0.0, 100.0))
+    g1[t >= 50.0, 0] = 0.35
+    p = tmp_path / "pair.bin"
+    write_imu_log(p, t, np.stack([g0, g1]), np.stack([a0, a1]))
+    assert main(["analyze", str(p), "--axes", "gx"]) == 0
+    out = capsys.readouterr()
+    text = out.out + out.err
+    assert "IMU instance 1" in text and "gyro alone" in text
+    assert "not analysed: its gyro alone" in text, text
+    assert "IMU[0]" in text

@@ -49,8 +49,13 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
         for s in streams:
             ranges = sel.ranges(s)
             if not ranges:  # say so: a stream must never vanish from the table silently
-                summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples, no still stretch of "
-                                        "at least 16 samples in it (too short for any Allan estimate)")
+                if sel.excluded_s(s.key.instance) > 0:
+                    summary["notes"].append(f"{s.key.label()}: not analysed: its gyro alone left its level at rest "
+                                            "wherever the vehicle was still (the note on IMU instance "
+                                            f"{s.key.instance} above)")
+                else:
+                    summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples, no still stretch "
+                                            "of at least 16 samples in it (too short for any Allan estimate)")
                 continue
             e = analyze_stream(s, axes, taus, bar, online=online, ranges=ranges, filters=stream_filters(s, res.meta))
             e["source"] = str(spec)
