@@ -50,8 +50,8 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
             ranges = sel.ranges(s)
             if not ranges:  # say so: a stream must never vanish from the table silently
                 if sel.excluded_s(s.key.instance) > 0:
-                    summary["notes"].append(f"{s.key.label()}: not analysed: its gyro alone left its level at rest "
-                                            "wherever the vehicle was still (the note on IMU instance "
+                    summary["notes"].append(f"{s.key.label()}: not analysed: its gyro changed alone wherever the "
+                                            "vehicle was still (the note on IMU instance "
                                             f"{s.key.instance} above)")
                 else:
                     summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples, no still stretch "

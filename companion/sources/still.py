@@ -359,11 +359,13 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
             continue
         sel.excluded[i] = cut
         span = f"{cut[0][0]:.0f}-{cut[-1][1]:.0f} s" if len(cut) > 1 else f"{cut[0][0]:.0f}-{cut[0][1]:.0f} s"
-        sel.notes.append(f"IMU instance {i}: in {sel.excluded_s(i):.0f} s (within {span}) its gyro alone left its "
-                         "level at rest (mean or spread) while the accelerometers and another IMU's gyro were still: "
-                         "the gyro changed (its bias drifting or stepping -- warm-up, a fault --, frozen at a rate, more "
-                         "noise; `companion run` judges its health), the vehicle did not move; left out of that IMU's "
-                         "analysis only")
+        frozen = np.any([e["frozen"] for e in by_gyro[i][2]], axis=0) if by_gyro[i][2] else np.zeros(nb, bool)
+        what = ("its gyro was frozen (every value of a window the same, where a live gyro varies)"
+                if frozen[w].mean() >= 0.9 else "its gyro alone left its level at rest (mean or spread)")
+        sel.notes.append(f"IMU instance {i}: in {sel.excluded_s(i):.0f} s (within {span}) {what} while the "
+                         "accelerometers and another IMU's gyro were still: the gyro changed (its bias drifting or "
+                         "stepping -- warm-up, a fault --, frozen, more noise; `companion run` judges its health), "
+                         "the vehicle did not move; left out of that IMU's analysis only")
     # accounting in time: samples actually present inside the kept intervals (gaps inside them excluded)
     # (the stream that covers the most time: a batch sampler's kHz bursts have the most samples and cover a
     # second in ten, and the headline said 7 s where the IMU streams had 44)
