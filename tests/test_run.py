@@ -107,6 +107,18 @@ def test_reboot_duplicates_and_other_systems():
     assert p.transitions == []
 
 
+def test_health_leaves_learning_when_the_baseline_is_learned_not_at_the_next_check():
+    """HLTH 2 is 'no baseline yet': the first HLTH sent after 'baseline learned' is the IMU's health (0 here),
+    not 2 until the next check_s of message time."""
+    rng = np.random.default_rng(12)
+    g, a = still(rng, 26_000)
+    p, sink = make_pipeline()
+    feed(p, 1.0 + np.arange(26_000) / FS, g, a)
+    k = next(i for i, m in enumerate(sink.msgs) if m[0] == "T" and "baseline learned" in m[2])
+    after = [m[2] for m in sink.msgs[k:] if m[0] != "T" and m[1] == "IMU0G_HLTH"]
+    assert after and after[0] == 0.0, after[:5]
+
+
 def test_state_round_trip_keeps_baseline_and_estimates(tmp_path):
     rng = np.random.default_rng(11)
     g, a = still(rng, 60_000)
@@ -327,6 +339,17 @@ def test_a_first_rate_below_the_request_is_not_yet_a_drop_and_a_later_one_is():
                                                    "IMU rate 100 Hz, as asked",
                                                    "IMU rate 40.0 Hz, below the 100 Hz asked for (another client's stream request?)",
                                                    "IMU rate back to 100 Hz"]
+        # the data stop (an autopilot reboot) and come back at its default rate: "not yet" again, no drop
+        said.clear()
+        now[0] = 40.0
+        link.service()  # 20 s without IMU data: stale
+        for t, hz in ((42.0, 50.0), (44.0, 100.0)):
+            now[0] = t
+            link.last_imu_wall = t
+            link.check_rate(hz)
+        assert link.rate_drops == 1, said
+        assert [x.split(":")[0] for x in said if x.startswith("IMU rate")] == [
+            "IMU rate 50.0 Hz, not yet the 100 Hz asked for", "IMU rate 100 Hz, as asked"], said
     finally:
         conn.close()
 

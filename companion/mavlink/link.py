@@ -366,6 +366,9 @@ class Link:
         data_stale = self.last_imu_wall is None or now - self.last_imu_wall > self.cfg.stale_s
         if not data_stale:
             return
+        # data stopped (a reboot, the link lost): what comes back streams at the autopilot's own rate until our
+        # request takes effect again -- "not yet" the rate asked for, not another client's request
+        self._rate_reached = False
         if self.last_request_wall is not None:
             waited = now - self.last_request_wall
             if waited < self.cfg.retry_s:

@@ -424,6 +424,8 @@ class Pipeline:
         self.log(f"IMU{ch.imu}: baseline learned from {ch.learned_s:.0f} s of still data (gx N "
                  f"{to_datasheet('N', n, 'gx'):.3g} {datasheet_unit('N', 'gx')} [{n:.3g} rad/s/sqrt(Hz)])")
         self.reporter.statustext(f"IMU{ch.imu} gyro baseline learned", MAV_SEVERITY_NOTICE, t)
+        # HLTH 2 means "no baseline yet": not until the next check (up to check_s later) once it exists
+        self._set_state(ch)
 
     # ------------------------------------------------------------------ reports
     def _report(self, events: Iterable[FaultEvent], t: float) -> None:
