@@ -80,8 +80,18 @@ def datasheet_unit(param: str, axis: str = "gx") -> str:
     return (GYRO_UNITS if is_gyro_axis(axis) else ACCEL_UNITS)[param]
 
 
-def fmt_value(v: float) -> str:
-    """A value in a table: 3 significant digits, exponent form outside 1e-3 .. 1e5."""
+def fmt_value(v: float, digits: int = 3) -> str:
+    """A value in a table: ``digits`` significant digits, exponent form outside 1e-3 .. 1e5."""
     if v == 0 or not math.isfinite(v):
         return f"{v:g}"
-    return f"{v:.3g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.2e}"
+    return f"{v:.{digits}g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.{digits - 1}e}"
+
+
+def fmt_interval(v: float, lo: float, hi: float) -> str:
+    """``v [lo, hi]`` with 3 significant digits, more (up to 6) where 3 would print the two ends alike: a
+    precise N on hours of data read "1.03 [1.03, 1.03]", an interval that says nothing."""
+    for d in range(3, 7):
+        a, b = fmt_value(lo, d), fmt_value(hi, d)
+        if a != b or not hi > lo:
+            break
+    return f"{fmt_value(v, d)} [{a}, {b}]"

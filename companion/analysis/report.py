@@ -5,6 +5,7 @@ from __future__ import annotations
 from companion import units
 from companion.allan.terms import PARAMS
 from companion.samples import ACCEL_AXES, GYRO_AXES
+from companion.units import fmt_interval
 from companion.units import fmt_value as _fmt
 
 
@@ -14,10 +15,9 @@ def format_term(t: dict, axis: str) -> str:
     parts = []
     for p in PARAMS[t["effect"]]:
         v = units.to_datasheet(p, t[p], axis)
-        s = f"{p} {_fmt(v)}"
         ci = t.get("ci95", {}).get(p)
-        if ci:
-            s += f" [{_fmt(units.to_datasheet(p, ci[0], axis))}, {_fmt(units.to_datasheet(p, ci[1], axis))}]"
+        s = (f"{p} {fmt_interval(v, units.to_datasheet(p, ci[0], axis), units.to_datasheet(p, ci[1], axis))}" if ci
+             else f"{p} {_fmt(v)}")
         parts.append(s + " " + units.datasheet_unit(p, axis))
     return ", ".join(parts)
 
@@ -56,8 +56,8 @@ def format_table(report: dict) -> str:
                     p = {"white_noise": "N", "bias_instability": "B", "random_walk": "K"}.get(t["effect"])
                     if p:
                         lo, hi = t["ci95"][p]
-                        cells[p] = (f"{_fmt(units.to_datasheet(p, t[p], a))} "
-                                    f"[{_fmt(units.to_datasheet(p, lo, a))}, {_fmt(units.to_datasheet(p, hi, a))}]")
+                        cells[p] = fmt_interval(units.to_datasheet(p, t[p], a), units.to_datasheet(p, lo, a),
+                                                units.to_datasheet(p, hi, a))
                     else:
                         other.append(format_term(t, a))
                 for t in r.get("bounds") or ():
