@@ -52,6 +52,8 @@ def test_raw_imu_tlog_names_rate_quantization(raw_imu_tlog, tmp_path, capsys):
     assert rc == 0
     text = capsys.readouterr().out
     assert "rate quantisation" in text and "gap before" in text and "gap after" in text
+    for path in (png, out_json, out_model):  # every file written is named
+        assert f"wrote {path}" in text.splitlines()
     assert "  evidence for " in text and " needed: " in text  # the test behind each iteration's choice
     doc = json.loads(out_json.read_text())
     test = doc["iterations"][0]["test"]

@@ -308,16 +308,19 @@ def run(args) -> int:
         if args.plot:
             from companion.plots.gap_plot import plot_gap
 
+            path = _axis_path(args.plot, axis, several)
             try:
-                plot_gap(r, _axis_path(args.plot, axis, several))
+                plot_gap(r, path)
             except OSError as exc:
                 raise CompanionError(f"cannot write {args.plot}: {exc.strerror or exc}") from None
+            print(f"wrote {path}")  # every file written is named, as analyze and compensate do
     if args.json:
         s = to_json(docs[0] if not several else {"axes": docs}, indent=2)
         if args.json == "-":
             print(s)
         else:
             write_text(args.json, s + "\n", "JSON")
+            print(f"wrote {args.json}")
     if args.out_model:
         try:
             save_model(NoiseModel(rate_hz=model.rate_hz, axes=new_axes), args.out_model,
@@ -326,4 +329,5 @@ def run(args) -> int:
                                           for d in docs))
         except OSError as exc:
             raise CompanionError(f"cannot write {args.out_model}: {exc.strerror or exc}") from None
+        print(f"wrote {args.out_model}")
     return 0
