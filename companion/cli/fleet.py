@@ -255,12 +255,13 @@ def run_report(args) -> int:
         if len(top) < len(entries):
             print(f"... {len(entries) - len(top)} more (--top 0 for all)")
         said = set()
+        flagged_vehicles = {(x["vehicle"], x["sysid"]) for x in entries if x["flagged"]}
         for e in entries:  # once per vehicle: trends over logs that may not be one vehicle's
-            if e.get("identity_note") and (e["vehicle"], e["sysid"]) not in said:
-                said.add((e["vehicle"], e["sysid"]))
+            v = (e["vehicle"], e["sysid"])
+            if e.get("identity_note") and v not in said:
+                said.add(v)
                 print(f"note: vehicle {e['vehicle']}: {e['identity_note']}"
-                      + (" (a flagged IMU among them)" if any(x["flagged"] for x in entries
-                                                            if (x["vehicle"], x["sysid"]) == (e["vehicle"], e["sysid"])) else ""))
+                      + (" (a flagged IMU among them)" if v in flagged_vehicles else ""))
         if args.json:
             write_text(args.json, to_json(report_json(store, entries, EVIDENCE_THRESHOLD, MIN_RISE)) + "\n", "JSON")
             print(f"wrote {args.json}")

@@ -150,10 +150,11 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
         if h is None:
             continue
         st = store.status(h)
-        if h in seen and not (st == "ok" or (st == "failed" and not retry_failed)):
+        in_db = st == "ok" or (st == "failed" and not retry_failed)
+        if h in seen and not in_db:
             duplicates += 1
             continue
-        if h in seen or st == "ok" or (st == "failed" and not retry_failed):
+        if in_db:
             skipped += 1
             if st is not None and store.cached_hash(lf.path, lf.size, lf.mtime) != h:
                 store.remember_path(lf.path, h, lf.size, lf.mtime)

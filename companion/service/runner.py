@@ -97,7 +97,7 @@ def replay(src: str, pcfg, period: float, baseline, scales, writer, state: Path 
         try:
             fp = fingerprint(src)
         except OSError:
-            fp = None  # the reader says what is wrong with the file
+            pass  # the reader says what is wrong with the file
         if fp is not None and any(r.get("sha256") == fp["sha256"] for r in pipeline.replayed):
             raise CompanionError(f"{src}: the state file {state} already holds this log's data (replayed into it "
                                  "before): replaying it again would count every sample twice and narrow the "

@@ -237,6 +237,13 @@ def _moving_windows(stream, t0: float, window_s: float, nb: int, threshold: floa
     return moving["accel"], moving["gyro"], has, evidence
 
 
+def _merged_evidence(a: dict, b: dict) -> dict:
+    """The gyro evidence of two streams of one IMU instance (:func:`_moving_windows`): the larger excursion,
+    the smaller limit, frozen in either."""
+    return {"frozen": a["frozen"] | b["frozen"], "dev": np.maximum(a["dev"], b["dev"]),
+            "sd": np.maximum(a["sd"], b["sd"]), "dev_lim": np.minimum(a["dev_lim"], b["dev_lim"]), "sd_lim": min(a["sd_lim"], b["sd_lim"])}
+
+
 def _dilate(mask: np.ndarray, k: int) -> np.ndarray:
     if k <= 0 or not mask.any():
         return mask
@@ -289,11 +296,11 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         has |= h
         if not use_all:
             moving |= acc_mv
-            e = by_gyro.setdefault(s.key.instance, [np.zeros(nb, dtype=bool), np.zeros(nb, dtype=bool), []])
+            e = by_gyro.setdefault(s.key.instance, [np.zeros(nb, dtype=bool), np.zeros(nb, dtype=bool), None])
             e[0] |= gyr_mv
             e[1] |= h
             if ev:
-                e[2].append(ev)
+                e[2] = ev if e[2] is None else _merged_evidence(e[2], ev)
     lone = {}  # instance -> its windows left out of its own streams
     if by_gyro:
         # a rotation or a vibration reaches every gyro of the airframe: where two or more IMU instances carry
@@ -301,8 +308,9 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         # that gyro's doing -- frozen at a rate, its bias drifting or stepping, noisy -- not motion: the window
         # stays still for the others and is left out of that instance's own streams only (a gyro stuck at
         # 20 deg/s took its healthy twin's 20 minutes at rest out of the analysis; a public ArduCopter tlog's
-        # IMU0 warming up, its bias 1 deg/s from its later level, took 130 s of rest from IMU1). With one instance (or streams that share
-        # one: a log's IMU and batch messages of the same sensor) its gyro counts alone, as before.
+        # IMU0 warming up, its bias 1 deg/s from its later level, took 130 s of rest from IMU1). With one
+        # instance (or streams that share one: a log's IMU and batch messages of the same sensor) its gyro
+        # counts alone, as before.
         # The other gyro is a witness only where it would have seen what this one shows (a frozen gyro aside):
         # the excursion (mean or spread) at least twice the limit the witness is tested against -- a gyro 7x
         # noisier than its twin does not see the small rotation the quiet one does (a public Pixhawk log's
@@ -312,14 +320,11 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         seen = np.zeros(nb, dtype=bool)
         for i, (mv_i, _, ev_i) in by_gyro.items():
             for j, (mv_j, h_j, ev_j) in by_gyro.items():
-                if j == i or not ev_i or not ev_j:
+                if j == i or ev_i is None or ev_j is None:
                     continue
-                dev = np.max([e["dev"] for e in ev_i], axis=0)
-                sd = np.max([e["sd"] for e in ev_i], axis=0)
-                lim_dev = np.min([e["dev_lim"] for e in ev_j], axis=0)
-                lim_sd = min(e["sd_lim"] for e in ev_j)
-                frozen = np.any([e["frozen"] for e in ev_i], axis=0)
-                seen |= mv_i & h_j & ~mv_j & ((dev > 2.0 * lim_dev) | (sd > 2.0 * lim_sd) | frozen)
+                would_see = ((ev_i["dev"] > 2.0 * ev_j["dev_lim"]) | (ev_i["sd"] > 2.0 * ev_j["sd_lim"])
+                             | ev_i["frozen"])
+                seen |= mv_i & h_j & ~mv_j & would_see
         alone &= seen
         moving |= gm.any(axis=0) & ~alone
         for i, mv_i in zip(by_gyro, gm):
@@ -358,10 +363,11 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
         if not cut:
             continue
         sel.excluded[i] = cut
-        span = f"{cut[0][0]:.0f}-{cut[-1][1]:.0f} s" if len(cut) > 1 else f"{cut[0][0]:.0f}-{cut[0][1]:.0f} s"
-        frozen = np.any([e["frozen"] for e in by_gyro[i][2]], axis=0) if by_gyro[i][2] else np.zeros(nb, bool)
+        span = f"{cut[0][0]:.0f}-{cut[-1][1]:.0f} s"
+        ev = by_gyro[i][2]
         what = ("its gyro was frozen (every value of a window the same, where a live gyro varies)"
-                if frozen[w].mean() >= 0.9 else "its gyro alone left its level at rest (mean or spread)")
+                if ev is not None and ev["frozen"][w].mean() >= 0.9
+                else "its gyro alone left its level at rest (mean or spread)")
         sel.notes.append(f"IMU instance {i}: in {sel.excluded_s(i):.0f} s (within {span}) {what} while the "
                          "accelerometers and another IMU's gyro were still: the gyro changed (its bias drifting or "
                          "stepping -- warm-up, a fault --, frozen, more noise; `companion run` judges its health), "
