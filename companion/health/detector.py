@@ -106,6 +106,17 @@ class ParamDetector:
                                                    cfg.hold_on, cfg.hold_off, good=lower < math.log(cfg.ratio_off))
         return changed
 
+    def unshown(self, x: float, b: float, cfg: DetectorConfig) -> bool:
+        """A raised flag whose rise the measured Allan curves do not show at this check (the value ``x`` is
+        above the baseline ``b`` by less than the curves can tell): one check towards clearing, as a value
+        below ``ratio_off`` would be. Nothing while healthy. Returns True when the state changed."""
+        if self.state != DEGRADING or not (x > 0 and b > 0 and math.isfinite(x) and math.isfinite(b)):
+            return False
+        self.ratio = x / b
+        self.state, self.count, changed = debounce(self.state, self.count, False, cfg.hold_on, cfg.hold_off,
+                                                   good=True)
+        return changed
+
 
 @dataclass
 class Transition:
@@ -132,11 +143,19 @@ class HealthDetector:
     detectors: dict[tuple[str, str], ParamDetector] = field(default_factory=dict)
 
     def check(self, axis: str, current: Mapping[str, tuple[float, float]],
-              baseline: Mapping[str, tuple[float, float]]) -> list[Transition]:
-        """Compare ``{param: (value, std)}`` of one axis with its baseline; return the transitions."""
+              baseline: Mapping[str, tuple[float, float]],
+              unshown: Mapping[str, tuple[float, float]] | None = None) -> list[Transition]:
+        """Compare ``{param: (value, std)}`` of one axis with its baseline; return the transitions.
+        ``unshown``: values above the baseline whose rise the Allan curves do not show (not compared; a raised
+        flag counts them towards clearing, :meth:`ParamDetector.unshown`)."""
         out = []
         for p in self.cfg.params:
-            if p not in current or p not in baseline:
+            if p not in baseline:
+                continue
+            if p not in current:
+                det = self.detectors.get((axis, p))
+                if det is not None and unshown and p in unshown and det.unshown(unshown[p][0], baseline[p][0], self.cfg):
+                    out.append(Transition(self.imu, axis, p, det.state, det.ratio))
                 continue
             det = self.detectors.setdefault((axis, p), ParamDetector())
             (x, s_x), (b, s_b) = current[p], baseline[p]

@@ -48,6 +48,12 @@ TEMP_COLUMN = 7  # the IMU temperature (degC, nan where the source has none)
 #: three 1-s blocks, and with three blocks only it was never compared with its twin
 RECENT_MIN_BLOCKS = 3
 RECENT_S = 12.0
+#: faults that corrupt the still data while they last and leave the gyro as it was when they clear: the
+#: estimators are kept as they stood at the onset and put back at the clear. Fed to the 600-s memory, a
+#: 60-s burst of 3x noise held "degrading: N" for ten minutes after the gyro was quiet again. Not a stuck or
+#: dead reading (a sub-LSB gyro at rest cycles 'stuck'/'cleared', and its Allan terms must follow it), nor a
+#: bias step (the gyro is not as it was).
+TRANSIENT_FAULTS = ("noise", "spikes")
 
 
 class Channel:
@@ -91,6 +97,9 @@ class Channel:
         # or PARAM_VALUE), modelled in the estimators' white-noise term unless the estimator config names one
         self.filters: dict[str, float] = {}
         self.gyro_moved = False  # any gyro axis read other than exactly 0 this run (the all-zero note)
+        # the estimators as they stood at the onset of a transient fault (TRANSIENT_FAULTS), put back when it clears
+        self._before_fault: dict | None = None
+        self.restored_s = 0.0  # still data dropped that way (the summary's count)
 
     def see(self, gyro: np.ndarray) -> None:
         """Every arriving gyro row (n, 3): notes a non-zero value."""
@@ -108,6 +117,13 @@ class Channel:
                else "dead, absent or not started (a live gyro's float never reads exactly 0)")
         return (f"IMU{self.imu}: gyro X, Y, Z read exactly 0 in all {n} samples{dur}: {why}; too few for the dead "
                 "test to name it")
+
+    def transient_note(self) -> str | None:
+        """What the Allan estimates leave out for transient faults (the summary's note), or None."""
+        if self.restored_s <= 0:
+            return None
+        return (f"IMU{self.imu}: {self.restored_s:.0f} s of still data fed during noise or spike faults were taken "
+                "back out of the Allan estimates when the faults cleared")
 
     # ------------------------------------------------------------------ read-only views
     @property
@@ -158,7 +174,8 @@ class Channel:
         if old is not None:
             self._profiles = [(r, p) for r, p in self._profiles if abs(r / old - 1.0) > RATE_CHANGE]
             self._profiles.append((old, {"fast": self.fast, "slow": self.slow, "learn": self.learn,
-                                         "learned_s": self.learned_s, "fed_s": self.fed_s, "faults": self.faults}))
+                                         "learned_s": self.learned_s, "fed_s": self.fed_s, "faults": self.faults,
+                                         "before_fault": self._before_fault}))
             self._profiles = self._profiles[-4:]
         kept = [(abs(r / new_rate - 1.0), i) for i, (r, _) in enumerate(self._profiles) if abs(r / new_rate - 1.0) <= RATE_CHANGE]
         self.cutter.prev_rate_hz, self.cutter.rate_hz = old, float(new_rate)
@@ -173,6 +190,7 @@ class Channel:
             _, p = self._profiles.pop(i)
             self.fast, self.slow, self.learn = p["fast"], p["slow"], p["learn"]
             self.learned_s, self.fed_s, self.faults = p["learned_s"], p["fed_s"], p["faults"]
+            self._before_fault = p.get("before_fault")
             self._queue, self._queue_s, self._junctions = [], 0.0, set()
             self._junction = True  # their last samples are of another time
             return True
@@ -201,6 +219,7 @@ class Channel:
         self.learned_s = 0.0
         self.fed_s = 0.0
         self._queue, self._queue_s, self._junctions = [], 0.0, set()
+        self._before_fault = None
 
     def set_filters(self, filters: dict) -> bool:
         """The autopilot's low-pass cut-offs ({"gyro": Hz, "accel": Hz}) became known or changed: the
@@ -223,9 +242,13 @@ class Channel:
         """Learn the baseline afresh (estimators without forgetting from now on)."""
         self.learn = {a: make_estimator(rate_hz=self.rate_hz, forgetting_s=None, **self._est_cfg(a)) for a in self.axes}
         self.learned_s = 0.0
+        if self._before_fault is not None:
+            self._before_fault["learn"] = None
 
     def stop_learning(self) -> None:
         self.learn = {}
+        if self._before_fault is not None:
+            self._before_fault["learn"] = None
 
     def forget_rest(self, learning: bool) -> bool:
         """The motion gate found that what it took for rest was vibration (MotionGate.mislearned): the still
@@ -289,7 +312,7 @@ class Channel:
         self.recent.append((data[:, 0].copy(), data[:, 1:4].copy()))
         while len(self.recent) > RECENT_MIN_BLOCKS and self.recent[0][0][-1] < data[-1, 0] - RECENT_S:
             self.recent.popleft()
-        return self.faults.on_block(st, data[:, 0], still, data[:, 1:4], data[:, 4:7])
+        return self._transient(self.faults.on_block(st, data[:, 0], still, data[:, 1:4], data[:, 4:7]))
 
     def settle(self, data: np.ndarray, st: BlockStats, still: bool) -> tuple[np.ndarray | None, BlockStats | None]:
         """The look-ahead, for every block once the rate is known: returns the pending still block (and its
@@ -308,8 +331,47 @@ class Channel:
 
     def on_quiet(self, st: BlockStats, extra_var: Mapping[str, float], data: np.ndarray | None = None) -> list[FaultEvent]:
         if data is None:
-            return self.faults.on_quiet(st, extra_var)
-        return self.faults.on_quiet(st, extra_var, data[:, 1:4], data[:, 0])
+            return self._transient(self.faults.on_quiet(st, extra_var))
+        return self._transient(self.faults.on_quiet(st, extra_var, data[:, 1:4], data[:, 0]))
+
+    # ------------------------------------------------------------------ transient faults
+    def _transient(self, events: list[FaultEvent]) -> list[FaultEvent]:
+        """After the fault detectors: at the onset of a transient fault (TRANSIENT_FAULTS, on any axis: the
+        estimators run per IMU) the estimators' state is kept, without the still blocks queued since the last
+        hand-over (the burst's first blocks, before the detector was sure, are among them); when the last
+        such fault clears it is put back and what was fed meanwhile is dropped. Between the two the
+        estimators are fed as usual, so the Allan terms show the fault while it lasts. Returns ``events``."""
+        if not events or not self.fast:
+            return events
+        active = any(k in TRANSIENT_FAULTS for k, _ in self.faults.active())
+        if active and self._before_fault is None:
+            self._before_fault = self._snapshot()
+        elif not active and self._before_fault is not None:
+            self._put_back(self._before_fault)
+            self._before_fault = None
+        return events
+
+    def _snapshot(self) -> dict:
+        learning = bool(self.learn)
+        return {"fast": {a: e.state_dict() for a, e in self.fast.items()},
+                "slow": {a: e.state_dict() for a, e in self.slow.items()},
+                "learn": {a: e.state_dict() for a, e in self.learn.items()} if learning else None,
+                "fed_s": self.fed_s - self._queue_s,
+                "learned_s": max(0.0, self.learned_s - self._queue_s) if learning else self.learned_s}
+
+    def _put_back(self, snap: Mapping) -> None:
+        dropped = self.fed_s - float(snap["fed_s"])
+        self.fast = {a: estimator_from_state(s) for a, s in snap["fast"].items()}
+        self.slow = {a: estimator_from_state(s) for a, s in snap["slow"].items()}
+        # a baseline learning that started afresh meanwhile (relearn) keeps its own estimators
+        if self.learn and snap.get("learn") is not None:
+            self.learn = {a: estimator_from_state(s) for a, s in snap["learn"].items()}
+            self.learned_s = float(snap["learned_s"])
+        self.fed_s = float(snap["fed_s"])
+        self.restored_s += max(0.0, dropped)
+        self._queue, self._queue_s, self._junctions = [], 0.0, set()
+        self._fed_end_t, self._junction = None, True  # what comes next does not follow what they saw last
+        self.current = {}
 
     def feed(self, data: np.ndarray) -> bool:
         """Queue a still block for the estimators; True when the baseline learning is complete (the caller
@@ -333,7 +395,8 @@ class Channel:
             self.next_check_t = float(data[-1, 0]) + self.cfg.check_s
         if self.learn:
             self.learned_s += duration
-            if self.learned_s >= self.cfg.baseline_s:
+            # not from the data of a transient fault: they will be dropped when it clears
+            if self.learned_s >= self.cfg.baseline_s and self._before_fault is None:
                 self.flush()
                 return True
         if self._queue_s >= self.cfg.check_s:
@@ -432,10 +495,13 @@ class Channel:
             if bad:
                 return reported, transitions, (f"baseline {baseline.source} does not match IMU{self.imu} {ax}: "
                                                f"{bad}; use a baseline of this stream or --baseline-force")
-            cur = self.risen(ax, cur, base, baseline.get_levels(self.imu, ax))
+            shown = self.risen(ax, cur, base, baseline.get_levels(self.imu, ax))
+            # a raised flag clears on them too: skipped, a value that stayed a little above a baseline learned
+            # low held "degrading" for good after the rise had gone
+            unshown = {p: v for p, v in cur.items() if p not in shown}
             if ax in GYRO_AXES:
                 base = rounding_ceiling(base, self.rate_hz, self.gyro_lsb)
-            for tr in self.detector.check(ax, cur, base):
+            for tr in self.detector.check(ax, shown, base, unshown):
                 transitions.append(tr)
                 if ax in GYRO_AXES:
                     high = any(d.state == DEGRADING for (a, _), d in self.detector.detectors.items() if a == ax)
@@ -462,7 +528,8 @@ class Channel:
                 "fast": {a: e.state_dict() for a, e in self.fast.items()},
                 "slow": {a: e.state_dict() for a, e in self.slow.items()},
                 "learn": {a: e.state_dict() for a, e in self.learn.items()},
-                "detector": self.detector.state_dict(), "faults": self.faults.state_dict()}
+                "detector": self.detector.state_dict(), "faults": self.faults.state_dict(),
+                "before_fault": self._before_fault, "restored_s": self.restored_s}
 
     @classmethod
     def from_state(cls, imu: int, c: Mapping, cfg: PipelineConfig) -> "Channel":
@@ -476,6 +543,12 @@ class Channel:
             raise ValueError("state holds other axes than configured")
         ch.fed_s, ch.learned_s = float(c["fed_s"]), float(c["learned_s"])
         ch._junction = True  # the next still data do not follow what the estimators saw before the restart
+        snap = c.get("before_fault")
+        if snap is not None:
+            if set(snap["fast"]) != set(ch.axes) or set(snap["slow"]) != set(ch.axes):
+                raise ValueError("state holds other axes than configured")
+            ch._before_fault = dict(snap)
+        ch.restored_s = float(c.get("restored_s", 0.0))
         ch.detector.load_state_dict(c["detector"])
         if c.get("faults") is not None:
             ch.faults.load_state_dict(c["faults"])

@@ -550,7 +550,7 @@ class Pipeline:
         for imu, ch in sorted(self.channels.items()):
             row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
                    "health": STATE_NAMES[self.health(ch)], "counts": ch.counts, "axes": {},
-                   "faults": self.fault_texts(ch), "notes": [n for n in (ch.too_slow(), ch.all_zero()) if n]}
+                   "faults": self.fault_texts(ch), "notes": [n for n in (ch.too_slow(), ch.all_zero(), ch.transient_note()) if n]}
             if ch.fast and ch.fed_s > 0:
                 ch.flush()
                 for ax in ch.axes:
