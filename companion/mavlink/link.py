@@ -220,6 +220,7 @@ class Link:
         self.last_imu_wall: float | None = None
         self.last_heartbeat_wall = -1e18
         self.last_request_wall: float | None = None
+        self._stale_asks = 0  # requests sent during the current silence of the IMU data (the log says the first two)
         self.use_data_stream = False
         self.acked = False  # the autopilot accepted a SET_MESSAGE_INTERVAL
         self.requests = 0
@@ -365,6 +366,9 @@ class Link:
         self._check_loss(now)
         data_stale = self.last_imu_wall is None or now - self.last_imu_wall > self.cfg.stale_s
         if not data_stale:
+            if self._stale_asks > 1:
+                self.log(f"IMU data back (asked {self._stale_asks} times while there were none)")
+            self._stale_asks = 0
             return
         # data stopped (a reboot, the link lost): what comes back streams at the autopilot's own rate until our
         # request takes effect again -- "not yet" the rate asked for, not another client's request
@@ -375,7 +379,13 @@ class Link:
                 return
             if self.requests >= 2 and not self.acked and not self.use_data_stream:
                 self.use_data_stream = True  # two requests without an answer nor data: old autopilot? fall back too
-        self.request_streams()
+                self.log("no answer to SET_MESSAGE_INTERVAL: asking with REQUEST_DATA_STREAM too")
+        # the first request of each silence is logged, then that they repeat: every retry_s for as long as an
+        # autopilot is off or rebooting, one line each filled the log
+        if self._stale_asks == 1:
+            self.log(f"no IMU data yet: asking again every {self.cfg.retry_s:g} s until they come")
+        self.request_streams(quiet=self._stale_asks > 0)
+        self._stale_asks += 1
         self.last_request_wall = now
 
     def requested_rate(self) -> float:
