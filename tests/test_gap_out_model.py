@@ -14,7 +14,7 @@ import pytest
 from companion.allan.adev import oavar
 from companion.cli.main import main
 from companion.mavlink.tlog_writer import write_imu_tlog
-from companion.sim.model import load_model, save_model, NoiseModel
+from companion.sim.model import NoiseModel, load_model, save_model
 from companion.sim.synth import synthesize_axis
 from companion.sources import load
 

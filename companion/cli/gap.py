@@ -64,7 +64,9 @@ def register(subparsers) -> None:
     sel.add_argument("--stream", metavar="LABEL", help="IMU stream by its label or message name, e.g. IMU[1], "
                      "sensor_combined, RAW_IMU")
     p.add_argument("--json", metavar="OUT", help="write the result as JSON ('-' for stdout)")
-    p.add_argument("--out-model", metavar="NEW.yaml", help="write the updated model (other axes unchanged)")
+    p.add_argument("--out-model", metavar="NEW.yaml",
+                   help="write the sensor's updated model at the data's rate_hz (other axes' terms unchanged; the "
+                   "log's rate rounding and filter are not written: docs/gap.md)")
     p.add_argument("--plot", metavar="PNG", help="write the gap figure (one per axis: NAME_gx.png ... when several)")
     p.add_argument("--lsb", type=float, metavar="RAD_S",
                    help="output step of the data in SI (default: the format's, e.g. 1e-3 for RAW_IMU gyro, or "
@@ -330,7 +332,8 @@ def run(args) -> int:
                                                          if abs(model.rate_hz - rate) > 1e-9 * rate else "")]
         left = [f"{a}: {', '.join(v)}" for a, v in left_out.items() if v]
         if left:
-            header.append("not written, properties of the log that gap derives from it on every run: " + "; ".join(left))
+            header.append("not written, properties of the log that gap derives from it on every run: "
+                          + "; ".join(left))
         try:
             save_model(NoiseModel(rate_hz=rate, axes=new_axes), args.out_model, header="\n".join(header))
         except OSError as exc:
