@@ -64,7 +64,9 @@ def register(subparsers) -> None:
     sel.add_argument("--stream", metavar="LABEL", help="IMU stream by its label or message name, e.g. IMU[1], "
                      "sensor_combined, RAW_IMU")
     p.add_argument("--json", metavar="OUT", help="write the result as JSON ('-' for stdout)")
-    p.add_argument("--out-model", metavar="NEW.yaml", help="write the updated model (other axes unchanged)")
+    p.add_argument("--out-model", metavar="NEW.yaml",
+                   help="write the sensor's updated model at the data's rate_hz (other axes' terms unchanged; the "
+                   "log's rate rounding and filter are not written: docs/gap.md)")
     p.add_argument("--plot", metavar="PNG", help="write the gap figure (one per axis: NAME_gx.png ... when several)")
     p.add_argument("--lsb", type=float, metavar="RAD_S",
                    help="output step of the data in SI (default: the format's, e.g. 1e-3 for RAW_IMU gyro, or "
@@ -211,6 +213,7 @@ def _axis_path(path, axis, several):
 
 def run(args) -> int:
     from companion.gap import run_gap
+    from companion.gap.sensor_model import sensor_terms
     from companion.sim.model import NoiseModel, load_model, save_model
     from companion.cli.output import check_output_path, check_plot_path
 
@@ -259,7 +262,7 @@ def run(args) -> int:
     # PX4 sensor_combined carries gyro_rad = integral / integral_dt: each value is a mean over its interval
     integrated = meta.get("format") == "ulog" and st.key.message == "sensor_combined"
     label = st.key.label()
-    docs, new_axes = [], {a: [dict(t) for t in ts] for a, ts in model.axes.items()}
+    docs, new_axes, left_out = [], {a: [dict(t) for t in ts] for a, ts in model.axes.items()}, {}
     several = len(axes) > 1
     for axis in axes:
         col = st.axis(axis)
@@ -301,10 +304,9 @@ def run(args) -> int:
             doc["datasheet"] = {k: v for k, v in sheet.items() if k != "si"} | {"si": sheet["si"]}
             doc["verdict"] = text.splitlines()[0]
         docs.append(doc)
-        # the model schema has no filter keys: the filter is a property of the log, not of the sensor
-        # a temperature-driven rate needs the log's temperature record: it stays in the report, not in the model
-        new_axes[axis] = [{k: v for k, v in t.items() if k not in ("ci95", "cutoff_hz", "order", "integrate")}
-                          for t in r.terms_after if t["effect"] != "temperature"]
+        # the sensor's terms only: the log's rate rounding, filter and temperature coupling are derived from
+        # the log on every run, and written into the model they would be counted twice when read back
+        new_axes[axis], left_out[axis] = sensor_terms(r)
         if args.plot:
             from companion.plots.gap_plot import plot_gap
 
@@ -322,12 +324,22 @@ def run(args) -> int:
             write_text(args.json, s + "\n", "JSON")
             print(f"wrote {args.json}")
     if args.out_model:
+        # the data's rate: every term was evaluated at it (a bias instability without f0 up to its Nyquist
+        # frequency), and `companion simulate` synthesises the model at its rate_hz
+        header = [f"updated by companion gap from {args.measured} ({label}), axes {', '.join(axes)}: "
+                  + ", ".join(f"{d['axis']} gap {d['gap_before']:.3g} -> {d['gap_after']:.3g}" for d in docs),
+                  f"rate_hz: the data's {rate:.6g} Hz" + (f" (the input model had {model.rate_hz:g})"
+                                                         if abs(model.rate_hz - rate) > 1e-9 * rate else "")]
+        left = [f"{a}: {', '.join(v)}" for a, v in left_out.items() if v]
+        if left:
+            header.append("not written, properties of the log that gap derives from it on every run: "
+                          + "; ".join(left))
         try:
-            save_model(NoiseModel(rate_hz=model.rate_hz, axes=new_axes), args.out_model,
-                       header=f"updated by companion gap from {args.measured} ({label}), axes {', '.join(axes)}: "
-                              + ", ".join(f"{d['axis']} gap {d['gap_before']:.3g} -> {d['gap_after']:.3g}"
-                                          for d in docs))
+            save_model(NoiseModel(rate_hz=rate, axes=new_axes), args.out_model, header="\n".join(header))
         except OSError as exc:
             raise CompanionError(f"cannot write {args.out_model}: {exc.strerror or exc}") from None
         print(f"wrote {args.out_model}")
+        if left:
+            print(f"  (the sensor's terms at the data's {rate:.6g} Hz; the log's own, which gap derives from it on "
+                  f"every run, not written: {'; '.join(left)})")
     return 0
