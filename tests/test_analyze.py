@@ -163,3 +163,123 @@ def test_plot_draws_an_unresolved_n_as_its_bound_touching_the_data():
     hi = np.asarray(r["adev_hi"]) * 180.0 / math.pi * 3600.0
     assert np.any(line >= adev) and np.all(line <= 1.01 * hi)
     plt.close(fig)
+
+
+def _misfit_axis(seed=1, n=60_000, fs=100.0, N=1e-3):
+    """White noise through a 3-tap average the model has no term for, a square-wave bias and a slow line: the
+    fit declares a misfit and N comes from the local white-noise refit (seed 1: model error 29 %)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    w = np.convolve(rng.normal(0, N * np.sqrt(fs), n), [0.5, 0.3, 0.2], mode="same") / math.sqrt(0.38)
+    return analyze_axis(w + 2e-4 * np.sign(np.sin(2 * np.pi * t / 200 + 1)) + 1e-4 * np.sin(2 * np.pi * t / 37), fs)
+
+
+def _plot_report(axes_results: dict, imus: int) -> dict:
+    streams = [{"source": "sim.bin", "message": "IMU", "instance": i, "sysid": 1, "compid": 1, "samples": 60_000,
+                "rate_hz": 100.0, "duration_s": 600.0, "axes": axes_results} for i in range(imus)]
+    return {"source": "sim.bin", "sources": ["sim.bin"], "streams": streams}
+
+
+def _assert_legends_clear_of_data(fig):
+    """Every legend of ``fig`` lies outside every panel that shows data, so it covers no point, line or band."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    panels = [a for a in fig.axes if a.get_visible() and (a.get_lines() or a.collections)]
+    legends = [a.get_legend() for a in fig.axes if a.get_legend() is not None] + list(fig.legends)
+    assert panels and len(legends) >= len(panels)  # no panel lost its legend
+    for leg in legends:
+        box = leg.get_window_extent(renderer)
+        for ax in panels:
+            assert not box.overlaps(ax.get_window_extent(renderer)), (leg.texts[0].get_text(), ax.get_title())
+            for ln in ax.get_lines():
+                x, y = (np.asarray(v, dtype=float) for v in ln.get_data())
+                ok = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
+                if not ok.any():
+                    continue
+                px = ax.transData.transform(np.column_stack([x[ok], y[ok]]))
+                frame = ax.get_window_extent(renderer)  # what lies outside it is clipped, not drawn
+                px = px[[frame.contains(*p) for p in px]]
+                inside = np.array([box.contains(*p) for p in px], dtype=bool)
+                assert not inside.any(), (leg.texts[0].get_text(), ax.get_title(), ln.get_label())
+
+
+def test_plot_legends_cover_no_data_with_1_to_3_imus_and_axes():
+    """A legend inside the axes ('best') landed on the shortest-tau points -- where N is read -- on panels whose
+    ADEV falls from the upper left corner. Each legend now has its own strip below its panel: with 1, 2 and 3
+    IMUs and 1, 2 and 3 axes, in the overlay and in each detailed figure, no legend overlaps any panel that
+    shows data (display coordinates, after drawing)."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from companion.plots.adev_plot import overlay_figure, stream_figure
+    from companion.sim.synth import synthesize_axis
+
+    fs, n = 100.0, 30_000
+    white = analyze_axis(synthesize_axis([{"effect": "white_noise", "N": 1e-3}], fs, n, np.random.default_rng(1)), fs)
+    walk = analyze_axis(synthesize_axis([{"effect": "white_noise", "N": 1e-3}, {"effect": "random_walk", "K": 3e-4}],
+                                        fs, n, np.random.default_rng(2)), fs)
+    misfit = _misfit_axis()
+    results = {"gx": white, "gy": misfit, "gz": walk}
+    for k in (1, 2, 3):
+        axes = dict(list(results.items())[:k])
+        rep = _plot_report(axes, k)
+        figs = [stream_figure(rep["streams"][0])] + ([overlay_figure(rep)] if k > 1 else [])
+        for fig in figs:
+            _assert_legends_clear_of_data(fig)
+            plt.close(fig)
+
+
+def test_plot_says_n_comes_from_the_local_refit_and_how_far_the_line_misses():
+    """Under model misfit N comes from the local refit of the white-noise region, and the drawn model (the global
+    fit's other terms with that N) need not pass the shorter cluster times. The figure says so with the report's
+    own record: the model error as the table prints it, the refit's region (shaded) and the global fit's N, and
+    how far the drawn line lies from the points below the region -- in the detailed figure and in the overlay.
+    A fit without misfit gets no such note."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from companion.analysis.report import format_table
+    from companion.plots.adev_plot import overlay_figure, stream_figure
+
+    r = _misfit_axis()
+    ref, me = r["fit"]["white_refit"], r["fit"]["model_error"]
+    assert me > 0 and ref is not None
+    rep = _plot_report({"gx": r}, 2)
+    table = format_table(rep)
+    assert f"misfit: +{100 * me:.0f} % model error" in table and "N from a local weighted fit" in table
+
+    fig = stream_figure(rep["streams"][0])
+    ax = next(a for a in fig.axes if a.get_title() == "IMU[0] gx (gyro)")
+    labels = ax.get_legend_handles_labels()[1]
+    (note,) = [s for s in labels if s.startswith("model misfit")]
+    lo, hi = ref["tau"]
+    assert f"+{100 * me:.0f} % model error" in note
+    assert f"N from a local refit of {lo:.3g}-{hi:.3g} s" in note
+    assert f"the global fit gave {100 * (ref['N_global'] / ref['N'] - 1):+.1f} %" in note
+    # the stated miss is the drawn line's, read at the points below the region
+    (total,) = [ln for ln in ax.get_lines() if ln.get_label() == "sum of fitted terms"]
+    tt, yy = (np.asarray(v) for v in total.get_data())
+    tau, adev = np.asarray(r["tau"]), np.asarray(r["adev"]) * 180.0 / math.pi * 3600.0
+    short = tau < lo
+    dev = np.exp(np.interp(np.log(tau[short]), np.log(tt), np.log(yy))) / adev[short] - 1.0
+    worst = dev[np.argmax(np.abs(dev))]
+    assert (f"below {lo:.3g} s the line lies up to {100 * abs(worst):.0f} % "
+            f"{'below' if worst < 0 else 'above'} the points") in note
+    # the refit's region is shaded on the panel
+    assert any(p.get_label() == note for p in ax.patches)
+    plt.close(fig)
+
+    fig = overlay_figure(rep)
+    ax = next(a for a in fig.axes if a.get_title().startswith("gx (gyro)"))
+    labels = ax.get_legend_handles_labels()[1]
+    assert all(f"N from a local refit of {lo:.3g}-{hi:.3g} s" in s and "model misfit" in s for s in labels)
+    plt.close(fig)
+
+    from companion.sim.synth import synthesize_axis
+
+    clean = analyze_axis(synthesize_axis([{"effect": "white_noise", "N": 1e-3}], 100.0, 30_000,
+                                         np.random.default_rng(1)), 100.0)
+    assert not clean["fit"]["model_error"] and clean["fit"]["white_refit"] is None
+    fig = stream_figure(_plot_report({"gx": clean}, 1)["streams"][0])
+    assert not any("misfit" in s for a in fig.axes for s in a.get_legend_handles_labels()[1])
+    plt.close(fig)

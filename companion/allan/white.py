@@ -70,7 +70,7 @@ def white_bound(tau, avar, edf, white_filter=None, level=0.95) -> tuple[float, f
     return math.sqrt(float(ub[i])), float(tau[i])
 
 
-def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0.5):
+def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0.5, record: dict | None = None):
     """N from a local weighted fit of the white-noise region, for a fit with model misfit (offline: companion
     analyze; online: the estimator's report -- one rule). Terms reported as bounds are not part of the model.
 
@@ -86,7 +86,9 @@ def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0
     The weights use the fitted model's AVAR, w = EDF / (2 model^2): the measured points' own would give those
     that happen to lie low the most weight and bias N low. Its interval is the global one scaled by the ratio,
     widened to the refit's own 95 % interval (from the points' variances and correlations) where that is wider.
-    Returns (terms, note or None).
+    Returns (terms, note or None); a refit also fills ``record`` (when given) with the region's cluster times
+    ``tau`` [first, last] and N before and after (``N_global``, ``N``, SI), the note's figures as numbers, so that
+    a figure can mark the region without reading the note's text.
     """
     wn = next((t for t in terms if t["effect"] == "white_noise"), None)
     if wn is None:
@@ -174,18 +176,21 @@ def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0
             if "std" in wn:
                 t["std"] = dict(wn["std"], N=max(wn["std"]["N"] * ratio, (hi - lo) / 3.92))
         new.append(t)
+    if record is not None:
+        record.update(tau=[float(tt[0]), float(tt[-1])], N_global=float(wn["N"]), N=N)
     return new, (f"N from a local weighted fit of the white-noise region ({tt[0]:.3g}-{tt[-1]:.3g} s) because "
                  f"the model misfits: the global fit gave {100 * (1 / ratio - 1):+.1f} %")
 
 
-def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: float, white_filter=None):
+def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: float, white_filter=None,
+                      record: dict | None = None):
     """The rules on N shared by the offline analysis and the online report, on report-format terms (resolved
     ones, and bounds with ``"bound": True``): under model misfit N from :func:`local_white_noise`; N resolved
     only where :func:`white_resolved`, else its filter-aware bound (:func:`white_bound`). Returns
-    (terms, notes)."""
+    (terms, notes); ``record``, when given, is filled as :func:`local_white_noise` fills it."""
     notes = []
     if model_error:
-        terms, note = local_white_noise(terms, tau, avar, edf, tau0)
+        terms, note = local_white_noise(terms, tau, avar, edf, tau0, record=record)
         if note:
             notes.append(note)
     wn = next((t for t in terms if t["effect"] == "white_noise" and not t.get("bound")), None)

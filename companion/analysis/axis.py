@@ -102,8 +102,9 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     from companion.allan.white import apply_white_rules
 
     # the rules on N shared with the online report: local refit under misfit, resolved or a filter-aware bound
+    refit: dict = {}
     terms, more = apply_white_rules(terms, tau_f[keep], avar_f[keep], edf0, 1.0 / rate_hz, fit.model_error,
-                                    white_filter_of(fit.filter))
+                                    white_filter_of(fit.filter), record=refit)
     notes += more
     if any(t.get("bound") for t in terms):
         bounds = [x for x in bounds if x["effect"] != "white_noise"] + [t for t in terms if t.get("bound")]
@@ -129,6 +130,8 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
                fit={"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
                     "model_error": fit.model_error, "tau_min": float(tau_f[keep][0]) if keep.any() else None,
                     "filter": fit.filter,
+                    # the local white-noise refit's region and N before/after (None: N from the global fit)
+                    "white_refit": refit or None,
                     "points": int(keep.sum()), "notes": notes, "segments": len(pieces)})
     if short_note:
         out["fit"]["notes"].append(short_note)
