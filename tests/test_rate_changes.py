@@ -66,3 +66,38 @@ def test_a_router_setting_stream_rates_every_15_s_leaves_still_data_and_raises_n
     n_true = math.sqrt(N_SI**2 + 1e-6 / (12 * 50.0)) / (math.pi / 180.0 / 60.0)  # deg/sqrt(h), with rounding
     for ax in "XYZ":
         assert sink.values[f"IMU0G{ax}_N"] == pytest.approx(n_true, rel=0.15)
+
+
+def wandering_times(duration_s, lo_hz=1.6, hi_hz=4.2, cycle_s=120.0, t0=1.0):
+    """Sample times of a telemetry stream whose rate the autopilot lowers and raises as its link gets busy
+    (ArduPilot slows its streams while the radio's buffer fills): the rate moves smoothly between ``lo_hz``
+    and ``hi_hz`` and back every ``cycle_s`` (a real 1000-s tlog: 1.6-4.2 Hz, its intervals 0.24-0.70 s)."""
+    out, t = [], t0
+    while t < t0 + duration_s:
+        phase = 0.5 - 0.5 * math.cos(2 * math.pi * (t - t0) / cycle_s)
+        t += 1.0 / (lo_hz + (hi_hz - lo_hz) * phase)
+        out.append(t)
+    return np.round(np.asarray(out) * 1e6) * 1e-6
+
+
+def test_a_stream_whose_rate_keeps_wandering_is_logged_a_few_times_then_summed_up():
+    rng = np.random.default_rng(5)
+    sink, lines = RecordingSink(), []
+    p = Pipeline(PipelineConfig.from_mapping({"baseline_s": 60}), Reporter(sink, 1.0), log=lines.append)
+    t = wandering_times(1200.0)
+    g = np.round(rng.normal(0.0, 3e-3, (t.size, 3)) / 1e-3) * 1e-3  # point samples of a filtered gyro
+    a = np.array([0.0, 0.0, -9.80665]) + rng.normal(0.0, 0.02, (t.size, 3))
+    for k in range(t.size):
+        p.on_sample(KEY, float(t[k]), g[k], a[k])
+    ch = p.channels[0]
+    assert ch.rate_switches >= 10, ch.rate_switches  # the stream did switch, again and again
+    changed = [x for x in lines if "rate changed" in x]
+    assert len(changed) == 3, lines
+    assert len([x for x in lines if "keeps changing" in x]) == 1, lines
+    (row,) = p.summary()
+    (note,) = [n for n in row["notes"] if "rate changed" in n]
+    assert f"changed {ch.rate_switches} times" in note, note
+    lo, hi = (float(x) for x in note.split("between ")[1].split(" Hz")[0].split(" and "))
+    assert 1.4 <= lo <= 2.2 and 3.4 <= hi <= 4.5, note  # the range of the rates that were taken
+    texts = [x for _, x in sink.texts]
+    assert not [x for x in texts if any(w in x.lower() for w in FAULT_WORDS)], texts

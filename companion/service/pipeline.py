@@ -59,6 +59,10 @@ STATE_FORMAT = "companion-run-state"
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
 CONFIRM_BLOCKS = 3  # still blocks after a bias jump is flagged before its size is confirmed
 OFF_RATE_BLOCKS = 3  # consecutive blocks at one new rate before the channel switches to it
+#: rate switches of one IMU logged line by line; the later ones are counted and summed up in the summary: a
+#: router that sets the stream rates every 15 s, or an autopilot that slows its telemetry streams while the
+#: radio is busy (a real 1000-s tlog at 1.6-4.2 Hz: 86 lines), would otherwise fill the log
+RATE_SWITCHES_LOGGED = 3
 FEW_INTERVALS = 8  # a block with fewer intervals (a stream below 8 Hz) is off rate only when every one is
 
 
@@ -99,6 +103,7 @@ class Pipeline:
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
         self._final: dict = {}  # (imu, axis) -> ((estimator id, fed_s), summary terms)
         self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
+        self.rate_range: dict[int, tuple[float, float]] = {}  # imu -> (lowest, highest) rate of its switches
         # logs replayed into this state (service.state.fingerprint): the same log replayed again into it would
         # feed its data twice
         self.replayed: list[dict] = []
@@ -328,9 +333,25 @@ class Pipeline:
         if self._has_baseline(ch):
             ch.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
         self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
-        self.log(f"IMU{ch.imu}: rate changed {old:.1f} -> {ch.rate_hz:.1f} Hz (a stream request, not a gyro fault): "
-                 + ("the state kept for this rate is back" if back else "references and estimators learned afresh"))
+        lo, hi = self.rate_range.get(ch.imu, (ch.rate_hz, ch.rate_hz))
+        self.rate_range[ch.imu] = (min(lo, ch.rate_hz, old or ch.rate_hz), max(hi, ch.rate_hz, old or ch.rate_hz))
+        if ch.rate_switches <= RATE_SWITCHES_LOGGED:
+            self.log(f"IMU{ch.imu}: rate changed {old:.1f} -> {ch.rate_hz:.1f} Hz (a stream request, not a gyro fault): "
+                     + ("the state kept for this rate is back" if back else "references and estimators learned afresh"))
+        if ch.rate_switches == RATE_SWITCHES_LOGGED:
+            self.log(f"IMU{ch.imu}: the rate keeps changing (another client's stream requests, or an autopilot that "
+                     "slows its streams while the link is busy): further changes are counted in the summary, not logged")
         self._set_state(ch)
+
+    def rate_note(self, ch: Channel) -> str | None:
+        """The summary's word on an IMU whose rate switched more often than the log said line by line."""
+        if ch.rate_switches <= RATE_SWITCHES_LOGGED or ch.imu not in self.rate_range:
+            return None
+        lo, hi = self.rate_range[ch.imu]
+        return (f"IMU{ch.imu}: the stream's rate changed {ch.rate_switches} times, between {lo:.1f} and {hi:.1f} Hz: "
+                "the Allan estimates of each rate are kept apart (a rate is another sampling of the noise), so each "
+                "holds only part of the still data (on a live link: ask for one rate, --rate, and keep other clients "
+                "from changing it)")
 
     def _close_block(self, ch: Channel, data: np.ndarray, rate_event: str | None) -> None:
         if self._off_rate(ch, data, rate_event):
@@ -550,7 +571,7 @@ class Pipeline:
         for imu, ch in sorted(self.channels.items()):
             row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
                    "health": STATE_NAMES[self.health(ch)], "counts": ch.counts, "axes": {},
-                   "faults": self.fault_texts(ch), "notes": [n for n in (ch.too_slow(), ch.all_zero(), ch.transient_note()) if n]}
+                   "faults": self.fault_texts(ch), "notes": [n for n in (ch.too_slow(), ch.all_zero(), ch.transient_note(), self.rate_note(ch)) if n]}
             if ch.fast and ch.fed_s > 0:
                 ch.flush()
                 for ax in ch.axes:
