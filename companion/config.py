@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from companion.errors import CompanionError
+from companion.errors import CompanionError, not_text
 
 
 @dataclass(frozen=True)
@@ -204,8 +204,10 @@ def load(config) -> dict:
         data = yaml.safe_load(path.read_text())
     except FileNotFoundError:
         raise CompanionError(f"{path}: no such config file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CompanionError(f"{path}: cannot read config ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise not_text(path, exc, "a configuration is a YAML file (see config/)") from None
+    except OSError as exc:
+        raise CompanionError(f"{path}: cannot read config ({exc.strerror or exc})") from None
     except yaml.YAMLError as exc:
         raise CompanionError(f"{path}: invalid YAML ({str(exc).splitlines()[0]})") from None
     if data is None:

@@ -12,3 +12,11 @@ class CompanionError(Exception):
     def __init__(self, message: str, exit_code: int = 2):
         super().__init__(message)
         self.exit_code = exit_code
+
+
+def not_text(path, exc: UnicodeDecodeError, what: str) -> CompanionError:
+    """The error for a binary file given where a text file (YAML, JSON) belongs: a log passed as a model,
+    say. Which byte is not UTF-8 and where, so that a text file with one bad byte can be mended."""
+    byte = exc.object[exc.start:exc.start + 1]
+    code = f" (byte 0x{byte[0]:02x} at offset {exc.start} is not UTF-8)" if byte else ""
+    return CompanionError(f"{path}: not a text file{code}: {what}")

@@ -1,5 +1,7 @@
 """Noise-model YAML: round trip, and one clear error naming the line/key for every kind of bad input."""
 
+from pathlib import Path
+
 import pytest
 
 from companion.cli.main import main
@@ -53,3 +55,22 @@ def test_simulate_cli_bad_model_exits_2(tmp_path, capsys):
     assert main(["simulate", str(p), "--duration", "1", "--out", str(tmp_path / "x.csv")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "unknown effect 'pink'" in err and "line 4" in err
+
+
+def test_a_binary_file_given_as_model_config_or_baseline_is_one_error_line(tmp_path, capsys):
+    """A log passed where a YAML file belongs (``simulate flight.tlog``) ended in a UnicodeDecodeError
+    traceback; now one line naming the file, the byte that is not UTF-8, and what belongs there."""
+    tlog = tmp_path / "flight.tlog"
+    tlog.write_bytes(b"\x00\x05\x8f\x2a\xd7\xfe\x01" * 40)  # a tlog's 8-byte time and a MAVLink frame's bytes
+    sample = str(Path(__file__).resolve().parents[1] / "tlogs" / "sample.tlog")
+    calls = [
+        (["simulate", str(tlog), "--duration", "1", "--out", str(tmp_path / "x.csv")], "a noise model is a YAML file"),
+        (["gap", sample, "--model", str(tlog)], "a noise model is a YAML file"),
+        (["analyze", sample, "--config", str(tlog)], "a configuration is a YAML file"),
+        (["run", "--source", sample, "--no-state", "--baseline", str(tlog)], "a baseline is a JSON/YAML report"),
+    ]
+    for argv, what in calls:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1, (argv, err)
+        assert "not a text file (byte 0x8f at offset 2 is not UTF-8)" in err and what in err, (argv, err)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from companion.errors import CompanionError
+from companion.errors import CompanionError, not_text
 
 
 class ReplaySink:
@@ -150,6 +150,8 @@ def _load_yaml_or_json(path: str) -> dict:
         raise CompanionError(f"{path}: no such file") from None
     except OSError as exc:
         raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise not_text(path, exc, "a baseline is a JSON/YAML report of `companion analyze` or a saved baseline") from None
     try:
         return json.loads(text)
     except ValueError:

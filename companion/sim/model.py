@@ -23,7 +23,7 @@ from pathlib import Path
 import yaml
 
 from companion.allan.terms import EFFECTS, validate_term
-from companion.errors import CompanionError
+from companion.errors import CompanionError, not_text
 
 AXES = ("gx", "gy", "gz", "ax", "ay", "az")
 _LINE = "__line__"
@@ -135,6 +135,8 @@ def load_model(path) -> NoiseModel:
         text = p.read_text()
     except OSError as exc:
         raise CompanionError(f"cannot read model {p}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise not_text(p, exc, "a noise model is a YAML file (e.g. tlogs/sample_model.yaml)") from None
     try:
         data = yaml.load(text, Loader=_LineLoader)
     except yaml.MarkedYAMLError as exc:
