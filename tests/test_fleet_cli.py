@@ -300,3 +300,35 @@ def test_logs_grouped_by_system_id_alone_are_said_to_be_possibly_different_vehic
     capsys.readouterr()
     assert main(["fleet", "report", "--db", db2]) == 0
     assert "note: vehicle" not in capsys.readouterr().out
+
+
+def _flights(db):
+    con = sqlite3.connect(db)
+    try:
+        return con.execute("SELECT COUNT(*), COUNT(DISTINCT path) FROM logs").fetchone()
+    finally:
+        con.close()
+
+
+def test_a_log_that_grew_replaces_its_partial_record(tmp_path, capsys):
+    """A log copied while still being written, then again once complete, is one flight, not two; a path
+    whose content changed otherwise (a log number reused) is a different flight."""
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "1", "--flights", "3", "--imus", "1",
+                 "--duration", "10", "--rate", "50", "--degrading", "0"]) == 0
+    f = logs / "vehicle_000" / "flight_002.tlog"
+    full = f.read_bytes()
+    f.write_bytes(full[:len(full) // 2])
+    db = str(tmp_path / "f.sqlite")
+    args = ["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--axes", "gx", "--quiet"]
+    assert main(args) == 0 and _flights(db) == (3, 3)
+    f.write_bytes(full)
+    assert main(args) == 0
+    assert _flights(db) == (3, 3)
+    con = sqlite3.connect(db)
+    size = con.execute("SELECT size FROM logs WHERE path = ?", (str(f),)).fetchone()[0]
+    con.close()
+    assert size == len(full)
+    # another log's bytes at the same path (the card wiped, the number reused): a flight of its own
+    f.write_bytes((logs / "vehicle_000" / "flight_000.tlog").read_bytes()[:len(full) // 3] + b"\0")
+    assert main(args) == 0 and _flights(db) == (4, 3)

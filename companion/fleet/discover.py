@@ -97,24 +97,35 @@ def hash_bytes(data: bytes) -> str:
     return hashlib.blake2b(data, digest_size=16).hexdigest()
 
 
-def hash_file(path: str, chunk: int = 1 << 20) -> str:
-    """BLAKE2b-128 hex digest of the file's content."""
+def hash_file(path: str, chunk: int = 1 << 20, prefix: int | None = None):
+    """BLAKE2b-128 hex digest of the file's content; with ``prefix`` (bytes), ``(digest, digest of the
+    first prefix bytes)`` in the same read (a log that grew since it was analysed: is the old content
+    its beginning?). The prefix digest is None when the file is shorter than ``prefix``."""
     h = hashlib.blake2b(digest_size=16)
+    head = hashlib.blake2b(digest_size=16) if prefix is not None else None
+    seen = 0
     with open(path, "rb") as fh:
         while True:
             b = fh.read(chunk)
             if not b:
                 break
+            if head is not None and seen < prefix:
+                head.update(b[:prefix - seen])
+            seen += len(b)
             h.update(b)
-    return h.hexdigest()
+    if head is None:
+        return h.hexdigest()
+    return h.hexdigest(), (head.hexdigest() if seen >= prefix else None)
 
 
-def hash_files(paths, threads: int = 4) -> dict[str, str | Exception]:
-    """``{path: hex digest}`` for many files (an unreadable file maps to its OSError)."""
+def hash_files(paths, threads: int = 4, prefixes: dict | None = None) -> dict:
+    """``{path: hex digest}`` for many files (an unreadable file maps to its OSError); a path in
+    ``prefixes`` (``{path: bytes}``) maps to ``(digest, digest of its first bytes)`` (:func:`hash_file`)."""
+    prefixes = prefixes or {}
 
     def one(p):
         try:
-            return p, hash_file(p)
+            return p, hash_file(p, prefix=prefixes.get(p))
         except OSError as exc:
             return p, exc
 
@@ -125,9 +136,10 @@ def hash_files(paths, threads: int = 4) -> dict[str, str | Exception]:
         return dict(ex.map(one, paths))
 
 
-def hash_chunk(paths) -> dict[str, str]:
-    """``{path: hex digest or "error: reason"}``: a Dask task hashing files where they are stored."""
+def hash_chunk(paths, prefixes: dict | None = None) -> dict:
+    """``{path: hex digest, (digest, prefix digest) or "error: reason"}``: a Dask task hashing files where
+    they are stored (``prefixes`` as in :func:`hash_files`)."""
     out = {}
-    for p, h in hash_files(paths, threads=2).items():
-        out[p] = h if isinstance(h, str) else f"error: {getattr(h, 'strerror', None) or h}"
+    for p, h in hash_files(paths, threads=2, prefixes=prefixes).items():
+        out[p] = h if isinstance(h, (str, tuple)) else f"error: {getattr(h, 'strerror', None) or h}"
     return out

@@ -32,6 +32,7 @@ DASK_MISSING = ("fleet analyze runs on dask.distributed, which is not installed:
 class Work:
     log: LogFile
     hash: str
+    replaces: str | None = None  # the hash of this path's earlier content, which the log grew from
 
 
 @dataclass
@@ -106,8 +107,10 @@ def hash_on_cluster(client, chunk: int = 100):
     """A ``hasher`` for :func:`plan` that hashes files on the Dask workers (where the storage is)."""
     from companion.fleet.discover import hash_chunk
 
-    def hasher(paths):
-        futs = client.map(hash_chunk, [paths[i:i + chunk] for i in range(0, len(paths), chunk)], pure=False)
+    def hasher(paths, prefixes=None):
+        parts = [paths[i:i + chunk] for i in range(0, len(paths), chunk)]
+        futs = [client.submit(hash_chunk, part, {p: prefixes[p] for p in part if p in (prefixes or {})},
+                              pure=False) for part in parts]
         out = {}
         for f in futs:
             out.update(f.result())
@@ -122,24 +125,37 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
     same content as another of ``logs``) for ``logs`` against ``store``.
 
     Content hashes come from the ``paths`` table when a path's size and mtime are unchanged, else from
-    ``hasher(paths) -> {path: hex or "error: reason"}`` (default: threads in this process).
+    ``hasher(paths, prefixes) -> {path: hex, (hex, prefix hex) or "error: reason"}`` (default: threads in
+    this process). A path that is longer than when it was recorded is hashed together with its first
+    recorded-size bytes: when those are the recorded content, the log grew (copied off the vehicle while
+    still being written, then again) and its new analysis replaces the partial one instead of standing
+    beside it as another flight. A path whose content changed otherwise (a log number reused after the
+    card was wiped) is a different log: both stay.
     """
     hashes: dict[str, str] = {}
-    unknown = []
+    unknown, prefixes, previous = [], {}, {}
     for lf in logs:
         h = store.cached_hash(lf.path, lf.size, lf.mtime)
         if h:
             hashes[lf.path] = h
-        else:
-            unknown.append(lf.path)
+            continue
+        unknown.append(lf.path)
+        prev = store.path_record(lf.path)
+        if prev is not None and prev[1] is not None and 0 < prev[1] < lf.size:
+            prefixes[lf.path] = int(prev[1])
+            previous[lf.path] = prev[0]
     if hasher is None:
-        found = {p: (h if isinstance(h, str) else f"error: {getattr(h, 'strerror', None) or h}")
-                 for p, h in hash_files(unknown, threads).items()}
+        found = {p: (h if isinstance(h, (str, tuple)) else f"error: {getattr(h, 'strerror', None) or h}")
+                 for p, h in hash_files(unknown, threads, prefixes).items()}
     else:
-        found = hasher(unknown) if unknown else {}
-    unreadable = []
+        found = (hasher(unknown, prefixes) if prefixes else hasher(unknown)) if unknown else {}
+    unreadable, grown = [], {}
     for p in unknown:
         h = found.get(p, "error: not hashed")
+        if isinstance(h, tuple):
+            h, head = h
+            if head is not None and head == previous.get(p):
+                grown[p] = head
         if h.startswith("error: "):
             unreadable.append((p, "cannot read (" + h[7:] + ")"))
         else:
@@ -157,10 +173,11 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
         if in_db:
             skipped += 1
             if st is not None and store.cached_hash(lf.path, lf.size, lf.mtime) != h:
-                store.remember_path(lf.path, h, lf.size, lf.mtime)
+                # the grown content may already be recorded (under another path): the partial one goes
+                store.remember_path(lf.path, h, lf.size, lf.mtime, grown.get(lf.path))
             continue
         seen.add(h)
-        work.append(Work(lf, h))
+        work.append(Work(lf, h, grown.get(lf.path)))
     return work, skipped, unreadable, duplicates
 
 
@@ -170,7 +187,7 @@ def _record(store, stats: RunStats, w: Work, result: dict) -> None:
 
 def _record_many(store, stats: RunStats, pairs) -> None:
     """Write the results of one task (one log, or a --batch of logs) in one transaction, then count them."""
-    store.record_many([(w.hash, r, w.log.size, w.log.mtime) for w, r in pairs])
+    store.record_many([(w.hash, r, w.log.size, w.log.mtime, w.replaces) for w, r in pairs])
     for w, result in pairs:
         if result["status"] == "ok":
             stats.done += 1

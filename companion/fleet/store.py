@@ -134,6 +134,22 @@ class FleetStore:
                              (path, size, mtime)).fetchone()
         return r[0] if r else None
 
+    def path_record(self, path: str) -> tuple | None:
+        """(hash, size, mtime) last recorded for ``path``, whatever its size and mtime are now."""
+        return self.con.execute("SELECT hash, size, mtime FROM paths WHERE path = ?", (path,)).fetchone()
+
+    def drop_superseded(self, old: str, path: str) -> bool:
+        """Remove the log ``old`` (its row and results): the earlier, shorter content of ``path``, which has
+        grown since (a log copied off the vehicle while it was still being written). Kept when another path
+        still holds that content (a copy of the partial log is a log of its own). Returns whether removed.
+        Call inside a transaction."""
+        other = self.con.execute("SELECT 1 FROM paths WHERE hash = ? AND path != ? LIMIT 1", (old, path)).fetchone()
+        if other:
+            return False
+        self.con.execute("DELETE FROM results WHERE hash = ?", (old,))
+        self.con.execute("DELETE FROM logs WHERE hash = ?", (old,))
+        return True
+
     def status(self, h: str) -> str | None:
         r = self.con.execute("SELECT status FROM logs WHERE hash = ?", (h,)).fetchone()
         return r[0] if r else None
@@ -141,8 +157,12 @@ class FleetStore:
     def statuses(self) -> dict[str, str]:
         return dict(self.con.execute("SELECT hash, status FROM logs"))
 
-    def remember_path(self, path: str, h: str, size: int, mtime: float) -> None:
+    def remember_path(self, path: str, h: str, size: int, mtime: float, replaces: str | None = None) -> None:
+        """Record that ``path`` holds content ``h`` (already stored); ``replaces``: the earlier content it
+        grew from, removed in the same transaction (:meth:`drop_superseded`)."""
         with self.con:
+            if replaces and replaces != h:
+                self.drop_superseded(replaces, path)
             self.con.execute("INSERT OR REPLACE INTO paths VALUES (?, ?, ?, ?)", (path, h, size, mtime))
 
     def counts(self) -> dict:
@@ -156,13 +176,18 @@ class FleetStore:
             self._write(h, result, size, mtime)
 
     def record_many(self, items) -> None:
-        """Store several ``(hash, result, size, mtime)`` in one transaction (a ``--batch`` task's logs)."""
+        """Store several ``(hash, result, size, mtime[, replaces])`` in one transaction (a ``--batch`` task's
+        logs); ``replaces``: the hash of the log's earlier, shorter content, removed in the same transaction
+        (:meth:`drop_superseded`)."""
         with self.con:
-            for h, result, size, mtime in items:
-                self._write(h, result, size, mtime)
+            for item in items:
+                self._write(*item)
 
-    def _write(self, h: str, result: dict, size, mtime) -> None:
+    def _write(self, h: str, result: dict, size, mtime, replaces: str | None = None) -> None:
         from companion import __version__
+
+        if replaces and replaces != h:
+            self.drop_superseded(replaces, result["path"])
 
         log = result.get("log") or {}
         start, source = log.get("start_time"), "log"
