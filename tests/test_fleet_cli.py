@@ -332,3 +332,33 @@ def test_a_log_that_grew_replaces_its_partial_record(tmp_path, capsys):
     # another log's bytes at the same path (the card wiped, the number reused): a flight of its own
     f.write_bytes((logs / "vehicle_000" / "flight_000.tlog").read_bytes()[:len(full) // 3] + b"\0")
     assert main(args) == 0 and _flights(db) == (4, 3)
+
+
+def test_new_axes_on_an_existing_database_are_analysed(tmp_path, capsys):
+    """--axes on a database that holds the logs for other axes: the logs are analysed for the new axes too,
+    not skipped as done."""
+    from companion.fleet.task import analyze_logs
+
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "1", "--flights", "2", "--imus", "1",
+                 "--duration", "10", "--rate", "50", "--degrading", "0"]) == 0
+    db = str(tmp_path / "f.sqlite")
+
+    def axes():
+        con = sqlite3.connect(db)
+        try:
+            return dict(con.execute("SELECT axis, COUNT(*) FROM results GROUP BY axis"))
+        finally:
+            con.close()
+
+    run = ["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet", "--axes"]
+    assert main(run + ["gx"]) == 0 and axes() == {"gx": 2}
+    capsys.readouterr()
+    assert main(run + ["gy"]) == 0 and axes() == {"gx": 2, "gy": 2}
+    assert "2 to analyse (2 of them stored before" in capsys.readouterr().err
+    assert main(run + ["gx,gy"]) == 0
+    assert "0 to analyse, 2 already" in capsys.readouterr().err
+    # a --batch task carries each log's own axes
+    paths = sorted(str(p) for p in logs.glob("*/*.tlog"))
+    out = analyze_logs(paths, [("gx",), ("gy", "gz")])
+    assert [sorted({r["axis"] for r in o["rows"]}) for o in out] == [["gx"], ["gy", "gz"]]

@@ -184,10 +184,14 @@ def run_analyze(args) -> int:
             if args.scheduler:  # a cluster: hash the files on the workers, next to the storage
                 client, cluster = open_client(None, args.scheduler)
                 hasher = hash_on_cluster(client)
-            work, skipped, unreadable, duplicates = plan(store, logs, retry_failed=args.retry_failed, hasher=hasher)
+            work, skipped, unreadable, duplicates = plan(store, logs, retry_failed=args.retry_failed, hasher=hasher,
+                                                         axes=axes)
             for path, reason in unreadable[:10]:
                 print(f"warning: {path}: {reason}; skipped", file=sys.stderr)
-            print(f"{len(logs)} log(s): {len(work)} to analyse, {skipped} already in {args.db}"
+            more = sum(w.axes is not None for w in work)
+            print(f"{len(logs)} log(s): {len(work)} to analyse"
+                  + (f" ({more} of them stored before without some of the axes {','.join(axes)})" if more else "")
+                  + f", {skipped} already in {args.db}"
                   + (f", {duplicates} duplicate(s) (the same content as another log given)" if duplicates else "")
                   + (f", {len(unreadable)} unreadable" if unreadable else ""), file=sys.stderr)
             progress = FleetProgress(len(work), skipped + duplicates, enabled=not args.quiet)

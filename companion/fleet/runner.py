@@ -33,6 +33,7 @@ class Work:
     log: LogFile
     hash: str
     replaces: str | None = None  # the hash of this path's earlier content, which the log grew from
+    axes: tuple | None = None  # analysed for these axes (None: the run's); a log stored without some of them
 
 
 @dataclass
@@ -120,7 +121,7 @@ def hash_on_cluster(client, chunk: int = 100):
 
 
 def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 4,
-         hasher=None) -> tuple[list[Work], int, list[tuple[str, str]], int]:
+         hasher=None, axes=None) -> tuple[list[Work], int, list[tuple[str, str]], int]:
     """(work to do, number already in the database, unreadable [(path, reason)], number of duplicates: the
     same content as another of ``logs``) for ``logs`` against ``store``.
 
@@ -131,7 +132,13 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
     still being written, then again) and its new analysis replaces the partial one instead of standing
     beside it as another flight. A path whose content changed otherwise (a log number reused after the
     card was wiped) is a different log: both stay.
+
+    ``axes``: the axes asked for. A log stored as ``ok`` without some of them is analysed again for its
+    stored axes and the new ones (its rows replaced in one transaction), so ``--axes`` on an existing
+    database is never silently ignored.
     """
+    from companion.samples import AXES
+
     hashes: dict[str, str] = {}
     unknown, prefixes, previous = [], {}, {}
     for lf in logs:
@@ -170,6 +177,12 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
         if h in seen and not in_db:
             duplicates += 1
             continue
+        more = None
+        if st == "ok" and axes:
+            have = store.axes(h)
+            if not set(axes) <= have:
+                more = tuple(a for a in AXES if a in have or a in axes)
+                in_db = False
         if in_db:
             skipped += 1
             if st is not None and store.cached_hash(lf.path, lf.size, lf.mtime) != h:
@@ -177,7 +190,7 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
                 store.remember_path(lf.path, h, lf.size, lf.mtime, grown.get(lf.path))
             continue
         seen.add(h)
-        work.append(Work(lf, h, grown.get(lf.path)))
+        work.append(Work(lf, h, grown.get(lf.path), more))
     return work, skipped, unreadable, duplicates
 
 
@@ -213,7 +226,7 @@ def run_serial(store, work: list[Work], progress: FleetProgress, axes=GYRO_AXES,
             if deadline_s is not None and time.monotonic() - t0 > deadline_s:
                 stats.stopped = "deadline"
                 break
-            _record(store, stats, w, analyze_log(w.log.path, axes, vehicle_from))
+            _record(store, stats, w, analyze_log(w.log.path, w.axes or axes, vehicle_from))
             progress.update(stats.done, stats.failed)
     except KeyboardInterrupt:
         stats.stopped = "interrupted"
@@ -318,10 +331,11 @@ def run_dask(store, work: list[Work], progress: FleetProgress, client, axes=GYRO
                 exhausted = True
                 return
             if batch == 1:
-                fut = client.submit(analyze_log, ws[0].log.path, tuple(axes), vehicle_from, pure=False, retries=0)
-            else:
-                fut = client.submit(analyze_logs, [w.log.path for w in ws], tuple(axes), vehicle_from, pure=False,
+                fut = client.submit(analyze_log, ws[0].log.path, tuple(ws[0].axes or axes), vehicle_from, pure=False,
                                     retries=0)
+            else:
+                fut = client.submit(analyze_logs, [w.log.path for w in ws], [tuple(w.axes or axes) for w in ws],
+                                    vehicle_from, pure=False, retries=0)
             pending[fut] = ws
 
     try:

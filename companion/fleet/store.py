@@ -154,6 +154,10 @@ class FleetStore:
         r = self.con.execute("SELECT status FROM logs WHERE hash = ?", (h,)).fetchone()
         return r[0] if r else None
 
+    def axes(self, h: str) -> set[str]:
+        """The axes a log was analysed for (every analysed stream has a row per requested axis)."""
+        return {a for (a,) in self.con.execute("SELECT DISTINCT axis FROM results WHERE hash = ?", (h,))}
+
     def statuses(self) -> dict[str, str]:
         return dict(self.con.execute("SELECT hash, status FROM logs"))
 

@@ -147,5 +147,8 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
 
 
 def analyze_logs(paths, axes=GYRO_AXES, vehicle_from: str = "auto", config=None) -> list[dict]:
-    """:func:`analyze_log` over several logs in one task (``--batch``: fewer, longer tasks for the scheduler)."""
-    return [analyze_log(p, axes, vehicle_from, config) for p in paths]
+    """:func:`analyze_log` over several logs in one task (``--batch``: fewer, longer tasks for the scheduler).
+
+    ``axes``: one tuple of axes for all, or a list of one tuple per log."""
+    each = axes if axes and not isinstance(axes[0], str) else [axes] * len(paths)
+    return [analyze_log(p, a, vehicle_from, config) for p, a in zip(paths, each)]
