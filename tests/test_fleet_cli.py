@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import os
 import re
@@ -362,3 +363,34 @@ def test_new_axes_on_an_existing_database_are_analysed(tmp_path, capsys):
     paths = sorted(str(p) for p in logs.glob("*/*.tlog"))
     out = analyze_logs(paths, [("gx",), ("gy", "gz")])
     assert [sorted({r["axis"] for r in o["rows"]}) for o in out] == [["gx"], ["gy", "gz"]]
+
+
+def test_a_folder_of_several_boards_is_ranked_per_board(tmp_path, capsys):
+    """--vehicle dir on a folder holding the DataFlash logs of 3 boards (all system id 0): each board's IMU is
+    ranked apart as folder/board id (in full), so the degrading one is flagged; mixed into one IMU of 24
+    flights its rise was lost. The identity note says so, in the HTML too."""
+    sim = tmp_path / "sim"
+    assert main(["fleet", "simulate", str(sim), "--vehicles", "3", "--flights", "8", "--imus", "1",
+                 "--degrading", "1", "--rise", "2", "--duration", "30", "--rate", "50", "--seed", "4",
+                 "--format", "bin"]) == 0
+    truth = json.loads((sim / "fleet_truth.json").read_text())
+    hangar = tmp_path / "logs" / "hangar"
+    hangar.mkdir(parents=True)
+    for f in sim.glob("*/*.bin"):
+        shutil.copy(f, hangar / f"{f.parent.name}_{f.name}")
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(tmp_path / "logs"), "--db", db, "--workers", "0", "--axes", "gx",
+                 "--quiet", "--vehicle", "dir"]) == 0
+    capsys.readouterr()
+    out, html_out = tmp_path / "r.json", tmp_path / "r.html"
+    assert main(["fleet", "report", "--db", db, "--json", str(out), "--html", str(html_out)]) == 0
+    printed = capsys.readouterr().out
+    imus = json.loads(out.read_text())["imus"]
+    boards = {v["board_id"] for v in truth["vehicles"]}
+    assert {e["vehicle"] for e in imus} == {f"hangar/{b}" for b in boards}
+    assert [(e["vehicle"], e["flagged"]) for e in imus if e["flagged"]] == [
+        (f"hangar/{b}", True) for b, _ in _sick(truth)]
+    assert all(f"hangar/{b}" in printed for b in boards)  # not cut to the column's width
+    note = imus[0]["identity_note"]
+    assert note and "3 boards" in note and all(b in note for b in boards)
+    assert html.escape(note) in html_out.read_text()

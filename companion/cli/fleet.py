@@ -235,7 +235,7 @@ def _finish(args, store, stats, progress, skipped, duplicates=0) -> int:
 
 def run_report(args) -> int:
     from companion.cli.output import to_json, write_text
-    from companion.fleet.report import fleet_trends, report_html, report_json
+    from companion.fleet.report import fleet_trends, identity_notes, report_html, report_json
     from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE
 
     from companion.fleet.store import FleetStore
@@ -247,25 +247,21 @@ def run_report(args) -> int:
             raise CompanionError(f"{args.db}: no analysed IMU data ({c['ok']} logs ok, {c['failed']} failed)")
         flagged = sum(e["flagged"] for e in entries)
         print(f"{len(entries)} IMUs, {flagged} flagged (evidence >= {EVIDENCE_THRESHOLD:g}, rise >= {MIN_RISE:g}x)")
-        print(f"{'#':>4} {'vehicle':<18} {'sys':>3} {'IMU':<16} {'flights':>7} {'flag':>4} {'evidence':>8} "
+        # board ids in full (a 96-bit MCU id is 24 hex digits, with its board name and a folder more)
+        wv = max([18] + [len(e["vehicle"]) for e in entries])
+        print(f"{'#':>4} {'vehicle':<{wv}} {'sys':>3} {'IMU':<16} {'flights':>7} {'flag':>4} {'evidence':>8} "
               f"{'worst':<6} {'trend':>6}")
         top = entries if args.top == 0 else entries[:args.top]
         for i, e in enumerate(top, 1):
             worst = f"{e['axis']} {e['param']}" if e["axis"] else "-"
             trend = f"{e['trend']:.2f}x" if e["trend"] is not None else "-"
-            print(f"{i:>4} {e['vehicle'][:18]:<18} {e['sysid']:>3} {str(e['imu']) + ' ' + e['message']:<16} "
+            print(f"{i:>4} {e['vehicle']:<{wv}} {e['sysid']:>3} {str(e['imu']) + ' ' + e['message']:<16} "
                   f"{e['flights']:>7} {'YES' if e['flagged'] else 'no':>4} {e['evidence']:>8.1f} {worst:<6} {trend:>6}"
                   + (f"  ({e['note']})" if e["note"] and not e["axis"] else ""))
         if len(top) < len(entries):
             print(f"... {len(entries) - len(top)} more (--top 0 for all)")
-        said = set()
-        flagged_vehicles = {(x["vehicle"], x["sysid"]) for x in entries if x["flagged"]}
-        for e in entries:  # once per vehicle: trends over logs that may not be one vehicle's
-            v = (e["vehicle"], e["sysid"])
-            if e.get("identity_note") and v not in said:
-                said.add(v)
-                print(f"note: vehicle {e['vehicle']}: {e['identity_note']}"
-                      + (" (a flagged IMU among them)" if v in flagged_vehicles else ""))
+        for who, note, flagged in identity_notes(entries):  # trends over logs that may not be one vehicle's
+            print(f"note: {who}{note}" + (" (a flagged IMU among them)" if flagged else ""))
         if args.json:
             write_text(args.json, to_json(report_json(store, entries, EVIDENCE_THRESHOLD, MIN_RISE)) + "\n", "JSON")
             print(f"wrote {args.json}")

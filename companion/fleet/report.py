@@ -23,6 +23,7 @@ from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE, TREND_PARAMS, im
 def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float = MIN_RISE) -> list[dict]:
     """Ranked IMU entries; each carries its ``_series`` and ``_tests`` (for plots; not JSON)."""
     entries = []
+    shared = store.shared_folders()
     key = itemgetter("vehicle", "sysid", "compid", "message", "imu")
     for (vehicle, sysid, compid, message, imu), group in groupby(store.all_results(), key=key):
         rows = list(group)  # one IMU at a time: the rows arrive sorted by IMU, then flight time
@@ -55,6 +56,16 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
                              "from different vehicles"
                              + (f"; {by_mtime} ordered by file time (no time of day in the log)" if by_mtime else "")
                              + "; where each vehicle's logs sit in their own folder, fleet analyze --vehicle dir")
+        folder = rows[0]["folder"]
+        if folder in shared:
+            # one folder, several boards: its logs are not one vehicle's, so each board is ranked apart
+            boards = shared[folder]
+            if vehicle != folder:
+                identity_note = (f"folder {folder} holds the logs of {len(boards)} boards ({', '.join(boards)}): "
+                                 f"each board's IMUs ranked apart, as {folder}/<board id>")
+            else:
+                identity_note = (f"{flights} logs with no board id in folder {folder}, which holds the logs of "
+                                 f"{len(boards)} boards: they may come from any of them")
         last_n = {}
         for (axis, p), (idx, v, lo, hi) in series.items():
             if p == "N" and len(v):
@@ -67,7 +78,7 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
             "tests": len(tr.tests), "note": tr.note,
             "first_flight": min(times) if times else None, "last_flight": max(times) if times else None,
             "last_N": last_n, "identity_note": identity_note,
-            "_series": series, "_tests": tr.tests})
+            "_series": series, "_tests": tr.tests, "_folder": folder})
     entries.sort(key=lambda e: (not e["flagged"], -e["evidence"], e["vehicle"], e["sysid"], e["message"], e["imu"]))
     return entries
 
@@ -92,6 +103,30 @@ tr.flag td{background:#fde2e2}.flag{color:#b00;font-weight:bold}section{margin:1
 img{max-width:100%}small{color:#666}"""
 
 
+def identity_notes(entries: list[dict]) -> list[tuple[str, str, bool]]:
+    """Each identity note once: (``"vehicle V: "`` or ``""`` when the note names its folder, the note, whether
+    a flagged IMU is among the logs it doubts)."""
+    seen: dict = {}
+    for e in entries:
+        note = e.get("identity_note")
+        if not note:
+            continue
+        split = e.get("_folder") not in (None, e["vehicle"])  # ranked per board: no doubt left to flag
+        k = ("" if split else f"vehicle {e['vehicle']}: ", note)
+        seen[k] = seen.get(k, False) or (bool(e["flagged"]) and not split)
+    return [(who, note, flagged) for (who, note), flagged in seen.items()]
+
+
+def _notes_html(entries: list[dict]) -> str:
+    notes = identity_notes(entries)
+    if not notes:
+        return ""
+    esc = html.escape
+    return ("<ul id='notes'>" + "".join(f"<li>note: {esc(who)}{esc(note)}"
+                                        + (" (a flagged IMU among them)" if flagged else "") + "</li>"
+                                        for who, note, flagged in notes) + "</ul>")
+
+
 def report_html(store, entries: list[dict], threshold: float, min_rise: float, max_plots: int = 100) -> str:
     """One self-contained HTML page (inline CSS, PNG plots as data: URIs; no script, no external file)."""
     from companion.plots.fleet_plot import imu_trend_png
@@ -106,6 +141,7 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
            f"<span class='flag'>{len(flagged)} flagged</span> (evidence &ge; {threshold:g} and a fitted rise "
            f"&ge; {min_rise:g}x). Database <code>{esc(store.path)}</code>, generated "
            f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.</p>",
+           _notes_html(entries),
            "<p><small>Evidence = -log10 of the Bonferroni-corrected one-sided p-value of the steepest rise of "
            "ln N, ln B or ln K across the IMU's flights (weighted regression on the per-flight 95 % intervals, "
            "dispersion-corrected); trend = fitted last/first ratio. Method: docs/fleet.md.</small></p>",
@@ -140,7 +176,8 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
                 f"({esc(e['message'])}, sysid {e['sysid']})")
         detail = (f"evidence {e['evidence']:.1f}, worst {e['axis']} {e['param']}, trend {e['trend']:.2f}x over "
                   f"{e['flights']} flights" if e["axis"] else esc(e["note"]))
-        out.append(f"<section id='imu{i}'><h3>{i}. {head}</h3><p>{detail}</p>"
+        note = f"<p class='note'>note: {esc(e['identity_note'])}</p>" if e.get("identity_note") else ""
+        out.append(f"<section id='imu{i}'><h3>{i}. {head}</h3><p>{detail}</p>{note}"
                    f"<img alt='N per flight of {esc(e['vehicle'])} IMU{e['imu']}' src='data:image/png;base64,{b64}'>"
                    "</section>")
     if plotted < len(entries):
@@ -149,4 +186,4 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
     return "\n".join(out)
 
 
-__all__ = ["fleet_trends", "report_json", "report_html", "public"]
+__all__ = ["fleet_trends", "report_json", "report_html", "public", "identity_notes"]

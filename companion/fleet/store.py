@@ -229,16 +229,36 @@ class FleetStore:
         names = [d[0] for d in cur.description]
         return [dict(zip(names, row)) for row in cur]
 
+    #: vehicles named by their folder (``--vehicle dir``) whose analysed logs come from more than one board
+    _SPLIT = ("SELECT vehicle, board_id FROM logs WHERE status = 'ok' AND board_id IS NOT NULL "
+              "AND vehicle != board_id AND vehicle != 'sys' || sysid AND vehicle IN ("
+              "SELECT vehicle FROM logs WHERE status = 'ok' AND board_id IS NOT NULL AND vehicle != board_id "
+              "GROUP BY vehicle HAVING COUNT(DISTINCT board_id) > 1) GROUP BY vehicle, board_id")
+
+    def shared_folders(self) -> dict[str, list[str]]:
+        """``{folder: [board ids]}``: vehicles named by a folder (``--vehicle dir``) that holds the logs of
+        several boards. The report ranks each board's IMUs apart, as ``folder/board id``: one folder
+        is not one vehicle when the logs say otherwise."""
+        out: dict[str, list[str]] = {}
+        for v, b in self.con.execute(self._SPLIT):
+            out.setdefault(v, []).append(b)
+        return out
+
     def all_results(self):
         """Every analysed axis joined with its log, ordered by IMU then flight time (for the report).
 
-        A generator: rows stream from SQLite, the report holds one IMU at a time."""
+        ``vehicle`` is ``folder/board id`` for the logs of a folder that holds several boards
+        (:meth:`shared_folders`), ``folder`` the stored vehicle name. A generator: rows stream from SQLite,
+        the report holds one IMU at a time."""
+        vehicle = ("CASE WHEN l.board_id IS NOT NULL AND r.vehicle = l.vehicle AND r.vehicle IN "
+                   "(SELECT vehicle FROM split) THEN r.vehicle || '/' || l.board_id ELSE r.vehicle END")
         cur = self.con.execute(
-            "SELECT r.vehicle, r.sysid, r.compid, r.message, r.imu, r.axis, r.status, r.hash, r.still_s, "
-            "r.rate_hz, r.temp_min, r.temp_max, "
+            f"WITH split AS ({self._SPLIT}) "
+            f"SELECT {vehicle} AS vehicle, r.vehicle AS folder, r.sysid, r.compid, r.message, r.imu, r.axis, "
+            "r.status, r.hash, r.still_s, r.rate_hz, r.temp_min, r.temp_max, "
             + ", ".join(f"r.{p}, r.{p}_lo, r.{p}_hi" for p in PARAMS)
             + ", l.start_time, l.start_source, l.board_id, l.path FROM results r JOIN logs l ON l.hash = r.hash WHERE l.status = 'ok' "
-            "ORDER BY r.vehicle, r.sysid, r.compid, r.message, r.imu, l.start_time, l.path, r.axis")
+            "ORDER BY 1, r.sysid, r.compid, r.message, r.imu, l.start_time, l.path, r.axis")
         names = [d[0] for d in cur.description]
         for row in cur:
             yield dict(zip(names, row))
