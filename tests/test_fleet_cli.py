@@ -394,3 +394,34 @@ def test_a_folder_of_several_boards_is_ranked_per_board(tmp_path, capsys):
     note = imus[0]["identity_note"]
     assert note and "3 boards" in note and all(b in note for b in boards)
     assert html.escape(note) in html_out.read_text()
+
+
+def test_output_paths_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
+    """--db in a missing directory or on a directory, --html/--json that cannot be written: one error line
+    naming the option, exit 2, before any log is read or any trend computed."""
+    import companion.fleet.discover as discover_mod
+    import companion.fleet.report as report_mod
+
+    def boom(*a, **k):
+        raise AssertionError("work started before the output paths were checked")
+
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "1", "--flights", "1", "--imus", "1",
+                 "--duration", "5", "--rate", "50", "--degrading", "0"]) == 0
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet", "--axes", "gx"]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(discover_mod, "discover", boom)
+    monkeypatch.setattr(report_mod, "fleet_trends", boom)
+    missing = tmp_path / "no" / "such"
+    cases = [(["fleet", "analyze", str(logs), "--db", str(missing / "f.sqlite"), "--workers", "0"], "--db"),
+             (["fleet", "analyze", str(logs), "--db", str(tmp_path), "--workers", "0"], "--db"),
+             (["fleet", "report", "--db", db, "--html", str(missing / "r.html")], "--html"),
+             (["fleet", "report", "--db", db, "--json", str(tmp_path)], "--json")]
+    for argv, opt in cases:
+        assert main(argv) == 2, argv
+        cap = capsys.readouterr()
+        err = cap.err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"companion: error: {opt} "), (argv, cap.err)
+        assert cap.out == ""
+    assert not missing.exists()

@@ -93,3 +93,23 @@ def test_plan_skips_known_and_duplicate_content_and_reports_unreadable(tmp_path)
         assert [w.log.path.rsplit("/", 1)[1] for w in work] == ["b.tlog", "c.tlog"]
         assert skipped == 1 and dup == 0  # a.tlog: its hash came from the paths table, no re-hashing
         assert unreadable == [(str(tmp_path / "d.tlog"), "cannot read (Permission denied)")]
+
+
+def test_another_programs_sqlite_file_is_refused_untouched(tmp_path):
+    """An SQLite file that is not a fleet database (another program's, with or without a table named meta)
+    is refused with one line and left as it was: no tables of ours added to it."""
+    for name, ddl in (("users.sqlite", "CREATE TABLE users (id INTEGER)"),
+                      ("meta.sqlite", "CREATE TABLE meta (key TEXT, value TEXT)")):
+        path = tmp_path / name
+        con = sqlite3.connect(path)
+        con.execute(ddl)
+        con.commit()
+        con.close()
+        before = path.read_bytes()
+        for create in (True, False):
+            with pytest.raises(CompanionError, match="not a fleet database"):
+                FleetStore(path, create=create)
+        assert path.read_bytes() == before
+        con = sqlite3.connect(path)
+        assert [t for (t,) in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")] == [ddl.split()[2]]
+        con.close()

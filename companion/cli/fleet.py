@@ -160,6 +160,7 @@ def _term_as_interrupt():
 
 
 def run_analyze(args) -> int:
+    from companion.cli.output import check_output_path
     from companion.fleet.discover import discover
     from companion.fleet.runner import (FleetProgress, close_client, hash_on_cluster, open_client, plan, run_dask,
                                         run_serial)
@@ -175,6 +176,7 @@ def run_analyze(args) -> int:
         raise CompanionError("--workers must be >= 0")
     if args.time_limit is not None and not (args.time_limit > 0 and math.isfinite(args.time_limit)):
         raise CompanionError("--time-limit must be a positive number of seconds")
+    check_output_path(args.db, "--db")
     logs = discover(args.logs)
     client = cluster = None
     old_term = _term_as_interrupt()
@@ -234,12 +236,16 @@ def _finish(args, store, stats, progress, skipped, duplicates=0) -> int:
 
 
 def run_report(args) -> int:
-    from companion.cli.output import to_json, write_text
+    from companion.cli.output import check_output_path, to_json, write_text
     from companion.fleet.report import fleet_trends, identity_notes, report_html, report_json
     from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE
 
     from companion.fleet.store import FleetStore
 
+    # checked before the trend tests over a large database, not after
+    for path, opt in ((args.html, "--html"), (args.json, "--json")):
+        if path:
+            check_output_path(path, opt)
     with FleetStore(args.db, create=False) as store:
         entries = fleet_trends(store)
         if not entries:

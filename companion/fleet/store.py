@@ -104,6 +104,19 @@ class FleetStore:
         try:
             self.con = sqlite3.connect(self.path, timeout=30.0)
             self.con.execute("PRAGMA foreign_keys = ON")
+            tables = {t for (t,) in self.con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            version = self.con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone() \
+                if "meta" in tables else None
+            if tables and version is None:
+                # another program's database: adding our tables to it would change a file that is not ours
+                self.con.close()
+                raise CompanionError(f"{self.path}: not a fleet database (an SQLite database with tables "
+                                     f"{', '.join(sorted(tables)[:5])}{', ...' if len(tables) > 5 else ''}); "
+                                     "give a new file or one written by fleet analyze")
+            if version is not None and str(version[0]) != str(SCHEMA_VERSION):
+                self.con.close()
+                raise CompanionError(f"{self.path}: fleet database schema {version[0]}, "
+                                     f"this companion reads {SCHEMA_VERSION}")
             if create:
                 self.con.execute("PRAGMA journal_mode = WAL")
                 self.con.execute("PRAGMA synchronous = NORMAL")
@@ -113,7 +126,7 @@ class FleetStore:
             row = self.con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
         except sqlite3.DatabaseError as exc:
             raise CompanionError(f"{self.path}: not a fleet database ({exc})") from None
-        if row is None or int(row[0]) != SCHEMA_VERSION:
+        if row is None or str(row[0]) != str(SCHEMA_VERSION):
             raise CompanionError(f"{self.path}: fleet database schema {row[0] if row else 'missing'}, "
                                  f"this companion reads {SCHEMA_VERSION}")
 
