@@ -425,3 +425,23 @@ def test_output_paths_are_checked_before_any_work(tmp_path, capsys, monkeypatch)
         assert len(err) == 1 and err[0].startswith(f"companion: error: {opt} "), (argv, cap.err)
         assert cap.out == ""
     assert not missing.exists()
+
+
+def test_every_log_failed_still_writes_the_report_saying_why(tmp_path, capsys):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "a.tlog").write_text("not a telemetry log\n")
+    (logs / "b.csv").write_text("time_s,gx\n0,0\n")
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 0
+    capsys.readouterr()
+    out, page = tmp_path / "r.json", tmp_path / "r.html"
+    assert main(["fleet", "report", "--db", db, "--html", str(page), "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "all 2 log(s) failed" in err[0]
+    text = page.read_text()
+    assert "No IMU could be ranked: all 2 log(s) failed" in text
+    assert "no IMU messages" in text and "missing column" in text  # the reasons
+    assert "a.tlog" in text and "b.csv" in text
+    rep = json.loads(out.read_text())
+    assert rep["imus"] == [] and rep["logs"] == {"ok": 0, "failed": 2}

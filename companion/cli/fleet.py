@@ -249,8 +249,7 @@ def run_report(args) -> int:
     with FleetStore(args.db, create=False) as store:
         entries = fleet_trends(store)
         if not entries:
-            c = store.counts()
-            raise CompanionError(f"{args.db}: no analysed IMU data ({c['ok']} logs ok, {c['failed']} failed)")
+            return _report_nothing(args, store)
         flagged = sum(e["flagged"] for e in entries)
         print(f"{len(entries)} IMUs, {flagged} flagged (evidence >= {EVIDENCE_THRESHOLD:g}, rise >= {MIN_RISE:g}x)")
         # board ids in full (a 96-bit MCU id is 24 hex digits, with its board name and a folder more)
@@ -275,6 +274,30 @@ def run_report(args) -> int:
             write_text(args.html, report_html(store, entries, EVIDENCE_THRESHOLD, MIN_RISE, args.max_plots), "HTML")
             print(f"wrote {args.html}")
     return 0
+
+
+def _report_nothing(args, store) -> int:
+    """No IMU to rank (every log failed, or none analysed): the files are still written, saying why (a
+    nightly job's report page must not silently keep yesterday's), then one error line."""
+    from companion.cli.output import to_json, write_text
+    from companion.fleet.report import failure_reasons, report_html, report_json
+    from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE
+
+    c = store.counts()
+    for n, reason in failure_reasons(store.failures()):
+        print(f"{n} log(s) failed: {reason}")
+    written = []
+    if args.json:
+        write_text(args.json, to_json(report_json(store, [], EVIDENCE_THRESHOLD, MIN_RISE)) + "\n", "JSON")
+        written.append(args.json)
+    if args.html:
+        write_text(args.html, report_html(store, [], EVIDENCE_THRESHOLD, MIN_RISE, args.max_plots), "HTML")
+        written.append(args.html)
+    for path in written:
+        print(f"wrote {path}")
+    what = f"all {c['failed']} log(s) failed" if c["failed"] and not c["ok"] else \
+        f"no analysed IMU data ({c['ok']} logs ok, {c['failed']} failed)"
+    raise CompanionError(f"{args.db}: no IMU to rank: {what}")
 
 
 def run_simulate(args) -> int:

@@ -117,6 +117,19 @@ def identity_notes(entries: list[dict]) -> list[tuple[str, str, bool]]:
     return [(who, note, flagged) for (who, note), flagged in seen.items()]
 
 
+def _nothing_ranked(store, entries, counts) -> str:
+    """The page's headline when no IMU could be ranked: why (every log failed, or none was analysed)."""
+    if entries:
+        return ""
+    esc = html.escape
+    if not counts["ok"] and counts["failed"]:
+        why = "".join(f"<li>{n} log(s): {esc(r)}</li>" for n, r in failure_reasons(store.failures()))
+        return (f"<p id='nothing' class='flag'>No IMU could be ranked: all {counts['failed']} log(s) failed. "
+                f"Commonest reasons:</p><ul>{why}</ul>")
+    return ("<p id='nothing' class='flag'>No IMU could be ranked: no log in the database has analysed IMU "
+            "data.</p>")
+
+
 def _notes_html(entries: list[dict]) -> str:
     notes = identity_notes(entries)
     if not notes:
@@ -125,6 +138,18 @@ def _notes_html(entries: list[dict]) -> str:
     return ("<ul id='notes'>" + "".join(f"<li>note: {esc(who)}{esc(note)}"
                                         + (" (a flagged IMU among them)" if flagged else "") + "</li>"
                                         for who, note, flagged in notes) + "</ul>")
+
+
+def failure_reasons(fails, top: int = 5) -> list[tuple[int, str]]:
+    """The commonest reasons of failed logs, ``[(count, reason)]``: the reason up to its details (" (...)"),
+    numbers as N, so "no still data (0 still segments ...)" of 93 logs is one line."""
+    import re
+
+    counts: dict = defaultdict(int)
+    for _, reason in fails:
+        text = (reason or "failed").split(" (")[0]
+        counts[re.sub(r"\d+(\.\d+)?", "N", text)] += 1
+    return sorted(((n, r) for r, n in counts.items()), key=lambda x: (-x[0], x[1]))[:top]
 
 
 def report_html(store, entries: list[dict], threshold: float, min_rise: float, max_plots: int = 100) -> str:
@@ -141,6 +166,7 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
            f"<span class='flag'>{len(flagged)} flagged</span> (evidence &ge; {threshold:g} and a fitted rise "
            f"&ge; {min_rise:g}x). Database <code>{esc(store.path)}</code>, generated "
            f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.</p>",
+           _nothing_ranked(store, entries, counts),
            _notes_html(entries),
            "<p><small>Evidence = -log10 of the Bonferroni-corrected one-sided p-value of the steepest rise of "
            "ln N, ln B or ln K across the IMU's flights (weighted regression on the per-flight 95 % intervals, "
@@ -161,7 +187,8 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
     out.append("</table>")
     fails = store.failures()
     if fails:
-        out.append(f"<details><summary>{len(fails)} failed log(s)</summary><table><tr><th class='l'>path</th>"
+        out.append(f"<details{' open' if not entries else ''}><summary>{len(fails)} failed log(s)</summary>"
+                   "<table id='failed'><tr><th class='l'>path</th>"
                    "<th class='l'>reason</th></tr>")
         out += [f"<tr><td class='l'>{esc(p)}</td><td class='l'>{esc(r or '')}</td></tr>" for p, r in fails]
         out.append("</table></details>")
@@ -186,4 +213,4 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
     return "\n".join(out)
 
 
-__all__ = ["fleet_trends", "report_json", "report_html", "public", "identity_notes"]
+__all__ = ["fleet_trends", "report_json", "report_html", "public", "identity_notes", "failure_reasons"]
