@@ -445,3 +445,18 @@ def test_every_log_failed_still_writes_the_report_saying_why(tmp_path, capsys):
     assert "a.tlog" in text and "b.csv" in text
     rep = json.loads(out.read_text())
     assert rep["imus"] == [] and rep["logs"] == {"ok": 0, "failed": 2}
+
+
+def test_a_failed_logs_path_is_printed_once(tmp_path, capsys):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    bad = logs / "a.tlog"
+    bad.write_text("not a telemetry log\n")
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 0
+    lines = [x for x in capsys.readouterr().err.splitlines() if x.startswith("failed:")]
+    assert len(lines) == 1 and lines[0].count("a.tlog") == 1 and "no IMU messages" in lines[0], lines
+    con = sqlite3.connect(db)
+    path, error = con.execute("SELECT path, error FROM logs").fetchone()
+    con.close()
+    assert path == str(bad) and "a.tlog" not in error and error.startswith("no IMU messages")

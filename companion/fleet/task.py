@@ -140,10 +140,20 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
     except KeyboardInterrupt:
         raise
     except Exception as exc:  # noqa: BLE001 - a failing log is recorded, never aborts the run
-        out["error"] = one_line(exc)[:500]
+        out["error"] = _without_path(one_line(exc), path)[:500]
         out["rows"] = []
     out["elapsed_s"] = time.perf_counter() - t0
     return out
+
+
+def _without_path(reason: str, path) -> str:
+    """The reason without the log's own name in front: the readers' errors start with it (right for
+    `companion analyze`), but the database keeps the path beside the reason and every message prints
+    both, which showed the path twice."""
+    for name in (str(path), os.path.abspath(str(path)), os.path.basename(str(path))):
+        if name and reason.startswith(name + ": "):
+            return reason[len(name) + 2:]
+    return reason
 
 
 def analyze_logs(paths, axes=GYRO_AXES, vehicle_from: str = "auto", config=None) -> list[dict]:
