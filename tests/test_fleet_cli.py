@@ -460,3 +460,52 @@ def test_a_failed_logs_path_is_printed_once(tmp_path, capsys):
     path, error = con.execute("SELECT path, error FROM logs").fetchone()
     con.close()
     assert path == str(bad) and "a.tlog" not in error and error.startswith("no IMU messages")
+
+
+def _accel_batch_log(path, seed):
+    """A DataFlash log: one IMU at 50 Hz and accelerometer-only batch-sampler bursts (ISBH type 0, ISBD)."""
+    import struct
+
+    from companion.sim.dataflash_writer import FMT_TYPE, HEAD, write_imu_log
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(1500) / 50.0 + 1.0
+    write_imu_log(path, t, rng.normal(0, 3e-3, (1, t.size, 3)),
+                  np.array([0, 0, -9.81]) + rng.normal(0, 0.02, (1, t.size, 3)), params={"INS_LOG_BAT_MASK": 1.0})
+
+    def fmt(tid, name, f, cols):
+        size = 3 + struct.calcsize("<" + f.replace("a", "32h"))
+        return HEAD + bytes([FMT_TYPE]) + struct.pack("<BB4s16s64s", tid, size, name.encode(), f.encode(), cols.encode())
+
+    out = fmt(90, "ISBH", "QHBBHHQf", "TimeUS,N,type,instance,mul,smp_cnt,SampleUS,smp_rate")
+    out += fmt(91, "ISBD", "QHHaaa", "TimeUS,N,seqno,x,y,z")
+    for k in range(10):  # 1,024 accelerometer samples at 1 kHz every 3 s
+        t0 = int((1.5 + 3 * k) * 1e6)
+        out += HEAD + bytes([90]) + struct.pack("<QHBBHHQf", t0, k, 0, 0, 1000, 1024, t0, 1000.0)
+        for s in range(32):
+            v = np.round((np.array([0, 0, -9.81]) + rng.normal(0, 0.05, (32, 3))) * 1000).astype("<i2")
+            out += HEAD + bytes([91]) + struct.pack("<QHH", t0, k, s) + b"".join(v[:, j].tobytes() for j in range(3))
+    with open(path, "ab") as fh:
+        fh.write(out)
+
+
+def test_accelerometer_batches_are_not_ranked_as_gyros(tmp_path, capsys):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for i in range(2):
+        _accel_batch_log(logs / f"f{i}.bin", i)
+    db = str(tmp_path / "f.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 0
+    con = sqlite3.connect(db)
+    messages = {m for (m,) in con.execute("SELECT DISTINCT message FROM results")}
+    con.close()
+    assert messages == {"IMU"}
+    out = tmp_path / "r.json"
+    assert main(["fleet", "report", "--db", db, "--json", str(out)]) == 0
+    assert [e["message"] for e in json.loads(out.read_text())["imus"]] == ["IMU"]
+    # asked for accelerometer axes, the batch is analysed
+    db2 = str(tmp_path / "g.sqlite")
+    assert main(["fleet", "analyze", str(logs), "--db", db2, "--workers", "0", "--quiet", "--axes", "ax"]) == 0
+    con = sqlite3.connect(db2)
+    assert {m for (m,) in con.execute("SELECT DISTINCT message FROM results")} == {"IMU", "ISB_ACCEL"}
+    con.close()

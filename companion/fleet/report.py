@@ -27,6 +27,8 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
     key = itemgetter("vehicle", "sysid", "compid", "message", "imu")
     for (vehicle, sysid, compid, message, imu), group in groupby(store.all_results(), key=key):
         rows = list(group)  # one IMU at a time: the rows arrive sorted by IMU, then flight time
+        if all(r["status"] == "absent" for r in rows):
+            continue  # a stream without these axes (an accelerometer batch in an older database): not an IMU here
         order: dict = {}
         for r in rows:  # rows are in flight-time order
             order.setdefault(r["hash"], len(order))

@@ -109,7 +109,7 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         boards = ident.get("board_by_sysid", {})
         board = boards.get(sysid) or ident.get("board_id")
         vehicle = vehicle_name(sysid, board, path, vehicle_from)
-        rows, duration = [], 0.0
+        rows, duration, still, lacking = [], 0.0, False, []
         for s in streams:
             v = vehicle if s.key.sysid == sysid else vehicle_name(s.key.sysid, boards.get(s.key.sysid), path,
                                                                    vehicle_from)
@@ -117,9 +117,15 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
             ranges = sel.ranges(s)
             if not ranges:  # no still data in this stream: nothing to analyse (said in the log's error)
                 continue
+            still = True
             entry = analyze_stream(s, list(axes), "octave", ranges=ranges,
                                    filters=stream_filters(s, getattr(res, "meta", {}) or {}))
-            rows += [_row(entry, s, a, v, ranges) for a in axes]
+            # an axis the stream does not carry (an accelerometer-only ISB_ACCEL batch asked for gyro axes)
+            # is no IMU of the fleet: a row of it would rank the accelerometer as a gyro without data
+            absent = [a for a in axes if entry["axes"][a]["status"] == "absent"]
+            if len(absent) == len(axes):
+                lacking.append(s.key.label())
+            rows += [_row(entry, s, a, v, ranges) for a in axes if a not in absent]
         out["log"] = {"sysid": sysid, "vehicle": vehicle, "board_id": board,
                       "imu_ids": {int(k): int(v) for k, v in ident.get("imu_ids", {}).items()},
                       "start_time": ident.get("start_time"), "duration_s": duration, "streams": len(streams)}
@@ -130,6 +136,8 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         if dead:  # recorded as a dead gyro, whatever else the log lacks
             out["error"] = "; ".join(dead)[:300]
             out["dead_gyro"] = True
+        elif not rows and still:
+            out["error"] = (f"no stream carries the axes {','.join(axes)} (only {', '.join(lacking)})")
         elif not rows:
             out["error"] = f"no still data ({sel.describe()})"
         elif not any(r["status"] == "ok" for r in rows):
