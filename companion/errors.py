@@ -20,3 +20,11 @@ def not_text(path, exc: UnicodeDecodeError, what: str) -> CompanionError:
     byte = exc.object[exc.start:exc.start + 1]
     code = f" (byte 0x{byte[0]:02x} at offset {exc.start} is not UTF-8)" if byte else ""
     return CompanionError(f"{path}: not a text file{code}: {what}")
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a batch system's time limit, systemd stopping a unit) turned into an exception
+    that stops a run the way Ctrl-C does (what is recorded stays), with the shell's exit status for
+    death by SIGTERM: 128 + 15."""
+
+    exit_code = 143

@@ -509,3 +509,61 @@ def test_accelerometer_batches_are_not_ranked_as_gyros(tmp_path, capsys):
     con = sqlite3.connect(db2)
     assert {m for (m,) in con.execute("SELECT DISTINCT message FROM results")} == {"IMU", "ISB_ACCEL"}
     con.close()
+
+
+def _wait_for_line(stream, text):
+    """Lines of ``stream`` up to and including the first holding ``text`` (or all of them, at EOF)."""
+    lines = []
+    for line in stream:
+        lines.append(line)
+        if text in line:
+            break
+    return "".join(lines)
+
+
+def test_sigterm_stops_like_ctrl_c_with_exit_143_and_a_resumable_database(tmp_path):
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "2", "--flights", "6", "--imus", "3",
+                 "--duration", "60", "--rate", "100", "--degrading", "0"]) == 0
+    db = str(tmp_path / "f.sqlite")
+    proc = subprocess.Popen([sys.executable, "-m", "companion", "fleet", "analyze", str(logs), "--db", db,
+                             "--workers", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + TIMEOUT
+    while _count(db) < 1 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=TIMEOUT)
+    first = _count(db)
+    if proc.returncode == 0:
+        pytest.skip("all 12 logs were analysed before the signal arrived")
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err and f"terminated: {12 - first} log(s) not analysed, run again" in out
+    con = sqlite3.connect(db)
+    assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+    assert con.execute("SELECT COUNT(DISTINCT hash) FROM results").fetchone()[0] == first
+    con.close()
+    r = _cli("fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--time-limit", "1e-9")
+    assert f"{12 - first} to analyse, {first} already" in r.stderr
+
+
+@pytest.mark.network
+def test_sigterm_to_the_process_group_while_the_cluster_starts(tmp_path):
+    """A batch system's SIGTERM reaches the workers too, here while the local cluster is starting: exit
+    143 and one line, no traceback from a half-started cluster."""
+    pytest.importorskip("dask.distributed")
+    logs = tmp_path / "logs"
+    assert main(["fleet", "simulate", str(logs), "--vehicles", "1", "--flights", "2", "--imus", "1",
+                 "--duration", "10", "--rate", "50", "--degrading", "0"]) == 0
+    db = str(tmp_path / "f.sqlite")
+    proc = subprocess.Popen([sys.executable, "-m", "companion", "fleet", "analyze", str(logs), "--db", db,
+                             "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    head = _wait_for_line(proc.stderr, "to analyse")  # the plan is made: the cluster starts next
+    os.killpg(proc.pid, signal.SIGTERM)
+    out, err = proc.communicate(timeout=TIMEOUT)
+    err = head + err
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err and "Exception" not in err, err
+    con = sqlite3.connect(db)
+    assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+    con.close()

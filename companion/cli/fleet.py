@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import signal
 import sys
 
-from companion.errors import CompanionError
+from companion.errors import CompanionError, Terminated
 
 DESCRIPTION = """\
 A fleet's thousands of logs: every IMU's noise coefficients per flight, kept in a SQLite database, and
@@ -148,15 +149,43 @@ def _help(p) -> int:
     return 2
 
 
-def _term_as_interrupt():
-    """SIGTERM (a batch system's time limit, ``kill``) stops the run like Ctrl-C: what is recorded stays."""
-    def handler(signum, frame):
-        raise KeyboardInterrupt
+class _Term:
+    """SIGTERM (a batch system's time limit, ``kill``, systemd) stops the run like Ctrl-C -- what is recorded
+    stays, the next run resumes -- and exits 143 (:class:`companion.errors.Terminated`). While the local
+    cluster starts or closes the signal is held and acted on right after: raised in the middle of
+    distributed's start-up it left a half-made cluster, whose clean-up at exit printed tracebacks."""
 
-    try:
-        return signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread
-        return None
+    def __init__(self):
+        self.hold = 0
+        self.pending = False
+        try:
+            self.old = signal.signal(signal.SIGTERM, self._handler)
+        except ValueError:  # not the main thread
+            self.old = None
+
+    def _handler(self, signum, frame):
+        if self.hold:
+            self.pending = True
+            return
+        raise Terminated
+
+    @contextlib.contextmanager
+    def held(self):
+        self.hold += 1
+        try:
+            yield
+        except Exception:
+            if self.pending:  # the start failed because the signal killed the workers too
+                raise Terminated from None
+            raise
+        finally:
+            self.hold -= 1
+        if self.pending and not self.hold:
+            raise Terminated
+
+    def restore(self) -> None:
+        if self.old is not None:
+            signal.signal(signal.SIGTERM, self.old)
 
 
 def run_analyze(args) -> int:
@@ -179,12 +208,13 @@ def run_analyze(args) -> int:
     check_output_path(args.db, "--db")
     logs = discover(args.logs)
     client = cluster = None
-    old_term = _term_as_interrupt()
+    term = _Term()
     try:
         with FleetStore(args.db) as store:
             hasher = None
             if args.scheduler:  # a cluster: hash the files on the workers, next to the storage
-                client, cluster = open_client(None, args.scheduler)
+                with term.held():
+                    client, cluster = open_client(None, args.scheduler)
                 hasher = hash_on_cluster(client)
             work, skipped, unreadable, duplicates = plan(store, logs, retry_failed=args.retry_failed, hasher=hasher,
                                                          axes=axes)
@@ -202,15 +232,18 @@ def run_analyze(args) -> int:
                 stats = run_serial(store, work, progress, axes, args.vehicle, args.time_limit)
             elif work:
                 if client is None:
-                    client, cluster = open_client(args.workers or os.cpu_count() or 1, None)
+                    with term.held():
+                        client, cluster = open_client(args.workers or os.cpu_count() or 1, None)
                 stats = run_dask(store, work, progress, client, axes, args.vehicle, args.time_limit,
                                  batch=args.batch)
             rc = _finish(args, store, stats, progress, skipped, duplicates)
     finally:
-        if client is not None:
-            close_client(client, cluster)
-        if old_term is not None:
-            signal.signal(signal.SIGTERM, old_term)
+        try:
+            if client is not None:
+                with term.held():
+                    close_client(client, cluster)
+        finally:
+            term.restore()
     return rc
 
 
@@ -228,6 +261,8 @@ def _finish(args, store, stats, progress, skipped, duplicates=0) -> int:
         print(describe(stats))
         if stats.stopped == "interrupted":
             return 130
+        if stats.stopped == "terminated":
+            return Terminated.exit_code
         if stats.stopped == "deadline":
             return 3
     c = store.counts()

@@ -12,7 +12,7 @@ import importlib
 import sys
 
 from companion import __version__
-from companion.errors import CompanionError
+from companion.errors import CompanionError, Terminated
 
 #: Subcommand modules in the order ``--help`` lists them.
 COMMANDS = (
@@ -69,7 +69,10 @@ def main(argv=None) -> int:
     except CompanionError as exc:
         print(f"companion: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        if isinstance(exc, Terminated):
+            print("companion: terminated (SIGTERM)", file=sys.stderr)
+            return exc.exit_code
         print("companion: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:

@@ -44,7 +44,7 @@ class RunStats:
     done: int = 0  # analysed and recorded ok in this run
     failed: int = 0  # analysed and recorded failed in this run
     elapsed_s: float = 0.0
-    stopped: str = ""  # "", "interrupted" or "deadline"
+    stopped: str = ""  # "", "interrupted" (Ctrl-C), "terminated" (SIGTERM) or "deadline"
     workers: int = 0
     batch: int = 1  # logs per Dask task
     failures: list = field(default_factory=list)  # (path, reason) of this run
@@ -228,10 +228,16 @@ def run_serial(store, work: list[Work], progress: FleetProgress, axes=GYRO_AXES,
                 break
             _record(store, stats, w, analyze_log(w.log.path, w.axes or axes, vehicle_from))
             progress.update(stats.done, stats.failed)
-    except KeyboardInterrupt:
-        stats.stopped = "interrupted"
+    except KeyboardInterrupt as exc:
+        stats.stopped = _stopped_by(exc)
     stats.elapsed_s = time.monotonic() - t0
     return stats
+
+
+def _stopped_by(exc: KeyboardInterrupt) -> str:
+    from companion.errors import Terminated
+
+    return "terminated" if isinstance(exc, Terminated) else "interrupted"
 
 
 def open_client(workers: int | None = None, scheduler: str | None = None, timeout_s: float = 60.0):
@@ -242,9 +248,10 @@ def open_client(workers: int | None = None, scheduler: str | None = None, timeou
     except ImportError:
         raise CompanionError(DASK_MISSING) from None
     for name in ("distributed", "distributed.nanny", "distributed.scheduler", "distributed.worker",
-                 "distributed.core", "distributed.comm"):
+                 "distributed.core", "distributed.comm", "asyncio"):
         # shutting down on Ctrl-C, the scheduler and nannies in this process may log a closed connection with
-        # its traceback; what goes wrong with a log comes back as its task's exception and is recorded
+        # its traceback (and asyncio a nanny whose worker was killed with the process group: "Task exception
+        # was never retrieved"); what goes wrong with a log comes back as its task's exception and is recorded
         logging.getLogger(name).setLevel(logging.CRITICAL)
     if scheduler:
         if "://" not in scheduler:
@@ -278,8 +285,19 @@ def open_client(workers: int | None = None, scheduler: str | None = None, timeou
         # the workers' own logs at CRITICAL only: a worker whose heartbeat meets the scheduler closing (a
         # Ctrl-C on a loaded machine) logs an ERROR with a traceback, which the user would take for a crash;
         # a task's real failure reaches this process as its future's exception and is recorded per log
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL)
+        before = _clusters()
+        try:
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL)
+        except BaseException as exc:
+            # a cluster that failed half-way through its start (its workers killed by a SIGTERM to the process
+            # group) is closed here, else distributed's exit hook tries again and prints a traceback
+            for c in _clusters() - before:
+                _close_quietly(c)
+            if isinstance(exc, Exception):
+                raise CompanionError(f"cannot start a local Dask cluster of {n} workers ({one_line(exc)})") \
+                    from None
+            raise
     finally:
         if old_int is not None:
             signal.signal(signal.SIGINT, old_int)
@@ -358,8 +376,8 @@ def run_dask(store, work: list[Work], progress: FleetProgress, client, axes=GYRO
                 _record_many(store, stats, list(zip(ws, results)))
             progress.update(stats.done, stats.failed)
             fill()
-    except KeyboardInterrupt:
-        stats.stopped = "interrupted"
+    except KeyboardInterrupt as exc:
+        stats.stopped = _stopped_by(exc)
     finally:
         if pending:
             try:
@@ -370,16 +388,32 @@ def run_dask(store, work: list[Work], progress: FleetProgress, client, axes=GYRO
     return stats
 
 
+def _clusters() -> set:
+    try:
+        from distributed.deploy.spec import SpecCluster
+    except ImportError:
+        return set()
+    return set(SpecCluster._instances)
+
+
+def _close_quietly(cluster) -> None:
+    """Close ``cluster``; whatever fails, distributed's exit hook is not to try again (its second attempt at
+    a cluster whose workers were killed ends in a traceback at exit)."""
+    try:
+        cluster.close(timeout=20)
+    except Exception:  # noqa: BLE001 - shutting down anyway
+        pass
+    finally:
+        cluster.shutdown_on_close = False
+
+
 def close_client(client, cluster) -> None:
     try:
         client.close(timeout=10)
     except Exception:  # noqa: BLE001
         pass
     if cluster is not None:
-        try:
-            cluster.close(timeout=20)
-        except Exception:  # noqa: BLE001
-            pass
+        _close_quietly(cluster)
 
 
 def describe(stats: RunStats) -> str:
