@@ -141,6 +141,17 @@ def test_user_errors_are_one_line(tmp_path, capsys):
     assert main(["fleet", "analyze", str(tmp_path), "--db", db, "--axes", "qq"]) == 2
     err = capsys.readouterr().err
     assert err.count("companion: error:") == 4 and "Traceback" not in err
+    # each names the option at fault
+    for argv, opt in ((["simulate", str(tmp_path / "s"), "--vehicles", "1", "--flights", "2", "--seed", "-1"],
+                       "--seed"),
+                      (["simulate", str(tmp_path / "s"), "--vehicles", "1", "--flights", "2", "--degrading", "-1"],
+                       "--degrading"),
+                      (["report", "--db", db, "--top", "-1"], "--top"),
+                      (["report", "--db", db, "--max-plots", "-2"], "--max-plots"),
+                      (["report", "--db", str(tmp_path)], "is a directory")):
+        assert main(["fleet", *argv]) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and opt in err[0], (argv, err)
 
 
 def test_missing_dask_is_one_clear_line(tmp_path, monkeypatch, capsys):

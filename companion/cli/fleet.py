@@ -277,6 +277,8 @@ def run_report(args) -> int:
 
     from companion.fleet.store import FleetStore
 
+    if args.top < 0 or args.max_plots < 0:
+        raise CompanionError(f"--{'top' if args.top < 0 else 'max-plots'} must be >= 0")
     # checked before the trend tests over a large database, not after
     for path, opt in ((args.html, "--html"), (args.json, "--json")):
         if path:
@@ -345,6 +347,10 @@ def run_simulate(args) -> int:
         raise CompanionError("--duration and --rate must be positive")
     if args.duration * args.rate < 64:
         raise CompanionError(f"--duration {args.duration:g} s at {args.rate:g} Hz is fewer than 64 samples per flight")
+    if not 0 <= args.degrading <= args.vehicles * args.imus:
+        raise CompanionError(f"--degrading must be between 0 and --vehicles x --imus = {args.vehicles * args.imus}")
+    if args.seed < 0:
+        raise CompanionError("--seed must be >= 0")
     if not (args.rise > 0 and math.isfinite(args.rise)):
         raise CompanionError("--rise must be a positive ratio")
     if args.format == "bin" and args.message != "ardupilot":

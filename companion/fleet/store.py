@@ -99,6 +99,8 @@ class FleetStore:
         import os
 
         self.path = str(path)
+        if os.path.isdir(self.path):
+            raise CompanionError(f"{self.path}: is a directory; give the database file")
         if not create and not os.path.isfile(self.path):
             raise CompanionError(f"{self.path}: no such database (run `companion fleet analyze ... --db {self.path}`)")
         try:
