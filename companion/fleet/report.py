@@ -114,9 +114,13 @@ def identity_notes(entries: list[dict]) -> list[tuple[str, str, bool]]:
         if not note:
             continue
         split = e.get("_folder") not in (None, e["vehicle"])  # ranked per board: no doubt left to flag
-        k = ("" if split else f"vehicle {e['vehicle']}: ", note)
-        seen[k] = seen.get(k, False) or (bool(e["flagged"]) and not split)
-    return [(who, note, flagged) for (who, note), flagged in seen.items()]
+        # once per folder of several boards, once per vehicle otherwise (its best-ranked IMU's words)
+        k = e["_folder"] if split else ("vehicle", e["vehicle"], e["sysid"])
+        who = "" if split else f"vehicle {e['vehicle']}: "
+        if k not in seen:
+            seen[k] = [who, note, False]
+        seen[k][2] = seen[k][2] or (bool(e["flagged"]) and not split)
+    return [tuple(v) for v in seen.values()]
 
 
 def _nothing_ranked(store, entries, counts) -> str:
