@@ -41,8 +41,11 @@ examples:
   companion fleet analyze logs/ --db fleet.sqlite --vehicle dir     one folder per vehicle
   companion fleet analyze logs/ --db fleet.sqlite --workers 0       in this process, no Dask
 
-Vehicle id: the autopilot's board id when the log has one (AUTOPILOT_VERSION uid in a tlog), else
-sys<MAVLink sysid>; --vehicle dir names vehicles by the log's folder instead (CSV logs carry no id).
+Vehicle id: the autopilot's board id when the log has one (AUTOPILOT_VERSION uid in a tlog, the boot
+banner of a DataFlash log), else sys<MAVLink sysid>; --vehicle dir names vehicles by the log's folder
+instead (CSV logs carry no id); a folder holding the logs of several boards is ranked per board, as
+folder/<board id>. Run again with other --axes: the stored logs are analysed for the new axes too.
+SIGTERM stops like Ctrl-C (exit 143); what is recorded stays.
 """
 
 REPORT_DESCRIPTION = """\
