@@ -79,3 +79,53 @@ def test_compensate_help_teaches(capsys):
     assert exc.value.code == 0
     text = capsys.readouterr().out
     assert "examples:" in text and "srrsukf" in text and "--max-samples" in text
+
+
+def _write_csv(path, gyro_col, n=4000, rate=100.0, seed=1):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / rate
+    a = np.tile([0.0, 0.0, -9.81], (n, 1)) + 0.01 * rng.standard_normal((n, 3))
+    g = np.column_stack([gyro_col, 1e-3 * rng.standard_normal(n), 1e-3 * rng.standard_normal(n)])
+    np.savetxt(path, np.column_stack([t, g, a]), delimiter=",", header="time_s,gx,gy,gz,ax,ay,az", comments="")
+    return path
+
+
+def _table_taus(printed):
+    import re
+
+    head = next(line for line in printed.splitlines() if line.startswith("method"))
+    return [float(v) for v in re.findall(r"@\s*([0-9.eE+-]+) s", head)]
+
+
+def _white_plus_walk(tmp_path, n=4000, sigma=0.01, seed=4):
+    rng = np.random.default_rng(seed)
+    gx = sigma * rng.standard_normal(n) + np.cumsum(2e-4 * rng.standard_normal(n))
+    return _write_csv(tmp_path / "w.csv", gx, n=n)
+
+
+def test_table_stops_at_a_tenth_of_the_record(tmp_path, capsys):
+    """40 s of data: no tau beyond T/10 = 4 s (fewer than 10 clusters: too few for an Allan estimate) is printed,
+    and the long-tau column is the longest one allowed."""
+    path = _white_plus_walk(tmp_path)
+    assert main(["compensate", str(path), "--axis", "gx", "--quiet"]) == 0
+    taus = _table_taus(capsys.readouterr().out)
+    assert taus and max(taus) <= 4.0 + 1e-9 and max(taus) > 2.0, taus
+
+
+def test_table_is_in_deg_per_s(tmp_path, capsys):
+    """White noise of 0.01 rad/s = 0.5730 deg/s plus a slow random walk: the printed raw ADEV at tau0 and the
+    fitted sqrt(R) are in deg/s (the ADEV at tau0 of white noise is its standard deviation; relative standard
+    error about 1/sqrt(2 n) = 1.1 % for n = 4000, so 5 % is a safe bound)."""
+    sigma = 0.01
+    path = _white_plus_walk(tmp_path, sigma=sigma)
+    assert main(["compensate", str(path), "--axis", "gx", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    raw_line = next(line for line in printed.splitlines() if line.startswith("raw ADEV"))
+    assert "deg/s" in raw_line
+    adev0 = float(raw_line.split(")")[-1].split()[0])
+    deg = sigma * 180.0 / np.pi
+    assert abs(adev0 / deg - 1.0) < 0.05, (adev0, deg)
+    import re
+
+    sqrt_r = float(re.search(r"sqrt\(R\)=([0-9.eE+-]+) deg/s", printed).group(1))
+    assert abs(sqrt_r / deg - 1.0) < 0.05, (sqrt_r, deg)

@@ -96,20 +96,36 @@ def select_series(res, axis: str, stream_index: int, max_samples):
     return s.t[a:b], np.asarray(s.axis(axis)[a:b], dtype=float), rate, s.key.label()
 
 
-def _nearest(tau, value):
-    return int(np.argmin(np.abs(np.log(tau) - np.log(value))))
+#: The table stops at T/10: beyond it the overlapping Allan estimate rests on fewer than ten clusters.
+MAX_TAU_FRACTION = 0.1
+
+
+def display_unit(axis: str) -> tuple[float, str]:
+    """(factor, unit) from SI to the table's and plot's unit: deg/s for gyro axes, m/s^2 for accelerometers."""
+    return (180.0 / np.pi, "deg/s") if axis in GYRO_AXES else (1.0, "m/s^2")
+
+
+def table_taus(result) -> list[int]:
+    """Indices of the taus shown: tau0, about 1 s and about 100 s, none beyond T/10 of the record."""
+    tau = result.raw_tau
+    n = len(next(iter(result.methods.values())).x)
+    ok = np.flatnonzero(tau <= MAX_TAU_FRACTION * n / result.rate_hz + 1e-12)
+    if ok.size == 0:
+        return [0]
+    return sorted({int(ok[np.argmin(np.abs(np.log(tau[ok]) - np.log(v)))]) for v in (tau[0], 1.0, 100.0)})
 
 
 def format_table(result, axis: str, label: str) -> str:
     tau = result.raw_tau
-    picks = sorted({_nearest(tau, v) for v in (tau[0], 1.0, 100.0)})
+    scale, unit = display_unit(axis)
+    p = result.params
+    picks = table_taus(result)
     lines = [f"{label} {axis}: {len(next(iter(result.methods.values())).x)} samples at {result.rate_hz:g} Hz; "
-             f"ARIMA(1,1,1) fit ({result.params.split}): phi={result.params.phi:.4f} theta={result.params.theta:.4f} "
-             f"delta1={result.params.delta1 * result.params.scale:.3g} "
-             f"sqrt(R)={np.sqrt(result.params.R) * result.params.scale:.3g} (input units)"]
+             f"ARIMA(1,1,1) fit ({p.split}): phi={p.phi:.4f} theta={p.theta:.4f} "
+             f"delta1={p.delta1 * p.scale * scale:.3g} {unit} sqrt(R)={np.sqrt(p.R) * p.scale * scale:.3g} {unit}"]
     head = f"{'method':<20}" + "".join(f"{'ADEV ratio @' + format(tau[i], '.3g') + ' s':>20}" for i in picks)
     lines.append(head + f"{'samples/s':>12}{'factor ok':>11}")
-    lines.append(f"{'raw ADEV':<20}" + "".join(f"{result.raw_adev[i]:>20.4g}" for i in picks))
+    lines.append(f"{'raw ADEV (' + unit + ')':<20}" + "".join(f"{result.raw_adev[i] * scale:>20.4g}" for i in picks))
     for m in result.methods.values():
         ratio = m.adev / result.raw_adev
         lines.append(f"{m.label:<20}" + "".join(f"{ratio[i]:>20.3f}" for i in picks)
@@ -160,9 +176,8 @@ def run(args) -> int:
     if args.plot:
         from companion.plots.compensation_plot import plot_compensation
 
-        gyro = axis in GYRO_AXES
-        plot_compensation(result, t, z, args.plot, title=f"{label} {axis}",
-                          unit_scale=180.0 / np.pi if gyro else 1.0, unit="deg/s" if gyro else "m/s^2")
+        scale, unit = display_unit(axis)
+        plot_compensation(result, t, z, args.plot, title=f"{label} {axis}", unit_scale=scale, unit=unit)
         print(f"wrote {args.plot}")
     if bad:
         print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)
