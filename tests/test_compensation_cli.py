@@ -129,3 +129,19 @@ def test_table_is_in_deg_per_s(tmp_path, capsys):
 
     sqrt_r = float(re.search(r"sqrt\(R\)=([0-9.eE+-]+) deg/s", printed).group(1))
     assert abs(sqrt_r / deg - 1.0) < 0.05, (sqrt_r, deg)
+
+
+def test_warns_when_no_method_reduces_the_noise(tmp_path, capsys):
+    """A random walk seen through a two-tap moving average (as an autopilot's low-pass filter shapes motion) has a
+    spectral zero at Nyquist, hence no white component at all: nothing can be removed, every ratio at tau0 is about
+    1, and the user is told so instead of reading a table of ones. Data with white noise give no such warning."""
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(6)
+    walk = _write_csv(tmp_path / "rw.csv", lfilter([1.0, 1.0], [1.0, -1.0], 1e-3 * rng.standard_normal(4000)))
+    assert main(["compensate", str(walk), "--axis", "gx", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "warning" in err and "0.9" in err and "tau0" in err
+    noisy = _write_csv(tmp_path / "wn.csv", np.cumsum(1e-4 * rng.standard_normal(4000)) + 5e-3 * rng.standard_normal(4000))
+    assert main(["compensate", str(noisy), "--axis", "gx", "--quiet"]) == 0
+    assert "warning" not in capsys.readouterr().err

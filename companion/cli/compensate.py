@@ -99,6 +99,9 @@ def select_series(res, axis: str, stream_index: int, max_samples):
 #: The table stops at T/10: beyond it the overlapping Allan estimate rests on fewer than ten clusters.
 MAX_TAU_FRACTION = 0.1
 
+#: A method "helped" when it brought the ADEV at tau0 below this fraction of the raw ADEV.
+HELPED_RATIO = 0.9
+
 
 def display_unit(axis: str) -> tuple[float, str]:
     """(factor, unit) from SI to the table's and plot's unit: deg/s for gyro axes, m/s^2 for accelerometers."""
@@ -133,6 +136,17 @@ def format_table(result, axis: str, label: str) -> str:
     return "\n".join(lines)
 
 
+def nothing_helped(result) -> str | None:
+    """A warning when no method brought the ADEV at tau0 below ``HELPED_RATIO`` x raw, else None."""
+    ratios = {m.label: float(m.adev[0] / result.raw_adev[0]) for m in result.methods.values()}
+    if not ratios or min(ratios.values()) < HELPED_RATIO:
+        return None
+    best = min(ratios, key=ratios.get)
+    return (f"no method brought the ADEV at tau0 ({result.raw_tau[0]:.3g} s) below {HELPED_RATIO:g}x raw (best: "
+            f"{best} {ratios[best]:.3f}x): the fit found little white measurement noise to remove, so the "
+            f"compensated series is about the raw one (data in motion, or noise the model does not describe)")
+
+
 def run(args) -> int:
     from companion.cli.output import check_output_path, check_plot_path
     from companion.sources import load
@@ -159,6 +173,9 @@ def run(args) -> int:
     finally:
         progress.close()
     print(format_table(result, axis, label))
+    warning = nothing_helped(result)
+    if warning:
+        print(f"companion: warning: {warning}", file=sys.stderr)
     bad = [m.name for m in result.methods.values() if not m.factor_valid]
     if args.json:
         report = result.to_json(axis)
