@@ -145,3 +145,60 @@ def test_warns_when_no_method_reduces_the_noise(tmp_path, capsys):
     noisy = _write_csv(tmp_path / "wn.csv", np.cumsum(1e-4 * rng.standard_normal(4000)) + 5e-3 * rng.standard_normal(4000))
     assert main(["compensate", str(noisy), "--axis", "gx", "--quiet"]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def _streams_result(tmp_path):
+    """A LoadResult with one accel-only stream (a DataFlash ISB_ACCEL burst: gyro NaN by design) before two IMUs."""
+    from companion.samples import ImuStream, StreamKey, TimingReport
+    from companion.sources import LoadResult
+
+    rng = np.random.default_rng(2)
+    n = 3000
+    t = np.arange(n) / 100.0
+    acc = np.tile([0.0, 0.0, -9.81], (n, 1)) + 0.01 * rng.standard_normal((n, 3))
+
+    def stream(msg, inst, gyro):
+        return ImuStream(StreamKey(0, 0, msg, inst), t, gyro, acc, segments=[(0, n)],
+                         timing=TimingReport(rate_hz=100.0, duration_s=n / 100.0))
+
+    nan = np.full((n, 3), np.nan)
+    gyro = 5e-3 * rng.standard_normal((n, 3))
+    return LoadResult(str(tmp_path / "log.bin"), [stream("IMU", 0, gyro), stream("IMU", 1, gyro),
+                                                   stream("ISB_ACCEL", 0, nan)])
+
+
+def test_accel_only_stream_names_the_gyro_streams(tmp_path, capsys, monkeypatch):
+    import companion.sources
+
+    monkeypatch.setattr(companion.sources, "load", lambda *a, **k: _streams_result(tmp_path))
+    assert main(["compensate", str(tmp_path / "log.bin"), "--axis", "gx", "--stream", "2", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("companion: error:") and "\n" not in err
+    assert "ISB_ACCEL[0]" in err and "no gyro" in err
+    assert "0: IMU[0]" in err and "1: IMU[1]" in err  # the gyro streams the user can pick instead
+
+
+def test_accel_only_shared_dataflash(shared_data, tmp_path, capsys):
+    """The real methodic log with its batch-sampler header turned into accel (type 0): ISB_ACCEL[0] is stream 2."""
+    from companion.sources import dataflash
+
+    data = bytearray((shared_data / "ardupilot" / "methodic_backend_log_80k.bin").read_bytes())
+    log = dataflash.index(np.frombuffer(bytes(data), dtype=np.uint8))
+    f = log.formats[log.names["ISBH"]]
+    at = 3 + f.dtype.fields["type"][1]
+    for pos in log.offsets[log.names["ISBH"]]:
+        data[int(pos) + at] = 0
+    p = tmp_path / "isb_accel.bin"
+    p.write_bytes(bytes(data))
+    assert main(["compensate", str(p), "--axis", "gx", "--stream", "2", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "no gyro" in err and "IMU[0]" in err and "IMU[1]" in err
+
+
+def test_too_short_record_names_the_stream_and_its_length(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    path = _write_csv(tmp_path / "short.csv", 5e-3 * rng.standard_normal(150), n=150)
+    assert main(["compensate", str(path), "--axis", "gx", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("companion: error:") and "\n" not in err
+    assert "CSV[0]" in err and "150 samples" in err and "1.5 s" in err and "200" in err

@@ -74,6 +74,11 @@ def parse_methods(spec: str) -> tuple:
     return tuple(dict.fromkeys(names))
 
 
+def _has_axis(stream, axis: str) -> bool:
+    """Whether the stream carries data for ``axis`` (a batch-sampler burst of one sensor has NaN for the other)."""
+    return bool(np.any(np.isfinite(stream.axis(axis))))
+
+
 def select_series(res, axis: str, stream_index: int, max_samples):
     """(t, z, rate_hz, label) of the longest still, gap-free piece of the chosen IMU stream."""
     streams = res.imu_streams()
@@ -83,6 +88,13 @@ def select_series(res, axis: str, stream_index: int, max_samples):
         labels = "; ".join(f"{i}: {s.key.label()}" for i, s in enumerate(streams))
         raise CompanionError(f"--stream {stream_index} out of range; IMU streams: {labels}")
     s = streams[stream_index]
+    kind = "gyro" if axis in GYRO_AXES else "accel"
+    if not _has_axis(s, axis):
+        other = "accel" if kind == "gyro" else "gyro"
+        usable = [f"{i}: {o.key.label()}" for i, o in enumerate(streams) if _has_axis(o, axis)]
+        where = (f"{kind} streams: {'; '.join(usable)} (choose one with --stream I)" if usable
+                 else f"this source has no {kind} stream")
+        raise CompanionError(f"{s.key.label()} (--stream {stream_index}) has no {kind} data ({other} only); {where}")
     from companion.sources.still import longest_still_range
 
     a, b = longest_still_range(res, s, warn=lambda m: print(f"warning: {m}", file=sys.stderr))
@@ -93,6 +105,14 @@ def select_series(res, axis: str, stream_index: int, max_samples):
     rate = float(s.rate_hz)
     if not rate > 0:
         raise CompanionError(f"{s.key.label()}: no usable sample rate")
+    from companion.compensation.arima import MIN_FIT_SAMPLES
+
+    if b - a < MIN_FIT_SAMPLES:
+        longer = [f"{i}: {o.key.label()} ({o.samples} samples)" for i, o in enumerate(streams)
+                  if i != stream_index and o.samples >= MIN_FIT_SAMPLES and _has_axis(o, axis)]
+        hint = f"; streams with more data: {'; '.join(longer)}" if longer else ""
+        raise CompanionError(f"{s.key.label()} {axis}: {b - a} samples ({(b - a) / rate:.1f} s at {rate:g} Hz) are too "
+                             f"few for the ARIMA(1,1,1) fit (need at least {MIN_FIT_SAMPLES}){hint}")
     return s.t[a:b], np.asarray(s.axis(axis)[a:b], dtype=float), rate, s.key.label()
 
 
