@@ -9,7 +9,8 @@ Simulated: ARIMA(1,1,1) (phi 0.8, delta1 2e-3, delta2 6e-4 rad/s) plus white noi
 the truth x is known: the table gives the RMS error of each estimate against it and against the optimal
 (exact ARIMA, DARE) Kalman filter. A second, "weak" case has delta1, delta2 ten times smaller (the ARIMA part
 is 0.1 % of the variance of the differenced data): there the free fit hides the white noise in x and the auto
-split's white-share rule refits canonically (docs/compensation.md). Real: ../shared/data/adis16405 (100 Hz, at rest; not in the repository).
+split's white-share rule refits canonically (docs/compensation.md).
+Real: ../shared/data/adis16405 (100 Hz, at rest; not in the repository).
 Gauss-Markov mode (--gauss-markov K): for seeds 1..K, a first-order Gauss-Markov process (tau_c log-uniform in
 0.2-20 s, sigma log-uniform in 1-10 times the white noise) plus white noise 5e-3 rad/s at 100 Hz: not an
 ARIMA(1,1,1) of the paper's kind (its difference is ARMA(1,1) with theta = 1) but what real gyros show. The

@@ -79,6 +79,8 @@ def test_compensate_help_teaches(capsys):
     assert exc.value.code == 0
     text = capsys.readouterr().out
     assert "examples:" in text and "srrsukf" in text and "--max-samples" in text
+    # what the code does: the longest still piece (not merely gap-free), a deg/s table cut at a tenth of the record
+    assert "still" in text and "deg/s" in text and "tenth of the record" in text
 
 
 def _write_csv(path, gyro_col, n=4000, rate=100.0, seed=1):
@@ -142,7 +144,8 @@ def test_warns_when_no_method_reduces_the_noise(tmp_path, capsys):
     assert main(["compensate", str(walk), "--axis", "gx", "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "warning" in err and "0.9" in err and "tau0" in err
-    noisy = _write_csv(tmp_path / "wn.csv", np.cumsum(1e-4 * rng.standard_normal(4000)) + 5e-3 * rng.standard_normal(4000))
+    noisy = _write_csv(tmp_path / "wn.csv",
+                       np.cumsum(1e-4 * rng.standard_normal(4000)) + 5e-3 * rng.standard_normal(4000))
     assert main(["compensate", str(noisy), "--axis", "gx", "--quiet"]) == 0
     assert "warning" not in capsys.readouterr().err
 
