@@ -167,8 +167,8 @@ def nothing_helped(result) -> str | None:
         return None
     best = min(ratios, key=ratios.get)
     return (f"no method brought the ADEV at tau0 ({result.raw_tau[0]:.3g} s) below {HELPED_RATIO:g}x raw (best: "
-            f"{best} {ratios[best]:.3f}x): the fit found little white measurement noise to remove, so the "
-            f"compensated series is about the raw one (data in motion, or noise the model does not describe)")
+            f"{best} {ratios[best]:.3f}x): little white noise found to remove (motion, or noise the model "
+            f"does not describe)")
 
 
 def run(args) -> int:
