@@ -205,3 +205,26 @@ def test_too_short_record_names_the_stream_and_its_length(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("companion: error:") and "\n" not in err
     assert "CSV[0]" in err and "150 samples" in err and "1.5 s" in err and "200" in err
+
+
+def test_plot_allan_panel_in_deg_per_s_and_cut_at_a_tenth(tmp_path, monkeypatch):
+    """The plot's Allan panel draws the same numbers as the JSON, times 180/pi (deg/s), and like the table stops
+    at T/10 = 4 s of the 40-s record."""
+    import companion.plots.compensation_plot as cp
+
+    figs = []
+    monkeypatch.setattr(cp, "save_figure", lambda fig, path, plt: figs.append(fig))
+    path = _white_plus_walk(tmp_path)
+    out_json = tmp_path / "c.json"
+    assert main(["compensate", str(path), "--axis", "gx", "--plot", str(tmp_path / "c.png"),
+                 "--json", str(out_json), "--quiet"]) == 0
+    rep = json.loads(out_json.read_text())
+    allan = [ax for ax in figs[0].axes if ax.get_xscale() == "log"][0]
+    raw = allan.get_lines()[0]
+    assert "deg/s" in allan.get_ylabel()
+    tau, adev = raw.get_xdata(), raw.get_ydata()
+    assert max(tau) <= 4.0 + 1e-9
+    assert np.allclose(adev, np.array(rep["raw"]["adev"][: len(adev)]) * 180.0 / np.pi)
+    import matplotlib.pyplot as plt
+
+    plt.close(figs[0])

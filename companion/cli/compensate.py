@@ -218,7 +218,8 @@ def run(args) -> int:
         from companion.plots.compensation_plot import plot_compensation
 
         scale, unit = display_unit(axis)
-        plot_compensation(result, t, z, args.plot, title=f"{label} {axis}", unit_scale=scale, unit=unit)
+        plot_compensation(result, t, z, args.plot, title=f"{label} {axis}", unit_scale=scale, unit=unit,
+                          max_tau=MAX_TAU_FRACTION * z.shape[0] / rate + 1e-12)
         print(f"wrote {args.plot}")
     if bad:
         print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)
