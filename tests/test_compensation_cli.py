@@ -228,3 +228,19 @@ def test_plot_allan_panel_in_deg_per_s_and_cut_at_a_tenth(tmp_path, monkeypatch)
     import matplotlib.pyplot as plt
 
     plt.close(figs[0])
+
+
+@pytest.mark.parametrize("split", ["canonical", "auto"])
+def test_json_is_strict_and_names_the_split(imu_csv, tmp_path, split):
+    """The JSON parses without NaN/Infinity constants (the free fit's white share is null when there was none)."""
+    path, _ = imu_csv
+    out_json = tmp_path / "c.json"
+    assert main(["compensate", str(path), "--axis", "gx", "--method", "stf", "--split", split,
+                 "--json", str(out_json), "--quiet"]) == 0
+
+    def refuse(name):
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    rep = json.loads(out_json.read_text(), parse_constant=refuse)
+    share = rep["arima"]["free_white_share"]
+    assert (share is None) if split == "canonical" else (0.0 <= share <= 1.0)

@@ -59,7 +59,7 @@ class ArimaParams:
     scale: float = 1.0
     offset: float = 0.0
     split: str = "free"  # how the fit shared white noise between x and V (see fit_arima111)
-    free_white_share: float = float("nan")  # white share of x in the free fit (see white_share), nan if not fitted
+    free_white_share: float | None = None  # white share of x in the free fit (see white_share); None: no free fit
 
     @property
     def theta(self) -> float:
@@ -190,7 +190,7 @@ def fit_arima111(z, max_lag: int = 30, max_samples: int | None = 200_000, split:
 
     used = "canonical" if split == "canonical" else "free"
     _cost, phi, theta, sigma, R = _least_squares_fit(c, max_lag, -1.0 if used == "canonical" else None)
-    share = white_share(phi, theta, sigma, R) if used == "free" else float("nan")
+    share = white_share(phi, theta, sigma, R) if used == "free" else None
     if split == "auto" and (theta >= 0.98 or share > WHITE_SHARE_MAX):
         used = "canonical"
         _cost, phi, theta, sigma, R = _least_squares_fit(c, max_lag, -1.0)
