@@ -244,3 +244,13 @@ def test_json_is_strict_and_names_the_split(imu_csv, tmp_path, split):
     rep = json.loads(out_json.read_text(), parse_constant=refuse)
     share = rep["arima"]["free_white_share"]
     assert (share is None) if split == "canonical" else (0.0 <= share <= 1.0)
+
+
+def test_constant_axis_names_the_stream_and_value(tmp_path, capsys):
+    """An all-zero gyro axis (real 2014 rover logs carry one) is one error line naming the stream, the axis, the
+    sample count and the value, instead of an anonymous 'the series is constant'."""
+    path = _write_csv(tmp_path / "dead.csv", np.zeros(1000), n=1000)
+    assert main(["compensate", str(path), "--axis", "gx", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("companion: error:") and "\n" not in err
+    assert "CSV[0]" in err and "gx" in err and "1000 samples are 0 deg/s" in err

@@ -117,7 +117,12 @@ def select_series(res, axis: str, stream_index: int, max_samples):
         hint = f"; streams with more data: {'; '.join(longer)}" if longer else ""
         raise CompanionError(f"{s.key.label()} {axis}: {b - a} samples ({(b - a) / rate:.1f} s at {rate:g} Hz) are too "
                              f"few for the ARIMA(1,1,1) fit (need at least {MIN_FIT_SAMPLES}){hint}")
-    return s.t[a:b], np.asarray(s.axis(axis)[a:b], dtype=float), rate, s.key.label()
+    z = np.asarray(s.axis(axis)[a:b], dtype=float)
+    if np.all(z == z[0]):
+        scale, unit = display_unit(axis)
+        raise CompanionError(f"{s.key.label()} {axis}: all {b - a} samples are {z[0] * scale:g} {unit} "
+                             f"(stuck, absent or not logged): nothing to compensate")
+    return s.t[a:b], z, rate, s.key.label()
 
 
 #: The table stops at T/10: beyond it the overlapping Allan estimate rests on fewer than ten clusters.
