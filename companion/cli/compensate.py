@@ -22,10 +22,13 @@ gyroscope random error based on square-root risk-sensitive UKF"):
 The ARIMA(1,1,1) + white-noise model is first fitted to the data by least squares (no hand tuning);
 each filter then runs sample by sample. The compensated series is the filtered estimate x_k: the
 gyro output with the white measurement noise removed. The table compares the overlapping Allan
-deviation of each compensated series with that of the raw series (ratio < 1: lower noise) and the
-speed. Meant for data at rest; on a moving vehicle the filters also smooth real motion.
-The longest gap-free segment of the chosen IMU stream is used. Method and measurements:
-docs/compensation.md.
+deviation of each compensated series with that of the raw series (ratio < 1: lower noise) at tau0,
+about 1 s and about 100 s, never beyond a tenth of the record, with the raw ADEV in deg/s (m/s^2 for
+an accelerometer axis), and the speed; a warning says when no method got below 0.9x raw at tau0.
+Meant for data at rest; on a moving vehicle the filters also smooth real motion.
+The longest still, gap-free piece of the chosen IMU stream is used (disarmed where the log says so,
+motion judged from the accelerometers); without one, the longest gap-free segment, with a warning.
+Method and measurements: docs/compensation.md.
 """
 
 EPILOG = """\
@@ -52,7 +55,8 @@ def register(subparsers) -> None:
     p.add_argument("--json", metavar="OUT", help="write ADEVs and fitted parameters as JSON (SI units)")
     p.add_argument("--plot", metavar="PNG", help="raw and compensated series and their Allan deviations")
     p.add_argument("--out", metavar="CSV", help="write the compensated series as CSV")
-    p.add_argument("--max-samples", type=int, default=None, metavar="N", help="use only the first N samples")
+    p.add_argument("--max-samples", type=int, default=None, metavar="N",
+                   help="use only the first N samples of that piece")
     p.add_argument("--stream", type=int, default=0, metavar="I", help="index of the IMU stream (default 0, the first)")
     p.add_argument("--split", default="auto", choices=("auto", "free", "canonical"),
                    help="how the ARIMA fit shares white noise between error and measurement noise (default auto)")
@@ -74,6 +78,11 @@ def parse_methods(spec: str) -> tuple:
     return tuple(dict.fromkeys(names))
 
 
+def _has_axis(stream, axis: str) -> bool:
+    """Whether the stream carries data for ``axis`` (a batch-sampler burst of one sensor has NaN for the other)."""
+    return bool(np.any(np.isfinite(stream.axis(axis))))
+
+
 def select_series(res, axis: str, stream_index: int, max_samples):
     """(t, z, rate_hz, label) of the longest still, gap-free piece of the chosen IMU stream."""
     streams = res.imu_streams()
@@ -83,6 +92,13 @@ def select_series(res, axis: str, stream_index: int, max_samples):
         labels = "; ".join(f"{i}: {s.key.label()}" for i, s in enumerate(streams))
         raise CompanionError(f"--stream {stream_index} out of range; IMU streams: {labels}")
     s = streams[stream_index]
+    kind = "gyro" if axis in GYRO_AXES else "accel"
+    if not _has_axis(s, axis):
+        other = "accel" if kind == "gyro" else "gyro"
+        usable = [f"{i}: {o.key.label()}" for i, o in enumerate(streams) if _has_axis(o, axis)]
+        where = (f"{kind} streams: {'; '.join(usable)} (choose one with --stream I)" if usable
+                 else f"this source has no {kind} stream")
+        raise CompanionError(f"{s.key.label()} (--stream {stream_index}) has no {kind} data ({other} only); {where}")
     from companion.sources.still import longest_still_range
 
     a, b = longest_still_range(res, s, warn=lambda m: print(f"warning: {m}", file=sys.stderr))
@@ -93,28 +109,71 @@ def select_series(res, axis: str, stream_index: int, max_samples):
     rate = float(s.rate_hz)
     if not rate > 0:
         raise CompanionError(f"{s.key.label()}: no usable sample rate")
-    return s.t[a:b], np.asarray(s.axis(axis)[a:b], dtype=float), rate, s.key.label()
+    from companion.compensation.arima import MIN_FIT_SAMPLES
+
+    if b - a < MIN_FIT_SAMPLES:
+        longer = [f"{i}: {o.key.label()} ({o.samples} samples)" for i, o in enumerate(streams)
+                  if i != stream_index and o.samples >= MIN_FIT_SAMPLES and _has_axis(o, axis)]
+        hint = f"; streams with more data: {'; '.join(longer)}" if longer else ""
+        raise CompanionError(f"{s.key.label()} {axis}: {b - a} samples ({(b - a) / rate:.1f} s at {rate:g} Hz) are too "
+                             f"few for the ARIMA(1,1,1) fit (need at least {MIN_FIT_SAMPLES}){hint}")
+    z = np.asarray(s.axis(axis)[a:b], dtype=float)
+    if np.all(z == z[0]):
+        scale, unit = display_unit(axis)
+        raise CompanionError(f"{s.key.label()} {axis}: all {b - a} samples are {z[0] * scale:g} {unit} "
+                             f"(stuck, absent or not logged): nothing to compensate")
+    return s.t[a:b], z, rate, s.key.label()
 
 
-def _nearest(tau, value):
-    return int(np.argmin(np.abs(np.log(tau) - np.log(value))))
+#: The table stops at T/10: beyond it the overlapping Allan estimate rests on fewer than ten clusters.
+MAX_TAU_FRACTION = 0.1
+
+#: A method "helped" when it brought the ADEV at tau0 below this fraction of the raw ADEV.
+HELPED_RATIO = 0.9
+
+
+def display_unit(axis: str) -> tuple[float, str]:
+    """(factor, unit) from SI to the table's and plot's unit: deg/s for gyro axes, m/s^2 for accelerometers."""
+    return (180.0 / np.pi, "deg/s") if axis in GYRO_AXES else (1.0, "m/s^2")
+
+
+def table_taus(result) -> list[int]:
+    """Indices of the taus shown: tau0, about 1 s and about 100 s, none beyond T/10 of the record."""
+    tau = result.raw_tau
+    n = len(next(iter(result.methods.values())).x)
+    ok = np.flatnonzero(tau <= MAX_TAU_FRACTION * n / result.rate_hz + 1e-12)
+    if ok.size == 0:
+        return [0]
+    return sorted({int(ok[np.argmin(np.abs(np.log(tau[ok]) - np.log(v)))]) for v in (tau[0], 1.0, 100.0)})
 
 
 def format_table(result, axis: str, label: str) -> str:
     tau = result.raw_tau
-    picks = sorted({_nearest(tau, v) for v in (tau[0], 1.0, 100.0)})
+    scale, unit = display_unit(axis)
+    p = result.params
+    picks = table_taus(result)
     lines = [f"{label} {axis}: {len(next(iter(result.methods.values())).x)} samples at {result.rate_hz:g} Hz; "
-             f"ARIMA(1,1,1) fit ({result.params.split}): phi={result.params.phi:.4f} theta={result.params.theta:.4f} "
-             f"delta1={result.params.delta1 * result.params.scale:.3g} "
-             f"sqrt(R)={np.sqrt(result.params.R) * result.params.scale:.3g} (input units)"]
+             f"ARIMA(1,1,1) fit ({p.split}): phi={p.phi:.4f} theta={p.theta:.4f} "
+             f"delta1={p.delta1 * p.scale * scale:.3g} {unit} sqrt(R)={np.sqrt(p.R) * p.scale * scale:.3g} {unit}"]
     head = f"{'method':<20}" + "".join(f"{'ADEV ratio @' + format(tau[i], '.3g') + ' s':>20}" for i in picks)
     lines.append(head + f"{'samples/s':>12}{'factor ok':>11}")
-    lines.append(f"{'raw ADEV':<20}" + "".join(f"{result.raw_adev[i]:>20.4g}" for i in picks))
+    lines.append(f"{'raw ADEV (' + unit + ')':<20}" + "".join(f"{result.raw_adev[i] * scale:>20.4g}" for i in picks))
     for m in result.methods.values():
         ratio = m.adev / result.raw_adev
         lines.append(f"{m.label:<20}" + "".join(f"{ratio[i]:>20.3f}" for i in picks)
                      + f"{m.samples_per_s:>12.0f}{'yes' if m.factor_valid else 'NO':>11}")
     return "\n".join(lines)
+
+
+def nothing_helped(result) -> str | None:
+    """A warning when no method brought the ADEV at tau0 below ``HELPED_RATIO`` x raw, else None."""
+    ratios = {m.label: float(m.adev[0] / result.raw_adev[0]) for m in result.methods.values()}
+    if not ratios or min(ratios.values()) < HELPED_RATIO:
+        return None
+    best = min(ratios, key=ratios.get)
+    return (f"no method brought the ADEV at tau0 ({result.raw_tau[0]:.3g} s) below {HELPED_RATIO:g}x raw (best: "
+            f"{best} {ratios[best]:.3f}x): little white noise found to remove (motion, or noise the model "
+            f"does not describe)")
 
 
 def run(args) -> int:
@@ -143,6 +202,9 @@ def run(args) -> int:
     finally:
         progress.close()
     print(format_table(result, axis, label))
+    warning = nothing_helped(result)
+    if warning:
+        print(f"companion: warning: {warning}", file=sys.stderr)
     bad = [m.name for m in result.methods.values() if not m.factor_valid]
     if args.json:
         report = result.to_json(axis)
@@ -160,9 +222,9 @@ def run(args) -> int:
     if args.plot:
         from companion.plots.compensation_plot import plot_compensation
 
-        gyro = axis in GYRO_AXES
-        plot_compensation(result, t, z, args.plot, title=f"{label} {axis}",
-                          unit_scale=180.0 / np.pi if gyro else 1.0, unit="deg/s" if gyro else "m/s^2")
+        scale, unit = display_unit(axis)
+        plot_compensation(result, t, z, args.plot, title=f"{label} {axis}", unit_scale=scale, unit=unit,
+                          max_tau=MAX_TAU_FRACTION * z.shape[0] / rate + 1e-12)
         print(f"wrote {args.plot}")
     if bad:
         print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)

@@ -59,6 +59,7 @@ class ArimaParams:
     scale: float = 1.0
     offset: float = 0.0
     split: str = "free"  # how the fit shared white noise between x and V (see fit_arima111)
+    free_white_share: float | None = None  # white share of x in the free fit (see white_share); None: no free fit
 
     @property
     def theta(self) -> float:
@@ -95,6 +96,28 @@ def model_autocovariance(phi: float, theta: float, sigma: float, R: float, max_l
     if max_lag >= 2:
         c[2:] = g1 * phi ** np.arange(1, max_lag)
     return c
+
+
+def white_share(phi: float, theta: float, sigma: float, R: float, grid: int = 4096) -> float:
+    """Share of the white noise that the model leaves inside x instead of in V: W_x / (W_x + R).
+
+    The pseudo-spectrum of x (eq. (2)) is f_x(w) = sigma^2 |1 - theta e^{-iw}|^2 / (|1 - e^{-iw}|^2
+    |1 - phi e^{-iw}|^2); its minimum W_x over 0 < w <= pi is the variance of the largest white component
+    x contains (the part the canonical decomposition moves into V). A filter cannot remove white noise the
+    model calls signal, so a large share means the fit has hidden the measurement noise in x.
+    """
+    w = np.linspace(0.0, np.pi, grid + 1)[1:]
+    c = np.cos(w)
+    f = sigma * sigma * (1.0 + theta * theta - 2.0 * theta * c) / ((2.0 - 2.0 * c) * (1.0 + phi * phi - 2.0 * phi * c))
+    wx = float(f.min())
+    total = wx + R
+    return wx / total if total > 0.0 else 0.0
+
+
+#: ``split="auto"`` refits with the canonical split when the free fit leaves more than this share of the
+#: white noise in x. On Gauss-Markov + white data (benchmarks/bench_compensation.py --gauss-markov 20) the
+#: free fits that filtered nothing had shares of 0.93-1.0, those near the optimal filter 0.0-0.16.
+WHITE_SHARE_MAX = 0.2
 
 
 def _least_squares_fit(c: np.ndarray, max_lag: int, theta_fixed: float | None):
@@ -139,10 +162,12 @@ def fit_arima111(z, max_lag: int = 30, max_samples: int | None = 200_000, split:
     - ``"free"``: the unconstrained fit above;
     - ``"canonical"``: theta fixed to -1, which puts a zero at the Nyquist frequency into the spectrum of
       x, i.e. gives all the white noise to V (the canonical decomposition of Hillmer & Tiao, JASA 1982);
-    - ``"auto"`` (default): the free fit, unless it puts the MA root on the unit circle (theta >= 0.98). Then
-      (1 - theta B) cancels the difference (1 - B), x contains a white component that no data can tell
-      apart from V, the free fit returns R about 0 and no filter can remove anything: use the canonical
-      split instead. Real gyros at rest (white noise plus slow drift) usually land here.
+    - ``"auto"`` (default): the free fit, unless it hides white noise in x: the MA root on the unit circle
+      (theta >= 0.98; (1 - theta B) cancels the difference (1 - B)), or more than ``WHITE_SHARE_MAX`` of the
+      white noise left inside x (:func:`white_share`). Along that direction the autocovariances barely
+      change (x's white component and V cannot be told apart), so the least-squares fit lands anywhere on
+      it, often at R about 0, and then no filter removes anything: use the canonical split instead. Real
+      gyros at rest (white noise plus slow drift or Gauss-Markov wander) usually land here.
     """
     if split not in ("auto", "free", "canonical"):
         raise CompanionError(f"unknown ARIMA split {split!r}; expected auto, free or canonical")
@@ -165,13 +190,14 @@ def fit_arima111(z, max_lag: int = 30, max_samples: int | None = 200_000, split:
 
     used = "canonical" if split == "canonical" else "free"
     _cost, phi, theta, sigma, R = _least_squares_fit(c, max_lag, -1.0 if used == "canonical" else None)
-    if split == "auto" and theta >= 0.98:
+    share = white_share(phi, theta, sigma, R) if used == "free" else None
+    if split == "auto" and (theta >= 0.98 or share > WHITE_SHARE_MAX):
         used = "canonical"
         _cost, phi, theta, sigma, R = _least_squares_fit(c, max_lag, -1.0)
     # A vanishing ARMA part would leave the filters with no process noise: keep a floor of 1e-3.
     sigma = max(sigma, 1e-3)
     return ArimaParams(phi=phi, delta1=sigma, delta2=theta * sigma, R=max(R, 1e-6),
-                       scale=scale, offset=offset, split=used)
+                       scale=scale, offset=offset, split=used, free_white_share=share)
 
 
 def simulate_arima111(n: int, phi: float, delta1: float, delta2: float, R: float, rng, x0: float = 0.0):

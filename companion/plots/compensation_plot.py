@@ -15,11 +15,12 @@ COLORS = {"stf": "tab:orange", "srukf": "tab:green", "srrsukf": "tab:red"}
 
 
 def plot_compensation(result, t: np.ndarray, z: np.ndarray, path, title: str = "", unit_scale: float = 180.0 / np.pi,
-                      unit: str = "deg/s", max_points: int = 20_000) -> None:
+                      unit: str = "deg/s", max_points: int = 20_000, max_tau: float = np.inf) -> None:
     """Write the figure for a :class:`companion.compensation.pipeline.CompensationResult` to ``path``.
 
     ``t`` and ``z`` are the time (s) and raw series (SI); values are shown times ``unit_scale`` in ``unit``.
     Time series are decimated to at most ``max_points`` points for drawing (the ADEV uses every sample).
+    Allan deviations are drawn up to ``max_tau`` (s).
     """
     plt = require_matplotlib()
 
@@ -40,9 +41,11 @@ def plot_compensation(result, t: np.ndarray, z: np.ndarray, path, title: str = "
         if i == rows - 1:
             ax.set_xlabel("time (s)")
     ax = fig.add_subplot(grid[:, 1])
-    ax.loglog(result.raw_tau, result.raw_adev * unit_scale, "o-", color="0.3", ms=3, label="raw")
+    keep = result.raw_tau <= max_tau
+    ax.loglog(result.raw_tau[keep], result.raw_adev[keep] * unit_scale, "o-", color="0.3", ms=3, label="raw")
     for m in methods:
-        ax.loglog(m.tau, m.adev * unit_scale, "o-", ms=3, color=COLORS.get(m.name, "C0"), label=m.label)
+        k = m.tau <= max_tau
+        ax.loglog(m.tau[k], m.adev[k] * unit_scale, "o-", ms=3, color=COLORS.get(m.name, "C0"), label=m.label)
     ax.set_xlabel("tau (s)")
     ax.set_ylabel(f"Allan deviation ({unit})")
     ax.set_title("Allan deviation of raw and compensated data", fontsize=9, loc="left")
