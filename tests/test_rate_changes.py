@@ -101,3 +101,36 @@ def test_a_stream_whose_rate_keeps_wandering_is_logged_a_few_times_then_summed_u
     assert 1.4 <= lo <= 2.2 and 3.4 <= hi <= 4.5, note  # the range of the rates that were taken
     texts = [x for _, x in sink.texts]
     assert not [x for x in texts if any(w in x.lower() for w in FAULT_WORDS)], texts
+
+
+def stepped_times(steps, t0=1.0):
+    """Sample times of a stream at ``hz`` for ``span`` s for each ``(hz, span)`` of ``steps`` in turn."""
+    out, t = [], t0
+    for hz, span in steps:
+        n = int(round(span * hz))
+        out.append(t + np.arange(1, n + 1) / hz)
+        t = out[-1][-1]
+    return np.round(np.concatenate(out) * 1e6) * 1e-6
+
+
+def test_a_rate_near_one_kept_before_does_not_throw_the_richer_one_away():
+    """A telemetry stream whose rate the autopilot lowers and raises: 300 s at 2.5 Hz, 20 s at 3.1, 20 s at
+    3.8, then 100 s at 2.5 again, still throughout. Putting 3.1 Hz aside replaced every kept rate within
+    20 % of it, so the 300 s of 2.5 Hz went, and the return to 2.5 Hz restored the 20 s of 3.1 (a real tlog's
+    IMU1 ended with 0 s of its 323 still blocks in any estimator). Now both are kept and the richer comes back."""
+    rng = np.random.default_rng(11)
+    sink = RecordingSink()
+    p = Pipeline(PipelineConfig.from_mapping({"baseline_s": 600}), Reporter(sink, 1.0))
+    t = stepped_times([(2.5, 300.0), (3.1, 20.0), (3.8, 20.0), (2.5, 100.0)])
+    g = np.round(rng.normal(0.0, 3e-3, (t.size, 3)) / 1e-3) * 1e-3
+    a = np.array([0.0, 0.0, -9.80665]) + rng.normal(0.0, 0.02, (t.size, 3))
+    for k in range(t.size):
+        p.on_sample(KEY, float(t[k]), g[k], a[k])
+    ch = p.channels[0]
+    assert ch.rate_switches == 3, ch.rate_switches
+    assert ch.rate_hz == pytest.approx(2.5, rel=0.05)
+    # the first 300 s (less the settling and the first blocks) and most of the last 100 s are in this rate's
+    # estimators; before, 20 s of 3.1 Hz and the last 100 s
+    assert ch.fed_s > 330.0, (ch.fed_s, ch.kept_rates())
+    (row,) = p.summary()
+    assert row["other_rates"][0] == 2 and row["other_rates"][1] > 20.0, row["other_rates"]  # 3.1 and 3.8 Hz kept

@@ -570,6 +570,7 @@ class Pipeline:
         out = []
         for imu, ch in sorted(self.channels.items()):
             row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
+                   "other_rates": ch.kept_rates(),
                    "health": STATE_NAMES[self.health(ch)], "counts": ch.counts, "axes": {},
                    "faults": self.fault_texts(ch), "notes": [n for n in (ch.too_slow(), ch.all_zero(), ch.transient_note(), self.rate_note(ch)) if n]}
             if ch.fast and ch.fed_s > 0:

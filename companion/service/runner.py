@@ -125,7 +125,10 @@ def summary_lines(pipeline) -> list[str]:
     for r in rows:
         c = r["counts"]
         rate = f"{r['rate_hz']:.1f} Hz" if r["rate_hz"] else "rate unknown"
-        out.append(f"IMU{r['imu']} ({r['message']}, {rate}): {r['health']}; {r['still_s']:.0f} s still data used; "
+        k, other_s = r.get("other_rates", (0, 0.0))
+        # the figures below are this rate's: still data fed at other rates sit in the estimators kept for them
+        other = f" (+ {other_s:.0f} s kept with {k} other rate{'s' if k > 1 else ''})" if other_s >= 1.0 else ""
+        out.append(f"IMU{r['imu']} ({r['message']}, {rate}): {r['health']}; {r['still_s']:.0f} s still data used{other}; "
                    f"{c['samples']} samples, {c['blocks_moving']} moving blocks, {c['resets']} resets, {c['gaps']} gaps, "
                    f"{c['duplicates']} duplicates")
         for text in r.get("faults") or ():
@@ -133,7 +136,8 @@ def summary_lines(pipeline) -> list[str]:
         for text in r.get("notes") or ():
             out.append(f"  note: {text}")
         for ax, d in r["axes"].items():
-            out.append(f"  {ax}: " + summary_line(d["terms"], ax, d["baseline"]))
+            text = summary_line(d["terms"], ax, d["baseline"])
+            out.append(f"  {ax}: " + (text or f"no estimate yet ({r['still_s']:.0f} s of still data at this rate)"))
     for t, text in pipeline.transitions:
         out.append(f"  at {t:.0f} s: {text}")
     return out
