@@ -137,11 +137,16 @@ def display_unit(axis: str) -> tuple[float, str]:
     return (180.0 / np.pi, "deg/s") if axis in GYRO_AXES else (1.0, "m/s^2")
 
 
+def max_tau(n: int, rate_hz: float) -> float:
+    """The longest cluster time shown (table and plot) for ``n`` samples at ``rate_hz``: T/10."""
+    return MAX_TAU_FRACTION * n / rate_hz + 1e-12
+
+
 def table_taus(result) -> list[int]:
     """Indices of the taus shown: tau0, about 1 s and about 100 s, none beyond T/10 of the record."""
     tau = result.raw_tau
     n = len(next(iter(result.methods.values())).x)
-    ok = np.flatnonzero(tau <= MAX_TAU_FRACTION * n / result.rate_hz + 1e-12)
+    ok = np.flatnonzero(tau <= max_tau(n, result.rate_hz))
     if ok.size == 0:
         return [0]
     return sorted({int(ok[np.argmin(np.abs(np.log(tau[ok]) - np.log(v)))]) for v in (tau[0], 1.0, 100.0)})
@@ -224,7 +229,7 @@ def run(args) -> int:
 
         scale, unit = display_unit(axis)
         plot_compensation(result, t, z, args.plot, title=f"{label} {axis}", unit_scale=scale, unit=unit,
-                          max_tau=MAX_TAU_FRACTION * z.shape[0] / rate + 1e-12)
+                          max_tau=max_tau(z.shape[0], rate))
         print(f"wrote {args.plot}")
     if bad:
         print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)

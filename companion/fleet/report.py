@@ -123,13 +123,13 @@ def identity_notes(entries: list[dict]) -> list[tuple[str, str, bool]]:
     return [tuple(v) for v in seen.values()]
 
 
-def _nothing_ranked(store, entries, counts) -> str:
+def _nothing_ranked(fails, entries, counts) -> str:
     """The page's headline when no IMU could be ranked: why (every log failed, or none was analysed)."""
     if entries:
         return ""
     esc = html.escape
     if not counts["ok"] and counts["failed"]:
-        why = "".join(f"<li>{n} log(s): {esc(r)}</li>" for n, r in failure_reasons(store.failures()))
+        why = "".join(f"<li>{n} log(s): {esc(r)}</li>" for n, r in failure_reasons(fails))
         return (f"<p id='nothing' class='flag'>No IMU could be ranked: all {counts['failed']} log(s) failed. "
                 f"Commonest reasons:</p><ul>{why}</ul>")
     return ("<p id='nothing' class='flag'>No IMU could be ranked: no log in the database has analysed IMU "
@@ -163,6 +163,7 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
     from companion.plots.fleet_plot import imu_trend_png
 
     counts = store.counts()
+    fails = store.failures()
     flagged = [e for e in entries if e["flagged"]]
     esc = html.escape
     out = ["<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
@@ -172,7 +173,7 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
            f"<span class='flag'>{len(flagged)} flagged</span> (evidence &ge; {threshold:g} and a fitted rise "
            f"&ge; {min_rise:g}x). Database <code>{esc(store.path)}</code>, generated "
            f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.</p>",
-           _nothing_ranked(store, entries, counts),
+           _nothing_ranked(fails, entries, counts),
            _notes_html(entries),
            "<p><small>Evidence = -log10 of the Bonferroni-corrected one-sided p-value of the steepest rise of "
            "ln N, ln B or ln K across the IMU's flights (weighted regression on the per-flight 95 % intervals, "
@@ -191,7 +192,6 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
                    f"<td>{'YES' if e['flagged'] else 'no'}</td><td>{e['evidence']:.1f}</td>"
                    f"<td class='l'>{worst}</td><td>{trend}</td><td>{disp}</td></tr>")
     out.append("</table>")
-    fails = store.failures()
     if fails:
         out.append(f"<details{' open' if not entries else ''}><summary>{len(fails)} failed log(s)</summary>"
                    "<table id='failed'><tr><th class='l'>path</th>"

@@ -103,7 +103,6 @@ class Pipeline:
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
         self._final: dict = {}  # (imu, axis) -> ((estimator id, fed_s), summary terms)
         self.rate_log: list[tuple[float, int, float | None, float]] = []  # (t, imu, old rate, new rate) of switches
-        self.rate_range: dict[int, tuple[float, float]] = {}  # imu -> (lowest, highest) rate of its switches
         # logs replayed into this state (service.state.fingerprint): the same log replayed again into it would
         # feed its data twice
         self.replayed: list[dict] = []
@@ -333,8 +332,6 @@ class Pipeline:
         if self._has_baseline(ch):
             ch.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
         self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
-        lo, hi = self.rate_range.get(ch.imu, (ch.rate_hz, ch.rate_hz))
-        self.rate_range[ch.imu] = (min(lo, ch.rate_hz, old or ch.rate_hz), max(hi, ch.rate_hz, old or ch.rate_hz))
         if ch.rate_switches <= RATE_SWITCHES_LOGGED:
             self.log(f"IMU{ch.imu}: rate changed {old:.1f} -> {ch.rate_hz:.1f} Hz (a stream request, not a gyro fault): "
                      + ("the state kept for this rate is back" if back else "references and estimators learned afresh"))
@@ -345,9 +342,12 @@ class Pipeline:
 
     def rate_note(self, ch: Channel) -> str | None:
         """The summary's word on an IMU whose rate switched more often than the log said line by line."""
-        if ch.rate_switches <= RATE_SWITCHES_LOGGED or ch.imu not in self.rate_range:
+        if ch.rate_switches <= RATE_SWITCHES_LOGGED:
             return None
-        lo, hi = self.rate_range[ch.imu]
+        rates = [r for _, imu, old, new in self.rate_log if imu == ch.imu for r in (old, new) if r]
+        if not rates:
+            return None
+        lo, hi = min(rates), max(rates)
         return (f"IMU{ch.imu}: the stream's rate changed {ch.rate_switches} times, between {lo:.1f} and {hi:.1f} Hz: "
                 "the Allan estimates of each rate are kept apart (a rate is another sampling of the noise), so each "
                 "holds only part of the still data (on a live link: ask for one rate, --rate, and keep other clients "

@@ -125,7 +125,7 @@ def summary_lines(pipeline) -> list[str]:
     for r in rows:
         c = r["counts"]
         rate = f"{r['rate_hz']:.1f} Hz" if r["rate_hz"] else "rate unknown"
-        k, other_s = r.get("other_rates", (0, 0.0))
+        k, other_s = r["other_rates"]
         # the figures below are this rate's: still data fed at other rates sit in the estimators kept for them
         other = f" (+ {other_s:.0f} s kept with {k} other rate{'s' if k > 1 else ''})" if other_s >= 1.0 else ""
         out.append(f"IMU{r['imu']} ({r['message']}, {rate}): {r['health']}; {r['still_s']:.0f} s still data used{other}; "
