@@ -26,10 +26,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 
-from chain import FAULT_WORDS, imu_times, low_rate_episodes, start_chain  # noqa: E402
-from loopback import stop  # noqa: E402
+from tests.support.chain import FAULT_WORDS, imu_times, low_rate_episodes, start_chain  # noqa: E402
+from tests.support.loopback import stop  # noqa: E402
 
 CLK_TCK = 100.0  # Linux USER_HZ: the unit of utime/stime in /proc/PID/stat
 

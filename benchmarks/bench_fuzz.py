@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT))
 SHARED = ROOT.parent / "shared" / "data"
 CHUNK = 500  # mutations per task
 
@@ -186,7 +186,7 @@ _BASES: dict = {}
 
 
 def _prepared(ext: str):
-    import fuzz
+    from tests.support import fuzz
 
     if ext not in _BASES:
         _BASES[ext] = [(label, b, fuzz.hot_offsets(ext, b)) for label, b in bases(ext)]
@@ -195,7 +195,7 @@ def _prepared(ext: str):
 
 def input_of(ext: str, base: int, seed: int, i: int) -> bytes:
     """Input ``i`` of ``seed`` on base ``base`` (what a report line names), for a regression test."""
-    import fuzz
+    from tests.support import fuzz
 
     _, data, hot = _prepared(ext)[base]
     for j, m in fuzz.seeds_of(data, i + 1, seed, hot):
@@ -205,7 +205,7 @@ def input_of(ext: str, base: int, seed: int, i: int) -> bytes:
 
 
 def _task(args):
-    import fuzz
+    from tests.support import fuzz
 
     logging.disable(logging.CRITICAL)  # the readers log what they skip; counted here instead
     ext, base, seed, count = args

@@ -22,9 +22,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 
-from relay import N_TRUE, loop_through_relay  # noqa: E402
+from tests.support.relay import N_TRUE, loop_through_relay  # noqa: E402
 
 CASES = {
     "0": {"p": 0.0},

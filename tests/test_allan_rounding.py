@@ -10,7 +10,7 @@ from companion.health.baseline import rounding_ceiling
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 LSB = 1e-3
 RATE = 100.0

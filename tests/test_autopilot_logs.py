@@ -559,7 +559,7 @@ def test_run_replays_the_imu_messages_not_the_batch_bursts(shared_data):
     from companion.service.config import PipelineConfig
     from companion.service.pipeline import Pipeline
     from companion.service.replay import replay_log
-    from sinks import RecordingSink
+    from tests.support.sinks import RecordingSink
 
     p = Pipeline(PipelineConfig(), Reporter(RecordingSink(), 1.0))
     replay_log(shared_data / "ardupilot" / "methodic_backend_log_80k.bin", p)

@@ -116,7 +116,7 @@ def test_replay_carries_the_temperature_to_the_bias_model(tmp_path, kind):
     from companion.mavlink.reporter import Reporter
     from companion.service.pipeline import Pipeline, PipelineConfig
     from companion.service.replay import replay_log, replay_tlog
-    from tests.sinks import RecordingSink
+    from tests.support.sinks import RecordingSink
 
     def slope(path):
         # the Allan report is not what this checks: none before 1e9 s of still data (fast)

@@ -15,11 +15,11 @@ import signal
 import time
 
 import pytest
-from chain import (FAULT_WORDS, MODEL, Listener, imu_times, low_rate_episodes, mavlink_routerd, sent_by_companion,
+from tests.support.chain import (FAULT_WORDS, MODEL, Listener, imu_times, low_rate_episodes, mavlink_routerd, sent_by_companion,
                    start_chain, start_mavlink_router)
-from readiness import READY, wait_for_text
+from tests.support.readiness import READY, wait_for_text
 
-from loopback import free_udp_port, read_record, start, stop
+from tests.support.loopback import free_udp_port, read_record, start, stop
 
 pytestmark = [pytest.mark.network,
               pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")]

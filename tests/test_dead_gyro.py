@@ -115,7 +115,7 @@ def test_a_float_gyro_reading_exactly_zero_at_10_and_25_hz_is_named_dead():
     from companion.samples import StreamKey
     from companion.service.config import PipelineConfig
     from companion.service.pipeline import Pipeline
-    from sinks import RecordingSink
+    from tests.support.sinks import RecordingSink
 
     for rate, within in ((10.0, 13.0), (25.0, 6.0)):
         p = Pipeline(PipelineConfig(), Reporter(RecordingSink(), 1.0))

@@ -18,7 +18,7 @@ from companion.service.pipeline import Pipeline
 from companion.sources import build_stream
 from companion.sources.decode import RawStream
 from companion.sources.still import select_still
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 RATE = 50.0
 N = 1e-4  # rad/s/sqrt(Hz): white rate noise of std N sqrt(fs) per sample

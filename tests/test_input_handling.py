@@ -6,8 +6,6 @@ from __future__ import annotations
 import math
 
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,9 +17,8 @@ from companion.sim.dataflash_writer import write_imu_log
 from companion.sim.ulog_writer import write_ulog
 from companion.sources import load
 
-sys.path.insert(0, str(Path(__file__).parent))
-import fuzz  # noqa: E402
-from test_adev import nbs14_1000  # noqa: E402
+from tests.support import fuzz
+from tests.test_adev import nbs14_1000
 
 MUTATIONS = 120  # per reader: a few seconds in all
 

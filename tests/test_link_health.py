@@ -7,7 +7,7 @@ import random
 import re
 
 import pytest
-from relay import N_TRUE, loop_through_relay
+from tests.support.relay import N_TRUE, loop_through_relay
 
 from companion.mavlink.link import LinkStats, SourceStats
 

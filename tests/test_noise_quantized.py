@@ -20,7 +20,7 @@ import pytest
 import companion.health.noise as noise
 from companion.health.faults import REF_MAX_FACTOR, AxisRef, Observation, chi2_llr
 from companion.health.noise import NoiseDetector, quantized_moments, quantized_var, v2_var
-from noise_blocks import learn_or_test, one_axis_stats as _stats
+from tests.support.noise_blocks import learn_or_test, one_axis_stats as _stats
 
 LSB = 1e-3
 N = 10  # samples per block (1 s at 10 Hz)

@@ -16,7 +16,7 @@ import numpy as np
 import companion.health.faults as faults
 from companion.health.faults import NU_REF_MIN, AxisRef, Observation
 from companion.health.noise import NoiseDetector
-from noise_blocks import learn_or_test, one_axis_stats as _stats
+from tests.support.noise_blocks import learn_or_test, one_axis_stats as _stats
 
 SIGMA = 3e-3  # rad/s: white, float (no code grid)
 

@@ -16,7 +16,7 @@ from companion.service.blocks import BlockCutter
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.replay import feed_in_order
 from companion.sim.vehicle import IMU_MESSAGES, Fault, Flight, Schedule, VehicleSimulator, WarmUp
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 LSB = 1e-3
 

@@ -17,7 +17,7 @@ import pytest
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 KEY = StreamKey(1, 1, "RAW_IMU", 0)
 N_SI = 3e-3

@@ -15,7 +15,7 @@ from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.config import PipelineConfig
 from companion.service.pipeline import Pipeline
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 RATE = 50.0
 SIG = 2e-3  # rad/s per sample at rest

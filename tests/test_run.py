@@ -21,8 +21,8 @@ from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.state import load_state, save_state
-from readiness import DEADLINE_S, READY, wait_for_text
-from sinks import RecordingSink
+from tests.support.readiness import DEADLINE_S, READY, wait_for_text
+from tests.support.sinks import RecordingSink
 
 ROOT = Path(__file__).resolve().parent.parent
 KEY = StreamKey(1, 1, "RAW_IMU", 0)

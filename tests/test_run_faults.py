@@ -18,7 +18,7 @@ from companion.mavlink.reporter import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_WARNI
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.replay import replay_vehicle
 from companion.sim.vehicle import Fault, Flight, Handling, Schedule, VehicleSimulator, WarmUp
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 LSB = 1e-3
 DEG = math.pi / 180

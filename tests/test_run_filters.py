@@ -17,7 +17,7 @@ from companion.sim.dataflash_writer import write_imu_log
 from companion.sim.filtered import filtered_white_noise, logged_white_level
 from companion.sources import load
 from companion.analysis.stream import stream_filters
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 FS, FC = 100.0, 20.0
 G = np.array([0.0, 0.0, -9.80665])

@@ -14,7 +14,7 @@ from companion.cli.main import main
 from companion.mavlink.reporter import NAME_RE, Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "tlogs" / "sample.tlog"

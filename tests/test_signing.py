@@ -13,8 +13,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from loopback import pacing
-from readiness import DEADLINE_S, READY, kill_left, wait_for_text, wait_until_read
+from tests.support.loopback import pacing
+from tests.support.readiness import DEADLINE_S, READY, kill_left, wait_for_text, wait_until_read
 
 from companion.cli.main import main
 

@@ -311,7 +311,7 @@ def test_random_schedule_is_valid_and_covers_the_duration():
 # ------------------------------------------------------------------------------------------ tlog
 def test_tlog_read_back_by_companion_and_pymavlink(tmp_path):
     from companion.sources import load
-    from pymavlink_reference import pymavlink_messages
+    from tests.support.pymavlink_reference import pymavlink_messages
 
     kw = dict(imus=3, seed=6, schedule=Schedule(flights=(Flight(20, 50),)), fault=Fault("bias", 30, imu=2))
     path = tmp_path / "v.tlog"

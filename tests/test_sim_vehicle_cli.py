@@ -22,7 +22,7 @@ def test_simulate_vehicle_writes_the_imus_heartbeats_and_the_fault(tmp_path, cap
     from companion.sim.model import load_model
     from companion.sim.vehicle import Fault, Flight, Schedule, VehicleSimulator
     from companion.sources import load
-    from pymavlink_reference import pymavlink_messages
+    from tests.support.pymavlink_reference import pymavlink_messages
 
     (tmp_path / "m.yaml").write_text(MODEL)
     out = tmp_path / "v.tlog"

@@ -17,9 +17,9 @@ import sys
 from pathlib import Path
 
 import pytest
-from readiness import READY, wait_for_text
+from tests.support.readiness import READY, wait_for_text
 
-from loopback import env, free_udp_port, link_losses, pacing, read_record, start, stop
+from tests.support.loopback import env, free_udp_port, link_losses, pacing, read_record, start, stop
 
 pytestmark = pytest.mark.network
 

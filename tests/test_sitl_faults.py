@@ -16,7 +16,7 @@ import re
 
 import pytest
 
-from loopback import sim_against_run
+from tests.support.loopback import sim_against_run
 
 pytestmark = pytest.mark.network
 

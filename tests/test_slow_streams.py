@@ -18,7 +18,7 @@ from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.config import PipelineConfig
 from companion.service.pipeline import Pipeline
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 G = np.array([0.0, 0.0, -9.80665])
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as dialect
 
-from pymavlink_reference import pymavlink_messages
+from tests.support.pymavlink_reference import pymavlink_messages
 
 from companion.mavlink.tlog_writer import write_imu_tlog
 from companion.samples import StreamKey

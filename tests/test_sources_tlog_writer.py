@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pymavlink_reference import pymavlink_messages
+from tests.support.pymavlink_reference import pymavlink_messages
 
 from companion.mavlink.tlog_writer import TlogWriter, write_imu_tlog
 from companion.sources import messages as M

@@ -12,7 +12,7 @@ from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.config import PipelineConfig
 from companion.service.pipeline import Pipeline
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 FS = 200.0
 G = np.array([0.0, 0.0, -9.80665])

@@ -19,7 +19,7 @@ from companion.health.stuck import StuckDetector, codes_glr, two_code_llr, two_c
 from companion.mavlink.reporter import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 LSB = 1e-3
 FS = 50.0

@@ -14,7 +14,7 @@ from companion.health.detector import DEGRADING, HEALTHY, DetectorConfig, Health
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
-from sinks import RecordingSink
+from tests.support.sinks import RecordingSink
 
 FS = 50.0
 N = 2e-4  # rad/s/sqrt(Hz): 1.4 mrad/s per sample at 50 Hz, a float (HIGHRES_IMU) stream

@@ -15,9 +15,9 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from readiness import READY, wait_for_text
+from tests.support.readiness import READY, wait_for_text
 
-from loopback import free_udp_port, start, stop
+from tests.support.loopback import free_udp_port, start, stop
 
 MODEL = """rate_hz: 100
 axes:

@@ -17,9 +17,9 @@ import sys
 import threading
 import time
 
-from readiness import DEADLINE_S, READY, kill_left, udp_rx_queue, wait_for_text
+from tests.support.readiness import DEADLINE_S, READY, kill_left, udp_rx_queue, wait_for_text
 
-from loopback import env, free_udp_port
+from tests.support.loopback import env, free_udp_port
 
 N_SI = 3e-3
 RATE = 100.0

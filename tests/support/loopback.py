@@ -15,9 +15,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from readiness import READY, wait_for_text  # noqa: F401 (re-exported for the loopback tests)
+from tests.support.readiness import READY, wait_for_text  # noqa: F401 (re-exported for the loopback tests)
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 #: Linux shows each UDP socket's unread bytes (/proc/net/udp): sim-autopilot --flow-control then sends as fast
 #: as the receiver reads (simulated time waits for it, nothing is lost by overrunning it), capped at FAST x;
