@@ -27,6 +27,8 @@ WHITE_SHARE = 0.5
 FILTER_PASS = 0.9
 #: ... on at least this many octave points
 MIN_POINTS = 2
+#: one-sided 95 % normal quantile, rounded: a bound's standard deviation is taken as bound / z
+Z95_ONE_SIDED = 1.645
 #: correlation of overlapping Allan variance estimates of white noise 0, 1, 2, 3, 4 octaves apart
 #: (companion.allan.confidence.oavar_covariance; the same to 0.01 for 600 samples at 10 Hz and 1e5 at 100 Hz)
 OCTAVE_CORRELATION = (1.0, 0.53, 0.19, 0.07, 0.02)
@@ -253,8 +255,8 @@ def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: flo
             notes.append(note)
     wn = next((t for t in terms if t["effect"] == "white_noise" and not t.get("bound")), None)
     # an interval that reaches zero does not resolve N either: the fit could trade all of it into the other
-    # terms (a 90-s public plane still at 10 Hz, where AVAR falls like 1 / tau^2 to 2 s: N 1.43 [0, 2.61]
-    # deg/sqrt(h) beside a quantization term)
+    # terms (90 s at 10 Hz whose AVAR falls like 1 / tau^2 to 2 s reads N 1.43 [0, 2.61] deg/sqrt(h) beside a
+    # quantization term)
     lo_zero = wn is not None and not wn.get("ci95", {}).get("N", [1.0])[0] > 0
     if wn is None or (white_resolved(terms, tau) and not lo_zero):
         return terms, notes
@@ -262,7 +264,7 @@ def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: flo
     ub, at = white_bound(tau, avar, edf, filt)
     if not math.isfinite(ub):
         return terms, notes
-    b = {"effect": "white_noise", "N": ub, "std": {"N": ub / 1.645}, "ci95": {"N": [0.0, ub]}, "bound": True}
+    b = {"effect": "white_noise", "N": ub, "std": {"N": ub / Z95_ONE_SIDED}, "ci95": {"N": [0.0, ub]}, "bound": True}
     b.update(filt)
     r = np.asarray(avar, dtype=float) * np.asarray(tau, dtype=float)
     rising = bool(np.all(np.diff(r[: max(3, r.shape[0] // 2)]) > 0))

@@ -36,7 +36,8 @@ QUANT_SLOPE = -1.5
 #: quantization term that passes the first test is at least 1.41x the white noise at the smallest cluster time,
 #: so the next octave still falls like tau^-1.34 or faster, where white noise alone falls like tau^-1. An output
 #: line near the Nyquist frequency lifts the smallest cluster time alone (point samples alternate, pairs
-#: average it out) and passes the first test but not this one (tests/test_fit.py holds such a record).
+#: average it out) and passes the first test but not this one
+#: (tests/test_fit.py::test_quantization_only_where_its_slope_is).
 QUANT_SLOPE2 = -1.2
 
 #: the log's low-pass cut-off stands unless it lies outside the data's profile interval at this level

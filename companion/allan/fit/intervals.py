@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from companion.allan.fit.constants import ORDER, PROFILE_POINTS
+from companion.allan.fit.constants import ORDER
 from companion.allan.fit.fit_state import FitState, covariance
 from companion.allan.fit.gls import _columns, _Problem, _shape_range
 from companion.allan.fit.point_cov import _flicker_shape_cov
@@ -109,10 +109,10 @@ def _inverted_ci(theta_hat, j, A, cov_at, tau, v, white, tau0, level, guess_lo=N
     (1 -+ level) / 2 quantiles of u chi2(nu_u) / nu_u, nu_u = 2 u^2 / var_u(estimate). Evaluated at the estimate
     instead (:func:`_scaled_chi2_ci`), nu is too large where the estimate lies high: the estimate's variance
     is only partly the term's own (the rest comes from the other terms' share of the same points), so a
-    random walk kept when its long-tau points happen to lie high got an interval that missed it high (found K
-    of random 2-h records covered in 76 of 83, against 82 of 83 here; benchmarks/bench_fit.py draws). The
-    covariance at u also moves the estimate (its weights), which is part of the test. ``guess_lo``, ``guess_hi``:
-    where to look first (the interval at the estimate). 0 when no u far below is rejected."""
+    random walk kept when its long-tau points happen to lie high gets an interval that misses it high (K of
+    random 2-h records: covered in 76 of 83 at the estimate, 82 of 83 by inversion; benchmarks/bench_fit.py
+    draws). The covariance at u also moves the estimate (its weights), which is part of the test.
+    ``guess_lo``, ``guess_hi``: where to look first (the interval at the estimate). 0 when no u far below is rejected."""
     if theta_hat <= 0:
         return 0.0, 0.0
     a = (1.0 - level) / 2.0
@@ -165,8 +165,8 @@ def _profile_union(lo, hi, prob, prob_ci, j, designs, c2, level):
     value of a grid; at each, the conditional interval at the level left once that shape's chi^2 excess over
     the minimum (``c2`` at the estimate, or the grid's least) is spent: chi^2(shape) - chi^2_min + z^2 <=
     chi2_level(1). The envelope of full-level conditional intervals over the shape's interval (a projection)
-    allows twice that excess: N's over a cut-off found in the data covered 99-100 %, a Gauss-Markov sigma's
-    over its tau_c 99 % (191 of 193) where 95 % was asked for."""
+    allows twice that excess and over-covers (99-100 % for N over a cut-off found in the data, 99 % for a
+    Gauss-Markov sigma over its tau_c, where 95 % is asked for)."""
     thr = chi2_ppf(level, 1)
     rows = [(A2,) + tuple(prob.solve(A2)) for A2 in designs]
     c2min = min([c2] + [r[2] for r in rows])
@@ -221,10 +221,10 @@ def forced_intervals(prob, sup, nonlin, tau, white, level) -> dict:
     # a term estimated at zero here still shares the points with the others: were it above zero, another
     # would move by cov[k, z] / cov[z, z] per unit of it (the whole model's covariance). It can only go up, so
     # it widens one end: each end of an interval comes from the covariance of the active terms and the zero
-    # terms that pull the estimate that way. Without them the forced model gave the selected model's
-    # covariance back: on 60 s at 10 Hz of white noise + flicker + random walk, the selection kept N and K in
-    # 712 of 2000 records, B came out at zero in the forced model in many of them, and N (+3 % there, the
-    # flicker's share) was covered in 92.6 % of them; with them 95.9 %, white noise alone as wide as before
+    # terms that pull the estimate that way. Without them the forced model would give the selected model's
+    # covariance back where B comes out at zero in it (60 s at 10 Hz of white noise + flicker + random walk: N,
+    # +3 % there from the flicker's share, covered in 92.6 % of records; with them 95.9 %, white noise alone
+    # as wide as without)
     cov_f = prob.cov_theta(A_s)
     covs = {}  # the column sets repeat between terms and ends
     for k, e in enumerate(sup):
@@ -247,9 +247,9 @@ def forced_intervals(prob, sup, nonlin, tau, white, level) -> dict:
 def _selection_envelope(terms, prob, sup, nonlin, tau, white, scale, level):
     """Widen each resolved linear term's interval to the envelope of it and its interval in the model with every
     base effect (N, B, K) forced in (``sup``), as the online report does: a base effect the selection left out
-    moves its share into the kept terms. Measured on random 2-h N/B/K draws (benchmarks/bench_fit.py draws):
-    a rate random walk too weak to be selected went into B, whose interval then missed the truth high
-    (1.02-1.08 x) in 7-8 of 100 draws. Estimates are unchanged."""
+    moves its share into the kept terms (on random 2-h N/B/K draws, benchmarks/bench_fit.py draws, a rate random
+    walk too weak to be selected goes into B, whose interval alone misses the truth high, 1.02-1.08 x, in 7-8
+    of 100 draws). Estimates are unchanged."""
     forced = forced_intervals(prob, sup, nonlin, tau, white, level)
     for t in terms:
         e = t["effect"]

@@ -54,7 +54,7 @@ def _flicker_shape_cov(bias_term, m, tau) -> np.ndarray:
     anti-alias filter). Those points carry most of N's information (EDF ~ 10^5 on hours of data) and the
     departure falls roughly like 1/tau there -- the white-noise shape -- so no fit can tell it from N: where B
     reaches the short taus (white noise meets the flicker floor within a few seconds) it moves N by 1-3 of N's
-    standard deviations (N's interval covered the truth in 88 % of random draws without this term). One shape
+    standard deviations (without this term N's interval covers the truth in 88 % of random draws). One shape
     error, fully correlated over tau (a rank-one term), widens N's interval by what it can move N, and by
     nothing where B is negligible at tau0."""
     sh = constants.FLICKER_SHAPE_ERROR * flicker_sampling_excess(m) * avar_term(bias_term, tau)

@@ -239,7 +239,8 @@ def _result(st: FitState, ff: FinalFit, terms: list, first_order: bool) -> FitRe
     return FitResult(terms=terms, tau=d.tau, avar_fit=avar_fit, chi2=ff.c2, dof=max(d.n_pts - kk, 0),
                      criterion="bic", score=ff.c2 + kk * math.log(d.n_pts),
                      covariance_mode="full" if d.full else "diagonal", avar_cov=st.model.cov * d.scale**2,
-                     notes=st.notes, model_error=st.floor, filter=_filter_summary(st.white, st.filter_info, first_order))
+                     notes=st.notes, model_error=st.floor,
+                     filter=_filter_summary(st.white, st.filter_info, first_order))
 
 
 def fit_avar(tau, avar, edf=None, effects=None, *, n=None, rate_hz=None, m=None, level=0.95,
