@@ -132,7 +132,7 @@ def test_flicker_shape_widens_n_only_where_b_reaches_the_short_taus(monkeypatch)
     """Noise-free AVAR of N + B (1 h at 50 Hz): with white noise meeting the flicker floor at 0.6 s the flicker's
     uncertain shape at the first cluster times widens N's interval by more than half; at 20 s it leaves it
     within 3 %. The estimates do not move."""
-    import companion.allan.fit as fit_mod
+    import companion.allan.fit.constants as fit_constants
     from companion.allan.terms import avar_model
 
     fs, n = 50.0, int(3600 * 50)
@@ -145,7 +145,7 @@ def test_flicker_shape_widens_n_only_where_b_reaches_the_short_taus(monkeypatch)
         av = avar_model(terms, tau)
         out = []
         for k in (0.0, 1.0):
-            monkeypatch.setattr(fit_mod, "FLICKER_SHAPE_ERROR", k)
+            monkeypatch.setattr(fit_constants, "FLICKER_SHAPE_ERROR", k)
             r = fit_avar(tau, av, edf, ["white_noise", "bias_instability"], n=n, rate_hz=fs, m=m)
             lo, hi = r.term("white_noise")["ci95"]["N"]
             out.append((r.term("white_noise")["N"], hi - lo))

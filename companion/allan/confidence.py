@@ -286,6 +286,7 @@ def _var_one(terms, m: int, n: int, rate_hz: float) -> float:
     return float(oavar_covariance(terms, [m], n, rate_hz)[0, 0])
 
 
+#: flicker_sampling_excess by cluster size: each costs a spectral sum and the fits ask for the same few m
 _FLICKER_EXCESS: dict[int, float] = {}
 
 

@@ -20,8 +20,11 @@ import numpy as np
 
 __all__ = ["brentq", "minimize_scalar_bounded", "gammainc_p", "gammainc_q", "chi2_cdf", "chi2_sf", "chi2_ppf", "Z95"]
 
+#: double-precision machine epsilon: series and root searches stop at rounding
 _EPS = 2.220446049250313e-16
+#: a denominator below this is replaced by it in the continued fraction (Lentz's method): no division by 0
 _FPMIN = 1e-300
+#: the standard normal of the Wilson-Hilferty / Cornish-Fisher starting points
 _STD_NORMAL = NormalDist()
 #: two-sided 95 % standard normal quantile
 Z95 = 1.959963984540054

@@ -35,6 +35,7 @@ import numpy as np
 
 from companion.allan.filtered_white import aliasing_gain, avar_filtered_white
 
+#: the canonical effects (docs/architecture.md), in the order a model lists them
 EFFECTS = (
     "quantization",
     "white_noise",
@@ -63,6 +64,7 @@ OPTIONAL_PARAMS: dict[str, tuple[str, ...]] = {"bias_instability": ("f0",), "whi
 LINEAR_EFFECTS = ("quantization", "white_noise", "bias_instability", "random_walk", "ramp")
 #: the usual gyro model (IEEE 952): every subset of these is compared by BIC (companion.allan.fit)
 BASE_EFFECTS = ("white_noise", "bias_instability", "random_walk")
+#: the magnitude parameter of each linear effect (its square is the design column's coefficient)
 LINEAR_PARAM = {"quantization": "Q", "white_noise": "N", "bias_instability": "B", "random_walk": "K", "ramp": "R"}
 
 BIAS_PLATEAU = 2.0 * math.log(2.0) / math.pi  # 0.4413: AVAR plateau / B^2 (ADEV plateau 0.6643 B)
@@ -177,6 +179,7 @@ def avar_sinusoid(tau, amplitude, freq_hz):
     return amplitude**2 * (np.sin(x) ** 2 / x) ** 2
 
 
+#: the analytic AVAR of each effect, by name
 _AVAR = {
     "quantization": avar_quantization,
     "white_noise": avar_white_noise,

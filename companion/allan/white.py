@@ -14,6 +14,7 @@ level Bonferroni-corrected: the least of k bounds at 95 % each falls below N wit
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,6 +27,8 @@ WHITE_SHARE = 0.5
 FILTER_PASS = 0.9
 #: ... on at least this many octave points
 MIN_POINTS = 2
+#: one-sided 95 % normal quantile, rounded: a bound's standard deviation is taken as bound / z
+Z95_ONE_SIDED = 1.645
 #: correlation of overlapping Allan variance estimates of white noise 0, 1, 2, 3, 4 octaves apart
 #: (companion.allan.confidence.oavar_covariance; the same to 0.01 for 600 samples at 10 Hz and 1e5 at 100 Hz)
 OCTAVE_CORRELATION = (1.0, 0.53, 0.19, 0.07, 0.02)
@@ -70,16 +73,139 @@ def white_bound(tau, avar, edf, white_filter=None, level=0.95) -> tuple[float, f
     return math.sqrt(float(ub[i])), float(tau[i])
 
 
+#: the white-noise region starts at this many sample periods: clear of a sensor's internal filter, output lines
+#: and quantisation at the first few samples
+CLEAR_SAMPLES = 10.0
+#: a point differs significantly from others when it lies this many of its standard deviations sqrt(2 / EDF)
+#: away
+SIGNIFICANT_SD = 2.0
+#: a leading point is compared with the median of this many following points
+CORNER_POINTS = 3
+#: a local N within this relative distance of the global one changes nothing
+SAME_N = 1e-4
+#: relative slack of a cluster-time comparison (tau from m / rate carries rounding)
+_TAU_SLACK = 1e-9
+
+
+class _WhiteModel(NamedTuple):
+    """The fitted model around its white-noise term, at the cluster times."""
+
+    wn: dict  # the white-noise term as reported
+    white: np.ndarray  # its AVAR
+    shape: np.ndarray  # its low-pass filter's shape s = AVAR_white tau / N^2 (1 without a filter)
+    total: np.ndarray  # the model's AVAR (terms reported as bounds left out)
+
+
+def _white_model(wn, terms, tau) -> _WhiteModel:
+    plain = [{k: v for k, v in t.items() if k not in ("ci95", "std", "bound")} for t in terms if not t.get("bound")]
+    white = avar_term({k: v for k, v in wn.items() if k not in ("ci95", "std", "bound")}, tau)
+    total = sum(avar_term(t, tau) for t in plain)
+    return _WhiteModel(wn, white, white * tau / wn["N"] ** 2, total)
+
+
+def _leading_points(r, rel, tau, tau0) -> int:
+    """How many leading points to leave to the global fit: points still significantly below the next
+    CORNER_POINTS (the data's own corner: a real filter chain rolls off more slowly than the modelled 2-pole
+    shape when the model misfits), and, below CLEAR_SAMPLES tau0, points significantly above them (an output
+    line at frequency f -- vibration, a sensor's clock -- lifts the octave points near 0.371 / f, and the model
+    has no term for a line that close to Nyquist). ``r``: filter-corrected AVAR x tau of the white noise."""
+    c = 0
+    while c + CORNER_POINTS < r.shape[0]:
+        med = float(np.median(r[c + 1:c + 1 + CORNER_POINTS]))
+        below = r[c] < med * (1.0 - SIGNIFICANT_SD * rel[c])
+        above = r[c] > med * (1.0 + SIGNIFICANT_SD * rel[c]) and tau[c] < CLEAR_SAMPLES * tau0 * (1 - _TAU_SLACK)
+        if not (below or above):
+            break
+        c += 1
+    return c
+
+
+def _before_rise(r, rel, w, first, stop) -> int:
+    """The end (exclusive) of the run ``first .. stop`` before a rise of the data that persists: from the first
+    point on which this and every later point of the run lie significantly above the EDF-weighted mean of the
+    points before it, something the model under misfit does not hold -- an unresolved bias instability, drift,
+    temperature -- lifts the curve, and a refit of N through it would read that rise as white noise. A long-tau
+    term lifts every longer cluster time; a chance wiggle of a real curve (hours of 100 Hz data make a 1 % one
+    significant) does not persist, and leaves the run as it is."""
+    for j in range(first + 1, stop + 1):
+        mean = float(np.sum(w[first:j] * r[first:j]) / np.sum(w[first:j]))
+        if np.all(r[j:stop + 1] > mean * (1.0 + SIGNIFICANT_SD * rel[j:stop + 1])):
+            return j
+    return stop + 1
+
+
+def _white_run(wm: _WhiteModel, tau, avar, edf, tau0, share) -> np.ndarray | None:
+    """Indices of the white-noise region: the first run of cluster times from CLEAR_SAMPLES tau0 (or, with the
+    low-pass filter modelled, from where it passes FILTER_PASS of the white level), past the data's own corner
+    (:func:`_leading_points`), on which white noise makes at least ``share`` of the model, cut before a
+    persisting rise (:func:`_before_rise`); None with fewer than 2 points."""
+    frac = wm.white / np.where(wm.total > 0, wm.total, 1.0)
+    start = ((wm.shape >= FILTER_PASS) if wm.wn.get("filter_hz")
+             else (tau >= CLEAR_SAMPLES * tau0 * (1 - _TAU_SLACK)))
+    r = (np.asarray(avar, dtype=float) - (wm.total - wm.white)) * tau / np.where(wm.shape > 0, wm.shape, 1.0)
+    rel = np.sqrt(2.0 / np.maximum(np.asarray(edf, dtype=float), 1.0))
+    start &= np.arange(tau.shape[0]) >= _leading_points(r, rel, tau, tau0)
+    ok = (frac >= share) & start
+    idx = np.flatnonzero(ok)
+    if idx.shape[0] < 2:
+        return None
+    stop = idx[0]
+    while stop + 1 < tau.shape[0] and ok[stop + 1]:
+        stop += 1
+    sel = np.arange(idx[0], _before_rise(r, rel, np.asarray(edf, dtype=float), idx[0], stop))
+    return sel if sel.shape[0] >= 2 else None
+
+
+class _LocalN(NamedTuple):
+    """N^2 refitted on the region and its standard deviation."""
+
+    n2: float
+    sd_n2: float
+
+
+def _refit_n2(wm: _WhiteModel, sel, tau, avar, edf) -> _LocalN:
+    """Weighted least squares of a - other = N^2 g on the region ``sel`` (module docstring), weights from the
+    fitted model: 1 / a^2 would give the points that happen to lie low the most weight and pull N down (5 % low
+    on pure white noise with a chance bump). Its standard deviation from the points' variances 2 model^2 / EDF,
+    correlated as neighbouring octaves of the overlapping estimator are (OCTAVE_CORRELATION): on a short record
+    the region holds a few long cluster times, less precise than the global fit's interval says."""
+    a, tt, e = np.asarray(avar)[sel], tau[sel], np.asarray(edf)[sel]
+    other = (wm.total - wm.white)[sel]
+    mod = np.maximum(wm.total[sel], 1e-300)
+    w = e / (2.0 * mod**2)
+    g = wm.shape[sel] / tt
+    n2 = float(np.sum(w * (a - other) * g) / np.sum(w * g**2))
+    k = np.abs(np.subtract.outer(np.arange(sel.shape[0]), np.arange(sel.shape[0])))
+    corr = np.asarray(OCTAVE_CORRELATION + (0.0,))[np.minimum(k, len(OCTAVE_CORRELATION))]
+    u = g * np.sqrt(e / 2.0) / mod  # w g sd(a), sd(a) = model sqrt(2 / EDF)
+    return _LocalN(n2, math.sqrt(float(u @ corr @ u)) / float(np.sum(w * g**2)))
+
+
+def _with_n(terms, wn, N, ci, ratio) -> list:
+    """``terms`` with the white-noise term ``wn`` at ``N`` with the interval ``ci`` (its std scaled by ``ratio``,
+    at least the interval's width / 3.92)."""
+    new = []
+    for t in terms:
+        if t is wn:
+            t = dict(t)
+            t["N"] = N
+            t["ci95"] = dict(wn["ci95"], N=ci)
+            if "std" in wn:
+                t["std"] = dict(wn["std"], N=max(wn["std"]["N"] * ratio, (ci[1] - ci[0]) / 3.92))
+        new.append(t)
+    return new
+
+
 def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0.5, record: dict | None = None):
     """N from a local weighted fit of the white-noise region, for a fit with model misfit (offline: companion
     analyze; online: the estimator's report -- one rule). Terms reported as bounds are not part of the model.
 
     Under misfit the global fit trades the short-tau points, where the data are most precise, for a bump
-    elsewhere. The white-noise region is the run of cluster times from 10 tau0 (clear of a sensor's internal
-    filter, output lines and quantisation at the first few samples) on which white noise makes at least
-    ``share`` of the fitted model. On it N^2 is refitted with the other fitted terms held fixed (weighted
-    least squares of a - other = N^2 g, g = s / tau with s the modelled filter's shape (1 without one),
-    weights w = EDF / (2 model^2)):
+    elsewhere. The white-noise region (:func:`_white_run`) is the run of cluster times from 10 tau0 (clear of a
+    sensor's internal filter, output lines and quantisation at the first few samples) on which white noise makes
+    at least ``share`` of the fitted model. On it N^2 is refitted with the other fitted terms held fixed
+    (weighted least squares of a - other = N^2 g, g = s / tau with s the modelled filter's shape (1 without
+    one), weights w = EDF / (2 model^2)):
 
         N^2 = sum w (a - other) g / sum w g^2.
 
@@ -93,93 +219,27 @@ def local_white_noise(terms: list, tau, avar, edf, tau0: float, share: float = 0
     wn = next((t for t in terms if t["effect"] == "white_noise"), None)
     if wn is None:
         return terms, None
-    plain = [{k: v for k, v in t.items() if k not in ("ci95", "std", "bound")} for t in terms if not t.get("bound")]
     tau = np.asarray(tau, dtype=float)
-    white = avar_term({k: v for k, v in wn.items() if k not in ("ci95", "std", "bound")}, tau)
-    shape = white * tau / wn["N"] ** 2  # a modelled low-pass filter's shape (1 without one)
-    total = sum(avar_term(t, tau) for t in plain)
-    frac = white / np.where(total > 0, total, 1.0)
-    # from 10 tau0 (clear of an unmodelled internal filter), or, when the fit models the low-pass filter,
-    # from where the filter passes 90 % of the white level
-    start = (shape >= 0.9) if wn.get("filter_hz") else (tau >= 10.0 * tau0 * (1 - 1e-9))
-    # ... and not before the data's own corner: a real filter chain rolls off more slowly than the modelled
-    # 2-pole shape when the model misfits; points still significantly below the next three (filter-corrected
-    # AVAR x tau, 2 standard deviations from their EDF) are left to the global fit. So are leading points
-    # significantly above them below 10 tau0: an output line (vibration, a sensor's clock) at frequency f
-    # lifts the octave points near 0.371 / f, and the model has no term for a line that close to Nyquist
-    r = (np.asarray(avar, dtype=float) - (total - white)) * tau / np.where(shape > 0, shape, 1.0)
-    rel = np.sqrt(2.0 / np.maximum(np.asarray(edf, dtype=float), 1.0))
-    c = 0
-    while c + 3 < r.shape[0]:
-        med = float(np.median(r[c + 1:c + 4]))
-        below = r[c] < med * (1.0 - 2.0 * rel[c])
-        above = r[c] > med * (1.0 + 2.0 * rel[c]) and tau[c] < 10.0 * tau0 * (1 - 1e-9)
-        if not (below or above):
-            break
-        c += 1
-    start &= np.arange(tau.shape[0]) >= c
-    ok = (frac >= share) & start
-    idx = np.flatnonzero(ok)
-    if idx.shape[0] < 2:
+    wm = _white_model(wn, terms, tau)
+    sel = _white_run(wm, tau, avar, edf, tau0, share)
+    if sel is None:
         return terms, None
-    stop = idx[0]
-    while stop + 1 < tau.shape[0] and ok[stop + 1]:
-        stop += 1
-    # ... and not into a rise of the data that persists: from the first point on which this and every later point
-    # of the run lie significantly above (2 standard deviations from their EDF) the weighted mean of the points
-    # before it, something the model under misfit does not hold -- an unresolved bias instability, drift,
-    # temperature -- lifts the curve, and a refit of N through it reads that rise as white noise. A long-tau
-    # term lifts every longer cluster time; a chance wiggle of a real curve (hours of 100 Hz data make a 1 %
-    # one significant) does not persist, and leaves the run as it is
-    w_all = np.asarray(edf, dtype=float)
-    end = stop + 1
-    for j in range(idx[0] + 1, stop + 1):
-        mean = float(np.sum(w_all[idx[0]:j] * r[idx[0]:j]) / np.sum(w_all[idx[0]:j]))
-        if np.all(r[j:stop + 1] > mean * (1.0 + 2.0 * rel[j:stop + 1])):
-            end = j
-            break
-    sel = np.arange(idx[0], end)
-    if sel.shape[0] < 2:
+    loc = _refit_n2(wm, sel, tau, avar, edf)
+    if not loc.n2 > 0:
         return terms, None
-    a, tt, e = np.asarray(avar)[sel], tau[sel], np.asarray(edf)[sel]
-    other = (total - white)[sel]
-    # weights from the fitted model, not from the measured points: 1 / a^2 gives the points that happen to
-    # lie low the most weight and pulls N down (measured: 5 % low on pure white noise with a chance bump)
-    mod = np.maximum(total[sel], 1e-300)
-    w = e / (2.0 * mod**2)
-    g = shape[sel] / tt
-    n2 = float(np.sum(w * (a - other) * g) / np.sum(w * g**2))
-    if not n2 > 0:
-        return terms, None
-    N = math.sqrt(n2)
+    N = math.sqrt(loc.n2)
     ratio = N / wn["N"]
-    if abs(ratio - 1) < 1e-4:
+    if abs(ratio - 1) < SAME_N:
         return terms, None
-    # its interval: the global one scaled by the ratio, widened to the refit's own spread where that is larger --
-    # each point's variance its estimate's, 2 model^2 / EDF, the points correlated as neighbouring octaves of the
-    # overlapping estimator are (OCTAVE_CORRELATION). On a short record the region holds a few long cluster
-    # times, and N from them is less precise than the global fit's interval says (60 s at 10 Hz: 4 points from
-    # 1.6 s, N's spread 10 % on white noise, predicted 10 %; the scaled interval covered 25 of 33 local
-    # refits of records with a line near the Nyquist frequency, the refit's own 33)
-    k = np.abs(np.subtract.outer(np.arange(sel.shape[0]), np.arange(sel.shape[0])))
-    corr = np.asarray(OCTAVE_CORRELATION + (0.0,))[np.minimum(k, len(OCTAVE_CORRELATION))]
-    u = g * np.sqrt(e / 2.0) / mod  # w g sd(a), sd(a) = model sqrt(2 / EDF)
-    sd_n2 = math.sqrt(float(u @ corr @ u)) / float(np.sum(w * g**2))
     lo, hi = (c * ratio for c in wn["ci95"]["N"])
-    lo, hi = min(lo, math.sqrt(max(n2 - Z95 * sd_n2, 0.0))), max(hi, math.sqrt(n2 + Z95 * sd_n2))
-    new = []
-    for t in terms:
-        if t is wn:
-            t = dict(t)
-            t["N"] = N
-            t["ci95"] = dict(wn["ci95"], N=[lo, hi])
-            if "std" in wn:
-                t["std"] = dict(wn["std"], N=max(wn["std"]["N"] * ratio, (hi - lo) / 3.92))
-        new.append(t)
+    lo = min(lo, math.sqrt(max(loc.n2 - Z95 * loc.sd_n2, 0.0)))
+    hi = max(hi, math.sqrt(loc.n2 + Z95 * loc.sd_n2))
+    tt = tau[sel]
     if record is not None:
         record.update(tau=[float(tt[0]), float(tt[-1])], N_global=float(wn["N"]), N=N)
-    return new, (f"N from a local weighted fit of the white-noise region ({tt[0]:.3g}-{tt[-1]:.3g} s) because "
-                 f"the model misfits: the global fit gave {100 * (1 / ratio - 1):+.1f} %")
+    return _with_n(terms, wn, N, [lo, hi], ratio), (
+        f"N from a local weighted fit of the white-noise region ({tt[0]:.3g}-{tt[-1]:.3g} s) because "
+        f"the model misfits: the global fit gave {100 * (1 / ratio - 1):+.1f} %")
 
 
 def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: float, white_filter=None,
@@ -195,8 +255,8 @@ def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: flo
             notes.append(note)
     wn = next((t for t in terms if t["effect"] == "white_noise" and not t.get("bound")), None)
     # an interval that reaches zero does not resolve N either: the fit could trade all of it into the other
-    # terms (a 90-s public plane still at 10 Hz, where AVAR falls like 1 / tau^2 to 2 s: N 1.43 [0, 2.61]
-    # deg/sqrt(h) beside a quantization term)
+    # terms (90 s at 10 Hz whose AVAR falls like 1 / tau^2 to 2 s reads N 1.43 [0, 2.61] deg/sqrt(h) beside a
+    # quantization term)
     lo_zero = wn is not None and not wn.get("ci95", {}).get("N", [1.0])[0] > 0
     if wn is None or (white_resolved(terms, tau) and not lo_zero):
         return terms, notes
@@ -204,7 +264,7 @@ def apply_white_rules(terms: list, tau, avar, edf, tau0: float, model_error: flo
     ub, at = white_bound(tau, avar, edf, filt)
     if not math.isfinite(ub):
         return terms, notes
-    b = {"effect": "white_noise", "N": ub, "std": {"N": ub / 1.645}, "ci95": {"N": [0.0, ub]}, "bound": True}
+    b = {"effect": "white_noise", "N": ub, "std": {"N": ub / Z95_ONE_SIDED}, "ci95": {"N": [0.0, ub]}, "bound": True}
     b.update(filt)
     r = np.asarray(avar, dtype=float) * np.asarray(tau, dtype=float)
     rising = bool(np.all(np.diff(r[: max(3, r.shape[0] // 2)]) > 0))
