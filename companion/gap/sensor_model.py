@@ -40,7 +40,7 @@ def rederived(terms: list[dict], result) -> bool:
     """Whether gap, reading ``terms`` back on the same log, adds the log's rate rounding again: the test of its
     LSB step (the white term N_q, every term held, lowers the deviance by more than chi^2_1(1 - ALPHA))."""
     from companion.gap.candidates import fit_terms
-    from companion.gap.workflow import delta_crit
+    from companion.gap.rate_rounding import delta_crit
 
     q = result.quantization
     fixed = range(len(terms) + 1)
