@@ -36,10 +36,10 @@ def spectral_line(ranked, y, rate_hz) -> Ruling:
             return Ruling(None, "")
         x.penalty = selection.RECAL_PENALTY
         return Ruling(x, f"sinusoid at {t['freq_hz']:.4g} Hz: LR {x.lr:.1f} on the Allan curve is short of the "
-                   f"{selection.add_penalty(2):.1f} of a searched frequency, but the periodogram shows the line "
-                   f"({ev['peak_ratio']:.1f}x the local level at {ev['f_peak']:.4g} Hz, carrying "
-                   f"{ev['amplitude_psd'] / t['amplitude']:.2f} of its amplitude): taken at the level of a known "
-                   f"frequency, {selection.RECAL_PENALTY:.1f}")
+                         f"{selection.add_penalty(2):.1f} of a searched frequency, but the periodogram shows the "
+                         f"line ({ev['peak_ratio']:.1f}x the local level at {ev['f_peak']:.4g} Hz, carrying "
+                         f"{ev['amplitude_psd'] / t['amplitude']:.2f} of its amplitude): taken at the level of a "
+                         f"known frequency, {selection.RECAL_PENALTY:.1f}")
     return Ruling(None, "")
 
 
@@ -89,17 +89,17 @@ def thermal_arbitration(ranked, chosen, y_segs, t_smooth, rate_hz) -> Ruling:
         if chk["confirmed"]:
             return Ruling(chosen, "")
         other = next((x for x in ranked if x.effect != "temperature" and x.score > 0), None)
-        return Ruling(other, "a temperature-shaped drift fits the Allan curve but the regression on the temperature "
-                       f"channel does not confirm it (slope t = {chk['t']:.1f}, ratio {chk.get('ratio', 0):.2g}): "
-                       "not named")
+        return Ruling(other, "a temperature-shaped drift fits the Allan curve but the regression on the "
+                             f"temperature channel does not confirm it (slope t = {chk['t']:.1f}, ratio "
+                             f"{chk.get('ratio', 0):.2g}): not named")
     if chosen.effect in DRIFTS and temp is not None and temp.score > 0:
         chk = regression_check(y_segs, t_smooth, temp.added_term()["coef"], rate_hz)
         if chk["confirmed"]:
-            return Ruling(temp, f"{chosen.effect} and a temperature-driven rate both explain the Allan curve (scores "
-                          f"{chosen.score:.1f}, {temp.score:.1f}); the temperature channel decides: regression "
-                          f"slope t = {chk['t']:.1f}, coefficient ratio {chk['ratio']:.2f}")
-        return Ruling(chosen, f"{chosen.effect} and a temperature-driven rate both explain the Allan curve (scores "
-                        f"{chosen.score:.1f}, {temp.score:.1f}); the temperature channel does not confirm the "
-                        f"latter beyond a straight drift (regression t = {chk['t']:.1f}, coefficient ratio "
-                        f"{chk['ratio']:.2g}): {chosen.effect} is named")
+            return Ruling(temp, f"{chosen.effect} and a temperature-driven rate both explain the Allan curve "
+                                f"(scores {chosen.score:.1f}, {temp.score:.1f}); the temperature channel decides: "
+                                f"regression slope t = {chk['t']:.1f}, coefficient ratio {chk['ratio']:.2f}")
+        return Ruling(chosen, f"{chosen.effect} and a temperature-driven rate both explain the Allan curve "
+                              f"(scores {chosen.score:.1f}, {temp.score:.1f}); the temperature channel does not "
+                              f"confirm the latter beyond a straight drift (regression t = {chk['t']:.1f}, "
+                              f"coefficient ratio {chk['ratio']:.2g}): {chosen.effect} is named")
     return Ruling(chosen, "")

@@ -7,7 +7,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from companion.gap import selection
-from companion.gap.candidates import MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation, refine_shapes, unit_column
+from companion.gap.candidates import (MAGNITUDE, SHAPE, Fit, _intervals, fit_terms, lr_inflation, refine_shapes,
+                                      unit_column)
 from companion.gap.likelihood import Measured
 from companion.gap.spectral import line_evidence
 
@@ -79,8 +80,8 @@ def drop_unneeded(meas: Measured, base: Fit, held, n_model: int, alternatives: d
     one step is taken out with the rest refitted (magnitudes; shapes as they stand); when putting it back
     no longer passes the level it passed when it was added (corrected LR, overdispersion under that null), the
     weakest such effect is removed, and the test is repeated. A later addition can make an earlier one
-    unnecessary: a sinusoid first fitted at a frequency 7 % off, then a second at the periodogram's line,
-    left the first at a tenth of the amplitude."""
+    unnecessary: a second sinusoid at the periodogram's line takes the power of a first fitted a little off
+    its frequency."""
     terms, held, notes = [dict(t) for t in base.terms], set(held), []
     while True:
         weakest, dev_all = None, fit_terms(meas, terms, sorted(held), intervals=False).dev
@@ -133,12 +134,11 @@ def filter_or_gauss_markov(meas: Measured, base: Fit, held, terms0, lp, y, rate_
     """The filter rule decides between a fitted low-pass filter and a short Gauss-Markov term at the step
     where they compete, in the state of that step: with another effect not yet named (a vibration line at
     the Gauss-Markov term's cluster times) the Gauss-Markov fit is pulled to a few samples' tau_c, the filter
-    wins, and later steps patch what it leaves (a hidden tau_c 0.25 s term beside a 1.4 Hz line ended as a
-    1 Hz filter + the line + quantization). In the final state the filter is taken out and the step weighed
-    again (the same choice and rules); when a Gauss-Markov term wins there, the effects it makes unnecessary
-    are dropped (backward step) and the two final states are compared by deviance plus the levels their
-    added effects passed. Returns the Gauss-Markov state (its one note) when it is the better one, else
-    None."""
+    wins, and later steps patch what it leaves with further terms. In the final state the filter is taken
+    out and the step weighed again (the same choice and rules); when a Gauss-Markov term wins there, the
+    effects it makes unnecessary are dropped (backward step) and the two final states are compared by
+    deviance plus the levels their added effects passed. Returns the Gauss-Markov state (its one note) when
+    it is the better one, else None."""
     n_model = len(terms0)
     js = [j for j, t in enumerate(base.terms) if t["effect"] == "white_noise" and t.get("cutoff_hz")
           and not (j < n_model and terms0[j].get("cutoff_hz"))]

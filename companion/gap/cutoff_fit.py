@@ -75,9 +75,8 @@ def with_cutoff(meas: Measured, f: Fit, fixed, effect, lowpass) -> Fit:
     """A candidate fitted beside a low-pass filter whose cut-off was fitted before it: the cut-off is a shape
     the new term may compete with, re-profiled in every candidate's fit (as earlier Gauss-Markov and
     sinusoid shapes are), so that no candidate gains or loses from it against another. Held at the value
-    fitted without it, the filter keeps the short-tau power it took in the new term's absence (a 116 Hz line
-    on a PX4 log scored LR 8 against a first-order 72 Hz cut-off, 33 with the cut-off refitted to 48 Hz
-    beside it)."""
+    fitted without it, the filter keeps the short-tau power it took in the new term's absence, and a line
+    near the logger's Nyquist frequency scores far below its evidence."""
     if (lowpass is None or lowpass[0] or f.terms[-1][MAGNITUDE[effect]] <= 0
             or not any(t["effect"] == "white_noise" and t.get("cutoff_hz") for t in f.terms)):
         return f
@@ -102,10 +101,8 @@ def _profile_cutoff(meas: Measured, terms, j, fixed, grid, refine: bool = True) 
     """The fit with the cut-off (and order) of the white-noise term ``j`` at its profile-likelihood maximum:
     over ``grid`` ((cut-off, order) pairs), then, like every other shape parameter, by a bounded scalar
     refinement between the best grid point's neighbours of the same order (the grid's 8 steps a decade are
-    33 % apart; held at the 37.3 Hz grid point, a PX4 log's first-order cut-off left its shortest cluster
-    time 1.10x the model in ADEV, refined to 44.6 Hz 1.03x). The neighbours bound it, so the aliasing limit
-    the grid keeps holds. ``refine`` False: the grid
-    as it is (a cut-off from the log)."""
+    33 % apart, too coarse for the shortest cluster times' ADEV). The neighbours bound it, so the aliasing
+    limit the grid keeps holds. ``refine`` False: the grid as it is (a cut-off from the log)."""
     def fit_at(fc, o):
         trial = [dict(t) for t in terms]
         trial[j].update(cutoff_hz=float(fc), order=int(o))

@@ -22,9 +22,11 @@ from companion.gap.compare import Measured, gap_metric, gap_vs_simulation, measu
 from companion.gap.filtered import synthesize_filtered_white
 from companion.sim.synth import synthesize_axis
 
-#: simulated records at most, and samples simulated in all (a 2 h record at 50 Hz gets 11 draws: skipped)
+#: simulated records at most (a share of 1 % is then resolved)
 NULL_DRAWS = 200
+#: samples simulated in all, which bounds the cost (a 2 h record at 50 Hz gets 11 draws: skipped)
 NULL_MAX_SAMPLES = 4_000_000
+#: fewer draws than this give no usable 95th percentile: the check is skipped
 NULL_MIN_DRAWS = 40
 #: samples of the model simulated at most for the check against the analytic curve (bounds its cost)
 SIM_MAX_SAMPLES = 2_000_000

@@ -114,9 +114,8 @@ def equal_size_rule(best: Explanation, ranked) -> Explanation:
     against the state (its test), and the level of a recalibration (10.8) is below that of an added effect
     (15.1) because a model term is already there; but between two explanations with the same number of
     parameters, once both pass, either difference would only favour the one that fits worse (a
-    deterministic ramp over a stochastic random walk that fits better: the hidden random walk named a ramp;
-    the model's K recalibrated 7-16x over the ramp that fits better: the hidden ramp absorbed). The filter
-    and the temperature term keep their own rules."""
+    deterministic ramp over a stochastic random walk that fits better; the model's K recalibrated many
+    times over a ramp that fits better). The filter and the temperature term keep their own rules."""
     if best.score <= 0 or best.effect in (LOWPASS, "temperature"):
         return best
     for y in ranked:
@@ -151,8 +150,7 @@ def flicker_rule(best: Explanation, ranked) -> Explanation:
     recalibrations, also passes its level gives way to it unless the Gauss-Markov term fits better by
     more than chi^2_1(1 - ALPHA_RECAL) = 10.8, its extra parameter's level (as in the filter rule and the
     nested rule): the QAIC ranking charges the shape parameter only 18.4 - 15.1 = 3.3, which a flicker's
-    hump between the white and random-walk lines clears by chance (a hidden bias instability named a
-    Gauss-Markov term of tau_c 17 s that fitted 5.3 deviance units better)."""
+    hump between the white and random-walk lines clears by chance."""
     if best.effect != "gauss_markov":
         return best
     bi = next((x for x in ranked if x.effect == FLICKER and x.recal == best.recal), None)

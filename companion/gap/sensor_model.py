@@ -6,7 +6,7 @@
 
 * the rate rounding to the log's LSB (``quantization`` of form ``rate_lsb``: a white term
   N_q = LSB sqrt(tau0 / 12)). It is a property of the recording (int16 mrad/s RAW_IMU, say), and its N_q
-  depends on the log's rate. Written into the model it was counted twice: ``simulate --message RAW_IMU``
+  depends on the log's rate. Written into the model it would be counted twice: ``simulate --message RAW_IMU``
   rounds its output again, and wherever the log's rounding and the model's extra white term both stand;
 * the low-pass filter and decimation put on the white noise (``cutoff_hz``, ``order``, ``integrate``):
   the autopilot's or the recorder's filter, a setting of the log; N stays the sensor's white noise;

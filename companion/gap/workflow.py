@@ -54,6 +54,7 @@ from companion.gap.verdicts import EffectEvidence, added_effects, model_term_ver
 __all__ = ["ALPHA", "ALPHA_RECAL", "MAX_ITER", "NESTED", "NOISE_FLOOR_G", "GapResult", "delta_crit", "detect_lsb",
            "run_gap"]
 
+#: the selection's levels and nested limits, under the names the workflow's users read
 ALPHA = selection.ALPHA
 ALPHA_RECAL = selection.ALPHA_RECAL
 NESTED = selection.NESTED
@@ -75,7 +76,23 @@ class DetrendedProvider:
     def __call__(self) -> selection.DetrendedRecord:
         if self._meas is None:
             self._meas = trend.detrended_measure(self.y_segs, self.rate_hz)
-        return selection.DetrendedRecord(self._meas, sorted(self.fixed), [len(s) / self.rate_hz for s in self.y_segs])
+        lengths = [len(s) / self.rate_hz for s in self.y_segs]
+        return selection.DetrendedRecord(self._meas, sorted(self.fixed), lengths)
+
+
+@dataclass
+class GapOptions:
+    """The choices of one run (:func:`run_gap`'s keyword arguments)."""
+
+    axis: str = "gx"
+    lsb: float | None = None  #: output step of the data (None: detected from the values)
+    seed: int = 0  #: of the simulations
+    simulate: bool = True  #: the checks by simulation (False: the analytic curves only)
+    max_iter: int = MAX_ITER
+    cutoff_hz: float | None = None  #: low-pass cut-off from the log's parameters (None: fitted)
+    filter_order: int = 2
+    lowpass: bool = True  #: the filter among the candidates (False: data known to be unfiltered)
+    integrated: bool = False  #: each value is the mean of the filtered rate over its interval
 
 
 @dataclass
@@ -117,8 +134,7 @@ class GapState:
         self.base = refit(inp.meas, self.current, self.held, len(inp.terms0))
 
 
-def _prepare(y, rate_hz, terms, axis, lsb, seed, simulate, max_iter, cutoff_hz, filter_order, lowpass, segments,
-             temperature, integrated) -> GapInput:
+def _prepare(y, rate_hz: float, terms, segments, temperature, opts: GapOptions) -> GapInput:
     """The measurement (pooled over ``segments`` when there are several), the lines the periodogram shows
     (candidates at their own frequency) and the temperature channel's candidate."""
     if segments is not None and len(segments) > 1:
@@ -138,10 +154,11 @@ def _prepare(y, rate_hz, terms, axis, lsb, seed, simulate, max_iter, cutoff_hz, 
     if temperature is not None:  # aligned with ``segments``, or with ``y``
         t_segs = temperature if segments is not None else [temperature]
     thermal, t_smooth = thermal_term(t_segs, rate_hz, meas.tau)
-    return GapInput(meas=meas, rate_hz=rate_hz, axis=axis, terms0=[dict(t) for t in terms], y=y, y_all=y_all,
+    lp = (opts.cutoff_hz, int(opts.filter_order), bool(opts.integrated)) if opts.lowpass else None
+    return GapInput(meas=meas, rate_hz=rate_hz, axis=opts.axis, terms0=[dict(t) for t in terms], y=y, y_all=y_all,
                     y_segs=y_segs, t_smooth=t_smooth, t_series=np.concatenate(t_smooth) if t_smooth else None,
-                    thermal=thermal, lowpass=(cutoff_hz, int(filter_order), bool(integrated)) if lowpass else None,
-                    cutoff_hz=cutoff_hz, lsb=lsb, seed=seed, simulate=simulate, max_iter=max_iter)
+                    thermal=thermal, lowpass=lp, cutoff_hz=opts.cutoff_hz, lsb=opts.lsb, seed=opts.seed,
+                    simulate=opts.simulate, max_iter=opts.max_iter)
 
 
 def _compare(inp: GapInput, st: GapState, res: GapResult) -> None:
@@ -389,8 +406,9 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     out of the candidates (data known to be unfiltered); ``integrated``: each logged value is the mean of
     the filtered rate over its interval (PX4 sensor_combined), not a point sample. ``simulate`` False skips
     the checks by simulation (the analytic curves only)."""
-    inp = _prepare(y, rate_hz, terms, axis, lsb, seed, simulate, max_iter, cutoff_hz, filter_order, lowpass,
-                   segments, temperature, integrated)
+    opts = GapOptions(axis=axis, lsb=lsb, seed=seed, simulate=simulate, max_iter=max_iter, cutoff_hz=cutoff_hz,
+                      filter_order=filter_order, lowpass=lowpass, integrated=integrated)
+    inp = _prepare(y, rate_hz, terms, segments, temperature, opts)
     res = GapResult(axis=axis, measured=inp.meas, terms_before=inp.terms0, terms_after=inp.terms0,
                     gap_before=float("nan"), gap_after=float("nan"))
     st = GapState(current=[dict(t) for t in inp.terms0], held=set())
