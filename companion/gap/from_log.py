@@ -96,9 +96,19 @@ def _pick_stream(spec, streams, sel, opts: GapLogOptions):
     return max(streams, key=lambda s: sum(b - a for a, b in sel.ranges(s)))
 
 
-def load_measured(spec, opts: GapLogOptions):
+@dataclass
+class MeasuredLog:
+    """The IMU stream picked from a log and its still segments."""
+
+    stream: object
+    ranges: list  #: [a, b) sample ranges of the still segments in the stream
+    selection: object  #: the still selection (companion.sources.still)
+    meta: dict  #: the log's metadata (format, parameters)
+
+
+def load_measured(spec, opts: GapLogOptions) -> MeasuredLog:
     """Load any input ``analyze`` reads, select the still segments (:func:`companion.sources.still.select_still`,
-    the same selection as ``companion analyze``), pick the stream. Returns (stream, ranges, selection, meta)."""
+    the same selection as ``companion analyze``), pick the stream."""
     from companion.sources import load
     from companion.sources.still import select_still
 
@@ -116,7 +126,7 @@ def load_measured(spec, opts: GapLogOptions):
     rate = st.rate_hz
     if not (rate and math.isfinite(rate) and rate > 0):
         raise CompanionError(f"{spec}: cannot determine the sample rate of {st.key.label()}")
-    return st, ranges, sel, res.meta
+    return MeasuredLog(st, ranges, sel, res.meta)
 
 
 def log_cutoff(stream, meta) -> float | None:
@@ -156,7 +166,8 @@ def prepare(opts: GapLogOptions) -> LogGap:
         model = load_model(opts.model)
         model_axes = list(model.axes)
     axes = _axes(opts, model_axes, sheet)
-    st, ranges, sel, meta = load_measured(opts.measured, opts)
+    m = load_measured(opts.measured, opts)
+    st, meta = m.stream, m.meta
     if sheet is not None:
         model = NoiseModel(rate_hz=float(st.rate_hz), axes={a: [dict(t) for t in terms] for a in GYRO_AXES})
         source_model = f"datasheet {sheet['name']} ({sheet['source']}; N from {sheet['si']['N_from']}" + \
@@ -165,7 +176,7 @@ def prepare(opts: GapLogOptions) -> LogGap:
         source_model = opts.model
     cutoff = opts.cutoff if opts.cutoff is not None else log_cutoff(st, meta)
     integrated = meta.get("format") == "ulog" and st.key.message == "sensor_combined"
-    return LogGap(opts=opts, model=model, sheet=sheet, axes=axes, stream=st, ranges=ranges, selection=sel,
+    return LogGap(opts=opts, model=model, sheet=sheet, axes=axes, stream=st, ranges=m.ranges, selection=m.selection,
                   source_model=source_model, cutoff_hz=cutoff, integrated=integrated)
 
 

@@ -25,7 +25,7 @@ def line_explanations(meas: Measured, state: Fit, held, shaped=(), lowpass=None,
     only) and the search's grid stops at 0.45 x rate. A line whose periodogram amplitude holds at least half
     the fitted one (:data:`companion.gap.spectral.MIN_AMPLITUDE_SHARE`) has a known frequency and is
     weighed at that level, chi^2_1(1 - ALPHA_RECAL) = 10.8, as a confirmed line is
-    (:func:`companion.gap.workflow._spectral_line`); otherwise at a searched one's, chi^2_2(1 - ALPHA)."""
+    (:func:`companion.gap.arbitration.spectral_line`); otherwise at a searched one's, chi^2_2(1 - ALPHA)."""
     from companion.gap.spectral import MIN_AMPLITUDE_SHARE
 
     out = []

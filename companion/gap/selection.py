@@ -33,7 +33,6 @@ from dataclasses import dataclass, field
 
 from companion.gap import trend
 from companion.gap.candidates import MAGNITUDE, Fit, estimate_covariance, fit_terms, gm_rw_direction, lr_inflation
-from companion.gap.cutoff_fit import refine_cutoff
 from companion.gap.likelihood import Measured
 from companion.gap.ranking import explanations
 from companion.gap.scoring import (ALPHA, ALPHA_RECAL, FILTER_LIKE_SAMPLES, LOWPASS, NESTED, RECAL_PENALTY,
@@ -41,7 +40,7 @@ from companion.gap.scoring import (ALPHA, ALPHA_RECAL, FILTER_LIKE_SAMPLES, LOWP
 
 __all__ = ["ALPHA", "ALPHA_RECAL", "FILTER_LIKE_SAMPLES", "LOWPASS", "NESTED", "RECAL_PENALTY", "SHORT_TAU_EFFECTS",
            "DetrendedRecord", "Explanation", "LimitPair", "StepChoice", "add_penalty", "choose", "equal_size_rule",
-           "filter_rule", "flicker_rule", "margin", "nested_test", "refine_cutoff", "runner_up"]
+           "filter_rule", "flicker_rule", "margin", "nested_test", "runner_up"]
 
 
 def nearer_limit(meas: Measured, x: Explanation) -> str | None:

@@ -42,6 +42,7 @@ from companion.gap.arbitration import LineVeto, spectral_line, thermal_arbitrati
 from companion.gap.backward import drop_unneeded, filter_or_gauss_markov, hold_test, refit
 from companion.gap.candidates import MAGNITUDE, SHAPE, Fit, refine_shapes
 from companion.gap.compare import Measured, disagreements, gap_metric, measure, measure_pooled, model_avar
+from companion.gap.cutoff_fit import refine_cutoff
 from companion.gap.null import null_gap, null_text, sim_checks
 from companion.gap.rate_rounding import delta_crit, detect_lsb, rate_rounding
 from companion.gap.result import (NOISE_FLOOR_G, GapResult, record_rule_notes, resolved_gap, resolved_text,
@@ -226,7 +227,7 @@ def _take(inp: GapInput, st: GapState, chosen, c: selection.StepChoice, shaped: 
         # a fitted cut-off is a shape too: an effect with power at the filter's cluster times (a vibration
         # line near the logger's Nyquist frequency), added after the filter, takes back short-tau power
         # the cut-off had absorbed; a long-tau effect (ramp, random walk) does not compete with it
-        st.current = selection.refine_cutoff(meas, st.current, sorted(st.held), inp.lowpass).terms
+        st.current = refine_cutoff(meas, st.current, sorted(st.held), inp.lowpass).terms
     st.base = refit(meas, st.current, st.held, len(terms0))
 
 
