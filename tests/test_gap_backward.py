@@ -5,7 +5,7 @@ import numpy as np
 
 from companion.gap.candidates import fit_terms
 from companion.gap.compare import measure
-from companion.gap.workflow import _drop_unneeded
+from companion.gap.backward import drop_unneeded as _drop_unneeded
 from companion.sim.synth import synthesize_axis
 
 RATE = 50.0
@@ -52,7 +52,7 @@ def test_a_fitted_filter_that_stood_for_a_short_gauss_markov_term_is_weighed_aga
     filter + line + quantization. Weighed again in that final state the Gauss-Markov term wins, the
     quantization is dropped, and the term's parameters are within 30 % of the truth."""
     from companion.gap.spectral import significant_lines
-    from companion.gap.workflow import _filter_or_gauss_markov
+    from companion.gap.backward import filter_or_gauss_markov as _filter_or_gauss_markov
 
     gm = {"effect": "gauss_markov", "sigma": 1.6862665e-3, "tau_c": 0.24761158}
     line = {"effect": "sinusoid", "amplitude": 3.5883434e-3, "freq_hz": 1.4136387}
@@ -79,7 +79,7 @@ def test_a_filter_the_data_show_is_kept():
     """White noise through a 5 Hz two-pole filter at 50 Hz (no other effect): the final state's filter is
     weighed again and kept (a Gauss-Markov term that short is the filter's look-alike; the filter rule keeps
     the one-parameter filter)."""
-    from companion.gap.workflow import _filter_or_gauss_markov
+    from companion.gap.backward import filter_or_gauss_markov as _filter_or_gauss_markov
 
     from companion.gap.filtered import synthesize_filtered_white
 

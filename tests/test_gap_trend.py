@@ -144,7 +144,7 @@ def test_gap_over_the_resolved_cluster_times_leaves_out_the_octaves_beyond_a_ten
     octaves is far above the noise floor, over the resolved ones (tau <= T/10) exactly 0."""
     from companion.gap.compare import measure
     from companion.gap.likelihood import gap_metric, model_avar
-    from companion.gap.workflow import GapResult, _resolved_gap
+    from companion.gap.result import GapResult, resolved_gap as _resolved_gap
 
     rate, n = 50.0, 1600
     terms = [{"effect": "white_noise", "N": 1e-3}]

@@ -25,6 +25,7 @@ LAYERS = {
     "companion.health": CORE,
     "companion.analysis": CORE,
     "companion.analysis.source": ADAPTER,  # loads a source (sources.load) before the analysis
+    "companion.gap.from_log": ADAPTER,  # loads a log (sources.load) and a model file before the gap workflow
     "companion.sources": ADAPTER,
     "companion.config": ADAPTER,  # the configuration schema and its YAML loader
     "companion.mavlink": ADAPTER,

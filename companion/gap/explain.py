@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from companion.units import datasheet_unit, to_datasheet
 
+#: what each effect looks like on the Allan curve (IEEE 952 Annex C)
 WHAT = {
     "quantization": "angle quantisation: ADEV slope -1 at the shortest cluster times (IEEE 952 C.1)",
     "white_noise": "white rate noise (angle random walk): ADEV slope -1/2 (IEEE 952 C.2)",
@@ -24,6 +25,7 @@ WHAT = {
                 "as 1/tau with notches (IEEE 952 C.7)",
 }
 
+#: the physical cause each effect usually has, for the report's plain words
 CAUSES = {
     "quantization": "the digital output resolution of the angle/rate integration (ADC or output word length)",
     "white_noise": "thermo-mechanical and electronic noise of the sensing element; with int16 MAVLink fields "

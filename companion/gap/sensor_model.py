@@ -6,7 +6,7 @@
 
 * the rate rounding to the log's LSB (``quantization`` of form ``rate_lsb``: a white term
   N_q = LSB sqrt(tau0 / 12)). It is a property of the recording (int16 mrad/s RAW_IMU, say), and its N_q
-  depends on the log's rate. Written into the model it was counted twice: ``simulate --message RAW_IMU``
+  depends on the log's rate. Written into the model it would be counted twice: ``simulate --message RAW_IMU``
   rounds its output again, and wherever the log's rounding and the model's extra white term both stand;
 * the low-pass filter and decimation put on the white noise (``cutoff_hz``, ``order``, ``integrate``):
   the autopilot's or the recorder's filter, a setting of the log; N stays the sensor's white noise;
@@ -40,7 +40,7 @@ def rederived(terms: list[dict], result) -> bool:
     """Whether gap, reading ``terms`` back on the same log, adds the log's rate rounding again: the test of its
     LSB step (the white term N_q, every term held, lowers the deviance by more than chi^2_1(1 - ALPHA))."""
     from companion.gap.candidates import fit_terms
-    from companion.gap.workflow import delta_crit
+    from companion.gap.rate_rounding import delta_crit
 
     q = result.quantization
     fixed = range(len(terms) + 1)

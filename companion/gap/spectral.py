@@ -39,6 +39,7 @@ from scipy.signal import welch
 REL_BAND = 0.10
 #: the share of the Allan-fitted amplitude the periodogram must hold (0.5 in amplitude = 25 % in power)
 MIN_AMPLITUDE_SHARE = 0.5
+#: level of the periodogram's line test over the band's bins (Bonferroni), and 1 - the power to rule one out
 ALPHA = 1e-3
 #: Hann window: equivalent noise bandwidth in bins, and the worst-case power loss between two bins
 HANN_ENBW = 1.5

@@ -24,6 +24,8 @@ import numpy as np
 
 from companion.allan.pooled import pooled_oavar
 
+#: span of the centred moving average on the temperature channel, s: longer than the sensor's own noise and
+#: quantisation steps, shorter than the bias's thermal response
 SMOOTH_S = 2.0
 
 
