@@ -29,15 +29,18 @@ import struct
 
 import numpy as np
 
+from companion.errors import CompanionError
 from companion.sources import messages as M
 
+#: per-axis parameter ranges, drawn log-uniformly: a consumer-grade MEMS gyro's spread
 N_RANGE = (1.5e-4, 4.0e-4)  # rad/s/sqrt(Hz)  (0.5 - 1.4 deg/sqrt(h))
 B_RANGE = (1.0e-5, 4.0e-5)  # rad/s           (2 - 8 deg/h)
 K_RANGE = (2.0e-7, 1.0e-6)  # rad/s^1.5
-ARDUPILOT_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
-DAY = 86400.0
-T0_UNIX = 1.75e9
+ARDUPILOT_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")  #: ArduPilot's messages of IMU 0, 1, 2
+DAY = 86400.0  #: s between two flights of a vehicle
+T0_UNIX = 1.75e9  #: unix time of the first flight (any fixed time: the same seed writes the same fleet)
 FORMATS = ("tlog", "bin")
+MIN_SAMPLES = 64  #: fewest samples per flight: the shortest record the analysis fits at all
 BIN_BOARD = "CubeOrange"  # the board name in a simulated DataFlash banner
 
 
@@ -170,6 +173,34 @@ def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: 
     with open(path, "wb") as fh:
         fh.write(pack_records(stamps, frames, flen))
     return {"path": str(path), "start_time": start, "imus": used}
+
+
+def check_fleet_options(vehicles: int, flights: int, imus: int, degrading: int, rise: float, duration_s: float,
+                        rate_hz: float, seed: int, message: str, fmt: str) -> None:
+    """One :class:`CompanionError` line for a fleet that cannot be written as asked."""
+    for name, value in (("vehicles", vehicles), ("flights", flights), ("imus", imus)):
+        if value < 1:
+            raise CompanionError(f"--{name} must be >= 1")
+    if not (duration_s > 0 and math.isfinite(duration_s)) or not (rate_hz > 0 and math.isfinite(rate_hz)):
+        raise CompanionError("--duration and --rate must be positive")
+    if duration_s * rate_hz < MIN_SAMPLES:
+        raise CompanionError(f"--duration {duration_s:g} s at {rate_hz:g} Hz is fewer than {MIN_SAMPLES} samples "
+                             "per flight")
+    if not 0 <= degrading <= vehicles * imus:
+        raise CompanionError(f"--degrading must be between 0 and --vehicles x --imus = {vehicles * imus}")
+    if seed < 0:
+        raise CompanionError("--seed must be >= 0")
+    if not (rise > 0 and math.isfinite(rise)):
+        raise CompanionError("--rise must be a positive ratio")
+    if fmt == "bin" and message != "ardupilot":
+        raise CompanionError("--message chooses the MAVLink message of tlogs; DataFlash logs hold IMU messages")
+    if fmt == "bin" and imus > 3:
+        raise CompanionError("--format bin writes at most 3 IMUs (ArduPilot's IMU instances 0-2)")
+
+
+def degrading_imus(truth: dict) -> list[str]:
+    """``"vehicle_000 IMU1"`` for every degrading IMU of a fleet's truth."""
+    return [f"{v['name']} IMU{i['imu']}" for v in truth["vehicles"] for i in v["imus"] if i["degrading"]]
 
 
 def simulate_fleet(out_dir, vehicles: int, flights: int, imus: int = 3, degrading: int = 3, rise: float = 1.5,

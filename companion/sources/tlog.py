@@ -109,13 +109,21 @@ def _crc_groups(buf, p, hl, ln, extra) -> np.ndarray:
     return ok
 
 
-def scan(data) -> FrameIndex:
-    """Index every intact frame of tlog bytes ``data`` (bytes, bytearray, memoryview or uint8 array)."""
-    buf = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data
+@dataclass
+class _Candidates:
+    """Plausible frame starts (known id, the frame fits in the file), one entry per candidate."""
+
+    p: np.ndarray  # offset of the magic byte
+    hl: np.ndarray  # header length
+    ln: np.ndarray  # payload length
+    msgid: np.ndarray
+    flen: np.ndarray  # whole frame length (header, payload, CRC, signature)
+    extra: np.ndarray  # CRC_EXTRA of the id
+
+
+def _candidates(buf: np.ndarray, bufp: np.ndarray) -> _Candidates:
+    """Steps 1-2 of the module docstring: every magic byte whose implied frame is plausible."""
     n = buf.shape[0]
-    # a zero-padded copy: header and "next record" lookups never need bounds checks
-    bufp = np.zeros(n + 300, dtype=np.uint8)
-    bufp[:n] = buf
     p = np.flatnonzero(buf[8:] >= M.MAGIC_V2) + 8 if n > 8 else np.zeros(0, np.int64)
     magic = buf[p]
     keep = magic != 0xFF  # 0xFD (v2) or 0xFE (v1)
@@ -130,15 +138,20 @@ def scan(data) -> FrameIndex:
     flen = hl + ln + 2 + M.SIGNATURE_LEN * (incompat & M.IFLAG_SIGNED)
     extra = _EXTRA_PADDED[np.minimum(msgid, M.MAX_MSGID + 1)]
     plausible = (p + flen <= n) & (extra >= 0) & (incompat <= M.IFLAG_SIGNED)
-    p, hl, ln, msgid, flen, extra = (a[plausible] for a in (p, hl, ln, msgid, flen, extra))
+    return _Candidates(*(a[plausible] for a in (p, hl, ln, msgid, flen, extra)))
 
+
+def _crc_passes(buf: np.ndarray, bufp: np.ndarray, c: _Candidates) -> tuple[np.ndarray, np.ndarray]:
+    """Step 3: (CRC valid, skipped: inside a pass-1 frame's record, never checked) per candidate."""
+    n = buf.shape[0]
+    p, flen = c.p, c.flen
     # pass 1: candidates followed by the next record's magic byte (or the end of the file): the chain
     nxt = p + flen + 8
     after = bufp[np.minimum(nxt, n + 299)]
     chain = (p + flen == n) | ((nxt < n) & (after >= M.MAGIC_V2) & (after <= M.MAGIC_V1))
     ok = np.zeros(p.shape[0], dtype=bool)
     first = np.flatnonzero(chain)
-    ok[first] = _crc_groups(buf, p[first], hl[first], ln[first], extra[first])
+    ok[first] = _crc_groups(buf, p[first], c.hl[first], c.ln[first], c.extra[first])
     # pass 2: the others (frames before garbage, garbage itself), unless inside a pass-1 frame's record
     rest = np.flatnonzero(~chain)
     skipped = np.zeros(p.shape[0], dtype=bool)
@@ -149,18 +162,20 @@ def scan(data) -> FrameIndex:
         inside = (j >= 0) & (p[rest] - 8 < cm_end[np.maximum(j, 0)])
         skipped[rest[inside]] = True
         rest = rest[~inside]
-    ok[rest] = _crc_groups(buf, p[rest], hl[rest], ln[rest], extra[rest])
+    ok[rest] = _crc_groups(buf, p[rest], c.hl[rest], c.ln[rest], c.extra[rest])
+    return ok, skipped
 
-    # overlap resolution among CRC-valid candidates (already in file order)
-    vp, vfl = p[ok], flen[ok]
-    start, end = vp - 8, vp + vfl
-    keep = np.ones(vp.shape[0], dtype=bool)
-    if vp.shape[0] > 1:
+
+def _no_overlap(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Step 4: which of the CRC-valid records ``[start, end)`` (file order) are kept: a record that starts
+    before the end of the last kept one is dropped. Runs that overlap nothing are kept in bulk."""
+    keep = np.ones(start.shape[0], dtype=bool)
+    if start.shape[0] > 1:
         prev_max = np.maximum.accumulate(end)[:-1]
         clean = np.r_[True, start[1:] >= prev_max]  # starts a run that overlaps nothing before it
         if not clean.all():
             run_start = np.flatnonzero(clean)
-            sizes = np.diff(np.r_[run_start, vp.shape[0]])
+            sizes = np.diff(np.r_[run_start, start.shape[0]])
             for r in np.flatnonzero(sizes > 1):
                 last_end = -1
                 for i in range(run_start[r], run_start[r] + sizes[r]):
@@ -168,12 +183,25 @@ def scan(data) -> FrameIndex:
                         last_end = end[i]
                     else:
                         keep[i] = False
+    return keep
+
+
+def scan(data) -> FrameIndex:
+    """Index every intact frame of tlog bytes ``data`` (bytes, bytearray, memoryview or uint8 array)."""
+    buf = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data
+    n = buf.shape[0]
+    # a zero-padded copy: header and "next record" lookups never need bounds checks
+    bufp = np.zeros(n + 300, dtype=np.uint8)
+    bufp[:n] = buf
+    c = _candidates(buf, bufp)
+    ok, skipped = _crc_passes(buf, bufp, c)
+    keep = _no_overlap(c.p[ok] - 8, c.p[ok] + c.flen[ok])
     acc = np.flatnonzero(ok)[keep]
-    pos, hlen, length, mid = p[acc], hl[acc], ln[acc], msgid[acc]
-    acc_start, acc_end = pos - 8, pos + flen[acc]
+    pos, hlen, length, mid = c.p[acc], c.hl[acc], c.ln[acc], c.msgid[acc]
+    acc_start, acc_end = pos - 8, pos + c.flen[acc]
 
     # bad frames: plausible headers failing the CRC that are not inside an accepted record
-    bad = p[~ok & ~skipped]
+    bad = c.p[~ok & ~skipped]
     if bad.shape[0] and pos.shape[0]:
         j = np.searchsorted(acc_start, bad, side="right") - 1
         inside = (j >= 0) & (bad < acc_end[np.maximum(j, 0)])
@@ -186,10 +214,10 @@ def scan(data) -> FrameIndex:
     sysid = np.where(v2a, buf[pos + 5], buf[pos + 3])
     compid = np.where(v2a, buf[pos + 6], buf[pos + 4])
     ids, cnt = np.unique(mid, return_counts=True)
-    counts = {M.MSG_NAMES.get(int(i), str(int(i))): int(c) for i, c in zip(ids, cnt)}
+    counts = {M.MSG_NAMES.get(int(i), str(int(i))): int(k) for i, k in zip(ids, cnt)}
     return FrameIndex(buf=buf, pos=pos, header_len=hlen, length=length, msgid=mid, sysid=sysid,
                       compid=compid, stamp_us=stamp_us, bad_bytes=n - covered,
-                      bad_frames=int(bad.shape[0]), candidates=int(p.shape[0]), counts=counts)
+                      bad_frames=int(bad.shape[0]), candidates=int(c.p.shape[0]), counts=counts)
 
 
 def read_file(path) -> bytes:
