@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import math
 
-DEG = 180.0 / math.pi
+DEG = 180.0 / math.pi  #: deg per rad
 G0 = 9.80665  # m/s^2 per g
-HOUR = 3600.0
+HOUR = 3600.0  #: s per h: datasheets give noise per hour
 
 GYRO_FACTORS = {
     "Q": DEG * 3600.0,  # rad -> arcsec

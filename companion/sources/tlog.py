@@ -244,8 +244,8 @@ def read_file(path) -> bytes:
 # --------------------------------------------------------------------------------------------------
 # identity: which board sent the log, its gyro ids, and when it started
 
-AUTOPILOT_VERSION_ID = 148
-PARAM_VALUE_ID = 22
+AUTOPILOT_VERSION_ID = 148  #: MAVLink id of AUTOPILOT_VERSION (its ``uid`` names the board)
+PARAM_VALUE_ID = 22  #: MAVLink id of PARAM_VALUE (the gyro device ids)
 #: ArduPilot gyro device-id parameters and the IMU instance each names
 GYRO_ID_PARAMS = M.ARDUPILOT_GYRO_ID_PARAMS
 _UNIX_US = (1e15, 4.1e15)  # 2001..2099 in unix microseconds: a plausible tlog record stamp
@@ -300,13 +300,13 @@ def param_values(idx: FrameIndex) -> dict[str, float]:
 # armed state: the vehicle's HEARTBEATs, on its IMU messages' clock
 
 HEARTBEAT_ID = M.HEARTBEAT.msgid
-MAV_MODE_FLAG_SAFETY_ARMED = 128
-MAV_AUTOPILOT_INVALID = 8
+MAV_MODE_FLAG_SAFETY_ARMED = 128  #: the armed bit of HEARTBEAT.base_mode
+MAV_AUTOPILOT_INVALID = 8  #: HEARTBEAT.autopilot of a component that is not a flight controller
 #: HEARTBEAT types of components that are not a vehicle's autopilot (MAV_TYPE: GCS, onboard controller,
 #: gimbal, ADS-B, camera, charging station, FLARM, servo, OpenDroneID, battery, parachute, log, OSD, IMU,
 #: GPS, winch, illuminator, gripper). A ground station's HEARTBEAT may carry the armed bit (QGC sends
-#: base_mode 192 from sysid 255) and so may a companion computer's (type 18, base_mode 128 on a real
-#: ArduSub tlog), neither of which says anything about the vehicle.
+#: base_mode 192 from sysid 255) and so may a companion computer's (type 18, base_mode 128), neither of
+#: which says anything about the vehicle.
 NOT_AUTOPILOT_TYPES = frozenset((6, 18, 26, 27, 30, 31, 32, 33, 34, 36, 37, 38, 39, 40, 41, 42, 44, 48))
 
 
