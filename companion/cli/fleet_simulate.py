@@ -73,6 +73,7 @@ def run_simulate(args) -> int:
         raise CompanionError(f"{args.out_dir}: cannot write ({exc.strerror or exc})") from None
     if tty:
         sys.stderr.write("\n")
+    degrading = ", ".join(degrading_imus(truth)) or "none"
     print(f"wrote {len(truth['logs'])} logs to {args.out_dir} ({args.vehicles} vehicles x {args.flights} flights, "
-          f"{args.imus} IMUs each); degrading ({args.param} x{args.rise:g}): {', '.join(degrading_imus(truth)) or 'none'}")
+          f"{args.imus} IMUs each); degrading ({args.param} x{args.rise:g}): {degrading}")
     return 0

@@ -117,14 +117,14 @@ class AnalyzeOutcome:
         return lines
 
 
-def plan_summary(n_logs: int, work, skipped: int, unreadable, duplicates: int, db: str, axes) -> str:
-    """The line that says what a run will do before it starts."""
-    more = sum(w.axes is not None for w in work)
-    return (f"{n_logs} log(s): {len(work)} to analyse"
+def plan_summary(n_logs: int, todo, db: str, axes) -> str:
+    """The line that says what a run will do (``todo``: :class:`companion.fleet.runner.Plan`) before it starts."""
+    more = sum(w.axes is not None for w in todo.work)
+    return (f"{n_logs} log(s): {len(todo.work)} to analyse"
             + (f" ({more} of them stored before without some of the axes {','.join(axes)})" if more else "")
-            + f", {skipped} already in {db}"
-            + (f", {duplicates} duplicate(s) (the same content as another log given)" if duplicates else "")
-            + (f", {len(unreadable)} unreadable" if unreadable else ""))
+            + f", {todo.skipped} already in {db}"
+            + (f", {todo.duplicates} duplicate(s) (the same content as another log given)" if todo.duplicates else "")
+            + (f", {len(todo.unreadable)} unreadable" if todo.unreadable else ""))
 
 
 @dataclass
@@ -152,16 +152,15 @@ def analyze_fleet(opts: AnalyzeOptions, say) -> AnalyzeOutcome:
                 with term.held():
                     held.client, held.cluster = open_client(None, opts.scheduler)
                 hasher = hash_on_cluster(held.client)
-            work, skipped, unreadable, duplicates = plan(store, logs, retry_failed=opts.retry_failed, hasher=hasher,
-                                                         axes=opts.axes)
-            for path, reason in unreadable[:LISTED]:
+            todo = plan(store, logs, retry_failed=opts.retry_failed, hasher=hasher, axes=opts.axes)
+            for path, reason in todo.unreadable[:LISTED]:
                 say(f"warning: {path}: {reason}; skipped")
-            say(plan_summary(len(logs), work, skipped, unreadable, duplicates, opts.db, opts.axes))
-            progress = FleetProgress(len(work), skipped + duplicates, enabled=not opts.quiet)
-            stats = _run(opts, store, work, progress, held, term)
+            say(plan_summary(len(logs), todo, opts.db, opts.axes))
+            progress = FleetProgress(len(todo.work), todo.skipped + todo.duplicates, enabled=not opts.quiet)
+            stats = _run(opts, store, todo.work, progress, held, term)
             if stats is not None:
                 progress.close()
-                stats.skipped, stats.duplicates = skipped, duplicates
+                stats.skipped, stats.duplicates = todo.skipped, todo.duplicates
             return AnalyzeOutcome(stats, store.counts())
     finally:
         try:

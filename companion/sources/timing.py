@@ -26,7 +26,8 @@ import numpy as np
 from companion.samples import TimingReport
 from companion.timebase import MS_STAMPED, period_of, stamp_resolution  # noqa: F401 (re-export)
 
-SPLIT_PERIODS = 10.0  #: a gap longer than this many periods splits the segment (Allan analysis needs contiguous samples)
+#: a gap longer than this many periods splits the segment (Allan analysis needs contiguous samples)
+SPLIT_PERIODS = 10.0
 
 
 @dataclass(frozen=True)

@@ -390,12 +390,11 @@ def armed_state(idx: FrameIndex, imu_keys) -> dict:
         by_sys.setdefault(int(key.sysid), []).append(key)
     per_sys, sources = [], []
     for sysid, keys in sorted(by_sys.items()):
-        clocks = [(k, *imu_clock(idx, k)) for k in keys]
-        ref, cf, ct = max(clocks, key=lambda c: c[1].shape[0])
-        frames, armed, comp = vehicle_heartbeats(idx, sysid, ref.compid)
+        ref = max((_ImuClock(k, *imu_clock(idx, k)) for k in keys), key=lambda c: c.frames.shape[0])
+        frames, armed, comp = vehicle_heartbeats(idx, sysid, ref.key.compid)
         if not frames.size:
             continue
-        t = to_message_time(idx, frames, cf, ct)
+        t = to_message_time(idx, frames, ref.frames, ref.t)
         good = np.isfinite(t)
         t, armed = t[good], armed[good]
         if not t.size:
@@ -405,21 +404,33 @@ def armed_state(idx: FrameIndex, imu_keys) -> dict:
         # arming after a reboot can be later on its clock than every event of the session before
         change = np.r_[True, (armed[1:] != armed[:-1]) | (np.diff(t) < -RESET_S)]
         per_sys.append([(float(a), bool(b)) for a, b in zip(t[change], armed[change])])
-        sources.append({"sysid": sysid, "compid": comp, "heartbeats": int(frames.size), "clock": ref.label()})
-    if len(per_sys) <= 1:
-        trans = per_sys[0] if per_sys else []
-    else:  # the union of the systems' armed periods as transitions
-        from companion.sources.still import armed_intervals
-
-        iv = sorted(iv for tr in per_sys for iv in armed_intervals(tr, np.inf))  # inf: armed to the end
-        merged: list = []
-        for a, b in iv:
-            if merged and a <= merged[-1][1]:
-                merged[-1][1] = max(merged[-1][1], b)
-            else:
-                merged.append([a, b])
-        t0 = min(tr[0][0] for tr in per_sys)
-        trans = [(t0, False)] if not merged or merged[0][0] > t0 else []
-        for a, b in merged:
-            trans += [(a, True)] + ([(b, False)] if np.isfinite(b) else [])
+        sources.append({"sysid": sysid, "compid": comp, "heartbeats": int(frames.size), "clock": ref.key.label()})
+    trans = (per_sys[0] if per_sys else []) if len(per_sys) <= 1 else _union_transitions(per_sys)
     return {"armed": trans, "has_armed_state": bool(per_sys), "armed_source": sources}
+
+
+@dataclass
+class _ImuClock:
+    """The frames of one IMU stream and their message times (s): the clock HEARTBEATs are mapped to."""
+
+    key: object  # StreamKey
+    frames: np.ndarray
+    t: np.ndarray
+
+
+def _union_transitions(per_sys: list[list[tuple[float, bool]]]) -> list[tuple[float, bool]]:
+    """The union of several systems' armed periods, as transitions (disarmed at the earliest first state)."""
+    from companion.sources.still import armed_intervals
+
+    iv = sorted(iv for tr in per_sys for iv in armed_intervals(tr, np.inf))  # inf: armed to the end
+    merged: list = []
+    for a, b in iv:
+        if merged and a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    t0 = min(tr[0][0] for tr in per_sys)
+    trans = [(t0, False)] if not merged or merged[0][0] > t0 else []
+    for a, b in merged:
+        trans += [(a, True)] + ([(b, False)] if np.isfinite(b) else [])
+    return trans
