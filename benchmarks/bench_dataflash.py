@@ -6,7 +6,7 @@
 Timed (best of --repeat runs, wall and CPU):
 - DFReader: ``DFReader_binary(path)`` (its Cython indexer when installed) + ``recv_match(type=IMU*)`` to the
   end, collecting time, gyro and accel of every message (what an analysis needs);
-- companion reader: ``dataflash.open_log`` + ``imu_raw_streams`` (the same arrays);
+- companion reader: ``dataflash.open_log`` + ``dataflash_imu.imu_raw_streams`` (the same arrays);
 - companion ``sources.load``: the reader plus the timing analysis, batch-sampler streams and metadata
   (PARM, armed state, modes), i.e. all that ``companion analyze`` reads.
 Memory: the reader's peak traced allocation (tracemalloc, numpy included) beside the size of the IMU arrays it
@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from companion.sim.dataflash_writer import write_imu_log  # noqa: E402
 from companion.sources import dataflash as df  # noqa: E402
+from companion.sources.dataflash_imu import imu_raw_streams  # noqa: E402
 from companion.sources import load  # noqa: E402
 
 SHARED = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "ardupilot" / "dronekit_log171.bin"
@@ -52,7 +53,7 @@ def dfreader_arrays(path):
 
 
 def ours_arrays(path):
-    raws, _ = df.imu_raw_streams(df.open_log(path))
+    raws, _ = imu_raw_streams(df.open_log(path))
     return {r.key.instance: np.column_stack([r.t, r.gyro, r.accel]) for r in raws}
 
 

@@ -21,8 +21,8 @@ import yaml
 
 from companion.errors import CompanionError
 
-PATH = Path(__file__).with_name("datasheets.yaml")
-DEG = math.pi / 180.0
+PATH = Path(__file__).with_name("datasheets.yaml")  #: the datasheet table shipped with the package
+DEG = math.pi / 180.0  #: rad per deg
 #: ADEV minimum of IEEE 952 flicker noise over B: sqrt(2 ln 2 / pi)
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-GYRO_AXES = ("gx", "gy", "gz")
-ACCEL_AXES = ("ax", "ay", "az")
+GYRO_AXES = ("gx", "gy", "gz")  #: gyro axes, rad/s
+ACCEL_AXES = ("ax", "ay", "az")  #: accelerometer axes, m/s^2
 AXES = GYRO_AXES + ACCEL_AXES
 
 

@@ -19,7 +19,7 @@ def period_of(intervals, resolution: float = 0.0) -> float:
     the intervals within ``P0 +- (0.5 P0 + r)`` (``r`` = the stamps' resolution), then ``P`` = the mean of
     those within ``P1 +- max(0.5 P1, r)``: longer intervals are lost samples or gaps, and a late sample
     splits one period into a short and a long interval that go together (a telemetry stream at 2 Hz with
-    intervals of 0.12 + 0.88 s: the short one alone took its rate 3 % high). A 400 Hz stream stamped in whole
+    intervals of 0.12 + 0.88 s: the short one alone would take its rate 3 % high). A 400 Hz stream stamped in whole
     milliseconds (intervals of 2 and 3 ms, 5 ms where one was lost) gets 2.5 ms, where the median alone
     says 2 or 3 ms (500 or 333 Hz) and one pass lets the 5-ms intervals in. NaN without intervals."""
     d = np.asarray(intervals, dtype=np.float64)

@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import math
 
-DEG = 180.0 / math.pi
+DEG = 180.0 / math.pi  #: deg per rad
 G0 = 9.80665  # m/s^2 per g
-HOUR = 3600.0
+HOUR = 3600.0  #: s per h: datasheets give noise per hour
 
 GYRO_FACTORS = {
     "Q": DEG * 3600.0,  # rad -> arcsec
@@ -95,3 +95,11 @@ def fmt_interval(v: float, lo: float, hi: float) -> str:
         if a != b or not hi > lo:
             break
     return f"{fmt_value(v, d)} [{a}, {b}]"
+
+
+def rate_display(axis: str) -> tuple[float, str]:
+    """(factor, unit) from SI to the unit a table or plot of raw samples shows: deg/s for gyro axes, m/s^2
+    for accelerometers."""
+    from companion.samples import GYRO_AXES
+
+    return (180.0 / math.pi, "deg/s") if axis in GYRO_AXES else (1.0, "m/s^2")

@@ -42,11 +42,12 @@ def dfreader_imu(path):
 
 def _compare_df(path):
     from companion.sources import dataflash as df
+    from companion.sources.dataflash_imu import imu_raw_streams
 
     ref, counts = dfreader_imu(path)
     log = df.open_log(path)
     assert log.counts() == counts
-    raws, _ = df.imu_raw_streams(log)
+    raws, _ = imu_raw_streams(log)
     assert sorted(r.key.instance for r in raws) == sorted(ref)
     for r in raws:
         exp = ref[r.key.instance]
@@ -535,14 +536,14 @@ def test_post_filter_batches_are_named_for_their_own_imu():
     """INS_LOG_BAT_OPT 4 (before and after the filters): ArduPilot writes the post-filter batch of IMU k as
     instance k + the number of IMUs. A public Copter 4.7 log with two IMUs and INS_LOG_BAT_MASK 1 carries
     instances 0 and 2; 2 (a quarter of 0's spread) was read as a third IMU."""
-    from companion.sources.dataflash import isb_name
+    from companion.sources.dataflash_imu import isb_name
 
     assert isb_name(True, 0, 4, 2) == ("ISB_GYRO", 0)
     assert isb_name(True, 2, 4, 2) == ("ISB_GYRO_POST", 0)
     assert isb_name(False, 3, 4, 2) == ("ISB_ACCEL_POST", 1)
     assert isb_name(True, 1, 2, 2) == ("ISB_GYRO_POST", 1)  # post-filter only: the sensor's own number
     assert isb_name(True, 2, 0, 3) == ("ISB_GYRO", 2)  # raw batches: as written
-    from companion.sources.dataflash import bat_opt
+    from companion.sources.dataflash_imu import bat_opt
 
     assert [bat_opt(p) for p in ({"INS_LOG_BAT_OPT": 4.0}, {}, None, {"INS_LOG_BAT_OPT": float("inf")},
                                  {"INS_LOG_BAT_OPT": float("nan")})] == [4, 0, 0, 0, 0]  # a damaged PARM

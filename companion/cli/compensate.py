@@ -6,12 +6,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 from companion.cli.output import to_json, write_text
 from companion.cli.progress import Progress
 from companion.errors import CompanionError
-from companion.samples import AXES, GYRO_AXES
+from companion.samples import AXES
+from companion.units import rate_display
 
 DESCRIPTION = """\
 Compensate the random error of one gyro axis with the three methods of Shi et al. ("Compensation of MEMS
@@ -78,111 +77,9 @@ def parse_methods(spec: str) -> tuple:
     return tuple(dict.fromkeys(names))
 
 
-def _has_axis(stream, axis: str) -> bool:
-    """Whether the stream carries data for ``axis`` (a batch-sampler burst of one sensor has NaN for the other)."""
-    return bool(np.any(np.isfinite(stream.axis(axis))))
-
-
-def select_series(res, axis: str, stream_index: int, max_samples):
-    """(t, z, rate_hz, label) of the longest still, gap-free piece of the chosen IMU stream."""
-    streams = res.imu_streams()
-    if not streams:
-        raise CompanionError(f"{res.source}: no IMU stream")
-    if not 0 <= stream_index < len(streams):
-        labels = "; ".join(f"{i}: {s.key.label()}" for i, s in enumerate(streams))
-        raise CompanionError(f"--stream {stream_index} out of range; IMU streams: {labels}")
-    s = streams[stream_index]
-    kind = "gyro" if axis in GYRO_AXES else "accel"
-    if not _has_axis(s, axis):
-        other = "accel" if kind == "gyro" else "gyro"
-        usable = [f"{i}: {o.key.label()}" for i, o in enumerate(streams) if _has_axis(o, axis)]
-        where = (f"{kind} streams: {'; '.join(usable)} (choose one with --stream I)" if usable
-                 else f"this source has no {kind} stream")
-        raise CompanionError(f"{s.key.label()} (--stream {stream_index}) has no {kind} data ({other} only); {where}")
-    from companion.sources.still import longest_still_range
-
-    a, b = longest_still_range(res, s, warn=lambda m: print(f"warning: {m}", file=sys.stderr))
-    if max_samples is not None:
-        if max_samples < 1:
-            raise CompanionError("--max-samples must be at least 1")
-        b = min(b, a + max_samples)
-    rate = float(s.rate_hz)
-    if not rate > 0:
-        raise CompanionError(f"{s.key.label()}: no usable sample rate")
-    from companion.compensation.arima import MIN_FIT_SAMPLES
-
-    if b - a < MIN_FIT_SAMPLES:
-        longer = [f"{i}: {o.key.label()} ({o.samples} samples)" for i, o in enumerate(streams)
-                  if i != stream_index and o.samples >= MIN_FIT_SAMPLES and _has_axis(o, axis)]
-        hint = f"; streams with more data: {'; '.join(longer)}" if longer else ""
-        raise CompanionError(f"{s.key.label()} {axis}: {b - a} samples ({(b - a) / rate:.1f} s at {rate:g} Hz) are too "
-                             f"few for the ARIMA(1,1,1) fit (need at least {MIN_FIT_SAMPLES}){hint}")
-    z = np.asarray(s.axis(axis)[a:b], dtype=float)
-    if np.all(z == z[0]):
-        scale, unit = display_unit(axis)
-        raise CompanionError(f"{s.key.label()} {axis}: all {b - a} samples are {z[0] * scale:g} {unit} "
-                             f"(stuck, absent or not logged): nothing to compensate")
-    return s.t[a:b], z, rate, s.key.label()
-
-
-#: The table stops at T/10: beyond it the overlapping Allan estimate rests on fewer than ten clusters.
-MAX_TAU_FRACTION = 0.1
-
-#: A method "helped" when it brought the ADEV at tau0 below this fraction of the raw ADEV.
-HELPED_RATIO = 0.9
-
-
-def display_unit(axis: str) -> tuple[float, str]:
-    """(factor, unit) from SI to the table's and plot's unit: deg/s for gyro axes, m/s^2 for accelerometers."""
-    return (180.0 / np.pi, "deg/s") if axis in GYRO_AXES else (1.0, "m/s^2")
-
-
-def max_tau(n: int, rate_hz: float) -> float:
-    """The longest cluster time shown (table and plot) for ``n`` samples at ``rate_hz``: T/10."""
-    return MAX_TAU_FRACTION * n / rate_hz + 1e-12
-
-
-def table_taus(result) -> list[int]:
-    """Indices of the taus shown: tau0, about 1 s and about 100 s, none beyond T/10 of the record."""
-    tau = result.raw_tau
-    n = len(next(iter(result.methods.values())).x)
-    ok = np.flatnonzero(tau <= max_tau(n, result.rate_hz))
-    if ok.size == 0:
-        return [0]
-    return sorted({int(ok[np.argmin(np.abs(np.log(tau[ok]) - np.log(v)))]) for v in (tau[0], 1.0, 100.0)})
-
-
-def format_table(result, axis: str, label: str) -> str:
-    tau = result.raw_tau
-    scale, unit = display_unit(axis)
-    p = result.params
-    picks = table_taus(result)
-    lines = [f"{label} {axis}: {len(next(iter(result.methods.values())).x)} samples at {result.rate_hz:g} Hz; "
-             f"ARIMA(1,1,1) fit ({p.split}): phi={p.phi:.4f} theta={p.theta:.4f} "
-             f"delta1={p.delta1 * p.scale * scale:.3g} {unit} sqrt(R)={np.sqrt(p.R) * p.scale * scale:.3g} {unit}"]
-    head = f"{'method':<20}" + "".join(f"{'ADEV ratio @' + format(tau[i], '.3g') + ' s':>20}" for i in picks)
-    lines.append(head + f"{'samples/s':>12}{'factor ok':>11}")
-    lines.append(f"{'raw ADEV (' + unit + ')':<20}" + "".join(f"{result.raw_adev[i] * scale:>20.4g}" for i in picks))
-    for m in result.methods.values():
-        ratio = m.adev / result.raw_adev
-        lines.append(f"{m.label:<20}" + "".join(f"{ratio[i]:>20.3f}" for i in picks)
-                     + f"{m.samples_per_s:>12.0f}{'yes' if m.factor_valid else 'NO':>11}")
-    return "\n".join(lines)
-
-
-def nothing_helped(result) -> str | None:
-    """A warning when no method brought the ADEV at tau0 below ``HELPED_RATIO`` x raw, else None."""
-    ratios = {m.label: float(m.adev[0] / result.raw_adev[0]) for m in result.methods.values()}
-    if not ratios or min(ratios.values()) < HELPED_RATIO:
-        return None
-    best = min(ratios, key=ratios.get)
-    return (f"no method brought the ADEV at tau0 ({result.raw_tau[0]:.3g} s) below {HELPED_RATIO:g}x raw (best: "
-            f"{best} {ratios[best]:.3f}x): little white noise found to remove (motion, or noise the model "
-            f"does not describe)")
-
-
 def run(args) -> int:
     from companion.cli.output import check_output_path, check_plot_path
+    from companion.cli.source_options import warn_ignored_options
     from companion.sources import load
 
     for opt, path in (("--json", args.json), ("--out", args.out)):
@@ -194,43 +91,38 @@ def run(args) -> int:
     if axis not in AXES:
         raise CompanionError(f"unknown --axis {args.axis!r}; expected one of {', '.join(AXES)}")
     methods = parse_methods(args.method)
-    from companion.cli.source_options import warn_ignored_options
-
     warn_ignored_options(args, [args.source], "compensate")
     res = load(args.source, args.config, duration=args.duration)
-    t, z, rate, label = select_series(res, axis, args.stream, args.max_samples)
-    progress = Progress("compensate", enabled=not args.quiet and z.shape[0] > 50_000)
+    from companion.compensation.arima import MIN_FIT_SAMPLES
     from companion.compensation.pipeline import compensate
+    from companion.compensation.table import format_table, json_report, max_tau, nothing_helped, write_series_csv
+    from companion.sources.series import select_series
 
+    series = select_series(res, axis, args.stream, args.max_samples, MIN_FIT_SAMPLES, "the ARIMA(1,1,1) fit",
+                           warn=lambda m: print(f"warning: {m}", file=sys.stderr))
+    progress = Progress("compensate", enabled=not args.quiet and series.z.shape[0] > 50_000)
     try:
-        result = compensate(z, rate, methods=methods, progress=progress, split=args.split)
+        result = compensate(series.z, series.rate_hz, methods=methods, progress=progress, split=args.split)
     finally:
         progress.close()
-    print(format_table(result, axis, label))
+    print(format_table(result, axis, series.label))
     warning = nothing_helped(result)
     if warning:
         print(f"companion: warning: {warning}", file=sys.stderr)
-    bad = [m.name for m in result.methods.values() if not m.factor_valid]
     if args.json:
-        report = result.to_json(axis)
-        report["stream"] = label
-        write_text(args.json, to_json(report) + "\n", "JSON")
+        write_text(args.json, to_json(json_report(result, axis, series.label)) + "\n", "JSON")
         print(f"wrote {args.json}")  # every file written is named, as analyze, gap and simulate do
     if args.out:
-        cols = [t, z] + [m.x for m in result.methods.values()]
-        header = ",".join(["time_s", f"{axis}_raw"] + [f"{axis}_{name}" for name in result.methods])
-        try:
-            np.savetxt(args.out, np.column_stack(cols), delimiter=",", header=header, comments="", fmt="%.9g")
-        except OSError as exc:
-            raise CompanionError(f"{args.out}: cannot write CSV ({exc.strerror or exc})") from None
+        write_series_csv(args.out, series.t, series.z, result, axis)
         print(f"wrote {args.out}")
     if args.plot:
         from companion.plots.compensation_plot import plot_compensation
 
-        scale, unit = display_unit(axis)
-        plot_compensation(result, t, z, args.plot, title=f"{label} {axis}", unit_scale=scale, unit=unit,
-                          max_tau=max_tau(z.shape[0], rate))
+        scale, unit = rate_display(axis)
+        plot_compensation(result, series.t, series.z, args.plot, title=f"{series.label} {axis}", unit_scale=scale,
+                          unit=unit, max_tau=max_tau(series.z.shape[0], series.rate_hz))
         print(f"wrote {args.plot}")
+    bad = [m.name for m in result.methods.values() if not m.factor_valid]
     if bad:
         print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)
         return 1

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import gzip
 import math
 
 import numpy as np
@@ -46,6 +45,7 @@ examples:
   companion run --source stuck.tlog --baseline-s 300
 """
 
+#: IMU messages a noise-only tlog can carry
 MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
 
 
@@ -67,6 +67,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+#: the --vehicle options and their values when not given: any other value needs --vehicle
 VEHICLE_ONLY = {"imus": None, "preset": None, "arm_at": None, "disarm_at": None, "arm_s": None, "handle_at": None, "warmup_deg_s": 0.0,
                 "fault": None, "fault_at": None, "fault_size": None}
 
@@ -107,37 +108,31 @@ def synthesize(model, duration_s: float, seed: int):
     return t, gyro, accel
 
 
-def write_csv(path: str, t, gyro, accel) -> None:
-    opener = gzip.open if path.lower().endswith(".gz") else open
-    arr = np.column_stack([t, gyro, accel])
-    with opener(path, "wt") as f:
-        f.write("time_s,gx,gy,gz,ax,ay,az\n")
-        np.savetxt(f, arr, fmt=["%.6f"] + ["%.9e"] * 6, delimiter=",")
+#: most samples per IMU written in one run (about 1.2 GB of arrays per IMU)
+MAX_SAMPLES = 50_000_000
 
 
-def run(args) -> int:
+def _model(args):
+    """The noise model: MODEL.yaml, else the --preset's."""
     from companion.sim.model import load_model
 
     if args.model is None and not (args.vehicle and args.preset):
         raise CompanionError("give a noise model MODEL.yaml (or --vehicle --preset NAME)")
-    model = load_model(args.model) if args.model is not None else None
-    if model is None:
-        from companion.sim.preset import load_preset
+    if args.model is not None:
+        return load_model(args.model)
+    from companion.sim.preset import load_preset
 
-        model = load_preset(args.preset)["model"]
-    if not (args.duration > 0 and math.isfinite(args.duration)):
-        raise CompanionError("--duration must be a positive number of seconds")
-    n = int(round(args.duration * model.rate_hz))
-    if args.vehicle:
-        if n > 50_000_000:
-            raise CompanionError(f"{n} samples per IMU is too many (limit 5e7); shorten --duration")
-        return run_vehicle(args, model)
+    return load_preset(args.preset)["model"]
+
+
+def _check_noise_run(args, model, n: int) -> None:
+    """One error line for a noise-only run that cannot be written as asked (checked before the work)."""
     used = [k for k, v in VEHICLE_ONLY.items() if getattr(args, k) != v]
     if used:
         raise CompanionError(f"--{used[0].replace('_', '-')} needs --vehicle")
     if n < 2:
         raise CompanionError(f"--duration {args.duration} s at {model.rate_hz} Hz gives fewer than 2 samples")
-    if n > 50_000_000:
+    if n > MAX_SAMPLES:
         raise CompanionError(f"{n} samples is too many (limit 5e7); shorten --duration")
     from companion.sim.synth import check_model_rate
 
@@ -145,24 +140,38 @@ def run(args) -> int:
         check_model_rate(model)  # a sinusoid above Nyquist, an impossible f0: refused before the work
     except ValueError as exc:
         raise CompanionError(f"{args.model}: {exc}") from None
-    out = args.out
-    low = out.lower()
+    low = args.out.lower()
     if not (low.endswith(".tlog") or low.endswith(".csv") or low.endswith(".csv.gz")):
-        raise CompanionError(f"--out {out}: expected a .tlog, .csv or .csv.gz file name")
+        raise CompanionError(f"--out {args.out}: expected a .tlog, .csv or .csv.gz file name")
     from companion.cli.output import check_output_path
 
-    check_output_path(out, "--out")
+    check_output_path(args.out, "--out")
+
+
+def run(args) -> int:
+    model = _model(args)
+    if not (args.duration > 0 and math.isfinite(args.duration)):
+        raise CompanionError("--duration must be a positive number of seconds")
+    n = int(round(args.duration * model.rate_hz))
+    if args.vehicle:
+        if n > MAX_SAMPLES:
+            raise CompanionError(f"{n} samples per IMU is too many (limit 5e7); shorten --duration")
+        return run_vehicle(args, model)
+    _check_noise_run(args, model, n)
+    out = args.out
     try:
         t, gyro, accel = synthesize(model, args.duration, args.seed)
     except ValueError as exc:
         raise CompanionError(f"{args.model}: {exc}") from None
     try:
-        if low.endswith(".tlog"):
+        if out.lower().endswith(".tlog"):
             from companion.mavlink.tlog_writer import write_imu_tlog
 
             count = write_imu_tlog(out, t, gyro, accel, message=args.message, sysid=args.sysid)
             print(f"wrote {out}: {count} {args.message} messages, {args.duration:g} s at {model.rate_hz:g} Hz")
         else:
+            from companion.sources.csvfile import write_csv
+
             write_csv(out, t, gyro, accel)
             print(f"wrote {out}: {n} samples, {args.duration:g} s at {model.rate_hz:g} Hz")
     except OSError as exc:

@@ -1,6 +1,6 @@
 """Source options that apply to one kind of source only: --time-unit (the time column of a CSV) and
---duration (how long to listen to a live link). Given for a source they do not apply to, they used to be
-ignored without a word; now each such option gets one warning line on stderr and the work goes on.
+--duration (how long to listen to a live link). Given for a source they do not apply to, each such option
+gets one warning line on stderr and the work goes on.
 
 A warning rather than a refusal: ``companion analyze a.csv b.tlog --time-unit ms`` is a sensible command
 (the option applies to a.csv), and a script that passes the same options to every log should not fail on a

@@ -8,8 +8,12 @@ import math
 
 from companion.errors import CompanionError
 
+#: the effect a --degrade-term grows
 DEGRADE_EFFECT = {"N": "white_noise", "B": "bias_instability", "K": "random_walk"}
+#: --fault kinds (companion.sim.vehicle.Fault)
 FAULT_KINDS = ("stuck", "noise", "bias", "spikes", "drift", "saturate")
+#: s: the shortest flight, room for take-off, a manoeuvre and landing
+MIN_FLIGHT_S = 4.0
 #: the --help text of the fault sizes, one line per kind
 FAULT_HELP = """\
 A fault (--fault KIND --fault-at S) on IMU --fault-imu, gyro axis --fault-axis; --fault-size X is, per KIND:
@@ -63,29 +67,26 @@ def add_fault_options(p, degrade: bool = False) -> None:
     g.add_argument("--degrade-term", default="N", choices=("N", "B", "K"), help="degraded term (default N)")
 
 
-def build_simulator(args, model, rate_hz: float | None = None):
-    """The :class:`companion.sim.vehicle.VehicleSimulator` the options describe (every check up front)."""
-    from companion.sim import vehicle as V
-
-    realism = None
+def _preset_model(args, model, rate_hz):
+    """(model, rate_hz, realism) with a --preset's: its realism, and its model and logged rate where none
+    was given; --imus from the preset unless given."""
     preset = getattr(args, "preset", None)
-    if preset is not None:
-        from companion.sim.preset import load_preset
+    if preset is None:
+        return model, rate_hz, None
+    from companion.sim.preset import load_preset
 
-        P = load_preset(preset)
-        realism = P["realism"]
-        if model is None:  # the preset's model at the preset's logged rate
-            model = P["model"]
-            if rate_hz is None and "rate_hz" in P["vehicle"]:
-                rate_hz = float(P["vehicle"]["rate_hz"])
-        if args.imus is None:
-            args.imus = int(P["vehicle"].get("imus", 1))
-    if model is None:
-        raise CompanionError("give a noise model (MODEL.yaml) or --preset")
+    P = load_preset(preset)
+    if model is None:  # the preset's model at the preset's logged rate
+        model = P["model"]
+        if rate_hz is None and "rate_hz" in P["vehicle"]:
+            rate_hz = float(P["vehicle"]["rate_hz"])
     if args.imus is None:
-        args.imus = 1
-    if not 1 <= args.imus <= 3:
-        raise CompanionError(f"--imus must be 1, 2 or 3, got {args.imus}")
+        args.imus = int(P["vehicle"].get("imus", 1))
+    return model, rate_hz, P["realism"]
+
+
+def _schedule(args, V):
+    """The flight (--arm-at, --disarm-at or --arm-s, --max-rate) and the handlings (--handle-at)."""
     flights = []
     if args.arm_at is None:
         for name in ("disarm_at", "arm_s"):
@@ -95,42 +96,70 @@ def build_simulator(args, model, rate_hz: float | None = None):
         if args.disarm_at is not None and args.arm_s is not None:
             raise CompanionError("give --disarm-at or --arm-s, not both")
         disarm = args.disarm_at if args.disarm_at is not None else args.arm_at + (60.0 if args.arm_s is None else args.arm_s)
-        if not disarm >= args.arm_at + 4.0:
+        if not disarm >= args.arm_at + MIN_FLIGHT_S:
             raise CompanionError(f"--disarm-at ({disarm:g} s) must be at least 4 s after --arm-at ({args.arm_at:g} s)")
         flights.append(_checked(lambda: V.Flight(args.arm_at, disarm, max_rate=args.max_rate), "--arm-at/--max-rate"))
     handlings = [_checked(lambda: V.Handling(h, args.handle_s), "--handle-at/--handle-s") for h in (args.handle_at or [])]
-    schedule = _checked(lambda: V.Schedule(tuple(flights), tuple(handlings)), "--handle-at")
-    fault = None
+    return _checked(lambda: V.Schedule(tuple(flights), tuple(handlings)), "--handle-at")
+
+
+def _fault(args, V):
+    """The --fault, or None; its options without it are refused."""
     if args.fault is None:
         for name in ("fault_at", "fault_size"):
             if getattr(args, name) is not None:
                 raise CompanionError(f"--{name.replace('_', '-')} needs --fault KIND")
-    else:
-        if args.fault_at is None:
-            raise CompanionError("--fault needs --fault-at S (seconds since the simulation start)")
-        if not 0 <= args.fault_imu < args.imus:
-            raise CompanionError(f"--fault-imu {args.fault_imu}: the vehicle has {args.imus} IMU(s) (0..{args.imus - 1}); raise --imus")
-        if not args.fault_at >= 0:
-            raise CompanionError(f"--fault-at must be >= 0, got {args.fault_at:g}")
-        if not args.spike_amplitude > 0:
-            raise CompanionError(f"--spike-amplitude must be > 0 rad/s, got {args.spike_amplitude:g}")
-        fault = _checked(lambda: V.Fault(args.fault, args.fault_at, args.fault_size, args.fault_imu, args.fault_axis,
-                                         args.spike_amplitude), "--fault-size")
-    degrade = None
-    if getattr(args, "degrade_at", None) is not None:
-        if not args.degrade_factor >= 1.0:
-            raise CompanionError("--degrade-factor must be >= 1 (a degradation makes a term larger)")
-        effect = DEGRADE_EFFECT[args.degrade_term]
-        base = [t for t in (model.axes.get(args.degrade_axis) or []) if t["effect"] == effect]
-        if not base:
-            raise CompanionError(f"--degrade-term {args.degrade_term}: the model has no {effect} on {args.degrade_axis}")
-        extra = {"effect": effect, args.degrade_term: base[0][args.degrade_term] * math.sqrt(args.degrade_factor**2 - 1.0)}
-        degrade = _checked(lambda: V.Degradation(args.degrade_at, args.degrade_axis, extra), "--degrade-at")
-    warmup = None
+        return None
+    if args.fault_at is None:
+        raise CompanionError("--fault needs --fault-at S (seconds since the simulation start)")
+    if not 0 <= args.fault_imu < args.imus:
+        raise CompanionError(f"--fault-imu {args.fault_imu}: the vehicle has {args.imus} IMU(s) (0..{args.imus - 1}); raise --imus")
+    if not args.fault_at >= 0:
+        raise CompanionError(f"--fault-at must be >= 0, got {args.fault_at:g}")
+    if not args.spike_amplitude > 0:
+        raise CompanionError(f"--spike-amplitude must be > 0 rad/s, got {args.spike_amplitude:g}")
+    return _checked(lambda: V.Fault(args.fault, args.fault_at, args.fault_size, args.fault_imu, args.fault_axis,
+                                    args.spike_amplitude), "--fault-size")
+
+
+def _degradation(args, model, V):
+    """The --degrade-* noise growth, or None: the term grows to ``factor`` x its value by adding an independent
+    term of the same effect, sqrt(factor^2 - 1) x the value (variances add)."""
+    if getattr(args, "degrade_at", None) is None:
+        return None
+    if not args.degrade_factor >= 1.0:
+        raise CompanionError("--degrade-factor must be >= 1 (a degradation makes a term larger)")
+    effect = DEGRADE_EFFECT[args.degrade_term]
+    base = [t for t in (model.axes.get(args.degrade_axis) or []) if t["effect"] == effect]
+    if not base:
+        raise CompanionError(f"--degrade-term {args.degrade_term}: the model has no {effect} on {args.degrade_axis}")
+    extra = {"effect": effect, args.degrade_term: base[0][args.degrade_term] * math.sqrt(args.degrade_factor**2 - 1.0)}
+    return _checked(lambda: V.Degradation(args.degrade_at, args.degrade_axis, extra), "--degrade-at")
+
+
+def _warmup(args, V):
     if args.warmup_deg_s < 0:
         raise CompanionError(f"--warmup-deg-s must be >= 0, got {args.warmup_deg_s:g}")
-    if args.warmup_deg_s:
-        warmup = _checked(lambda: V.WarmUp(math.radians(args.warmup_deg_s), args.warmup_tau_s), "--warmup-deg-s/--warmup-tau-s")
+    if not args.warmup_deg_s:
+        return None
+    return _checked(lambda: V.WarmUp(math.radians(args.warmup_deg_s), args.warmup_tau_s), "--warmup-deg-s/--warmup-tau-s")
+
+
+def build_simulator(args, model, rate_hz: float | None = None):
+    """The :class:`companion.sim.vehicle.VehicleSimulator` the options describe (every check up front)."""
+    from companion.sim import vehicle as V
+
+    model, rate_hz, realism = _preset_model(args, model, rate_hz)
+    if model is None:
+        raise CompanionError("give a noise model (MODEL.yaml) or --preset")
+    if args.imus is None:
+        args.imus = 1
+    if not 1 <= args.imus <= 3:
+        raise CompanionError(f"--imus must be 1, 2 or 3, got {args.imus}")
+    schedule = _schedule(args, V)
+    fault = _fault(args, V)
+    degrade = _degradation(args, model, V)
+    warmup = _warmup(args, V)
     spread = _checked(lambda: V.ImuSpread(scale=args.scale_spread, misalignment_deg=args.misalign_deg),
                       "--scale-spread/--misalign-deg")
     rate = float(rate_hz or model.rate_hz)

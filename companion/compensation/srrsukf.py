@@ -35,6 +35,7 @@ from companion.compensation.arima import ArimaParams
 from companion.compensation.sqrt_ops import DowndateError, cholupdate, tria, tril_inverse
 from companion.compensation.srukf import NQ, NR, SRUKF
 
+#: diagonal of the risk-sensitive matrix: risk on x_k and x_{k-1} only, none on the parameters or the noise
 DEFAULT_MU = (0.05, 0.05, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 

@@ -43,7 +43,7 @@ from companion.compensation.sqrt_ops import cholupdate, tria
 
 NR = 5  # real state: x_k, x_{k-1}, phi, delta1, delta2
 NQ = 2  # augmented noise items: a_k, a_{k-1}
-PHI_MAX = 0.9999
+PHI_MAX = 0.9999  #: |phi| is held below 1: the AR(1) part of the model stays stationary
 
 
 class SRUKF(ScaledFilter):

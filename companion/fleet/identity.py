@@ -6,7 +6,7 @@ The readers find these while they read the IMU data (one pass over the file) and
 - telemetry log (.tlog, :func:`companion.sources.tlog.identity`): ``AUTOPILOT_VERSION.uid`` (the board's
   64-bit unique id), the ``INS_GYR_ID``/``INS_GYR2_ID``/``INS_GYR3_ID`` ``PARAM_VALUE``s (IMU ids), and
   the first record's time stamp as the start time.
-- DataFlash .bin (:func:`companion.sources.dataflash.log_identity`): the boot banner logged as ``MSG``
+- DataFlash .bin (:func:`companion.sources.dataflash_meta.log_identity`): the boot banner logged as ``MSG``
   (e.g. ``Pixhawk4 0047002B 34385105 36363539``: the MCU's 96-bit unique id), the ``INS_GYR*_ID``
   parameters, and the start time from the first GPS record with a 3D fix (GPS week and ms, leap seconds
   applied) and the time since boot of the first IMU sample.

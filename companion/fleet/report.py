@@ -95,6 +95,34 @@ def report_json(store, entries: list[dict], threshold: float, min_rise: float) -
             "logs": store.counts(), "imus": [public(e) for e in entries]}
 
 
+def ranking_lines(entries: list[dict], top: int) -> list[str]:
+    """The printed ranking: a headline, a header, one line per IMU (the first ``top``; 0: all) and how many
+    more there are."""
+    flagged = sum(e["flagged"] for e in entries)
+    lines = [f"{len(entries)} IMUs, {flagged} flagged (evidence >= {EVIDENCE_THRESHOLD:g}, rise >= {MIN_RISE:g}x)"]
+    # board ids in full (a 96-bit MCU id is 24 hex digits, with its board name and a folder more)
+    wv = max([18] + [len(e["vehicle"]) for e in entries])
+    lines.append(f"{'#':>4} {'vehicle':<{wv}} {'sys':>3} {'IMU':<16} {'flights':>7} {'flag':>4} {'evidence':>8} "
+                 f"{'worst':<6} {'trend':>6}")
+    shown = entries if top == 0 else entries[:top]
+    for i, e in enumerate(shown, 1):
+        worst = f"{e['axis']} {e['param']}" if e["axis"] else "-"
+        trend = f"{e['trend']:.2f}x" if e["trend"] is not None else "-"
+        lines.append(f"{i:>4} {e['vehicle']:<{wv}} {e['sysid']:>3} {str(e['imu']) + ' ' + e['message']:<16} "
+                     f"{e['flights']:>7} {'YES' if e['flagged'] else 'no':>4} {e['evidence']:>8.1f} {worst:<6} {trend:>6}"
+                     + (f"  ({e['note']})" if e["note"] and not e["axis"] else ""))
+    if len(shown) < len(entries):
+        lines.append(f"... {len(entries) - len(shown)} more (--top 0 for all)")
+    return lines
+
+
+def nothing_to_rank(counts: dict[str, int]) -> str:
+    """Why no IMU could be ranked, from the database's log counts."""
+    if counts["failed"] and not counts["ok"]:
+        return f"all {counts['failed']} log(s) failed"
+    return f"no analysed IMU data ({counts['ok']} logs ok, {counts['failed']} failed)"
+
+
 def _fmt_time(t) -> str:
     return time.strftime("%Y-%m-%d", time.gmtime(t)) if t else "-"
 

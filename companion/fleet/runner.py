@@ -18,6 +18,7 @@ import signal
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from companion.errors import CompanionError
 from companion.fleet.discover import LogFile, hash_files
@@ -120,8 +121,17 @@ def hash_on_cluster(client, chunk: int = 100):
     return hasher
 
 
+class Plan(NamedTuple):
+    """What a run will do with the logs given (see :func:`plan`)."""
+
+    work: list[Work]  # to analyse
+    skipped: int  # already in the database
+    unreadable: list[tuple[str, str]]  # (path, reason)
+    duplicates: int  # the same content as another of the logs given
+
+
 def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 4,
-         hasher=None, axes=None) -> tuple[list[Work], int, list[tuple[str, str]], int]:
+         hasher=None, axes=None) -> Plan:
     """(work to do, number already in the database, unreadable [(path, reason)], number of duplicates: the
     same content as another of ``logs``) for ``logs`` against ``store``.
 
@@ -191,7 +201,7 @@ def plan(store, logs: list[LogFile], retry_failed: bool = False, threads: int = 
             continue
         seen.add(h)
         work.append(Work(lf, h, grown.get(lf.path), more))
-    return work, skipped, unreadable, duplicates
+    return Plan(work, skipped, unreadable, duplicates)
 
 
 def _record(store, stats: RunStats, w: Work, result: dict) -> None:

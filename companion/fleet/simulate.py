@@ -26,18 +26,22 @@ import json
 import math
 import os
 import struct
+from dataclasses import dataclass
 
 import numpy as np
 
+from companion.errors import CompanionError
 from companion.sources import messages as M
 
+#: per-axis parameter ranges, drawn log-uniformly: a consumer-grade MEMS gyro's spread
 N_RANGE = (1.5e-4, 4.0e-4)  # rad/s/sqrt(Hz)  (0.5 - 1.4 deg/sqrt(h))
 B_RANGE = (1.0e-5, 4.0e-5)  # rad/s           (2 - 8 deg/h)
 K_RANGE = (2.0e-7, 1.0e-6)  # rad/s^1.5
-ARDUPILOT_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
-DAY = 86400.0
-T0_UNIX = 1.75e9
-FORMATS = ("tlog", "bin")
+ARDUPILOT_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")  #: ArduPilot's messages of IMU 0, 1, 2
+DAY = 86400.0  #: s between two flights of a vehicle
+T0_UNIX = 1.75e9  #: unix time of the first flight (any fixed time: the same seed writes the same fleet)
+FORMATS = ("tlog", "bin")  #: telemetry logs or ArduPilot DataFlash logs
+MIN_SAMPLES = 64  #: fewest samples per flight: the shortest record the analysis fits at all
 BIN_BOARD = "CubeOrange"  # the board name in a simulated DataFlash banner
 
 
@@ -90,66 +94,64 @@ def _meta_payloads(board_id: str, gyro_ids: list[int]):
     return out
 
 
-def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: str, duration_s: float,
-                 rate_hz: float, message: str, seed, fmt: str = "tlog") -> dict:
-    """Write one flight's log (tlog or DataFlash .bin); returns what it holds (start time, per-IMU
-    parameters used)."""
-    from companion.mavlink.tlog_writer import encode_frames, heartbeat_payload, imu_payloads, pack_records
-    from companion.sim.synth import flicker, random_walk, white_noise
+@dataclass
+class _Clock:
+    """One flight's times: boot offset and IMU sample times (s since boot), unix start, temperature (deg C)."""
 
-    rng = np.random.default_rng(seed)
-    n = int(round(duration_s * rate_hz))
-    if n < 2:
-        raise ValueError("a flight needs at least 2 samples")
+    boot: float
+    t: np.ndarray
+    start: float
+    temperature: np.ndarray
+
+
+def _clock(rng, n: int, rate_hz: float, f: int, vehicle: dict) -> _Clock:
+    """Flight ``f``'s clock: logging starts 20-120 s after boot, the flight a day after the previous one at an
+    hour of the vehicle's own, and the IMUs warm by 3 deg C with a 300-s time constant."""
     boot = float(rng.uniform(20.0, 120.0))
     t = boot + np.arange(n) / rate_hz
     start = T0_UNIX + f * DAY + (vehicle["sysid"] % 24) * 3600.0 + float(rng.uniform(0, 3000))
     temp0 = float(rng.uniform(15.0, 35.0))
-    temperature = temp0 + 3.0 * (1.0 - np.exp(-(t - boot) / 300.0))
-    factor = rise ** (f / (flights - 1)) if flights > 1 else 1.0
-    rows, msgids, times, used = [], [], [], []
-    meta = _meta_payloads(vehicle["board_id"], [i["gyro_id"] for i in vehicle["imus"]]) if fmt == "tlog" else []
-    for payload, mid in meta:
-        rows.append(np.frombuffer(payload, dtype=np.uint8).reshape(1, -1))  # first in the log (stable sort)
-        msgids.append(np.array([mid]))
-        times.append(np.array([boot]))
-    gyros, accels = [], []
-    for imu in vehicle["imus"]:
-        gyro = np.zeros((n, 3))
-        par = {}
-        for j, a in enumerate(("gx", "gy", "gz")):
-            p = dict(imu["axes"][a])
-            if imu["degrading"]:
-                p[param] *= factor
-            par[a] = p
-            gyro[:, j] = (white_noise(p["N"], rate_hz, n, rng) + flicker(p["B"], rate_hz, n, rng)
-                          + random_walk(p["K"], rate_hz, n, rng) + rng.normal(0.0, 0.01))  # + a constant bias
-        accel = rng.normal(0.0, 0.02, (n, 3))
-        accel[:, 2] -= 9.80665
-        if fmt == "bin":
-            gyros.append(gyro)
-            accels.append(accel)
-            used.append({"imu": imu["imu"], "message": "IMU", "axes": par})
-            continue
-        msg = imu_message(imu["imu"], message)
-        rec = imu_payloads(msg, t, gyro, accel, instance=imu["imu"], temperature=temperature + imu["imu"])
-        rows.append(rec.view(np.uint8).reshape(n, -1))
-        msgids.append(np.full(n, M.IMU_LAYOUTS[msg].msgid))
-        times.append(t)
-        used.append({"imu": imu["imu"], "message": msg, "axes": par})
-    if fmt == "bin":
-        from companion.sim.dataflash_writer import write_imu_log
+    return _Clock(boot, t, start, temp0 + 3.0 * (1.0 - np.exp(-(t - boot) / 300.0)))
 
-        b = vehicle["board_id"]
-        params = {M.ARDUPILOT_GYRO_ID_NAMES[i["imu"]]: float(i["gyro_id"])
-                  for i in vehicle["imus"][:3]}
-        banner = f"{BIN_BOARD} {b[0:8].upper()} {b[8:16].upper()} {b[16:24].upper()}"
-        write_imu_log(path, t, np.stack(gyros), np.stack(accels), "4.x", params=params,
-                      temperature=float(temperature.mean()),
-                      messages=["ArduCopter V4.5.7 (companion fleet simulate)", banner],
-                      gps_utc=(boot, start))
-        return {"path": str(path), "start_time": start, "imus": used}
-    hb_t = boot + np.arange(0.0, duration_s, 1.0)
+
+def _imu_data(imu: dict, param: str, factor: float, rate_hz: float, n: int, rng):
+    """(gyro (n, 3), accel (n, 3), the parameters used per axis) of one IMU at rest: N, B and K of each axis
+    (the degrading parameter times ``factor``) and a constant bias; the accelerometer at 1 g with noise."""
+    from companion.sim.synth import flicker, random_walk, white_noise
+
+    gyro = np.zeros((n, 3))
+    par = {}
+    for j, a in enumerate(("gx", "gy", "gz")):
+        p = dict(imu["axes"][a])
+        if imu["degrading"]:
+            p[param] *= factor
+        par[a] = p
+        gyro[:, j] = (white_noise(p["N"], rate_hz, n, rng) + flicker(p["B"], rate_hz, n, rng)
+                      + random_walk(p["K"], rate_hz, n, rng) + rng.normal(0.0, 0.01))  # + a constant bias
+    accel = rng.normal(0.0, 0.02, (n, 3))
+    accel[:, 2] -= 9.80665
+    return gyro, accel, par
+
+
+def _write_bin(path, vehicle: dict, clock: _Clock, gyros, accels) -> None:
+    """A DataFlash log: the IMUs, the gyro ids as parameters, the board id in the boot banner, a GPS fix."""
+    from companion.sim.dataflash_writer import write_imu_log
+
+    b = vehicle["board_id"]
+    params = {M.ARDUPILOT_GYRO_ID_NAMES[i["imu"]]: float(i["gyro_id"]) for i in vehicle["imus"][:3]}
+    banner = f"{BIN_BOARD} {b[0:8].upper()} {b[8:16].upper()} {b[16:24].upper()}"
+    write_imu_log(path, clock.t, np.stack(gyros), np.stack(accels), "4.x", params=params,
+                  temperature=float(clock.temperature.mean()),
+                  messages=["ArduCopter V4.5.7 (companion fleet simulate)", banner],
+                  gps_utc=(clock.boot, clock.start))
+
+
+def _write_tlog(path, vehicle: dict, clock: _Clock, duration_s: float, rows, msgids, times) -> None:
+    """A tlog of the payloads ``rows`` (ids ``msgids``, times ``times``) and a HEARTBEAT a second, in time
+    order (the identity messages first), record stamps at the flight's unix time."""
+    from companion.mavlink.tlog_writer import encode_frames, heartbeat_payload, pack_records
+
+    hb_t = clock.boot + np.arange(0.0, duration_s, 1.0)
     rows.append(np.repeat(heartbeat_payload().view(np.uint8).reshape(1, -1), hb_t.size, axis=0))
     msgids.append(np.full(hb_t.size, M.HEARTBEAT.msgid))
     times.append(hb_t)
@@ -166,10 +168,76 @@ def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: 
     extra = M.CRC_EXTRA_TABLE[msgid].astype(np.uint16)
     seq = (np.arange(msgid.size) & 0xFF).astype(np.uint8)
     frames, flen = encode_frames(payloads, msgid, extra, seq, vehicle["sysid"], 1, True)
-    stamps = np.rint((start + (t_all - boot)) * 1e6).astype(np.uint64)
+    stamps = np.rint((clock.start + (t_all - clock.boot)) * 1e6).astype(np.uint64)
     with open(path, "wb") as fh:
         fh.write(pack_records(stamps, frames, flen))
-    return {"path": str(path), "start_time": start, "imus": used}
+
+
+def write_flight(path, vehicle: dict, f: int, flights: int, rise: float, param: str, duration_s: float,
+                 rate_hz: float, message: str, seed, fmt: str = "tlog") -> dict:
+    """Write one flight's log (tlog or DataFlash .bin); returns what it holds (start time, per-IMU
+    parameters used)."""
+    from companion.mavlink.tlog_writer import imu_payloads
+
+    rng = np.random.default_rng(seed)
+    n = int(round(duration_s * rate_hz))
+    if n < 2:
+        raise ValueError("a flight needs at least 2 samples")
+    clock = _clock(rng, n, rate_hz, f, vehicle)
+    factor = rise ** (f / (flights - 1)) if flights > 1 else 1.0
+    rows, msgids, times, used = [], [], [], []
+    meta = _meta_payloads(vehicle["board_id"], [i["gyro_id"] for i in vehicle["imus"]]) if fmt == "tlog" else []
+    for payload, mid in meta:
+        rows.append(np.frombuffer(payload, dtype=np.uint8).reshape(1, -1))  # first in the log (stable sort)
+        msgids.append(np.array([mid]))
+        times.append(np.array([clock.boot]))
+    gyros, accels = [], []
+    for imu in vehicle["imus"]:
+        gyro, accel, par = _imu_data(imu, param, factor, rate_hz, n, rng)
+        if fmt == "bin":
+            gyros.append(gyro)
+            accels.append(accel)
+            used.append({"imu": imu["imu"], "message": "IMU", "axes": par})
+            continue
+        msg = imu_message(imu["imu"], message)
+        rec = imu_payloads(msg, clock.t, gyro, accel, instance=imu["imu"], temperature=clock.temperature + imu["imu"])
+        rows.append(rec.view(np.uint8).reshape(n, -1))
+        msgids.append(np.full(n, M.IMU_LAYOUTS[msg].msgid))
+        times.append(clock.t)
+        used.append({"imu": imu["imu"], "message": msg, "axes": par})
+    if fmt == "bin":
+        _write_bin(path, vehicle, clock, gyros, accels)
+    else:
+        _write_tlog(path, vehicle, clock, duration_s, rows, msgids, times)
+    return {"path": str(path), "start_time": clock.start, "imus": used}
+
+
+def check_fleet_options(vehicles: int, flights: int, imus: int, degrading: int, rise: float, duration_s: float,
+                        rate_hz: float, seed: int, message: str, fmt: str) -> None:
+    """One :class:`CompanionError` line for a fleet that cannot be written as asked."""
+    for name, value in (("vehicles", vehicles), ("flights", flights), ("imus", imus)):
+        if value < 1:
+            raise CompanionError(f"--{name} must be >= 1")
+    if not (duration_s > 0 and math.isfinite(duration_s)) or not (rate_hz > 0 and math.isfinite(rate_hz)):
+        raise CompanionError("--duration and --rate must be positive")
+    if duration_s * rate_hz < MIN_SAMPLES:
+        raise CompanionError(f"--duration {duration_s:g} s at {rate_hz:g} Hz is fewer than {MIN_SAMPLES} samples "
+                             "per flight")
+    if not 0 <= degrading <= vehicles * imus:
+        raise CompanionError(f"--degrading must be between 0 and --vehicles x --imus = {vehicles * imus}")
+    if seed < 0:
+        raise CompanionError("--seed must be >= 0")
+    if not (rise > 0 and math.isfinite(rise)):
+        raise CompanionError("--rise must be a positive ratio")
+    if fmt == "bin" and message != "ardupilot":
+        raise CompanionError("--message chooses the MAVLink message of tlogs; DataFlash logs hold IMU messages")
+    if fmt == "bin" and imus > 3:
+        raise CompanionError("--format bin writes at most 3 IMUs (ArduPilot's IMU instances 0-2)")
+
+
+def degrading_imus(truth: dict) -> list[str]:
+    """``"vehicle_000 IMU1"`` for every degrading IMU of a fleet's truth."""
+    return [f"{v['name']} IMU{i['imu']}" for v in truth["vehicles"] for i in v["imus"] if i["degrading"]]
 
 
 def simulate_fleet(out_dir, vehicles: int, flights: int, imus: int = 3, degrading: int = 3, rise: float = 1.5,

@@ -29,8 +29,8 @@ import time
 
 from companion.errors import CompanionError
 
-SCHEMA_VERSION = 1
-PARAMS = ("Q", "N", "B", "K", "R")
+SCHEMA_VERSION = 1  #: stored in the database; a database of another version is refused, not misread
+PARAMS = ("Q", "N", "B", "K", "R")  #: the coefficients stored per axis
 
 SCHEMA = f"""
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);

@@ -3,7 +3,7 @@
 Gyro panels in deg/h, accel panels in mg (ADEV of the rate), against the cluster time in seconds; the
 legend gives each fitted coefficient in datasheet units with its 95 % interval. Every legend sits in its own
 strip below its panel, never on the data: the short-tau points, where N is read, are where a legend inside the
-axes used to land. Where the fit declared a model misfit the legend says so with the report's own record of it
+axes would land. Where the fit declared a model misfit the legend says so with the report's own record of it
 (:func:`misfit_text`): the model error, the local white-noise refit's region (shaded) that N comes from, and how
 far the drawn model lies from the points at shorter cluster times.
 """
@@ -29,7 +29,7 @@ _COLORS = {"quantization": "tab:purple", "white_noise": "tab:blue", "bias_instab
 
 #: legend text size [pt] and the characters per line a label is wrapped at (a 5.2-inch panel holds about 80)
 LEGEND_FONT = 7.0
-_WRAP = 78
+_WRAP = 78  #: characters per legend line (see LEGEND_FONT)
 
 
 def _value_text(t, axis):
@@ -79,7 +79,7 @@ def misfit_text(r: dict, axis: str) -> str | None:
     tau, adev = np.asarray(r["tau"], dtype=float), np.asarray(r["adev"], dtype=float)
     short = (tau < lo * (1 - 1e-9)) & np.isfinite(adev) & (adev > 0)
     if short.any():
-        # the line drawn against the points it is drawn over: the global fit's terms with the local N no longer
+        # the line drawn against the points it is drawn over: the global fit's terms with the local N need not
         # pass the shortest cluster times, which the refit leaves out
         dev = np.sqrt(_model_avar(r, tau[short])) / adev[short] - 1.0
         k = int(np.argmax(np.abs(dev)))

@@ -121,7 +121,7 @@ def write_imu_log(path, t_s, gyro, accel, layout: str = "4.x", params: dict | No
     for tt, mnum in modes or []:
         small.append((tt, 3, one("MODE", tt, mnum, mnum)))
     if gps_utc is not None:
-        from companion.sources.dataflash import GPS_EPOCH_UNIX, GPS_LEAP_S
+        from companion.sources.dataflash_meta import GPS_EPOCH_UNIX, GPS_LEAP_S
 
         tt, unix = gps_utc
         gps = unix + next(v for t_from, v in GPS_LEAP_S if unix >= t_from) - GPS_EPOCH_UNIX

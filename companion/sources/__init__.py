@@ -134,18 +134,20 @@ def load_csv(path, split_periods: float = _timing.SPLIT_PERIODS, time_unit: str 
 def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
     """An ArduPilot DataFlash .bin (or .bin.gz): every IMU instance, batch-sampler bursts, metadata."""
     from companion.sources import dataflash as df
+    from companion.sources.dataflash_imu import imu_raw_streams, isb_raw_streams
+    from companion.sources.dataflash_meta import log_identity, log_metadata
 
     log = df.open_log(path)
-    raws, extras = df.imu_raw_streams(log)
-    meta = df.log_metadata(log)
-    isb, bursts = df.isb_raw_streams(log, meta["params"], len({r.key.instance for r in raws}) or None)
+    raws, extras = imu_raw_streams(log)
+    meta = log_metadata(log)
+    isb, bursts = isb_raw_streams(log, meta["params"], len({r.key.instance for r in raws}) or None)
     streams = sorted((build_stream(r, split_periods) for r in raws + isb), key=lambda s: s.key)
     counts = log.counts()
     imu_n = int(sum(r.t.shape[0] for r in raws))
     totals = {"frames": int(sum(counts.values())), "bad_bytes": int(log.bad_bytes), "bad_frames": 0,
               "imu_messages": imu_n}
     meta["format"] = "dataflash"
-    meta["identity"] = df.log_identity(log, meta)
+    meta["identity"] = log_identity(log, meta)
     meta["isb_bursts"] = bursts
     meta["imu_extras"] = {k.instance: {n: int(np.nansum(v)) if n.endswith("errors") else None
                                        for n, v in e.items()} for k, e in extras.items()}

@@ -26,7 +26,7 @@ from companion.errors import CompanionError
 NET_PREFIXES = ("udpin", "udpout", "udp", "tcp", "tcpin")
 _NET = re.compile(r"^(udpin|udpout|udp|tcp|tcpin):([A-Za-z0-9.\-_]+|\[[0-9a-fA-F:]+\]):(\d{1,5})$")
 _COM = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
-DEFAULT_BAUD = 115200
+DEFAULT_BAUD = 115200  #: a serial link's rate unless --baud says otherwise (ArduPilot's default telemetry rate)
 
 
 def is_connection_string(spec: str) -> bool:
@@ -63,7 +63,7 @@ def parse_connection(spec: str, baud: int | None = None) -> tuple[str, str]:
 
 
 def _resolve(kind_prefix: str, host: str, port: int, spec: str) -> None:
-    """A host name that does not resolve is one clear line now, not 'no IMU data' later."""
+    """A host name that does not resolve is one clear error line at once, not 'no IMU data' after listening."""
     import socket
 
     host = host.strip("[]")
@@ -73,7 +73,7 @@ def _resolve(kind_prefix: str, host: str, port: int, spec: str) -> None:
         raise CompanionError(f"{spec}: cannot resolve host {host!r} ({getattr(exc, 'strerror', None) or exc})") from None
 
 
-UDP_RCVBUF = 4 << 20
+UDP_RCVBUF = 4 << 20  #: bytes: a few seconds of IMU messages at kHz rates (see _grow_receive_buffer)
 
 
 def _grow_receive_buffer(conn) -> None:

@@ -143,3 +143,12 @@ def _to_file_lines(msg: str) -> str:
     msg = re.sub(r"at row (\d+)", lambda m: f"on line {int(m.group(1)) + 2}", msg)
     return re.sub(r"the number of columns changed from (\d+) to (\d+) at row (\d+)",
                   lambda m: f"line {int(m.group(3)) + 2} has {m.group(2)} columns, expected {m.group(1)}", msg)
+
+
+def write_csv(path: str, t, gyro, accel) -> None:
+    """Write ``time_s,gx,gy,gz,ax,ay,az`` rows (SI; gzip-compressed for a ``.gz`` path): the format read above."""
+    opener = gzip.open if path.lower().endswith(".gz") else open
+    arr = np.column_stack([t, gyro, accel])
+    with opener(path, "wt") as f:
+        f.write("time_s,gx,gy,gz,ax,ay,az\n")
+        np.savetxt(f, arr, fmt=["%.6f"] + ["%.9e"] * 6, delimiter=",")

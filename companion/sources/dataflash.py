@@ -25,32 +25,14 @@ loop over messages). Bodies of one type are then gathered into a numpy structure
 step. On the 2.9 MB 3-IMU log this is about 30x faster than DFReader (``benchmarks/bench_ingest.py
 --dataflash``) with identical values.
 
-IMU layouts (all produce :class:`companion.samples.ImuStream`, message ``IMU``, instance 0, 1, 2):
-
-- 2014-16 (Copter 3.2-3.3): ``IMU``, ``IMU2``, ``IMU3`` with ``TimeMS`` (ms), ``ErrG/ErrA/Temp``;
-- 3.4-3.6: the same three messages with ``TimeUS``;
-- 4.x: one ``IMU`` with the instance field ``I``, ``TimeUS``, ``T``, ``EG/EA``, ``GH/AH``.
-
-Batch sampler (``INS_LOG_BAT_*``): an ``ISBH`` header (``type`` 0 accel / 1 gyro, ``instance``, ``mul``,
-``smp_cnt``, ``SampleUS`` of the first sample, ``smp_rate``) followed by ``ISBD`` messages (``N`` = the
-header's sequence number, ``seqno``, ``x/y/z`` int16[32]: value = int16 / ``mul``, rad/s or m/s^2).
-Each (type, instance) becomes its own stream ``ISB_GYRO``/``ISB_ACCEL`` of bursts (sample ``k`` of a
-burst at ``SampleUS + k / smp_rate``; the timing rules split the bursts into segments); the other
-sensor's columns are NaN. Batches sampled after the autopilot's filters (``INS_LOG_BAT_OPT`` bit 1, or
-bit 2: before and after, the post-filter ones numbered from the number of IMUs on) are
-``ISB_GYRO_POST``/``ISB_ACCEL_POST`` of their own sensor's instance: a public Copter 4.7 log with two IMUs
-and ``INS_LOG_BAT_MASK`` 1 carries instances 0 and 2, 2 being IMU 0 filtered (a quarter of its spread), not
-a third IMU.
-
-Log metadata (:func:`log_metadata`): ``PARM`` (name -> last value), armed state from ``EV`` ids 10
-(armed) / 11 (disarmed) and ``ARM`` (``ArmState``), ``MODE`` changes, ``MSG`` texts, ``ERR``.
+The IMU and batch-sampler streams are decoded in :mod:`companion.sources.dataflash_imu`, the log's
+metadata and identity in :mod:`companion.sources.dataflash_meta`.
 """
 
 from __future__ import annotations
 
 import gzip
 import mmap
-import re
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,20 +42,22 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from companion.errors import CompanionError
 
-HEAD1, HEAD2 = 0xA3, 0x95
-FMT_TYPE = 0x80
-FMT_LEN = 89
+HEAD1, HEAD2 = 0xA3, 0x95  #: the two bytes that start every message
+FMT_TYPE = 0x80  #: message type of the FMT records that define the others
+FMT_LEN = 89  #: bytes of an FMT message, header included
+FMT_FORMAT, FMT_COLUMNS = "BBnNZ", ["Type", "Length", "Name", "Format", "Columns"]  #: the FMT record's own layout
 
+#: storage of each format character (see the table above)
 _DTYPE = {"a": ("<i2", (32,)), "b": "i1", "B": "u1", "g": "<f2", "h": "<i2", "H": "<u2", "i": "<i4",
           "I": "<u4", "f": "<f4", "n": "S4", "N": "S16", "Z": "S64", "c": "<i2", "C": "<u2", "e": "<i4",
           "E": "<u4", "L": "<i4", "d": "<f8", "M": "i1", "q": "<i8", "Q": "<u8"}
 _DIVISOR = {"c": 100.0, "C": 100.0, "e": 100.0, "E": 100.0, "L": 1e7}  # DFReader divides (not multiplies)
 
-EV_ARMED, EV_DISARMED = 10, 11
-
 
 @dataclass
 class Format:
+    """One message type's layout from its FMT record."""
+
     type: int
     name: str
     length: int
@@ -192,7 +176,7 @@ class DataFlashLog:
         return np.where(j >= 0, best_t[np.maximum(j, 0)], best_t[0] if best_t.shape[0] else np.nan)
 
 
-def _ints(v: np.ndarray) -> np.ndarray:
+def int_codes(v: np.ndarray) -> np.ndarray:
     """Integer codes from a float column; a value a damaged layout made NaN or huge becomes -1."""
     ok = np.isfinite(v) & (np.abs(v) < 2**62)
     return np.where(ok, v, -1).astype(np.int64)
@@ -244,6 +228,15 @@ def read_bytes(path) -> np.ndarray:
         raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
+@dataclass
+class _FmtCandidate:
+    """An FMT record found at a header position; the message chain decides whether it is real."""
+
+    pos: int
+    length: int  # the ``Length`` it gives its type
+    record: np.void  # the decoded FMT body
+
+
 def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     """Walk the message chain of DataFlash bytes ``buf`` (see the module docstring)."""
     n = buf.shape[0]
@@ -254,22 +247,8 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     if h.shape[0] == 0 or buf[h[0] + 2] != FMT_TYPE:
         raise CompanionError(f"{source}: not a DataFlash log (no 0xA3 0x95 FMT header at the start)")
     types = buf[h + 2].astype(np.int64)
-    # formats: every FMT candidate whose body decodes; the chain decides which are real
-    fmt_dt = _dtype("BBnNZ", ["Type", "Length", "Name", "Format", "Columns"])
-    fc = h[(types == FMT_TYPE) & (h + FMT_LEN <= n)]
-    if fc.shape[0] == 0:
-        raise CompanionError(f"{source}: not a DataFlash log (no complete FMT message)")
-    frec = np.ascontiguousarray(sliding_window_view(buf, FMT_LEN - 3)[fc + 3]).view(fmt_dt).reshape(-1)
-    length = np.full(257, -1, dtype=np.int64)  # index 256: never used
-    length[FMT_TYPE] = FMT_LEN
-    cand_fmt: dict[int, list] = {}
-    for pos, r in zip(fc.tolist(), frec):
-        t, ln = int(r["Type"]), int(r["Length"])
-        cand_fmt.setdefault(t, []).append((pos, ln, r))
-    # first definition of each type fixes its length (DFReader keeps the first length it used)
-    for t, lst in cand_fmt.items():
-        if t != FMT_TYPE and lst[0][1] >= 3:
-            length[t] = lst[0][1]
+    cand_fmt = _fmt_candidates(buf, h[types == FMT_TYPE], source)
+    length = _type_lengths(cand_fmt)
     # a header of a type no FMT defines is garbage: skipped byte by byte like any bad byte, as DFReader's
     # (Cython) indexer does -- its pure-Python fallback stops there instead
     known = length[types] > 0
@@ -280,31 +259,67 @@ def index(buf: np.ndarray, source: str = "<bytes>") -> DataFlashLog:
     pos = h[chain]
     typ = types[chain]
     covered = int(np.minimum(pos + length[typ], n).sum() - pos.sum())
-    end = n
-    bad_bytes = max(0, int(end - covered))
-    # formats actually on the chain
-    on_fmt = set(pos[typ == FMT_TYPE].tolist())
-    formats: dict[int, Format] = {FMT_TYPE: Format(FMT_TYPE, "FMT", FMT_LEN, "BBnNZ",
-                                                   ["Type", "Length", "Name", "Format", "Columns"], fmt_dt)}
+    bad_bytes = max(0, int(n - covered))
+    formats = _chain_formats(cand_fmt, set(pos[typ == FMT_TYPE].tolist()), length)
+    log = DataFlashLog(source, buf, formats, _offsets_by_type(pos, typ), bad_bytes=bad_bytes)
+    if pos.shape[0] and pos[-1] + length[typ[-1]] > n:  # the file ends inside its last message
+        log.truncated = int(n - pos[-1])
+    log.names = {f.name: t for t, f in formats.items()}
+    return log
+
+
+def _fmt_candidates(buf: np.ndarray, fmt_headers: np.ndarray, source: str) -> dict[int, list[_FmtCandidate]]:
+    """Every complete FMT candidate's body, per type it defines, in file order."""
+    fmt_dt = _dtype(FMT_FORMAT, FMT_COLUMNS)
+    fc = fmt_headers[fmt_headers + FMT_LEN <= buf.shape[0]]
+    if fc.shape[0] == 0:
+        raise CompanionError(f"{source}: not a DataFlash log (no complete FMT message)")
+    frec = np.ascontiguousarray(sliding_window_view(buf, FMT_LEN - 3)[fc + 3]).view(fmt_dt).reshape(-1)
+    cand_fmt: dict[int, list[_FmtCandidate]] = {}
+    for pos, r in zip(fc.tolist(), frec):
+        cand_fmt.setdefault(int(r["Type"]), []).append(_FmtCandidate(pos, int(r["Length"]), r))
+    return cand_fmt
+
+
+def _type_lengths(cand_fmt: dict[int, list[_FmtCandidate]]) -> np.ndarray:
+    """Message length per type (index 0-255; -1: undefined; index 256 never used): the first definition of
+    each type fixes it, as DFReader keeps the first length it used."""
+    length = np.full(257, -1, dtype=np.int64)
+    length[FMT_TYPE] = FMT_LEN
     for t, lst in cand_fmt.items():
-        for p, lnt, r in lst:
-            if p not in on_fmt:
+        if t != FMT_TYPE and lst[0].length >= 3:
+            length[t] = lst[0].length
+    return length
+
+
+def _chain_formats(cand_fmt: dict[int, list[_FmtCandidate]], on_chain: set[int],
+                   length: np.ndarray) -> dict[int, Format]:
+    """The formats of the FMT records that lie on the message chain (a later one of a type replaces an
+    earlier one's columns; its length stays the first)."""
+    formats: dict[int, Format] = {FMT_TYPE: Format(FMT_TYPE, "FMT", FMT_LEN, FMT_FORMAT, list(FMT_COLUMNS),
+                                                   _dtype(FMT_FORMAT, FMT_COLUMNS))}
+    for t, lst in cand_fmt.items():
+        if t == FMT_TYPE:
+            continue
+        for c in lst:
+            if c.pos not in on_chain:
                 continue
+            r = c.record
             name, fmt = _text(r["Name"]), _text(r["Format"])
             cols = [c for c in _text(r["Columns"]).split(",")] if _text(r["Columns"]) else []
-            if t == FMT_TYPE:
-                continue
-            formats[t] = Format(t, name, int(length[t]) if length[t] > 0 else lnt, fmt, cols, _dtype(fmt, cols))
+            formats[t] = Format(t, name, int(length[t]) if length[t] > 0 else c.length, fmt, cols,
+                                _dtype(fmt, cols))
+    return formats
+
+
+def _offsets_by_type(pos: np.ndarray, typ: np.ndarray) -> dict[int, np.ndarray]:
+    """Header offsets of the chain's messages per type, each in file order."""
     order = np.argsort(typ, kind="stable")
     bounds = np.flatnonzero(np.diff(typ[order])) + 1
     offsets = {}
     for grp in np.split(order, bounds) if order.shape[0] else []:
         offsets[int(typ[grp[0]])] = pos[grp]
-    log = DataFlashLog(source, buf, formats, offsets, bad_bytes=bad_bytes)
-    if pos.shape[0] and pos[-1] + length[typ[-1]] > n:  # the file ends inside its last message
-        log.truncated = int(n - pos[-1])
-    log.names = {f.name: t for t, f in formats.items()}
-    return log
+    return offsets
 
 
 def _headers(buf: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
@@ -346,263 +361,3 @@ def _orbit(succ: np.ndarray, known: np.ndarray, block: int = 1 << 18) -> tuple[n
 
 def open_log(path) -> DataFlashLog:
     return index(read_bytes(path), str(path))
-
-
-# --------------------------------------------------------------------------------------------------
-# IMU streams
-
-def _imu_arrays(log: DataFlashLog, name: str):
-    rec = log.records(name)
-    cols = log.columns(name)
-    t = log.time_s(name, rec)
-    gyro = np.column_stack([log.values(name, c, rec) for c in ("GyrX", "GyrY", "GyrZ")])
-    accel = np.column_stack([log.values(name, c, rec) for c in ("AccX", "AccY", "AccZ")])
-    tcol = "T" if "T" in cols else ("Temp" if "Temp" in cols else None)
-    temp = log.values(name, tcol, rec) if tcol else None
-    inst = _ints(log.values(name, "I", rec)) if "I" in cols else None
-    res = 1e-6 if "TimeUS" in cols else 1e-3
-    extra = {}
-    for short, names in (("gyro_errors", ("EG", "ErrG")), ("accel_errors", ("EA", "ErrA")),
-                         ("gyro_healthy", ("GH",)), ("accel_healthy", ("AH",)), ("gyro_rate_hz", ("GHz",)),
-                         ("accel_rate_hz", ("AHz",))):
-        c = next((c for c in names if c in cols), None)
-        if c:
-            extra[short] = log.values(name, c, rec)
-    return t, gyro, accel, temp, inst, res, extra
-
-
-def imu_raw_streams(log: DataFlashLog):
-    """RawStreams of every IMU instance (all three layouts) plus per-instance extras (errors, health)."""
-    from companion.samples import StreamKey
-    from companion.sources.decode import RawStream
-
-    out, extras = [], {}
-    for name, default_inst in (("IMU", 0), ("IMU2", 1), ("IMU3", 2)):
-        if not log.has(name, "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"):
-            continue
-        if not {"TimeUS", "TimeMS"} & set(log.columns(name)):
-            log.damaged.setdefault(name, "no TimeUS/TimeMS column")
-            continue
-        t, gyro, accel, temp, inst, res, extra = _imu_arrays(log, name)
-        if inst is None:
-            inst = np.full(t.shape[0], default_inst, dtype=np.int64)
-        for k in np.unique(inst):
-            sel = inst == k
-            key = StreamKey(0, 0, "IMU", int(k))
-            out.append(RawStream(key, t[sel], gyro[sel], accel[sel], None if temp is None else temp[sel],
-                                 True, None, None, res))
-            extras[key] = {k2: v[sel] for k2, v in extra.items()}
-    return out, extras
-
-
-#: INS_LOG_BAT_OPT bits: 1 the batches are sampled after the filters; 2 before and after, the post-filter
-#: batches written with the instance plus the number of gyros (a 2-IMU log's instance 2 is IMU 0 filtered)
-BAT_OPT_POST, BAT_OPT_PRE_POST = 2, 4
-
-
-def isb_name(is_gyro: bool, instance: int, opt: int, n_imu: int) -> tuple[str, int]:
-    """(message, instance) of a batch: ``ISB_GYRO``/``ISB_ACCEL`` of the raw sensor, ``..._POST`` after the
-    filters (``opt``: INS_LOG_BAT_OPT; with pre and post, an instance from ``n_imu`` on is the post-filter
-    batch of instance - ``n_imu``)."""
-    post = bool(opt & BAT_OPT_POST) or (bool(opt & BAT_OPT_PRE_POST) and instance >= n_imu)
-    if opt & BAT_OPT_PRE_POST and instance >= n_imu:
-        instance -= n_imu
-    return ("ISB_GYRO" if is_gyro else "ISB_ACCEL") + ("_POST" if post else ""), instance
-
-
-def bat_opt(params: dict | None) -> int:
-    """INS_LOG_BAT_OPT from the log's parameters; 0 where absent or damaged (nan, inf, not a number)."""
-    try:
-        return int(float((params or {}).get("INS_LOG_BAT_OPT", 0)))
-    except (TypeError, ValueError, OverflowError):
-        return 0
-
-
-def isb_raw_streams(log: DataFlashLog, params: dict | None = None, imu_instances: int | None = None):
-    """Batch-sampler bursts (ISBH/ISBD) as one RawStream per (sensor type, instance). With ``params``
-    (the log's PARM) the post-filter batches (``INS_LOG_BAT_OPT``) are ``ISB_GYRO_POST``/``ISB_ACCEL_POST``
-    of their sensor's instance (``imu_instances``: the number of IMUs, for the pre+post numbering)."""
-    from companion.samples import StreamKey
-    from companion.sources.decode import RawStream
-
-    if not (log.has("ISBH", "N", "type", "instance", "mul", "smp_cnt", "SampleUS", "smp_rate")
-            and log.has("ISBD", "N", "seqno", "x", "y", "z")):
-        return [], []
-    hdr = log.records("ISBH")
-    dat = log.records("ISBD")
-    if any(dat.dtype[c].shape != (32,) for c in "xyz"):
-        log.damaged.setdefault("ISBD", f"x/y/z are not int16[32] ({dat.shape[0]} messages skipped)")
-        return [], []
-    hv = {c: log.values("ISBH", c, hdr) for c in ("N", "type", "instance", "mul", "smp_cnt", "SampleUS",
-                                                  "smp_rate")}
-    hN = _ints(hv["N"])
-    dN, dseq = _ints(log.values("ISBD", "N", dat)), _ints(log.values("ISBD", "seqno", dat))
-    # the most recent header with that sequence number (N wraps at 65536)
-    hpos = log.offsets[log.names["ISBH"]][:hdr.shape[0]]
-    dpos = log.offsets[log.names["ISBD"]][:dat.shape[0]]
-    out, bursts = [], []
-    per: dict = {}
-    for j in range(hdr.shape[0]):
-        nxt_h = hpos[j + 1] if j + 1 < hdr.shape[0] else np.iinfo(np.int64).max
-        sel = (dpos > hpos[j]) & (dpos < nxt_h) & (dN == hN[j])
-        d = dat[sel]
-        if d.shape[0] == 0:
-            continue
-        o = np.argsort(dseq[sel], kind="stable")
-        d, seq = d[o], dseq[sel][o]
-        vals = np.stack([d["x"].reshape(-1), d["y"].reshape(-1), d["z"].reshape(-1)], axis=1).astype(np.float64)
-        idx = (seq[:, None] * 32 + np.arange(32)).reshape(-1)
-        cnt = int(_ints(hv["smp_cnt"][j:j + 1])[0])
-        keep = idx < cnt if cnt > 0 else np.ones(idx.shape[0], bool)
-        vals, idx = vals[keep], idx[keep]
-        mul = float(hv["mul"][j])
-        mul = mul if np.isfinite(mul) and mul != 0 else 1.0
-        rate = float(hv["smp_rate"][j])
-        t0 = float(hv["SampleUS"][j]) * 1e-6
-        t = t0 + idx / rate if rate > 0 and np.isfinite(rate) else np.full(idx.shape[0], np.nan)
-        key = (int(_ints(hv["type"][j:j + 1])[0]), int(_ints(hv["instance"][j:j + 1])[0]))
-        per.setdefault(key, []).append((t, vals / mul, mul))
-        bursts.append({"type": key[0], "instance": key[1], "samples": int(idx.shape[0]), "expected": cnt,
-                       "rate_hz": rate, "t0": t0, "mul": mul})
-    opt = bat_opt(params)
-    n_imu = imu_instances or (max(i for _, i in per) // 2 + 1 if per else 1)
-    for (typ, inst), parts in sorted(per.items()):
-        t = np.concatenate([p[0] for p in parts])
-        v = np.concatenate([p[1] for p in parts])
-        nan = np.full_like(v, np.nan)
-        is_gyro = typ == 1
-        key = StreamKey(0, 0, *isb_name(is_gyro, inst, opt, n_imu))
-        lsb = 1.0 / parts[0][2]
-        out.append(RawStream(key, t, v if is_gyro else nan, nan if is_gyro else v, None, True,
-                             lsb if is_gyro else None, None if is_gyro else lsb, 1e-6))
-    return out, bursts
-
-
-# --------------------------------------------------------------------------------------------------
-# metadata
-
-def log_metadata(log: DataFlashLog) -> dict:
-    """Parameters, armed transitions, modes, texts and errors of the log (times in s since boot)."""
-    meta: dict = {"params": {}, "armed": [], "modes": [], "messages": [], "errors": []}
-    if log.has("PARM", "Name", "Value"):
-        rec = log.records("PARM")
-        for nm, v in zip(log.strings("PARM", "Name", rec), log.values("PARM", "Value", rec)):
-            meta["params"][nm] = float(v)
-    trans = []
-    if log.has("EV", "Id"):
-        rec = log.records("EV")
-        t = log.time_s("EV", rec)
-        for ti, i in zip(t, _ints(log.values("EV", "Id", rec))):
-            if i in (EV_ARMED, EV_DISARMED):
-                trans.append((float(ti), bool(i == EV_ARMED)))
-    if log.has("ARM", "ArmState"):
-        rec = log.records("ARM")
-        t = log.time_s("ARM", rec)
-        for ti, s in zip(t, _ints(log.values("ARM", "ArmState", rec))):
-            trans.append((float(ti), bool(s)))
-    trans.sort()
-    dedup = []
-    for ti, s in trans:
-        if not dedup or dedup[-1][1] != s:
-            dedup.append((ti, s))
-    meta["armed"] = dedup
-    meta["has_armed_state"] = bool(log.has("EV") or log.has("ARM"))
-    mode_col = next((c for c in ("ModeNum", "Mode") if c in log.columns("MODE")), None)
-    if mode_col and log.has("MODE", mode_col):
-        rec = log.records("MODE")
-        t = log.time_s("MODE", rec)
-        num = _ints(log.values("MODE", mode_col, rec))
-        meta["modes"] = [(float(a), int(b)) for a, b in zip(t, num)]
-    if log.has("MSG", "Message"):
-        rec = log.records("MSG")
-        t = log.time_s("MSG", rec)
-        meta["messages"] = [(float(a), s) for a, s in zip(t, log.strings("MSG", "Message", rec))]
-    if log.has("ERR", "Subsys", "ECode"):
-        rec = log.records("ERR")
-        t = log.time_s("ERR", rec)
-        meta["errors"] = [(float(a), int(b), int(c)) for a, b, c in
-                          zip(t, _ints(log.values("ERR", "Subsys", rec)), _ints(log.values("ERR", "ECode", rec)))]
-    return meta
-
-
-def gyro_filter_hz(params: dict, instance: int = 0) -> float | None:
-    """The gyro low-pass cut-off of the logged IMU data (INS_GYRO_FILTER; 0 or absent: unknown)."""
-    v = params.get("INS_GYRO_FILTER")
-    return float(v) if v else None
-
-
-# --------------------------------------------------------------------------------------------------
-# identity: which board flew the log, and when
-
-#: ArduPilot's banner line with the MCU's unique id, sent at boot and logged as MSG, e.g.
-#: "Pixhawk4 0047002B 34385105 36363539" (board name, then 96 bits as three 32-bit hex words)
-BOARD_BANNER = re.compile(r"^(\S+) ([0-9A-Fa-f]{8}) ([0-9A-Fa-f]{8}) ([0-9A-Fa-f]{8})\s*$")
-GPS_EPOCH_UNIX = 315964800.0  # 1980-01-06 00:00:00 UTC
-#: GPS - UTC leap seconds from these unix times on (a fleet's start times need seconds, not better)
-GPS_LEAP_S = ((1483228800.0, 18.0), (1435708800.0, 17.0), (1341100800.0, 16.0), (1230768000.0, 15.0),
-              (0.0, 14.0))
-GPS_FIX_3D = 3
-
-
-def board_from_messages(messages) -> tuple[str | None, str | None]:
-    """(board id as 24 lowercase hex digits, board name) from the boot banner among MSG texts."""
-    for _, text in messages:
-        m = BOARD_BANNER.match(text.strip())
-        if m and m.group(1) not in ("Frame:", "PX4:", "ChibiOS:", "NuttX:"):
-            return "".join(m.group(i) for i in (2, 3, 4)).lower(), m.group(1)
-    return None, None
-
-
-def utc_at_boot(log: DataFlashLog) -> float | None:
-    """Unix time at the autopilot's boot from the first GPS record with a 3D fix (instance 0), or None.
-
-    New logs: ``GWk``/``GMS`` (GPS week, ms of week) with ``TimeUS`` since boot; old ones (3.3): ``Week``/
-    ``TimeMS`` (ms of week) with ``T`` (ms since boot)."""
-    if not log.has("GPS"):
-        return None
-    cols = log.columns("GPS")
-    rec = log.records("GPS")
-
-    def v(c):
-        return log.values("GPS", c, rec)
-
-    if {"GWk", "GMS", "TimeUS"} <= set(cols):
-        wk, ms, boot = v("GWk"), v("GMS"), v("TimeUS") * 1e-6
-    elif {"Week", "TimeMS", "T"} <= set(cols):
-        wk, ms, boot = v("Week"), v("TimeMS"), v("T") * 1e-3
-    else:
-        return None
-    ok = (wk > 0) & (boot > 0) & np.isfinite(ms)
-    if "Status" in cols:
-        ok &= v("Status") >= GPS_FIX_3D
-    if "I" in cols:
-        ok &= v("I") == 0
-    i = np.flatnonzero(ok)
-    if not i.size:
-        return None
-    k = int(i[0])
-    gps = GPS_EPOCH_UNIX + float(wk[k]) * 604800.0 + float(ms[k]) * 1e-3
-    if not gps >= 0.0:
-        return None
-    leap = next(v for t0, v in GPS_LEAP_S if gps >= t0)
-    return gps - leap - float(boot[k])
-
-
-def log_identity(log: DataFlashLog, meta: dict) -> dict:
-    """``{"board_id", "board", "imu_ids": {instance: INS_GYRn_ID}, "start_time": unix s of the first IMU
-    sample or None}`` (see :mod:`companion.fleet.identity`)."""
-    board_id, board = board_from_messages(meta.get("messages") or [])
-    params = meta.get("params") or {}
-    ids = {}
-    from companion.sources.messages import ARDUPILOT_GYRO_ID_PARAMS
-
-    for name, inst in ARDUPILOT_GYRO_ID_PARAMS.items():
-        v = params.get(name)
-        if v is not None and np.isfinite(v) and v != 0:
-            ids[inst] = int(round(v))
-    start = None
-    boot = utc_at_boot(log)
-    if boot is not None:
-        t0 = log.time_s("IMU")[:1] if log.has("IMU") else np.zeros(1)
-        start = boot + (float(t0[0]) if t0.size and np.isfinite(t0[0]) else 0.0)
-    return {"board_id": board_id, "board": board, "imu_ids": ids, "start_time": start}

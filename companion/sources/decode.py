@@ -26,10 +26,13 @@ from companion.errors import CompanionError
 from companion.samples import StreamKey
 from companion.sources import messages as M
 
-G0 = 9.80665
+G0 = 9.80665  #: m/s^2 per g (standard gravity)
+#: SI per int16 count of RAW_IMU/SCALED_IMU: ArduPilot sends mrad/s and mG
 DEFAULT_SCALES = {"gyro_scale": 1e-3, "accel_scale": G0 * 1e-3}
+#: s per timestamp count: time_usec (RAW_IMU, HIGHRES_IMU) or time_boot_ms (SCALED_IMU*); a CSV has no fixed one
 TIME_RESOLUTION = {"RAW_IMU": 1e-6, "HIGHRES_IMU": 1e-6, "SCALED_IMU": 1e-3, "SCALED_IMU2": 1e-3,
                    "SCALED_IMU3": 1e-3, "CSV": 0.0}
+#: messages that may carry a compass only (accel and gyro all zero), not an IMU
 COMPASS_ONLY_CAN = ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3")
 _MATCH_KEYS = ("message", "sysid", "compid", "instance")
 

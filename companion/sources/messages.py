@@ -24,12 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAGIC_V1 = 0xFE
-MAGIC_V2 = 0xFD
-HEADER_V1 = 6
-HEADER_V2 = 10
-SIGNATURE_LEN = 13
-IFLAG_SIGNED = 0x01
+MAGIC_V1 = 0xFE  #: start byte of a MAVLink 1 frame
+MAGIC_V2 = 0xFD  #: start byte of a MAVLink 2 frame
+HEADER_V1 = 6  #: header bytes of a MAVLink 1 frame, magic included
+HEADER_V2 = 10  #: header bytes of a MAVLink 2 frame, magic included
+SIGNATURE_LEN = 13  #: bytes a MAVLink 2 signature adds after the CRC
+IFLAG_SIGNED = 0x01  #: the incompat flag of a signed MAVLink 2 frame
 
 
 @dataclass(frozen=True)
@@ -84,6 +84,7 @@ LAYOUTS = dict(IMU_LAYOUTS, HEARTBEAT=HEARTBEAT)
 #: Fixed instance number of the messages without an ``id`` field (SCALED_IMU2 is the 2nd IMU, ...).
 FIXED_INSTANCE = {"SCALED_IMU": 0, "SCALED_IMU2": 1, "SCALED_IMU3": 2}
 
+#: the HEARTBEAT a simulated vehicle sends: a quadrotor on ArduPilot, standing by
 MAV_TYPE_QUADROTOR = 2
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_STATE_STANDBY = 3

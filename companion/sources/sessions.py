@@ -3,8 +3,8 @@
 A log that spans autopilot reboots (a ground station's tlog across a power cycle; ULog or DataFlash files
 written across a restart) has message times that start again at each boot. Every stream keeps its samples in
 file order, split into segments at the resets (:mod:`companion.sources.timing`), but the still selection,
-the armed intervals and ``--start/--end`` work on one time axis: with the times of three sessions overlapping,
-a public PX4 log's record "ran" from 5488 to 5232 s and ``analyze`` refused it.
+the armed intervals and ``--start/--end`` work on one time axis: with the times of several sessions
+overlapping, a record would run backwards (its last sample before its first) and could not be analysed.
 
 :func:`join_sessions` shifts every session after the first so that it starts ``SESSION_GAP_S`` after the
 previous one ended (the gap keeps them separate segments and the still selection's guards apart), the same

@@ -26,6 +26,7 @@ import numpy as np
 from companion.samples import TimingReport
 from companion.timebase import MS_STAMPED, period_of, stamp_resolution  # noqa: F401 (re-export)
 
+#: a gap longer than this many periods splits the segment (Allan analysis needs contiguous samples)
 SPLIT_PERIODS = 10.0
 
 
@@ -94,6 +95,54 @@ def classify_steps(t, newest: float | None, rules: StepRules) -> np.ndarray:
     return kind
 
 
+def _reset_starts(t: np.ndarray, reset_s: float) -> list[int]:
+    """Indices where a reset segment starts (0 first): a timestamp more than ``reset_s`` behind the running
+    maximum. The search windows double in size, so the total work stays O(n)."""
+    n = t.shape[0]
+    starts = [0]
+    s, w = 0, 1024
+    while s < n - 1:
+        e = min(n, s + w)
+        runmax = np.maximum.accumulate(t[s:e])
+        jump = np.flatnonzero(t[s + 1:e] < runmax[:-1] - reset_s)
+        if jump.shape[0]:
+            s += 1 + int(jump[0])
+            starts.append(s)
+            w = 1024
+        elif e == n:
+            break
+        else:
+            w *= 2
+    return starts
+
+
+def _drop_steps_back(t: np.ndarray, starts: list[int], rep: TimingReport) -> np.ndarray:
+    """Mask of the samples kept: per reset segment, duplicates and small backward steps (behind the newest
+    timestamp so far) are dropped and counted in ``rep``."""
+    n = t.shape[0]
+    keep = np.ones(n, dtype=bool)
+    bounds = starts + [n]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        seg = t[a:b]
+        prev_max = np.maximum.accumulate(seg)[:-1]
+        later = seg[1:]
+        dup = later == prev_max
+        back = later < prev_max
+        rep.duplicates += int(dup.sum())
+        rep.backwards += int(back.sum())
+        keep[a + 1:b] = ~(dup | back)
+    return keep
+
+
+def _period(di: np.ndarray, resolution: float, rate_hz: float | None) -> float:
+    """The sampling period from the kept intervals that do not cross a reset (``rate_hz`` forces it)."""
+    if rate_hz:
+        return 1.0 / rate_hz
+    if di.shape[0] and np.any(di > 0):
+        return period_of(di, resolution)
+    return float("nan")
+
+
 def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT_PERIODS,
             rate_hz: float | None = None) -> tuple[np.ndarray, list[tuple[int, int]], TimingReport]:
     """Timing of arrival-ordered timestamps ``t`` (s).
@@ -107,57 +156,26 @@ def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT
     rep = TimingReport()
     if n == 0:
         return np.zeros(0, dtype=bool), [], rep
-    # 1. resets: a jump far behind the running maximum (threshold needs a period estimate)
+    # 1. resets: a jump far behind the running maximum (the threshold needs a first period estimate)
     d = np.diff(t)
     pos = d[d > 0]
     p0 = float(np.median(pos)) if pos.shape[0] else 1.0
     if rate_hz:
         p0 = 1.0 / rate_hz
-    reset_s = step_rules(p0, resolution, split_periods).reset_s
-    starts = [0]
-    s, w = 0, 1024
-    while s < n - 1:  # search windows double in size, so the total work stays O(n)
-        e = min(n, s + w)
-        runmax = np.maximum.accumulate(t[s:e])
-        jump = np.flatnonzero(t[s + 1:e] < runmax[:-1] - reset_s)
-        if jump.shape[0]:
-            s += 1 + int(jump[0])
-            starts.append(s)
-            w = 1024
-        elif e == n:
-            break
-        else:
-            w *= 2
+    starts = _reset_starts(t, step_rules(p0, resolution, split_periods).reset_s)
     rep.resets = len(starts) - 1
     # 2. duplicates and small backward steps, per reset segment
-    keep = np.ones(n, dtype=bool)
-    bounds = starts + [n]
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        seg = t[a:b]
-        prev_max = np.maximum.accumulate(seg)[:-1]
-        later = seg[1:]
-        dup = later == prev_max
-        back = later < prev_max
-        rep.duplicates += int(dup.sum())
-        rep.backwards += int(back.sum())
-        keep[a + 1:b] = ~(dup | back)
-    # indices of reset starts among kept samples
+    keep = _drop_steps_back(t, starts, rep)
     kept_idx = np.cumsum(keep) - 1
-    reset_kept = [int(kept_idx[s]) for s in starts]
+    reset_kept = [int(kept_idx[s]) for s in starts]  # reset starts among the kept samples
     tk = t[keep]
     nk = tk.shape[0]
     dk = np.diff(tk)
     inside = np.ones(max(nk - 1, 0), dtype=bool)  # intervals that do not cross a reset
     for s in reset_kept[1:]:
         inside[s - 1] = False
-    di = dk[inside]
     # 3. rate
-    if rate_hz:
-        period = 1.0 / rate_hz
-    elif di.shape[0] and np.any(di > 0):
-        period = period_of(di, resolution)
-    else:
-        period = float("nan")
+    period = _period(dk[inside], resolution, rate_hz)
     rep.rate_hz = 1.0 / period if period and np.isfinite(period) and period > 0 else float("nan")
     # 4. gaps and splits
     if np.isfinite(period):
@@ -175,4 +193,3 @@ def analyse(t: np.ndarray, resolution: float = 0.0, split_periods: float = SPLIT
     segments = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
     rep.duration_s = float(sum(tk[b - 1] - tk[a] for a, b in segments))
     return keep, segments, rep
-

@@ -109,13 +109,21 @@ def _crc_groups(buf, p, hl, ln, extra) -> np.ndarray:
     return ok
 
 
-def scan(data) -> FrameIndex:
-    """Index every intact frame of tlog bytes ``data`` (bytes, bytearray, memoryview or uint8 array)."""
-    buf = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data
+@dataclass
+class _Candidates:
+    """Plausible frame starts (known id, the frame fits in the file), one entry per candidate."""
+
+    p: np.ndarray  # offset of the magic byte
+    hl: np.ndarray  # header length
+    ln: np.ndarray  # payload length
+    msgid: np.ndarray
+    flen: np.ndarray  # whole frame length (header, payload, CRC, signature)
+    extra: np.ndarray  # CRC_EXTRA of the id
+
+
+def _candidates(buf: np.ndarray, bufp: np.ndarray) -> _Candidates:
+    """Steps 1-2 of the module docstring: every magic byte whose implied frame is plausible."""
     n = buf.shape[0]
-    # a zero-padded copy: header and "next record" lookups never need bounds checks
-    bufp = np.zeros(n + 300, dtype=np.uint8)
-    bufp[:n] = buf
     p = np.flatnonzero(buf[8:] >= M.MAGIC_V2) + 8 if n > 8 else np.zeros(0, np.int64)
     magic = buf[p]
     keep = magic != 0xFF  # 0xFD (v2) or 0xFE (v1)
@@ -130,15 +138,20 @@ def scan(data) -> FrameIndex:
     flen = hl + ln + 2 + M.SIGNATURE_LEN * (incompat & M.IFLAG_SIGNED)
     extra = _EXTRA_PADDED[np.minimum(msgid, M.MAX_MSGID + 1)]
     plausible = (p + flen <= n) & (extra >= 0) & (incompat <= M.IFLAG_SIGNED)
-    p, hl, ln, msgid, flen, extra = (a[plausible] for a in (p, hl, ln, msgid, flen, extra))
+    return _Candidates(*(a[plausible] for a in (p, hl, ln, msgid, flen, extra)))
 
+
+def _crc_passes(buf: np.ndarray, bufp: np.ndarray, c: _Candidates) -> tuple[np.ndarray, np.ndarray]:
+    """Step 3: (CRC valid, skipped: inside a pass-1 frame's record, never checked) per candidate."""
+    n = buf.shape[0]
+    p, flen = c.p, c.flen
     # pass 1: candidates followed by the next record's magic byte (or the end of the file): the chain
     nxt = p + flen + 8
     after = bufp[np.minimum(nxt, n + 299)]
     chain = (p + flen == n) | ((nxt < n) & (after >= M.MAGIC_V2) & (after <= M.MAGIC_V1))
     ok = np.zeros(p.shape[0], dtype=bool)
     first = np.flatnonzero(chain)
-    ok[first] = _crc_groups(buf, p[first], hl[first], ln[first], extra[first])
+    ok[first] = _crc_groups(buf, p[first], c.hl[first], c.ln[first], c.extra[first])
     # pass 2: the others (frames before garbage, garbage itself), unless inside a pass-1 frame's record
     rest = np.flatnonzero(~chain)
     skipped = np.zeros(p.shape[0], dtype=bool)
@@ -149,18 +162,20 @@ def scan(data) -> FrameIndex:
         inside = (j >= 0) & (p[rest] - 8 < cm_end[np.maximum(j, 0)])
         skipped[rest[inside]] = True
         rest = rest[~inside]
-    ok[rest] = _crc_groups(buf, p[rest], hl[rest], ln[rest], extra[rest])
+    ok[rest] = _crc_groups(buf, p[rest], c.hl[rest], c.ln[rest], c.extra[rest])
+    return ok, skipped
 
-    # overlap resolution among CRC-valid candidates (already in file order)
-    vp, vfl = p[ok], flen[ok]
-    start, end = vp - 8, vp + vfl
-    keep = np.ones(vp.shape[0], dtype=bool)
-    if vp.shape[0] > 1:
+
+def _no_overlap(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Step 4: which of the CRC-valid records ``[start, end)`` (file order) are kept: a record that starts
+    before the end of the last kept one is dropped. Runs that overlap nothing are kept in bulk."""
+    keep = np.ones(start.shape[0], dtype=bool)
+    if start.shape[0] > 1:
         prev_max = np.maximum.accumulate(end)[:-1]
         clean = np.r_[True, start[1:] >= prev_max]  # starts a run that overlaps nothing before it
         if not clean.all():
             run_start = np.flatnonzero(clean)
-            sizes = np.diff(np.r_[run_start, vp.shape[0]])
+            sizes = np.diff(np.r_[run_start, start.shape[0]])
             for r in np.flatnonzero(sizes > 1):
                 last_end = -1
                 for i in range(run_start[r], run_start[r] + sizes[r]):
@@ -168,12 +183,25 @@ def scan(data) -> FrameIndex:
                         last_end = end[i]
                     else:
                         keep[i] = False
+    return keep
+
+
+def scan(data) -> FrameIndex:
+    """Index every intact frame of tlog bytes ``data`` (bytes, bytearray, memoryview or uint8 array)."""
+    buf = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data
+    n = buf.shape[0]
+    # a zero-padded copy: header and "next record" lookups never need bounds checks
+    bufp = np.zeros(n + 300, dtype=np.uint8)
+    bufp[:n] = buf
+    c = _candidates(buf, bufp)
+    ok, skipped = _crc_passes(buf, bufp, c)
+    keep = _no_overlap(c.p[ok] - 8, c.p[ok] + c.flen[ok])
     acc = np.flatnonzero(ok)[keep]
-    pos, hlen, length, mid = p[acc], hl[acc], ln[acc], msgid[acc]
-    acc_start, acc_end = pos - 8, pos + flen[acc]
+    pos, hlen, length, mid = c.p[acc], c.hl[acc], c.ln[acc], c.msgid[acc]
+    acc_start, acc_end = pos - 8, pos + c.flen[acc]
 
     # bad frames: plausible headers failing the CRC that are not inside an accepted record
-    bad = p[~ok & ~skipped]
+    bad = c.p[~ok & ~skipped]
     if bad.shape[0] and pos.shape[0]:
         j = np.searchsorted(acc_start, bad, side="right") - 1
         inside = (j >= 0) & (bad < acc_end[np.maximum(j, 0)])
@@ -186,10 +214,10 @@ def scan(data) -> FrameIndex:
     sysid = np.where(v2a, buf[pos + 5], buf[pos + 3])
     compid = np.where(v2a, buf[pos + 6], buf[pos + 4])
     ids, cnt = np.unique(mid, return_counts=True)
-    counts = {M.MSG_NAMES.get(int(i), str(int(i))): int(c) for i, c in zip(ids, cnt)}
+    counts = {M.MSG_NAMES.get(int(i), str(int(i))): int(k) for i, k in zip(ids, cnt)}
     return FrameIndex(buf=buf, pos=pos, header_len=hlen, length=length, msgid=mid, sysid=sysid,
                       compid=compid, stamp_us=stamp_us, bad_bytes=n - covered,
-                      bad_frames=int(bad.shape[0]), candidates=int(p.shape[0]), counts=counts)
+                      bad_frames=int(bad.shape[0]), candidates=int(c.p.shape[0]), counts=counts)
 
 
 def read_file(path) -> bytes:
@@ -216,8 +244,8 @@ def read_file(path) -> bytes:
 # --------------------------------------------------------------------------------------------------
 # identity: which board sent the log, its gyro ids, and when it started
 
-AUTOPILOT_VERSION_ID = 148
-PARAM_VALUE_ID = 22
+AUTOPILOT_VERSION_ID = 148  #: MAVLink id of AUTOPILOT_VERSION (its ``uid`` names the board)
+PARAM_VALUE_ID = 22  #: MAVLink id of PARAM_VALUE (the gyro device ids)
 #: ArduPilot gyro device-id parameters and the IMU instance each names
 GYRO_ID_PARAMS = M.ARDUPILOT_GYRO_ID_PARAMS
 _UNIX_US = (1e15, 4.1e15)  # 2001..2099 in unix microseconds: a plausible tlog record stamp
@@ -272,13 +300,13 @@ def param_values(idx: FrameIndex) -> dict[str, float]:
 # armed state: the vehicle's HEARTBEATs, on its IMU messages' clock
 
 HEARTBEAT_ID = M.HEARTBEAT.msgid
-MAV_MODE_FLAG_SAFETY_ARMED = 128
-MAV_AUTOPILOT_INVALID = 8
+MAV_MODE_FLAG_SAFETY_ARMED = 128  #: the armed bit of HEARTBEAT.base_mode
+MAV_AUTOPILOT_INVALID = 8  #: HEARTBEAT.autopilot of a component that is not a flight controller
 #: HEARTBEAT types of components that are not a vehicle's autopilot (MAV_TYPE: GCS, onboard controller,
 #: gimbal, ADS-B, camera, charging station, FLARM, servo, OpenDroneID, battery, parachute, log, OSD, IMU,
 #: GPS, winch, illuminator, gripper). A ground station's HEARTBEAT may carry the armed bit (QGC sends
-#: base_mode 192 from sysid 255) and so may a companion computer's (type 18, base_mode 128 on a real
-#: ArduSub tlog), neither of which says anything about the vehicle.
+#: base_mode 192 from sysid 255) and so may a companion computer's (type 18, base_mode 128), neither of
+#: which says anything about the vehicle.
 NOT_AUTOPILOT_TYPES = frozenset((6, 18, 26, 27, 30, 31, 32, 33, 34, 36, 37, 38, 39, 40, 41, 42, 44, 48))
 
 
@@ -362,12 +390,11 @@ def armed_state(idx: FrameIndex, imu_keys) -> dict:
         by_sys.setdefault(int(key.sysid), []).append(key)
     per_sys, sources = [], []
     for sysid, keys in sorted(by_sys.items()):
-        clocks = [(k, *imu_clock(idx, k)) for k in keys]
-        ref, cf, ct = max(clocks, key=lambda c: c[1].shape[0])
-        frames, armed, comp = vehicle_heartbeats(idx, sysid, ref.compid)
+        ref = max((_ImuClock(k, *imu_clock(idx, k)) for k in keys), key=lambda c: c.frames.shape[0])
+        frames, armed, comp = vehicle_heartbeats(idx, sysid, ref.key.compid)
         if not frames.size:
             continue
-        t = to_message_time(idx, frames, cf, ct)
+        t = to_message_time(idx, frames, ref.frames, ref.t)
         good = np.isfinite(t)
         t, armed = t[good], armed[good]
         if not t.size:
@@ -377,21 +404,33 @@ def armed_state(idx: FrameIndex, imu_keys) -> dict:
         # arming after a reboot can be later on its clock than every event of the session before
         change = np.r_[True, (armed[1:] != armed[:-1]) | (np.diff(t) < -RESET_S)]
         per_sys.append([(float(a), bool(b)) for a, b in zip(t[change], armed[change])])
-        sources.append({"sysid": sysid, "compid": comp, "heartbeats": int(frames.size), "clock": ref.label()})
-    if len(per_sys) <= 1:
-        trans = per_sys[0] if per_sys else []
-    else:  # the union of the systems' armed periods as transitions
-        from companion.sources.still import armed_intervals
-
-        iv = sorted(iv for tr in per_sys for iv in armed_intervals(tr, np.inf))  # inf: armed to the end
-        merged: list = []
-        for a, b in iv:
-            if merged and a <= merged[-1][1]:
-                merged[-1][1] = max(merged[-1][1], b)
-            else:
-                merged.append([a, b])
-        t0 = min(tr[0][0] for tr in per_sys)
-        trans = [(t0, False)] if not merged or merged[0][0] > t0 else []
-        for a, b in merged:
-            trans += [(a, True)] + ([(b, False)] if np.isfinite(b) else [])
+        sources.append({"sysid": sysid, "compid": comp, "heartbeats": int(frames.size), "clock": ref.key.label()})
+    trans = (per_sys[0] if per_sys else []) if len(per_sys) <= 1 else _union_transitions(per_sys)
     return {"armed": trans, "has_armed_state": bool(per_sys), "armed_source": sources}
+
+
+@dataclass
+class _ImuClock:
+    """The frames of one IMU stream and their message times (s): the clock HEARTBEATs are mapped to."""
+
+    key: object  # StreamKey
+    frames: np.ndarray
+    t: np.ndarray
+
+
+def _union_transitions(per_sys: list[list[tuple[float, bool]]]) -> list[tuple[float, bool]]:
+    """The union of several systems' armed periods, as transitions (disarmed at the earliest first state)."""
+    from companion.sources.still import armed_intervals
+
+    iv = sorted(iv for tr in per_sys for iv in armed_intervals(tr, np.inf))  # inf: armed to the end
+    merged: list = []
+    for a, b in iv:
+        if merged and a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    t0 = min(tr[0][0] for tr in per_sys)
+    trans = [(t0, False)] if not merged or merged[0][0] > t0 else []
+    for a, b in merged:
+        trans += [(a, True)] + ([(b, False)] if np.isfinite(b) else [])
+    return trans

@@ -40,7 +40,7 @@ TOPICS = ("sensor_combined", "sensor_gyro", "sensor_accel", "sensor_gyro_fifo", 
           "vehicle_status", "vehicle_gps_position", "sensor_gps")
 #: PX4 gyro device-id parameters (calibration slots) and the IMU instance each names
 GYRO_ID_PARAMS = {"CAL_GYRO0_ID": 0, "CAL_GYRO1_ID": 1, "CAL_GYRO2_ID": 2, "CAL_GYRO3_ID": 3}
-ARMING_STATE_ARMED = 2
+ARMING_STATE_ARMED = 2  #: vehicle_status.arming_state of an armed vehicle
 
 
 class _GuardedFile(io.BytesIO):
