@@ -63,7 +63,7 @@ from companion.estimators.coefficient_fit import fit_theta, fit_theta_gls
 
 #: every effect of the offline model (the candidates of the model selection, companion.estimators.report)
 DEFAULT_EFFECTS = EFFECTS
-_BUF = 2048
+_BUF = 2048  # scalar samples buffered before a block update (the same result as one array update)
 #: coefficient fits: ``model`` (default: model chosen from the data, resolved values and 95 % bounds,
 #: companion.estimators.report), diagonal weighted NNLS, a cached GLS, the offline fit_avar (linear effects only)
 FITS = ("model", "fit_avar", "gls", "diag")
@@ -370,7 +370,7 @@ class OctaveBankEstimator:
         est._S = np.asarray(d["S"], dtype=float)
         if "cnt" in d:
             est._cnt = np.asarray(d["cnt"], dtype=np.int64)
-        else:  # a state saved before the count was kept: one continuous record
+        else:  # a state without the count: one continuous record
             est._cnt = np.maximum(est._n // est._s - (2 * est._P - 1), 0).astype(np.int64)
         est._segs = [int(x) for x in d.get("segments", [])]
         est._seg_base = int(d.get("segments_base", 0))

@@ -15,10 +15,10 @@ from companion.health.block_stats import DD_NU_PER_SAMPLE
 #: degrees of freedom (white second differences; at most REF_MAX_FACTOR x ref_blocks blocks); the other tests
 #: start from the reference of ref_blocks. A level below the truth by a factor persists in every test
 #: against it: the noise test's CUSUM (noise.py) drifts up on a healthy gyro once it is 22 % low. 30 blocks of
-#: 50 Hz hold 756 dof (22 % is 4.3 standard errors), 30 blocks of 10 Hz 123 (1.7): a healthy copter streamed at
-#: 10 Hz was called noisy 5 times in 48 IMU-hours, at 4 Hz 3 times in 18. With 700 dof the 10 Hz level takes
-#: about 3 minutes of rest; a 4 Hz one (5 samples a block, 1.5 dof) stops at the cap, 5 minutes and 370 dof (22 %
-#: is 3 standard errors there).
+#: 50 Hz hold 756 dof (22 % is 4.3 standard errors), 30 blocks of 10 Hz only 123 (1.7: a healthy copter streamed
+#: at 10 Hz would be called noisy a few times a day). With 700 dof the 10 Hz level takes about 3 minutes of rest;
+#: a 4 Hz one (5 samples a block, 1.5 dof) stops at the cap, 5 minutes and 370 dof (22 % is 3 standard errors
+#: there).
 NU_REF_MIN = 700.0
 REF_MAX_FACTOR = 8  #: the noise level's blocks stop at this many times ref_blocks (a slow stream's cap)
 #: A reference block whose v2 is above KNOCK x the median of the reference blocks is not rest: a knock or a
@@ -125,7 +125,7 @@ class AxisRef:
         self._spk, self._samples = int(d.get("spk", 0)), int(d.get("samples", 0))
         if "noise_sigma2" in d:
             self.noise_sigma2, self.noise_nu = _nan(d.get("noise_sigma2")), _nan(d.get("noise_nu"))
-        else:  # saved before the noise level was kept apart: the reference's, as then
+        else:  # a state without a noise level of its own: the reference's
             self.noise_sigma2, self.noise_nu = self.sigma2, self.nu
 
 

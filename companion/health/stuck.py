@@ -76,11 +76,12 @@ from companion.health.limits import equal_codes_llr, p_equal_codes
 R1 = 0.1  # variance collapse the CUSUM is tuned to
 MIN_OUTSIDE = 10  # samples beyond two codes seen at rest before that evidence counts (a quiet gyro never does)
 H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
-H_OFF = 10.0
+H_OFF = 10.0  # nats of evidence for healthy that clear a stuck fault
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
-#: ... a block of fewer samples than this counts as that share of one (a 10 Hz block as a fifth): a float gyro
-#: reading exactly 0.0 at 10 or 25 Hz (a tlog's HIGHRES_IMU, a DataFlash log's 25 Hz IMU) never made a block
-#: of 50 equal values and was never named; now after 100 equal values, 10 s at 10 Hz
+#: samples of one full block of the equal-values rule; a block of fewer counts as that share of one (a 10 Hz
+#: block as a fifth), so that a float
+#: gyro reading exactly 0.0 at 10 or 25 Hz (a tlog's HIGHRES_IMU, a DataFlash log's 25 Hz IMU), whose blocks never
+#: hold 50 equal values, is named after 100 equal values as a fast one is (10 s at 10 Hz)
 EQUAL_MIN_SAMPLES = 50
 VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
 RUN_BLOCKS = 256  # blocks of a run of codes kept (the windows of its evidence end there)
@@ -234,7 +235,7 @@ class StuckDetector:
         every sample in it with probability P^n, P = erf(0.5 / (s sqrt 2)) (s the reference noise in LSB less
         the rounding's 1/12), so a block of one code is worth at most n ln(1 / P) nats. The repeated-codes
         rate p_equal_codes averages over the level; at a code's centre a quiet gyro repeats more (at 10 Hz and
-        0.36 LSB one block in six is a single code, and the uncapped 4 nats per block took a healthy
+        0.36 LSB one block in six is a single code, and uncapped, 4 nats per block would take a healthy
         simulated plane to 15 of the 20 nats in an hour)."""
         s_l = self._noise_lsb(ref)
         if s_l <= 0:
@@ -276,7 +277,7 @@ class StuckDetector:
         # not the second-difference figure v_dd: a gyro low-passed well below its logged rate (the rover: 5 Hz
         # at 50 Hz) spreads its samples over codes far beyond its sample-to-sample noise, and a decimated one
         # with energy near its Nyquist rate (the plane at 10 Hz) less than that figure says (taken from v_dd, a
-        # healthy plane resting on a boundary for a minute was named stuck). The noise s = sqrt(v_b - 1/12)
+        # healthy plane resting on a boundary for a minute would be named stuck). The noise s = sqrt(v_b - 1/12)
         # (Sheppard), less if the axis left two codes at rest less often than s on a boundary would; a
         # correlated block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that
         # changes from sample to sample).
@@ -307,8 +308,8 @@ class StuckDetector:
     def _independent_share(self, ref) -> float:
         """min(1, v_dd / v_b): the share of the still samples' spread that changes from one sample to the next,
         each sample worth that many independent ones. Both from the same still samples (the reference's v2
-        leaves outliers out and comes from the first still blocks only: on the plane's nearly white 10 Hz
-        codes it was 0.79 of their spread, and a fifth of the evidence was lost)."""
+        leaves outliers out and comes from the first still blocks only: on a plane's nearly white 10 Hz
+        codes it is 0.79 of their spread, which would lose a fifth of the evidence)."""
         v_b = self.spread[0] / self.spread[1] if self.spread[1] > 0 else 0.0
         v_dd = self.spread[2] / self.spread[3] / 6.0 if self.spread[3] > 0 else ref.sigma2
         return min(1.0, v_dd / v_b) if v_b > 0 else 1.0
