@@ -72,6 +72,7 @@ from companion.health.code_spread import (_STD_NORMAL, LEVEL_STEP, MAX_CODES, Q_
                                           two_code_llr, two_code_outside)
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 from companion.health.limits import equal_codes_llr, p_equal_codes
+from companion.health.rest_tally import CodeTally, JitterTally, LeadErrors
 
 R1 = 0.1  # variance collapse the CUSUM is tuned to
 MIN_OUTSIDE = 10  # samples beyond two codes seen at rest before that evidence counts (a quiet gyro never does)
@@ -102,17 +103,14 @@ class StuckDetector:
         self.kind = "stuck"  # the kind named for the current fault: "stuck", or "dead" (exactly 0)
         self.detail = ""  # of a "dead" fault: "" (integer message, at rest), "float", "moving"
         self.alive = False  # the axis changed codes in a moving block (a live gyro; its zeros at rest are resolution)
-        self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
-        self.out_n = 0
-        self.spread = [0.0, 0, 0.0, 0]  # the still blocks' sample variance (times samples), samples, their second
-        # differences' squares and count, while healthy
-        self.pend = [0, 0, 0.0, 0, 0.0, 0]  # out_k, out_n, spread of the current run of codes (kept if it ends healthy)
-        self.jitter = [0.0, 0.0, 0]  # successive still blocks: their means' squared differences, the share of
-        self.jpend = [0.0, 0.0, 0]  # their within-block variance in it (LSB^2), pairs; and of the current run
+        self.codes = CodeTally()  # still blocks while healthy: their codes and spread
+        self.pend = CodeTally()  # the same of the current run of codes (kept if it ends healthy)
+        self.jitter = JitterTally()  # successive still blocks' levels while healthy
+        self.jpend = JitterTally()  # the same of the current run
         self.prev_level: tuple[float, float] | None = None  # the last still block's mean and variance of its mean
         self.recent: list[tuple[int, float]] = []  # (block number, mean level in LSB) of the last still blocks kept
         self.lpend: list[tuple[int, float]] = []  # the same of the current run
-        self.lead_err = [0.0, 0, 0.0, 0]  # squared errors of the expected level 1 and PRIOR_LEAD blocks ahead, counts
+        self.lead_err = LeadErrors()  # of the expected level 1 and PRIOR_LEAD blocks ahead
         self.nblk = 0
         # each block's codes (lowest, counts, its healthy likelihoods by pair) since the two-code CUSUM stood at 0
         self.run: list[tuple[int, np.ndarray, dict]] = []
@@ -123,6 +121,11 @@ class StuckDetector:
         self.value = math.nan
         self.lsb = math.inf  # smallest non-zero step seen (the sensor's resolution, or finer)
         self.quantised = False  # a healthy block repeated a code: the data are quantised near the noise level
+
+    @property
+    def spread(self) -> list:
+        """The still blocks' spread: [variance times samples, samples, squared second differences, their count]."""
+        return self.codes.spread
 
     @property
     def state(self) -> int:
@@ -256,13 +259,14 @@ class StuckDetector:
         c = np.round(y / self.lsb)
         k, n = two_code_outside(y, self.lsb), y.shape[0]
         if obs.still and self.state == OK and self.cusum.s == 0.0 and n >= 2:
-            self.pend[0] += k
-            self.pend[1] += n
-            self.pend[2] += float(np.var(y, ddof=1)) * n  # unbiased: 10 samples at 10 Hz gave 0.9 of it
-            self.pend[3] += n
+            pend = self.pend
+            pend.outside += k
+            pend.samples += n
+            pend.var_sum += float(np.var(y, ddof=1)) * n  # unbiased: ddof 0 gives 0.9 of it at 10 samples
+            pend.var_samples += n
             dd = np.diff(y, 2)
-            self.pend[4] += float(np.dot(dd, dd))
-            self.pend[5] += dd.shape[0]
+            pend.dd_sq += float(np.dot(dd, dd))
+            pend.dd_count += dd.shape[0]
             self._learn_jitter(y)
             self.lpend.append((self.nblk, float(np.mean(y)) / self.lsb))
         else:
@@ -270,7 +274,7 @@ class StuckDetector:
             if not obs.still:
                 self.recent = []  # moved: the level before is no expectation
         self.nblk += 1
-        if self.out_k < MIN_OUTSIDE or self.spread[1] == 0:
+        if self.codes.outside < MIN_OUTSIDE or self.codes.var_samples == 0:
             self._end_run(commit=True)
             return None
         # What lands beyond two codes is the samples' own spread at rest (their within-block variance v_b),
@@ -281,9 +285,9 @@ class StuckDetector:
         # (Sheppard), less if the axis left two codes at rest less often than s on a boundary would; a
         # correlated block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that
         # changes from sample to sample).
-        v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
+        v_b = self.codes.var_sum / self.codes.var_samples / (self.lsb * self.lsb)
         s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
-        seen = self.out_k / self.out_n
+        seen = self.codes.outside / self.codes.samples
         if s_b <= 0 or seen <= 0:
             self._end_run(commit=True)
             return 0.0  # a level resting on a boundary could give all of it: no evidence either way
@@ -310,8 +314,9 @@ class StuckDetector:
         each sample worth that many independent ones. Both from the same still samples (the reference's v2
         leaves outliers out and comes from the first still blocks only: on a plane's nearly white 10 Hz
         codes it is 0.79 of their spread, which would lose a fifth of the evidence)."""
-        v_b = self.spread[0] / self.spread[1] if self.spread[1] > 0 else 0.0
-        v_dd = self.spread[2] / self.spread[3] / 6.0 if self.spread[3] > 0 else ref.sigma2
+        c = self.codes
+        v_b = c.var_sum / c.var_samples if c.var_samples > 0 else 0.0
+        v_dd = c.dd_sq / c.dd_count / 6.0 if c.dd_count > 0 else ref.sigma2
         return min(1.0, v_dd / v_b) if v_b > 0 else 1.0
 
     def _learn_jitter(self, y: np.ndarray) -> None:
@@ -322,16 +327,16 @@ class StuckDetector:
         vm = float(np.var(y)) / (self.lsb * self.lsb) / y.shape[0]
         if self.prev_level is not None:
             d = m - self.prev_level[0]
-            self.jpend[0] += min(d * d, 1.0)
-            self.jpend[1] += vm + self.prev_level[1]
-            self.jpend[2] += 1
+            self.jpend.d2 += min(d * d, 1.0)
+            self.jpend.within += vm + self.prev_level[1]
+            self.jpend.pairs += 1
         self.prev_level = (m, vm)
 
     def _jitter_lsb(self, f: float) -> float:
         """The sd (LSB) of a healthy level's own block-to-block jitter at rest: half the mean squared difference
         of successive still blocks' means less what their samples' noise gives (over ``f`` independent samples
         each); 0 until ``JITTER_MIN`` pairs were seen."""
-        d2, within, m = self.jitter
+        d2, within, m = self.jitter.d2, self.jitter.within, self.jitter.pairs
         if m < JITTER_MIN or f <= 0:
             return 0.0
         return math.sqrt(max(0.0, (d2 - within / f) / (2.0 * m)))
@@ -341,7 +346,8 @@ class StuckDetector:
         of the last ``PRIOR_BLOCKS`` still blocks kept before the run, its error as learned at rest 1 and
         ``PRIOR_LEAD`` blocks ahead, linear in between and beyond (wander grows with the lead). None until
         ``JITTER_MIN`` errors of each lead were seen, or while too few still blocks precede the run."""
-        e1, n1, e16, n16 = self.lead_err
+        le = self.lead_err
+        e1, n1, e16, n16 = le.sq1, le.n1, le.sq_lead, le.n_lead
         if n1 < JITTER_MIN or n16 < JITTER_MIN or len(self.recent) < PRIOR_BLOCKS:
             return None
         last = self.recent[-PRIOR_BLOCKS:]
@@ -358,14 +364,14 @@ class StuckDetector:
             r = self.recent
             if len(r) >= PRIOR_BLOCKS and i - r[-1][0] == 1:
                 e = m - sum(x for _, x in r[-PRIOR_BLOCKS:]) / PRIOR_BLOCKS
-                self.lead_err[0] += min(e * e, 1.0)
-                self.lead_err[1] += 1
+                self.lead_err.sq1 += min(e * e, 1.0)
+                self.lead_err.n1 += 1
             k = PRIOR_BLOCKS + PRIOR_LEAD - 1
             if len(r) >= k and i - r[-k][0] == k:
                 old = r[-k:-k + PRIOR_BLOCKS]
                 e = m - sum(x for _, x in old) / PRIOR_BLOCKS
-                self.lead_err[2] += min(e * e, 1.0)
-                self.lead_err[3] += 1
+                self.lead_err.sq_lead += min(e * e, 1.0)
+                self.lead_err.n_lead += 1
             r.append((i, m))
         del self.recent[:-(PRIOR_BLOCKS + PRIOR_LEAD)]
 
@@ -425,16 +431,11 @@ class StuckDetector:
     def _end_run(self, commit: bool) -> None:
         """The run of codes ends: what it taught at rest is kept if it ended healthy (``commit``)."""
         if commit:
-            self.out_k += int(self.pend[0])
-            self.out_n += int(self.pend[1])
-            self.spread[0] += self.pend[2]
-            self.spread[1] += int(self.pend[3])
-            self.spread[2] += self.pend[4]
-            self.spread[3] += int(self.pend[5])
-            self.jitter = [a + b for a, b in zip(self.jitter, self.jpend)]
+            self.codes.add(self.pend)
+            self.jitter.add(self.jpend)
             self._learn_prior(self.lpend)
-        self.pend = [0, 0, 0.0, 0, 0.0, 0]
-        self.jpend = [0.0, 0.0, 0]
+        self.pend = CodeTally()
+        self.jpend = JitterTally()
         self.lpend = []
         self.run = []
 
@@ -442,10 +443,10 @@ class StuckDetector:
         return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
                 "equal_run": self.equal_run,
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
-                "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n],
-                "spread": self.spread, "pend": self.pend,
-                "jitter": self.jitter, "jpend": self.jpend, "recent": self.recent, "lpend": self.lpend,
-                "lead_err": self.lead_err, "nblk": self.nblk,
+                "kind": self.kind, "detail": self.detail, "alive": self.alive,
+                "out": [self.codes.outside, self.codes.samples], "spread": self.codes.spread,
+                "pend": self.pend.to_list(), "jitter": self.jitter.to_list(), "jpend": self.jpend.to_list(),
+                "recent": self.recent, "lpend": self.lpend, "lead_err": self.lead_err.to_list(), "nblk": self.nblk,
                 "run": [[lo, c.tolist()] for lo, c, _ in self.run]}
 
     def load_state_dict(self, d: Mapping) -> None:
@@ -458,18 +459,13 @@ class StuckDetector:
         self.kind = "dead" if d.get("kind") == "dead" else "stuck"
         self.detail = str(d.get("detail", ""))
         self.alive = bool(d.get("alive", False))
-        self.out_k, self.out_n = (int(v) for v in (d.get("out") or [0, 0]))
-        sp = list(d.get("spread") or []) + [0.0, 0, 0.0, 0][len(d.get("spread") or []):]
-        self.spread = [float(sp[0]), int(sp[1]), float(sp[2]), int(sp[3])]
-        pd = list(d.get("pend") or []) + [0, 0, 0.0, 0, 0.0, 0][len(d.get("pend") or []):]
-        self.pend = [int(pd[0]), int(pd[1]), float(pd[2]), int(pd[3]), float(pd[4]), int(pd[5])]
+        self.codes = CodeTally.from_lists(d.get("out"), d.get("spread"))
+        self.pend = CodeTally.from_list(d.get("pend"))
         self.run = [(int(lo), np.asarray(c, dtype=float), {}) for lo, c in (d.get("run") or [])]
-        jt, jp = d.get("jitter") or [0.0, 0.0, 0], d.get("jpend") or [0.0, 0.0, 0]
-        self.jitter = [float(jt[0]), float(jt[1]), int(jt[2])]
-        self.jpend = [float(jp[0]), float(jp[1]), int(jp[2])]
+        self.jitter = JitterTally.from_list(d.get("jitter"))
+        self.jpend = JitterTally.from_list(d.get("jpend"))
         self.prev_level = None
         self.recent = [(int(i), float(m)) for i, m in (d.get("recent") or [])]
         self.lpend = [(int(i), float(m)) for i, m in (d.get("lpend") or [])]
-        le = d.get("lead_err") or [0.0, 0, 0.0, 0]
-        self.lead_err = [float(le[0]), int(le[1]), float(le[2]), int(le[3])]
+        self.lead_err = LeadErrors.from_list(d.get("lead_err"))
         self.nblk = int(d.get("nblk", 0))
