@@ -70,6 +70,7 @@ Errors in any parameter raise :class:`companion.errors.CompanionError` with one 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
@@ -85,6 +86,15 @@ from companion.sim.vehicle_spec import (ACCEL_AXES, FAULT_DEFAULT_SIZE, FAULT_KI
                                         IMU_MESSAGES, MAX_IMUS, Degradation, Fault, ImuSpread, WarmUp)
 
 DEFAULT_ACCEL_NOISE = 0.02  #: m/s^2 per-sample std, so that an accelerometer the model leaves out is not noise-free
+
+
+
+@dataclass(frozen=True)
+class _FrozenAt:
+    """A stuck fault's frozen value, first in force at sample ``index`` of the current block."""
+
+    index: int
+    value: float
 
 
 # ----------------------------------------------------------------------------------------------- the simulator
@@ -189,7 +199,7 @@ class VehicleSimulator:
         self._blk: VehicleBlock | None = None
         self._blk_state: dict = {}
         self._blk_raw = None
-        self._blk_frozen = None
+        self._blk_frozen: _FrozenAt | None = None
         self._i = 0
         self.interval_set = False  # sim-autopilot: a SET_MESSAGE_INTERVAL wins over REQUEST_DATA_STREAM
 
@@ -242,8 +252,8 @@ class VehicleSimulator:
         for k, arr in self._blk_state.items():
             self._state[k] = float(arr[j - 1])
         self._prev_raw = self._blk_raw[:, j - 1].copy()
-        if self._blk_frozen is not None and j > self._blk_frozen[0]:
-            self._frozen = self._blk_frozen[1]
+        if self._blk_frozen is not None and j > self._blk_frozen.index:
+            self._frozen = self._blk_frozen.value
 
     def temperature_at(self, t) -> np.ndarray:
         """(imus, n) IMU temperatures (degC) at times since boot ``t`` (with Realism; else the ambient 25 C)."""
@@ -427,12 +437,12 @@ class VehicleSimulator:
         if fl.kind == "stuck":
             if i0 > 0:
                 frozen = float(y[i0 - 1])
-                self._blk_frozen = (i0, frozen)
+                self._blk_frozen = _FrozenAt(i0, frozen)
             elif self._frozen is not None:
                 frozen = self._frozen
             else:
                 frozen = float(self._prev_raw[fl.imu, j]) if self._prev_raw is not None else float(y[0])
-                self._blk_frozen = (0, frozen)
+                self._blk_frozen = _FrozenAt(0, frozen)
             dither = self._rng_fault.normal(0.0, fl.size, n_on) if fl.size > 0 else 0.0
             y[on] = frozen + dither
         elif fl.kind == "noise":
