@@ -70,8 +70,8 @@ class SpikeDetector:
         moves every axis)."""
         st, j = obs.stats, obs.col
         # a knock on a standing vehicle (the accelerometer moved for several samples) moves the gyro as the
-        # vehicle's motion does: its spikes are weighed as in motion (taps on a standing PX4 vehicle, 20-40
-        # robust sigmas on two gyro axes and the accelerometer at once, were named "spikes 0.11 %")
+        # vehicle's motion does: its spikes are weighed as in motion (taps on a standing PX4 vehicle reach 20-40
+        # robust sigmas on two gyro axes and the accelerometer at once: no gyro glitch)
         still = obs.still and not obs.accel_knock
         count = int(st.spikes[j] if still else st.spikes_solo[j])
         size = st.spike_size[j] if st.spike_size is not None else 0.0
