@@ -138,7 +138,8 @@ def _with_carry(y: np.ndarray, prev, dd_scale_ref) -> tuple[np.ndarray, int]:
 def _search_spikes(y: np.ndarray, c0: int, step: np.ndarray, dd_scale_ref, k: float) -> _SpikeSearch:
     dd = y[2:] - 2.0 * y[1:-1] + y[:-2]
     a = np.abs(dd)
-    scale, bar, code = _noise_bar(a, dd, step, dd_scale_ref)
+    nb = _noise_bar(a, dd, step, dd_scale_ref)
+    bar = nb.bar
     out = a > k * bar
     # a spike is looked for against a bar it does not raise itself: in a short block (10 Hz: 8 second
     # differences) a quarter of two holds the spike's own -2A and A, so there, once the still reference
@@ -149,7 +150,7 @@ def _search_spikes(y: np.ndarray, c0: int, step: np.ndarray, dd_scale_ref, k: fl
     short = not (a.shape[0] - c0 >= 4 * LOCAL_MIN or dd_scale_ref is None)
     if short:
         ref = np.asarray(dd_scale_ref, dtype=float)
-        bar = np.broadcast_to(np.maximum(scale, np.where((ref > 1e-9) & (code > k * ref), 0.0, code)), a.shape)
+        bar = np.broadcast_to(np.maximum(nb.scale, np.where((ref > 1e-9) & (nb.code > k * ref), 0.0, nb.code)), a.shape)
         cand = a > k * bar
     else:
         cand = out
@@ -162,11 +163,19 @@ def _search_spikes(y: np.ndarray, c0: int, step: np.ndarray, dd_scale_ref, k: fl
     return _SpikeSearch(dd, a, bar, out, peak, c0)
 
 
-def _noise_bar(a: np.ndarray, dd: np.ndarray, step: np.ndarray, dd_scale_ref):
-    """(robust scale, the bar per second difference, the rounding's floor) of the second differences: the
-    larger of the block's MAD (at least the reference's, or half the block's rms before a reference), the
-    local MAD of each quarter and its neighbours (vibration that starts mid-block is not a spike) and what
-    rounding gives."""
+@dataclass
+class _NoiseBar:
+    """The scales the second differences are judged against (robust sigmas, per axis or per difference)."""
+
+    scale: np.ndarray  # the block's MAD, at least the reference's (or half the block's rms before one)
+    bar: np.ndarray  # per second difference: the largest of scale, the local scale and the rounding's floor
+    code: np.ndarray  # the rounding's floor: sd of the second differences of a signal rounded to its step
+
+
+def _noise_bar(a: np.ndarray, dd: np.ndarray, step: np.ndarray, dd_scale_ref) -> _NoiseBar:
+    """The bar of the second differences: the larger of the block's MAD (at least the reference's, or half the
+    block's rms before a reference), the local MAD of each quarter and its neighbours (vibration that starts
+    mid-block is not a spike) and what rounding gives."""
     scale = np.median(a, axis=0) / MAD_TO_SIGMA
     floor = 0.5 * np.sqrt(np.mean(dd * dd, axis=0))  # only matters where the median is 0 (coarse rounding)
     scale = np.maximum(scale, floor if dd_scale_ref is None else np.maximum(dd_scale_ref, 1e-12))
@@ -182,7 +191,7 @@ def _noise_bar(a: np.ndarray, dd: np.ndarray, step: np.ndarray, dd_scale_ref):
     # sd >= q sqrt(6/12) whatever the reference says (a gyro quieter than the int16 step sits on one code, then
     # flips to the next one or two and back: noise, not spikes)
     code = math.sqrt(0.5) * np.where(np.isfinite(step), step, 0.0)
-    return scale, np.maximum(np.maximum(scale, local), code), code
+    return _NoiseBar(scale, np.maximum(np.maximum(scale, local), code), code)
 
 
 def _peaks(cand: np.ndarray, a: np.ndarray, dd: np.ndarray, short: bool, c0: int) -> np.ndarray:
