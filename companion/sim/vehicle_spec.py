@@ -21,7 +21,7 @@ MAX_IMUS = 3  #: an ArduPilot autopilot logs and sends at most three IMUs (RAW_I
 #: MAVLink message of each IMU index in a tlog or on the link (ArduPilot's convention)
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
 
-FAULT_KINDS = ("stuck", "noise", "bias", "spikes", "drift", "saturate")
+FAULT_KINDS = ("stuck", "noise", "bias", "spikes", "drift", "saturate")  #: the injectable gyro faults
 #: what ``Fault.size`` means for each kind (SI)
 FAULT_SIZE_UNITS = {
     "stuck": "std in rad/s of a dither added to the frozen value (0: exactly frozen)",
@@ -31,6 +31,7 @@ FAULT_SIZE_UNITS = {
     "drift": "ramp in rad/s per s added from the fault on (signed)",
     "saturate": "clip level in rad/s: the output is limited to +-size",
 }
+#: each kind's size when none is given (``Fault(size=None)``, ``--fault`` without ``--fault-size``)
 FAULT_DEFAULT_SIZE = {"stuck": 0.0, "noise": 6.0, "bias": math.radians(1.0), "spikes": 0.005,
                       "drift": 1e-4, "saturate": 0.5}
 
