@@ -277,7 +277,7 @@ def quantised_stuck_limit(sim, s_lsb, d_lsb, lsb, rate):
     of an oracle that does not know the healthy level: the level closest to the frozen codes)."""
     from scipy.special import ndtr
 
-    frozen = sim._frozen if sim._frozen is not None else (sim._blk_frozen or (0, math.nan))[1]
+    frozen = sim._frozen if sim._frozen is not None else (sim._blk_frozen.value if sim._blk_frozen else math.nan)
     v = float(frozen) / lsb
     if not math.isfinite(v):
         return math.nan, ""

@@ -8,7 +8,7 @@
    same samples (3 IMUs x 6 axes of noise only): the price of the vehicle over its noise.
    And the same vehicle with the realistic gyro path of ``--preset`` (default copter: 1 kHz sensors,
    filter, decimation, vibration, skew, temperature; ``companion.sim.realism``) at the same 100 Hz.
-2. ``companion.sim.vehicle.write_tlog`` (3 streams and HEARTBEATs merged in time order, block by block)
+2. ``companion.mavlink.vehicle_tlog.write_tlog`` (3 streams and HEARTBEATs merged in time order, block by block)
    against ``companion.mavlink.tlog_writer.write_imu_tlog`` writing the same samples as 3 separate tlogs.
 Times are CPU seconds of this process (the machine is shared). Also printed: how much of the run was armed
 or handled, and the peak body rate.
@@ -28,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from companion.mavlink.tlog_writer import write_imu_tlog  # noqa: E402
 from companion.sim.synth import simulate_model  # noqa: E402
-from companion.sim.vehicle import Schedule, VehicleSimulator, WarmUp, write_tlog  # noqa: E402
+from companion.mavlink.vehicle_tlog import write_tlog  # noqa: E402
+from companion.sim.vehicle import Schedule, VehicleSimulator, WarmUp  # noqa: E402
 
 MODEL = {"rate_hz": 100.0, "axes": {
     **{a: [{"effect": "white_noise", "N": 3e-3}, {"effect": "bias_instability", "B": 5e-5},

@@ -33,7 +33,6 @@ LAYERS = {
     "companion.sim.model": ADAPTER,  # model YAML
     "companion.sim.preset": ADAPTER,  # preset YAML
     "companion.datasheets": ADAPTER,  # the datasheet YAML (companion/datasheets.yaml)
-    "companion.sim.vehicle": ADAPTER,  # write_tlog encodes MAVLink (mavlink.tlog_writer)
     "companion.sim.dataflash_writer": ADAPTER,
     "companion.sim.ulog_writer": ADAPTER,
     "companion.service": SERVICE,

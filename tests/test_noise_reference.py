@@ -13,6 +13,7 @@ import json
 
 import numpy as np
 
+import companion.health.axis_ref as axis_ref
 import companion.health.faults as faults
 from companion.health.faults import NU_REF_MIN, AxisRef, Observation
 from companion.health.noise import NoiseDetector
@@ -59,7 +60,7 @@ def _chance_low_seeds(n=10, blocks=30, below=0.75, count=3):
 def test_a_reference_low_by_chance_at_10_hz_made_false_alarms_and_is_now_learned_on(monkeypatch):
     seeds = _chance_low_seeds()
     with monkeypatch.context() as m:
-        m.setattr(faults, "NU_REF_MIN", 0.0)  # the reference of 30 blocks whatever they hold
+        m.setattr(axis_ref, "NU_REF_MIN", 0.0)  # the reference of 30 blocks whatever they hold
         assert sum(_run(s, 10, 3000)[0] for s in seeds) > 0
     for s in seeds:
         alarms, _, ref = _run(s, 10, 3000)

@@ -11,7 +11,8 @@ from companion.errors import CompanionError
 from companion.sim.preset import load_preset
 from companion.sim.realism import (PRESETS, Realism, Vibration, filtered_white_avar,
                                    psd_line_amplitude)
-from companion.sim.vehicle import Flight, Schedule, VehicleSimulator, write_tlog
+from companion.mavlink.vehicle_tlog import write_tlog
+from companion.sim.vehicle import Flight, Schedule, VehicleSimulator
 
 N = 1e-3
 WHITE = {"rate_hz": 50.0, "axes": {"gx": [{"effect": "white_noise", "N": N}]}}

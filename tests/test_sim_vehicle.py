@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from companion.errors import CompanionError
+from companion.mavlink.vehicle_tlog import write_tlog
 from companion.sim.vehicle import (FAULT_KINDS, Fault, Flight, Handling, ImuSpread, Schedule, VehicleSimulator,
-                                   WarmUp, write_tlog)
+                                   WarmUp)
 
 FS = 100.0
 N = 3e-3  # rad/s/sqrt(Hz): 0.03 rad/s per sample at 100 Hz

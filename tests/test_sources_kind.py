@@ -73,7 +73,8 @@ def test_tlog_bin_replays_with_the_logs_heartbeats(tmp_path):
     through the log reader, which has no armed state, and replayed as disarmed."""
     from companion.service.runner import replay
     from companion.service.pipeline import PipelineConfig
-    from companion.sim.vehicle import Flight, Schedule, VehicleSimulator, write_tlog
+    from companion.mavlink.vehicle_tlog import write_tlog
+    from companion.sim.vehicle import Flight, Schedule, VehicleSimulator
     from companion.sources.decode import ScaleTable
 
     model = {"rate_hz": 100.0, "axes": {ax: [{"effect": "white_noise", "N": 2e-4}] for ax in ("gx", "gy", "gz")}}

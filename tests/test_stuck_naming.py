@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from companion.health.faults import AXES, FAULT, KIND_CODE, AxisRef, Observation, block_stats
-from companion.health.stuck import StuckDetector, codes_glr, two_code_llr, two_code_outside
+from companion.health.code_spread import codes_glr, two_code_llr, two_code_outside
+from companion.health.stuck import StuckDetector
 from companion.mavlink.reporter import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig

@@ -75,7 +75,8 @@ VEHICLE_ONLY = {"imus": None, "preset": None, "arm_at": None, "disarm_at": None,
 def run_vehicle(args, model) -> int:
     """``--vehicle``: companion.sim.vehicle into a tlog (RAW_IMU / SCALED_IMU2 / SCALED_IMU3 + HEARTBEAT)."""
     from companion.cli.vehicle_options import build_simulator
-    from companion.sim.vehicle import IMU_MESSAGES, write_tlog
+    from companion.mavlink.vehicle_tlog import write_tlog
+    from companion.sim.vehicle import IMU_MESSAGES
 
     if not args.out.lower().endswith(".tlog"):
         raise CompanionError(f"--out {args.out}: --vehicle writes a .tlog (one IMU message type per IMU)")

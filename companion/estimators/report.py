@@ -188,17 +188,43 @@ def _marginal_var(prob, A, theta, i):
     return float(cov[list(idx).index(i), list(idx).index(i)])
 
 
+@dataclass
+class _Solved:
+    """The structure's model solved on the current levels (scaled by ``scale``: the median AVAR)."""
+
+    prob: object  # companion.allan.fit._Problem: the GLS problem of the levels
+    scale: float
+    mod: list  # the linear columns (selected, then nuisance effects)
+    theta: np.ndarray  # linear then nonlinear amplitudes, scaled
+    c2: float  # the fit's chi-square
+    cov_t: np.ndarray  # covariance of theta (zero rows for terms at the bound)
+
+
 def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95):
     """Resolved terms and bounds (see the module docstring) from the levels ``tau, avar`` (restricted to the
     structure's levels) and the covariance ``cov`` of the Allan estimates (default: the structure's)."""
-    from companion.allan.fit import _columns, _profile_white_ci, _scaled_chi2_ci, forced_intervals  # scipy-free
-
     tau = np.asarray(tau, float)
     avar = np.asarray(avar, float)
     cov = st.cov if cov is None else cov
     out = []
     if tau.size == 0 or not np.any(avar > 0):
         return out
+    sol = _solve(tau, avar, st, cov)
+    resolved, unsure = _resolved_terms(sol, tau, st, candidates, level)
+    for e in LINEAR_EFFECTS:
+        if e not in candidates:
+            continue
+        if e in resolved:
+            out.append(resolved[e])
+            continue
+        out.append(_bound_term(sol, tau, st, e, unsure))
+    out += _nonlinear_terms(sol, st, level)
+    return out
+
+
+def _solve(tau, avar, st: Structure, cov) -> _Solved:
+    from companion.allan.fit import _columns  # scipy-free
+
     prob, scale = _problem(tau, avar, cov)
     mod = _model_effects(st)
     A = _columns(mod, st.nonlin, tau, st.white)
@@ -207,17 +233,26 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
     act = theta > 0
     if act.any():
         cov_t[np.ix_(act, act)] = prob.cov_theta(A[:, act])
-    # selection uncertainty: the interval of a resolved term is the envelope of its intervals in the selected
-    # model and in the model with every base effect (N, B, K) forced in -- a base effect the selection left
-    # out (e.g. a bias instability hidden under a Gauss-Markov hump) can otherwise shift N beyond its interval
-    # (solved only when that model has more terms: the selected one with N, B and K in is the same model)
+    return _Solved(prob, scale, mod, theta, c2, cov_t)
+
+
+def _resolved_terms(sol: _Solved, tau, st: Structure, candidates, level):
+    """({effect: resolved term}, {effect: upper end of the interval of a selected term not resolved}).
+
+    Selection uncertainty: the interval of a resolved term is the envelope of its intervals in the selected
+    model and in the model with every base effect (N, B, K) forced in -- a base effect the selection left
+    out (e.g. a bias instability hidden under a Gauss-Markov hump) can otherwise shift N beyond its interval
+    (solved only when that model has more terms: the selected one with N, B and K in is the same model)."""
+    from companion.allan.fit import _profile_white_ci, _scaled_chi2_ci, forced_intervals  # scipy-free
+
+    prob, scale, mod, theta = sol.prob, sol.scale, sol.mod, sol.theta
     sup = [x for x in LINEAR_EFFECTS if x in mod or (x in BASE_EFFECTS and x in candidates)]
     forced = forced_intervals(prob, sup, st.nonlin, tau, st.white, level) if set(sup) != set(mod) else {}
     resolved, unsure = {}, {}
     for j, e in enumerate(st.linear):
         if theta[j] <= 0:
             continue
-        lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
+        lo, hi = _scaled_chi2_ci(theta[j], sol.cov_t[j, j], level)
         if e in forced:
             lo, hi = min(lo, forced[e][0]), max(hi, forced[e][1])
         # resolved only when the envelope, too, stays clear of 0: a term whose interval reaches 0 in the model
@@ -225,47 +260,59 @@ def report(tau, avar, st: Structure, candidates=CANDIDATES, cov=None, level=0.95
         # envelope's upper end) is reported
         if lo <= 0:
             unsure[e] = hi
-        else:
-            p = LINEAR_PARAM[e]
-            v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
-            if e == "white_noise" and st.white:
-                # N and a cut-off found in the data are correlated: N's profile interval over it (and over the
-                # roll-off's order, with the log's cut-off too), as offline
-                (lo_p, hi_p), _ = _profile_white_ci([lo_p, hi_p], prob, prob, mod, st.nonlin, tau, st.white,
-                                                    st.white_ci, c2, scale, level, float(tau[0] / st.m[0]),
-                                                    first_order=st.first_order)
-            resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
-                           "bound": False}
-            if e == "white_noise" and st.white:
-                resolved[e]["filter_hz"] = float(st.white["filter_hz"])
-                if st.white.get("filter_order"):
-                    resolved[e]["filter_order"] = int(st.white["filter_order"])
-    for e in LINEAR_EFFECTS:
-        if e not in candidates:
-            continue
-        if e in resolved:
-            out.append(resolved[e])
             continue
         p = LINEAR_PARAM[e]
-        lin = [x for x in LINEAR_EFFECTS if x == e or (x in mod and x != e)]
-        A2 = _columns(lin, st.nonlin, tau, st.white)
-        th2, _ = prob.solve(A2)
-        i = lin.index(e)
-        var = _marginal_var(prob, A2, th2, i)
-        th_i = max(float(th2[i]), 0.0)
-        ub = max(th_i + Z_UPPER * math.sqrt(max(var, 0.0)), unsure.get(e, 0.0))
-        ub_p = math.sqrt(ub * scale)
-        sd_p = math.sqrt((th_i + math.sqrt(max(var, 0.0))) * scale) - math.sqrt(th_i * scale)
-        out.append({"effect": e, p: ub_p, "std": {p: sd_p}, "ci95": {p: [0.0, ub_p]}, "bound": True})
-        if e in unsure:
-            out[-1]["selected"] = True  # in the model, not resolved: kept there between selections
+        v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
+        if e == "white_noise" and st.white:
+            # N and a cut-off found in the data are correlated: N's profile interval over it (and over the
+            # roll-off's order, with the log's cut-off too), as offline
+            (lo_p, hi_p), _ = _profile_white_ci([lo_p, hi_p], prob, prob, mod, st.nonlin, tau, st.white,
+                                                st.white_ci, sol.c2, scale, level, float(tau[0] / st.m[0]),
+                                                first_order=st.first_order)
+        resolved[e] = {"effect": e, p: v, "std": {p: (hi_p - lo_p) / 3.92}, "ci95": {p: [lo_p, hi_p]},
+                       "bound": False}
+        if e == "white_noise" and st.white:
+            resolved[e]["filter_hz"] = float(st.white["filter_hz"])
+            if st.white.get("filter_order"):
+                resolved[e]["filter_order"] = int(st.white["filter_order"])
+    return resolved, unsure
+
+
+def _bound_term(sol: _Solved, tau, st: Structure, e: str, unsure: dict) -> dict:
+    """The one-sided 95 % upper bound of a linear effect not resolved: solved with it in (beside the model's
+    other linear effects), theta_e + Z_UPPER sd (sd from the Fisher information, freed at the bound 0), at
+    least the upper end of its interval when it was selected."""
+    from companion.allan.fit import _columns  # scipy-free
+
+    p = LINEAR_PARAM[e]
+    lin = [x for x in LINEAR_EFFECTS if x == e or (x in sol.mod and x != e)]
+    A2 = _columns(lin, st.nonlin, tau, st.white)
+    th2, _ = sol.prob.solve(A2)
+    i = lin.index(e)
+    var = _marginal_var(sol.prob, A2, th2, i)
+    th_i = max(float(th2[i]), 0.0)
+    ub = max(th_i + Z_UPPER * math.sqrt(max(var, 0.0)), unsure.get(e, 0.0))
+    ub_p = math.sqrt(ub * sol.scale)
+    sd_p = math.sqrt((th_i + math.sqrt(max(var, 0.0))) * sol.scale) - math.sqrt(th_i * sol.scale)
+    term = {"effect": e, p: ub_p, "std": {p: sd_p}, "ci95": {p: [0.0, ub_p]}, "bound": True}
+    if e in unsure:
+        term["selected"] = True  # in the model, not resolved: kept there between selections
+    return term
+
+
+def _nonlinear_terms(sol: _Solved, st: Structure, level) -> list:
+    """The selected Gauss-Markov / sinusoid terms with their amplitude's interval (the envelope of this fit's
+    and the selection fit's profile interval) and the shape parameter's profile interval."""
+    from companion.allan.fit import _scaled_chi2_ci  # scipy-free
+
+    out = []
     for k, (e, shape) in enumerate(st.nonlin):
-        j = len(mod) + k
-        if theta[j] <= 0:
+        j = len(sol.mod) + k
+        if sol.theta[j] <= 0:
             continue
         lp, sp = NL_PARAMS[e]
-        lo, hi = _scaled_chi2_ci(theta[j], cov_t[j, j], level)
-        v, lo_p, hi_p = (math.sqrt(x * scale) for x in (theta[j], lo, hi))
+        lo, hi = _scaled_chi2_ci(sol.theta[j], sol.cov_t[j, j], level)
+        v, lo_p, hi_p = (math.sqrt(x * sol.scale) for x in (sol.theta[j], lo, hi))
         ci = dict((st.nl_ci or {}).get(e, {}))
         lo_p, hi_p = min(lo_p, ci.get(lp, [lo_p])[0]), max(hi_p, ci.get(lp, [0, hi_p])[1])
         out.append({"effect": e, lp: v, sp: shape, "std": {lp: (hi_p - lo_p) / 3.92},

@@ -45,16 +45,19 @@ from companion.health.limits import FaultLimits, capped, floored_mean_llr, wande
 from companion.health.thermal import LAG, ThermalBias
 
 DEG = math.pi / 180.0
-DELTA = 0.2 * DEG  # rad/s, mean shift the jump CUSUMs are tuned to
-H_ON = 20.0
-H_OFF = 20.0
-REF_TAU_BLOCKS = 60.0
-DRIFT_TAU_BLOCKS = 20.0
-DRIFT_TOL = 0.3 * DEG
-DRIFT_HOLD = 5
-HIST_BLOCKS = 90
-RESTART_BLOCKS = 10  # still blocks whose mean is the bias reference after a restart
-RAMP_NATS = 4.0  # log-likelihood margin for naming a ramp (drift) rather than a step (jump)
+DELTA = 0.2 * DEG  #: rad/s, mean shift the jump CUSUMs are tuned to (allowance delta/2 above a warm-up's lag)
+H_ON = 20.0  #: nats to flag a jump: ARL0 >= e^20 still blocks
+H_OFF = 20.0  #: nats of evidence for healthy to clear it
+REF_TAU_BLOCKS = 60.0  #: still blocks of the tracking reference's EWMA (lags a warm-up by <= 0.03 deg/s)
+DRIFT_TAU_BLOCKS = 20.0  #: still blocks of the drift EWMA
+DRIFT_TOL = 0.3 * DEG  #: rad/s the drift EWMA may leave the reference bias: 3x a cold start's warm-up
+DRIFT_HOLD = 5  #: blocks beyond (within) the tolerance to flag (clear) a drift
+DRIFT_SIGMAS = 4.0  #: the drift EWMA's own uncertainty allowed beyond the tolerance
+DRIFT_CLEAR = 0.7  #: a drift clears below this share of the tolerance (hysteresis)
+QUIET_SHARE = 0.25  #: share of H_ON below which neither jump CUSUM counts as building evidence (references learn)
+HIST_BLOCKS = 90  #: recent still-block means kept for the step-or-ramp test and the measured wander
+RESTART_BLOCKS = 10  #: still blocks whose mean is the bias reference after a restart
+RAMP_NATS = 4.0  #: log-likelihood margin for naming a ramp (drift) rather than a step (jump)
 
 
 class BiasDetector:
@@ -135,28 +138,39 @@ class BiasDetector:
         """One still block; returns the kinds that changed state (``bias_jump``, ``bias_drift``)."""
         if not (ref.ready and math.isfinite(x_raw) and n > 0):
             return []
-        out = []
         x = x_raw - self.thermal.correction(temp)  # the residual the temperature does not explain
         if self._restart is not None:
-            self._restart.append(x)
-            self.hist.append(x_raw)
-            self.hist_t.append(temp)
-            if len(self._restart) < RESTART_BLOCKS:
-                return []
-            self.mu0 = float(np.mean(self._restart))
-            self.r = self.e = self.mu0
-            self._restart = None
+            self._restart_block(x, x_raw, temp)
             return []
         mu = self._mu(ref)
         if math.isnan(self.r):
             self.r = mu
         if math.isnan(self.e):
             self.e = mu  # the reference period's mean (30 blocks), not one noisy block
-        lim = self.limits
         # the block mean's spread around the reference: white noise, the Allan-predicted wander, and the
         # wander measured on the vehicle (vibration, small real motion, temperature) while nothing was flagged
-        var_m = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + max(extra_var, self.wander)
-        sig = math.sqrt(max(var_m, 1e-18))
+        white = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n
+        sig = math.sqrt(max(white + max(extra_var, self.wander), 1e-18))
+        out = self._jump_step(x, x_raw, temp, sig, mu)
+        if self.state == OK and self.up.s < QUIET_SHARE * H_ON and self.down.s < QUIET_SHARE * H_ON:
+            self._learn_quiet(x)
+        return out + self._drift_step(x, mu, white + extra_var)
+
+    def _restart_block(self, x: float, x_raw: float, temp: float) -> None:
+        """A still block after a restart: collected until ``RESTART_BLOCKS``, whose mean becomes the reference."""
+        self._restart.append(x)
+        self.hist.append(x_raw)
+        self.hist_t.append(temp)
+        if len(self._restart) < RESTART_BLOCKS:
+            return
+        self.mu0 = float(np.mean(self._restart))
+        self.r = self.e = self.mu0
+        self._restart = None
+
+    def _jump_step(self, x: float, x_raw: float, temp: float, sig: float, mu: float) -> list[str]:
+        """The two jump CUSUMs on the offset from the tracking reference; a flagged change whose evidence grew
+        like a ramp is named a drift instead."""
+        lim = self.limits
         d = x - self.r
         was = self.state
         if was == OK and self.up.s == 0.0 and self.down.s == 0.0:
@@ -169,54 +183,57 @@ class BiasDetector:
             hold = lim.bias_hold_blocks
             self.up.step(capped(floored_mean_llr(d, sig, lim.bias_jump, DELTA), H_ON, hold))
             self.down.step(capped(floored_mean_llr(-d, sig, lim.bias_jump, DELTA), H_ON, hold))
-        if self.state != was:
-            if self.state == FAULT:
-                if self._is_ramp(sig):  # the evidence grew like a ramp: a drift, not a step
-                    self.up.state = self.down.state = OK
-                    self.up.s = self.down.s = 0.0
-                    if self.drift_state == OK:
-                        self.drift_state, self.drift_count, self.drift_r = FAULT, 0, self.r
-                        self.drift_value = (x - mu) / DEG
-                        out.append("bias_drift")
-                else:
-                    out.append("bias_jump")
-                    self.value = sum(self.run) / len(self.run) / DEG
-                    self.post = []
-            else:
-                out.append("bias_jump")
-                self.r = x  # back to normal: follow from here
-        elif was == FAULT:
-            # the size once confirmed: the blocks after the flag, all wholly after the step (the flagging
-            # block may hold the step part-way and the run blocks before it), against the frozen reference
-            self.post.append(d)
-            self.value = float(np.median(self.post)) / DEG
-        quiet = self.state == OK and self.up.s < 0.25 * H_ON and self.down.s < 0.25 * H_ON
-        if quiet:
-            if len(self.hist) > LAG and len(self.hist_t) == len(self.hist):
-                self.thermal.add_pair(self.hist[-1] - self.hist[-1 - LAG], self.hist_t[-1] - self.hist_t[-1 - LAG])
-            self.r += (x - self.r) / REF_TAU_BLOCKS
-            self.wander = wander_var(self._hist_c())
-        # drift against the reference period's bias
+        if self.state == was:
+            if was == FAULT:
+                # the size once confirmed: the blocks after the flag, all wholly after the step (the flagging
+                # block may hold the step part-way and the run blocks before it), against the frozen reference
+                self.post.append(d)
+                self.value = float(np.median(self.post)) / DEG
+            return []
+        if self.state == OK:
+            self.r = x  # back to normal: follow from here
+            return ["bias_jump"]
+        if not self._is_ramp(sig):
+            self.value = sum(self.run) / len(self.run) / DEG
+            self.post = []
+            return ["bias_jump"]
+        # the evidence grew like a ramp: a drift, not a step
+        self.up.state = self.down.state = OK
+        self.up.s = self.down.s = 0.0
+        if self.drift_state != OK:
+            return []
+        self.drift_state, self.drift_count, self.drift_r = FAULT, 0, self.r
+        self.drift_value = (x - mu) / DEG
+        return ["bias_drift"]
+
+    def _learn_quiet(self, x: float) -> None:
+        """No evidence building: the temperature slope, the tracking reference and the measured wander learn."""
+        if len(self.hist) > LAG and len(self.hist_t) == len(self.hist):
+            self.thermal.add_pair(self.hist[-1] - self.hist[-1 - LAG], self.hist_t[-1] - self.hist_t[-1 - LAG])
+        self.r += (x - self.r) / REF_TAU_BLOCKS
+        self.wander = wander_var(self._hist_c())
+
+    def _drift_step(self, x: float, mu: float, white: float) -> list[str]:
+        """The drift EWMA against the reference period's bias; ``white`` the variance of one block mean that the
+        EWMA averages down (a slow wander, correlated over tens of blocks, it does not)."""
+        lim = self.limits
         self.e += (x - self.e) / DRIFT_TAU_BLOCKS
-        # the EWMA averages the white part down, not a slow wander (correlated over tens of blocks)
-        white = max(ref.sigma2, v2 if math.isfinite(v2) else 0.0) / n + extra_var
         sig_e = math.sqrt(white / (2.0 * DRIFT_TAU_BLOCKS) + self.wander)
         off = self.e - mu
         tol = max(DRIFT_TOL, lim.bias_drift)
         if self.drift_state == OK:
-            self.drift_count = self.drift_count + 1 if abs(off) - 4.0 * sig_e > tol else 0
+            self.drift_count = self.drift_count + 1 if abs(off) - DRIFT_SIGMAS * sig_e > tol else 0
             if self.drift_count >= DRIFT_HOLD and self.state == OK:  # not while a jump is flagged
                 self.drift_state, self.drift_count, self.drift_value = FAULT, 0, off / DEG
                 self.drift_r = mu
-                out.append("bias_drift")
-        else:
-            last = list(self._hist_c())[-DRIFT_HOLD:]
-            back = abs(off) < 0.7 * tol and abs(sum(last) / len(last) - self.drift_r) < 0.5 * max(DELTA, lim.bias_jump)
-            self.drift_state, self.drift_count, changed = debounce(self.drift_state, self.drift_count, False,
-                                                                   DRIFT_HOLD, DRIFT_HOLD, good=back)
-            if changed:
-                out.append("bias_drift")
-        return out
+                return ["bias_drift"]
+            return []
+        last = list(self._hist_c())[-DRIFT_HOLD:]
+        back = (abs(off) < DRIFT_CLEAR * tol
+                and abs(sum(last) / len(last) - self.drift_r) < 0.5 * max(DELTA, lim.bias_jump))
+        self.drift_state, self.drift_count, changed = debounce(self.drift_state, self.drift_count, False,
+                                                               DRIFT_HOLD, DRIFT_HOLD, good=back)
+        return ["bias_drift"] if changed else []
 
     def _is_ramp(self, sig: float) -> bool:
         """Step or ramp? Over the recent still-block means, the best single step (two constants) against

@@ -26,12 +26,12 @@ flags it anyway); a biased one above the floor about 10+ nats per block.
 Clearing is a separate, explicit rule (PX4 DataValidator style), not the CUSUMs' reverse statistic: an axis in
 FAULT clears after ``CLEAR_BLOCKS`` consecutive blocks whose residual is within the allowance both ways
 (|d| <= 0.75 floor, no evidence in either direction), and never while the caller holds it (another fault on
-that axis of either IMU that moves a mean rate: service/imu_group.py). The reverse CUSUM cleared in one
+that axis of either IMU that moves a mean rate: service/imu_group.py). The reverse CUSUM would clear in one
 block: an agreeing block's LLR is -(delta / sigma_d^2) 0.75 floor, hundreds of nats with sigma_d ~ 0.25
 deg/s, while h is 15. A gyro frozen in flight agrees for a block whenever the vehicle's mean rate over
-that second passes near the frozen value, so the fault was named and cleared every few seconds (a user
-trial: 9 named/cleared pairs in 106 s), and each clear re-anchored the bias reference c at that block, until
-c had absorbed the offset and the frozen gyro "agreed" for good.
+that second passes near the frozen value, so the fault would be named and cleared every few seconds (9
+named/cleared pairs in 106 s of a frozen gyro in flight), and each clear would re-anchor the bias reference c
+at that block, until c had absorbed the offset and the frozen gyro "agreed" for good.
 
 With three IMUs the odd one out is the IMU whose two pairs disagree while the third pair agrees
 (service/imu_group.py names it: ``IMU1 gyro X disagrees with IMU0/IMU2``).
@@ -48,17 +48,17 @@ from companion.health.limits import FaultLimits, capped, floored_mean_llr
 from companion.health.faults import AXES, FAULT, OK, Cusum, FaultEvent, Observation
 
 DEG = math.pi / 180.0
-DELTA = 0.5 * DEG
-H_ON = 15.0
-H_OFF = 15.0
+DELTA = 0.5 * DEG  # rad/s, mean shift of the residual the CUSUMs are tuned to (above the floor)
+H_ON = 15.0  # nats to flag a disagreement (with each block's evidence capped at h / disagree_hold_blocks)
+H_OFF = 15.0  # nats of the reverse CUSUM (clearing is CLEAR_BLOCKS' rule)
 PRIOR_STD = 0.03  # expected scale/misalignment difference between two IMUs
-E_CLIP = 0.1
-FIT_TAU_BLOCKS = 600.0
-REF_TAU_BLOCKS = 60.0
+E_CLIP = 0.1  # largest |E| entry: a frozen gyro is never "explained" as a scale factor of -1
+FIT_TAU_BLOCKS = 600.0  # blocks of memory of the E fit (10 min of 1-s blocks: the mounting does not change)
+REF_TAU_BLOCKS = 60.0  # blocks of the bias-difference reference's EWMA (follows a warm-up, not a fault)
 MOTION_RMS = 0.02  # rad/s: a block with this much (demeaned) rotation is fitted
-WARM_BLOCKS = 5
-#: consecutive agreeing blocks (1 s each) before a disagreement clears. A gyro frozen in flight agreed by
-#: chance for up to 6 blocks in a row in the trial's manoeuvres (true rate near the frozen value); a
+WARM_BLOCKS = 5  # blocks of a pair before it is tested (the reference c settles)
+#: consecutive agreeing blocks (1 s each) before a disagreement clears. A gyro frozen in flight agrees by
+#: chance for up to 6 blocks in a row in manoeuvres (true rate near the frozen value); a
 #: hover at that value lasts longer, which the caller's hold covers while the stuck detector names it
 CLEAR_BLOCKS = 30
 

@@ -52,8 +52,8 @@ samples', so a calibration offset is allowed), the offset is seen in the block m
 
 So a healthy block is never compared with less than the rounding gives at any offset the data allow, and the
 model's own sigma is its upper reading. Taking the offset as exact instead (no window, no lean, no
-tracking) flags healthy gyros once the bias left the code centre the reference was learned at (tests/
-test_noise_quantized.py), the plane's old `noise 1.6x baseline`. The ceiling stays where the offset cannot be
+tracking) flags healthy gyros once the bias leaves the code centre the reference was learned at (tests/
+test_noise_quantized.py: a healthy plane read as `noise 1.6x baseline`). The ceiling stays where the offset cannot be
 placed: samples off a grid (float logs), fewer than MIN_PLACED reference blocks on it, a sigma above 0.75
 LSB (the offset no longer matters), or samples far from independent (the reference's sample variance over
 1.5 times its v2: the rover's 5 Hz low-pass at 50 Hz, where the rounding of independent samples is not the
@@ -71,9 +71,9 @@ import numpy as np
 from companion.health.limits import FaultLimits, capped
 from companion.health.faults import Cusum, FaultEvent, OK, Observation, chi2_llr
 
-R1 = 1.69
-H_ON = 20.0
-H_OFF = 20.0
+R1 = 1.69  # variance ratio the CUSUM is tuned to: a 1.3x noise std
+H_ON = 20.0  # nats: ARL0 >= e^20 quiet blocks per axis
+H_OFF = 20.0  # nats of evidence for healthy that clear it
 EWMA_W = 0.2  # weight of a new block in the reported ratio
 _OFFSETS = np.linspace(0.0, 0.5, 11)  # bias offsets from a code's centre, in LSB (the variance is even and 1-periodic)
 

@@ -16,9 +16,9 @@ from typing import Mapping
 
 from companion.health.faults import FAULT, FaultEvent, OK, Observation, debounce
 
-MIN_CHANGES = 20
-HOLD = 10
-REF_BLOCKS = 10
+MIN_CHANGES = 20  # changes a block needs before its smallest step says anything (see above)
+HOLD = 10  # suspect (good) blocks in a row that flag (clear) it: a healthy miss is < 0.07 per block
+REF_BLOCKS = 10  # still blocks whose common smallest step is the reference LSB
 
 
 class ResolutionDetector:

@@ -16,10 +16,10 @@ from typing import Mapping
 
 from companion.health.faults import FAULT, OK, FaultEvent, Observation, debounce
 
-RUN = 5
-BLOCKS = 3
-WINDOW = 10
-CLEAR_BLOCKS = 60
+RUN = 5  # samples in a row exactly at the block's peak: healthy motion plus noise is never this flat
+BLOCKS = 3  # blocks at the same plateau level within WINDOW: a clip level is fixed
+WINDOW = 10  # recent blocks in which the plateau levels are compared
+CLEAR_BLOCKS = 60  # blocks without a limit or a plateau that clear it (a minute of 1-s blocks)
 MIN_LEVEL = 0.05  # rad/s
 
 

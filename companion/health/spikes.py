@@ -31,14 +31,14 @@ from typing import Mapping
 from companion.health.faults import Cusum, FaultEvent, Observation
 
 LAMBDA1 = 1e-3  # outliers per sample under H1
-LAMBDA0_FLOOR = 1e-5
-H_ON = 12.0
-H_OFF = 12.0
-RATE_TAU_BLOCKS = 30.0
+LAMBDA0_FLOOR = 1e-5  # outliers per sample under H0 at least (healthy Gaussian noise: 2e-9)
+H_ON = 12.0  # nats: three spikes close together flag it
+H_OFF = 12.0  # nats of evidence for healthy that clear it
+RATE_TAU_BLOCKS = 30.0  # blocks of the EWMA of the outlier rate the report quotes (the spikes %)
 LAMBDA0_MOTION = 1e-2  # outliers per sample a moving vehicle may show (heavy-tailed vibration)
-MOTION_RATIO = 5.0
-MOTION_HOLD = 5
-MOTION_TAU_BLOCKS = 60.0
+MOTION_RATIO = 5.0  # lambda1 / lambda0 in motion: only a rate well above the vehicle's own counts
+MOTION_HOLD = 5  # blocks of evidence in motion: short glitches are judged once the vehicle is still again
+MOTION_TAU_BLOCKS = 60.0  # blocks of the EWMA of the moving outlier rate
 #: A still spike's size, u = ln(|dd| / bar) >= 0 (bar: SPIKE_K robust sigmas, faults.block_stats): healthy
 #: outliers beyond the bar are taken to fall off as z^-ALPHA0 (a Pareto tail: heavier than the copter flights'
 #: 2.4-3.6 measured on real logs, far heavier than Gaussian), a glitch's size spreads over decades up to full
@@ -46,9 +46,9 @@ MOTION_TAU_BLOCKS = 60.0
 #: the rate evidence where positive (u > 0.92: beyond 15 sigmas), only while the accelerometer stayed quiet
 #: (a knock or jolt of the vehicle moves both; a gyro glitch only the gyro), and a spike's whole evidence is
 #: at most SPIKE_LLR_MAX: two spikes are needed, one is never a fault.
-ALPHA0 = 2.0
-ALPHA1 = 0.5
-SPIKE_LLR_MAX = 0.6 * H_ON
+ALPHA0 = 2.0  # tail exponent of healthy outliers (above)
+ALPHA1 = 0.5  # tail exponent of a glitch's size (above)
+SPIKE_LLR_MAX = 0.6 * H_ON  # one spike's evidence at most: two are needed, one is never a fault
 
 
 class SpikeDetector:
@@ -70,8 +70,8 @@ class SpikeDetector:
         moves every axis)."""
         st, j = obs.stats, obs.col
         # a knock on a standing vehicle (the accelerometer moved for several samples) moves the gyro as the
-        # vehicle's motion does: its spikes are weighed as in motion (taps on a standing PX4 vehicle, 20-40
-        # robust sigmas on two gyro axes and the accelerometer at once, were named "spikes 0.11 %")
+        # vehicle's motion does: its spikes are weighed as in motion (taps on a standing PX4 vehicle reach 20-40
+        # robust sigmas on two gyro axes and the accelerometer at once: no gyro glitch)
         still = obs.still and not obs.accel_knock
         count = int(st.spikes[j] if still else st.spikes_solo[j])
         size = st.spike_size[j] if st.spike_size is not None else 0.0

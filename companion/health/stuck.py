@@ -63,159 +63,35 @@ handling otherwise). A value frozen at 0 after a learned reference showed codes 
 
 from __future__ import annotations
 
-import functools
 import math
-from statistics import NormalDist
 from typing import Mapping
 
 import numpy as np
 
+from companion.health.code_spread import (_STD_NORMAL, LEVEL_STEP, MAX_CODES, Q_RATIO, _block_level_logs, _pair_counts,
+                                          two_code_llr, two_code_outside)
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
 from companion.health.limits import equal_codes_llr, p_equal_codes
+from companion.health.rest_tally import CodeTally, JitterTally, LeadErrors
 
 R1 = 0.1  # variance collapse the CUSUM is tuned to
-Q_RATIO = 20.0  # the frozen hypothesis' rate of samples beyond two codes: 1/20 of the healthy one
-MAX_CODES = 64  # a block spread over more codes is no frozen value
 MIN_OUTSIDE = 10  # samples beyond two codes seen at rest before that evidence counts (a quiet gyro never does)
 H_ON = 20.0  # nats: ARL0 >= e^20 = 5e8 blocks (1 s) = 15 years per axis
-H_OFF = 10.0
+H_OFF = 10.0  # nats of evidence for healthy that clear a stuck fault
 EQUAL_BLOCKS = 2  # blocks with no change at all (>= 100 equal values at 100 Hz), PX4's rule doubled
-#: ... a block of fewer samples than this counts as that share of one (a 10 Hz block as a fifth): a float gyro
-#: reading exactly 0.0 at 10 or 25 Hz (a tlog's HIGHRES_IMU, a DataFlash log's 25 Hz IMU) never made a block
-#: of 50 equal values and was never named; now after 100 equal values, 10 s at 10 Hz
+#: samples of one full block of the equal-values rule; a block of fewer counts as that share of one (a 10 Hz
+#: block as a fifth), so that a float
+#: gyro reading exactly 0.0 at 10 or 25 Hz (a tlog's HIGHRES_IMU, a DataFlash log's 25 Hz IMU), whose blocks never
+#: hold 50 equal values, is named after 100 equal values as a fast one is (10 s at 10 Hz)
 EQUAL_MIN_SAMPLES = 50
 VIB_KEEP = 0.5  # the accelerometer's vibration at least this share of its still reference: it did not fall
 RUN_BLOCKS = 256  # blocks of a run of codes kept (the windows of its evidence end there)
 WINDOWS = tuple(range(1, 33)) + (48, 64, 96, 128, 192, 256, 1 << 30)  # the run's last blocks weighed
-LEVEL_STEP = 0.005  # LSB: the grid the healthy level is profiled on
 PRIOR_BLOCKS = 8  # still blocks before a run whose mean level is where a healthy level is expected
 PRIOR_LEAD = 16  # blocks: the second lead at which that expectation's error is learned
 PRIOR_CAP = 3.0  # nats: the most a healthy level away from the expected one is penalised (a level may step)
 JITTER_MIN = 30  # pairs of successive still blocks before the level's block-to-block jitter is used
 ZERO_ALIVE_BLOCKS = 60  # integer-coded zeros of an axis seen alive (changing in motion): "for long" = 1 min
-
-
-def two_code_outside(y: np.ndarray, lsb: float) -> int:
-    """Samples of a block beyond the two adjacent codes that hold the most of them (0: at most two codes)."""
-    c = np.round(np.asarray(y, dtype=float) / lsb)
-    lo = c.min()
-    if c.max() - lo > MAX_CODES:
-        return int(c.shape[0])
-    cnt = np.bincount((c - lo).astype(np.int64), minlength=2)
-    return int(c.shape[0] - (cnt[:-1] + cnt[1:]).max())
-
-
-def two_code_llr(k: float, n: float, q0: float) -> float:
-    """Evidence (nats) of a block's ``k`` samples beyond its two best adjacent codes among ``n``: a value
-    frozen with a dither far below the step (rate q0 / ``Q_RATIO``) against a healthy gyro (rate q0). What
-    clears a stuck axis (each sample beyond two codes is -3 nats); :func:`codes_glr` names it.
-
-    A frozen value with a dither d << LSB rounds to one code, or flips between two adjacent codes when it
-    lies near their boundary; then its repeated codes and its variance look like a healthy gyro's of
-    ~0.5 LSB, and only the spread over codes tells them apart: healthy noise s (LSB) also lands beyond two
-    codes, least often when its level sits on a boundary: q0 = 2 Phi(-1 / s) (0.005 at s = 0.36 LSB), the
-    rate used, so that at any level a healthy gyro's expected LLR is negative. The SPRT LLR
-    k ln(q1 / q0) + (n - k) ln((1 - q1) / (1 - q0)) is about n q0 for a block within two codes (0.26 nats
-    for 50 samples at s = 0.36: the information is thin, a value frozen right on a boundary takes over a
-    minute) and -3 nats for each sample beyond. Off a boundary a frozen value repeats one code and the
-    repeated-codes evidence names it at once."""
-    if n <= 0 or not (0.0 < q0 < 0.5):
-        return 0.0
-    q1 = q0 / Q_RATIO
-    return k * math.log(q1 / q0) + (n - k) * math.log((1.0 - q1) / (1.0 - q0))
-
-
-def codes_glr(lo: int, counts: np.ndarray, s: float, q1: float) -> float:
-    """Evidence (nats) of the counts of codes ``lo``, ``lo`` + 1, ... (samples) for a value frozen near a
-    code boundary against a healthy gyro of noise ``s`` (LSB), each at its most likely parameter.
-
-    The samples are read as three counts: in the two adjacent codes k, k + 1 that hold the most of them,
-    and beyond them. Frozen: they flip between k and k + 1 with some probability p (any p: the dither and
-    the distance to the boundary are unknown) and land beyond them at a rate ``q1``. Healthy: a level mu
-    plus noise s puts P_k(mu), P_k+1(mu) (P_c = Phi((c + 1/2 - mu) / s) - Phi((c - 1/2 - mu) / s)) and the
-    rest, Q(mu), beyond them. The split between the two codes tells where a healthy level would be, and
-    there its share beyond them (least on the boundary: 2 Phi(-1/s), more off it) is what the frozen
-    value lacks: a split of 23:77 puts a healthy level of 0.47 LSB noise 0.35 LSB off the boundary, where
-    8.6 % of its samples leave the two codes (3.3 % on the boundary). About ln((1 - q1) / (1 - q0)) per
-    sample on a boundary, as the count beyond two codes alone gives; n ln(1 / P_k) for a single code (a
-    healthy level at the code's centre). Which codes the samples beyond the pair hit is not used: a block
-    the healthy model does not fit (motion starting, a noisier period) must not count as frozen."""
-    if s <= 0 or not (0.0 < q1 < 1.0):
-        return 0.0
-    return float(_glr(np.asarray([_three_counts(np.asarray(counts, dtype=float))]), s, q1)[0])
-
-
-def _three_counts(counts: np.ndarray) -> tuple[float, float, float]:
-    """(in code k, in code k + 1, beyond them) for the two adjacent codes holding the most samples."""
-    return _pair_counts(counts)[1:]
-
-
-def _pair_counts(counts: np.ndarray) -> tuple[int, float, float, float]:
-    """(k, in code k, in code k + 1, beyond them), k the index of the two adjacent codes holding the most."""
-    if counts.shape[0] < 2:
-        return 0, float(counts.sum()), 0.0, 0.0
-    j = int(np.argmax(counts[:-1] + counts[1:]))
-    n_a, n_b = float(counts[j]), float(counts[j + 1])
-    return j, n_a, n_b, float(counts.sum()) - n_a - n_b
-
-
-# the live pipeline loads no scipy (seconds of start-up, tens of MB on a small board): the normal CDF from
-# math.erfc, its inverse from the standard library
-_STD_NORMAL = NormalDist()
-_ERFC = np.frompyfunc(math.erfc, 1, 1)
-
-
-def _ndtr(x: np.ndarray) -> np.ndarray:
-    """Standard normal CDF, elementwise: erfc(-x / sqrt 2) / 2."""
-    return 0.5 * _ERFC(-np.asarray(x, dtype=float) / math.sqrt(2.0)).astype(float)
-
-
-@functools.lru_cache(maxsize=64)
-def _level_logs(s: float) -> np.ndarray:
-    """ln P_k, ln P_k+1 and ln of the rest for a healthy level on the grid of :func:`_glr` (3, levels): the
-    noise is learned slowly, so the same few values recur (rounded to 0.001 LSB)."""
-    mu = np.arange(-1.0, 2.0 + 1e-9, LEVEL_STEP)
-    pa = _ndtr((0.5 - mu) / s) - _ndtr((-0.5 - mu) / s)
-    pb = _ndtr((1.5 - mu) / s) - _ndtr((0.5 - mu) / s)
-    logs = np.log(np.maximum(np.vstack([pa, pb, 1.0 - pa - pb]), 1e-300))
-    logs.flags.writeable = False
-    return logs
-
-
-def _glr(n: np.ndarray, s: float, q1: float) -> np.ndarray:
-    """:func:`codes_glr` of rows of three counts (n_k, n_k+1, beyond). The healthy level is profiled on a
-    grid relative to code k (0.005 LSB from 1 LSB below it to 2 above: where the pair can be the most
-    likely; off the grid the healthy shares only fall), the same grid for every row."""
-    healthy = np.max(n @ _level_logs(round(s, 3)), axis=1)
-    n2 = n[:, 0] + n[:, 1]
-    frozen = n[:, 2] * math.log(q1) + n2 * math.log(1.0 - q1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for col in (0, 1):
-            frozen = frozen + np.where(n[:, col] > 0, n[:, col] * np.log(n[:, col] / np.maximum(n2, 1e-300)), 0.0)
-    return np.where(n.sum(axis=1) > 0, frozen - healthy, 0.0)
-
-
-@functools.lru_cache(maxsize=64)
-def _jitter_kernel(tau: float) -> np.ndarray:
-    """A normal density of sd ``tau`` (LSB) on the level grid of :func:`_level_logs` (weights summing to 1)."""
-    h = max(1, int(math.ceil(4.0 * tau / LEVEL_STEP)))
-    x = np.arange(-h, h + 1) * LEVEL_STEP
-    w = np.exp(-0.5 * (x / tau) ** 2)
-    w = w / w.sum()
-    w.flags.writeable = False
-    return w
-
-
-def _block_level_logs(row: np.ndarray, s: float, f: float, tau: float) -> np.ndarray:
-    """ln of one block's likelihood (three counts ``row`` relative to a pair of codes) at each level of the grid
-    of :func:`_level_logs`, its samples worth ``f`` independent ones each, its level spread around the grid's
-    by a normal jitter of sd ``tau`` (LSB) of its own (a healthy level moves from block to block)."""
-    ll = f * (row @ _level_logs(round(s, 3)))
-    if tau <= 0.0:
-        return ll
-    top = float(ll.max())
-    conv = np.convolve(np.exp(ll - top), _jitter_kernel(round(tau, 3)), mode="same")
-    return np.log(np.maximum(conv, 1e-300)) + top
 
 
 class StuckDetector:
@@ -227,17 +103,14 @@ class StuckDetector:
         self.kind = "stuck"  # the kind named for the current fault: "stuck", or "dead" (exactly 0)
         self.detail = ""  # of a "dead" fault: "" (integer message, at rest), "float", "moving"
         self.alive = False  # the axis changed codes in a moving block (a live gyro; its zeros at rest are resolution)
-        self.out_k = 0  # samples beyond two adjacent codes in still blocks while healthy, and their total
-        self.out_n = 0
-        self.spread = [0.0, 0, 0.0, 0]  # the still blocks' sample variance (times samples), samples, their second
-        # differences' squares and count, while healthy
-        self.pend = [0, 0, 0.0, 0, 0.0, 0]  # out_k, out_n, spread of the current run of codes (kept if it ends healthy)
-        self.jitter = [0.0, 0.0, 0]  # successive still blocks: their means' squared differences, the share of
-        self.jpend = [0.0, 0.0, 0]  # their within-block variance in it (LSB^2), pairs; and of the current run
+        self.codes = CodeTally()  # still blocks while healthy: their codes and spread
+        self.pend = CodeTally()  # the same of the current run of codes (kept if it ends healthy)
+        self.jitter = JitterTally()  # successive still blocks' levels while healthy
+        self.jpend = JitterTally()  # the same of the current run
         self.prev_level: tuple[float, float] | None = None  # the last still block's mean and variance of its mean
         self.recent: list[tuple[int, float]] = []  # (block number, mean level in LSB) of the last still blocks kept
         self.lpend: list[tuple[int, float]] = []  # the same of the current run
-        self.lead_err = [0.0, 0, 0.0, 0]  # squared errors of the expected level 1 and PRIOR_LEAD blocks ahead, counts
+        self.lead_err = LeadErrors()  # of the expected level 1 and PRIOR_LEAD blocks ahead
         self.nblk = 0
         # each block's codes (lowest, counts, its healthy likelihoods by pair) since the two-code CUSUM stood at 0
         self.run: list[tuple[int, np.ndarray, dict]] = []
@@ -248,6 +121,11 @@ class StuckDetector:
         self.value = math.nan
         self.lsb = math.inf  # smallest non-zero step seen (the sensor's resolution, or finer)
         self.quantised = False  # a healthy block repeated a code: the data are quantised near the noise level
+
+    @property
+    def spread(self) -> list:
+        """The still blocks' spread: [variance times samples, samples, squared second differences, their count]."""
+        return self.codes.spread
 
     @property
     def state(self) -> int:
@@ -360,7 +238,7 @@ class StuckDetector:
         every sample in it with probability P^n, P = erf(0.5 / (s sqrt 2)) (s the reference noise in LSB less
         the rounding's 1/12), so a block of one code is worth at most n ln(1 / P) nats. The repeated-codes
         rate p_equal_codes averages over the level; at a code's centre a quiet gyro repeats more (at 10 Hz and
-        0.36 LSB one block in six is a single code, and the uncapped 4 nats per block took a healthy
+        0.36 LSB one block in six is a single code, and uncapped, 4 nats per block would take a healthy
         simulated plane to 15 of the 20 nats in an hour)."""
         s_l = self._noise_lsb(ref)
         if s_l <= 0:
@@ -381,13 +259,14 @@ class StuckDetector:
         c = np.round(y / self.lsb)
         k, n = two_code_outside(y, self.lsb), y.shape[0]
         if obs.still and self.state == OK and self.cusum.s == 0.0 and n >= 2:
-            self.pend[0] += k
-            self.pend[1] += n
-            self.pend[2] += float(np.var(y, ddof=1)) * n  # unbiased: 10 samples at 10 Hz gave 0.9 of it
-            self.pend[3] += n
+            pend = self.pend
+            pend.outside += k
+            pend.samples += n
+            pend.var_sum += float(np.var(y, ddof=1)) * n  # unbiased: ddof 0 gives 0.9 of it at 10 samples
+            pend.var_samples += n
             dd = np.diff(y, 2)
-            self.pend[4] += float(np.dot(dd, dd))
-            self.pend[5] += dd.shape[0]
+            pend.dd_sq += float(np.dot(dd, dd))
+            pend.dd_count += dd.shape[0]
             self._learn_jitter(y)
             self.lpend.append((self.nblk, float(np.mean(y)) / self.lsb))
         else:
@@ -395,20 +274,20 @@ class StuckDetector:
             if not obs.still:
                 self.recent = []  # moved: the level before is no expectation
         self.nblk += 1
-        if self.out_k < MIN_OUTSIDE or self.spread[1] == 0:
+        if self.codes.outside < MIN_OUTSIDE or self.codes.var_samples == 0:
             self._end_run(commit=True)
             return None
         # What lands beyond two codes is the samples' own spread at rest (their within-block variance v_b),
         # not the second-difference figure v_dd: a gyro low-passed well below its logged rate (the rover: 5 Hz
         # at 50 Hz) spreads its samples over codes far beyond its sample-to-sample noise, and a decimated one
         # with energy near its Nyquist rate (the plane at 10 Hz) less than that figure says (taken from v_dd, a
-        # healthy plane resting on a boundary for a minute was named stuck). The noise s = sqrt(v_b - 1/12)
+        # healthy plane resting on a boundary for a minute would be named stuck). The noise s = sqrt(v_b - 1/12)
         # (Sheppard), less if the axis left two codes at rest less often than s on a boundary would; a
         # correlated block counts as n min(1, v_dd / v_b) independent samples (the share of its variance that
         # changes from sample to sample).
-        v_b = self.spread[0] / self.spread[1] / (self.lsb * self.lsb)
+        v_b = self.codes.var_sum / self.codes.var_samples / (self.lsb * self.lsb)
         s_b = math.sqrt(max(v_b - 1.0 / 12.0, 0.0))
-        seen = self.out_k / self.out_n
+        seen = self.codes.outside / self.codes.samples
         if s_b <= 0 or seen <= 0:
             self._end_run(commit=True)
             return 0.0  # a level resting on a boundary could give all of it: no evidence either way
@@ -433,10 +312,11 @@ class StuckDetector:
     def _independent_share(self, ref) -> float:
         """min(1, v_dd / v_b): the share of the still samples' spread that changes from one sample to the next,
         each sample worth that many independent ones. Both from the same still samples (the reference's v2
-        leaves outliers out and comes from the first still blocks only: on the plane's nearly white 10 Hz
-        codes it was 0.79 of their spread, and a fifth of the evidence was lost)."""
-        v_b = self.spread[0] / self.spread[1] if self.spread[1] > 0 else 0.0
-        v_dd = self.spread[2] / self.spread[3] / 6.0 if self.spread[3] > 0 else ref.sigma2
+        leaves outliers out and comes from the first still blocks only: on a plane's nearly white 10 Hz
+        codes it is 0.79 of their spread, which would lose a fifth of the evidence)."""
+        c = self.codes
+        v_b = c.var_sum / c.var_samples if c.var_samples > 0 else 0.0
+        v_dd = c.dd_sq / c.dd_count / 6.0 if c.dd_count > 0 else ref.sigma2
         return min(1.0, v_dd / v_b) if v_b > 0 else 1.0
 
     def _learn_jitter(self, y: np.ndarray) -> None:
@@ -447,16 +327,16 @@ class StuckDetector:
         vm = float(np.var(y)) / (self.lsb * self.lsb) / y.shape[0]
         if self.prev_level is not None:
             d = m - self.prev_level[0]
-            self.jpend[0] += min(d * d, 1.0)
-            self.jpend[1] += vm + self.prev_level[1]
-            self.jpend[2] += 1
+            self.jpend.d2 += min(d * d, 1.0)
+            self.jpend.within += vm + self.prev_level[1]
+            self.jpend.pairs += 1
         self.prev_level = (m, vm)
 
     def _jitter_lsb(self, f: float) -> float:
         """The sd (LSB) of a healthy level's own block-to-block jitter at rest: half the mean squared difference
         of successive still blocks' means less what their samples' noise gives (over ``f`` independent samples
         each); 0 until ``JITTER_MIN`` pairs were seen."""
-        d2, within, m = self.jitter
+        d2, within, m = self.jitter.d2, self.jitter.within, self.jitter.pairs
         if m < JITTER_MIN or f <= 0:
             return 0.0
         return math.sqrt(max(0.0, (d2 - within / f) / (2.0 * m)))
@@ -466,7 +346,8 @@ class StuckDetector:
         of the last ``PRIOR_BLOCKS`` still blocks kept before the run, its error as learned at rest 1 and
         ``PRIOR_LEAD`` blocks ahead, linear in between and beyond (wander grows with the lead). None until
         ``JITTER_MIN`` errors of each lead were seen, or while too few still blocks precede the run."""
-        e1, n1, e16, n16 = self.lead_err
+        le = self.lead_err
+        e1, n1, e16, n16 = le.sq1, le.n1, le.sq_lead, le.n_lead
         if n1 < JITTER_MIN or n16 < JITTER_MIN or len(self.recent) < PRIOR_BLOCKS:
             return None
         last = self.recent[-PRIOR_BLOCKS:]
@@ -483,14 +364,14 @@ class StuckDetector:
             r = self.recent
             if len(r) >= PRIOR_BLOCKS and i - r[-1][0] == 1:
                 e = m - sum(x for _, x in r[-PRIOR_BLOCKS:]) / PRIOR_BLOCKS
-                self.lead_err[0] += min(e * e, 1.0)
-                self.lead_err[1] += 1
+                self.lead_err.sq1 += min(e * e, 1.0)
+                self.lead_err.n1 += 1
             k = PRIOR_BLOCKS + PRIOR_LEAD - 1
             if len(r) >= k and i - r[-k][0] == k:
                 old = r[-k:-k + PRIOR_BLOCKS]
                 e = m - sum(x for _, x in old) / PRIOR_BLOCKS
-                self.lead_err[2] += min(e * e, 1.0)
-                self.lead_err[3] += 1
+                self.lead_err.sq_lead += min(e * e, 1.0)
+                self.lead_err.n_lead += 1
             r.append((i, m))
         del self.recent[:-(PRIOR_BLOCKS + PRIOR_LEAD)]
 
@@ -550,16 +431,11 @@ class StuckDetector:
     def _end_run(self, commit: bool) -> None:
         """The run of codes ends: what it taught at rest is kept if it ended healthy (``commit``)."""
         if commit:
-            self.out_k += int(self.pend[0])
-            self.out_n += int(self.pend[1])
-            self.spread[0] += self.pend[2]
-            self.spread[1] += int(self.pend[3])
-            self.spread[2] += self.pend[4]
-            self.spread[3] += int(self.pend[5])
-            self.jitter = [a + b for a, b in zip(self.jitter, self.jpend)]
+            self.codes.add(self.pend)
+            self.jitter.add(self.jpend)
             self._learn_prior(self.lpend)
-        self.pend = [0, 0, 0.0, 0, 0.0, 0]
-        self.jpend = [0.0, 0.0, 0]
+        self.pend = CodeTally()
+        self.jpend = JitterTally()
         self.lpend = []
         self.run = []
 
@@ -567,10 +443,10 @@ class StuckDetector:
         return {"cusum": self.cusum.state_dict(), "two": self.two.state_dict(), "vib": self.vib.state_dict(),
                 "equal_run": self.equal_run,
                 "lsb": self.lsb if math.isfinite(self.lsb) else None, "quantised": self.quantised,
-                "kind": self.kind, "detail": self.detail, "alive": self.alive, "out": [self.out_k, self.out_n],
-                "spread": self.spread, "pend": self.pend,
-                "jitter": self.jitter, "jpend": self.jpend, "recent": self.recent, "lpend": self.lpend,
-                "lead_err": self.lead_err, "nblk": self.nblk,
+                "kind": self.kind, "detail": self.detail, "alive": self.alive,
+                "out": [self.codes.outside, self.codes.samples], "spread": self.codes.spread,
+                "pend": self.pend.to_list(), "jitter": self.jitter.to_list(), "jpend": self.jpend.to_list(),
+                "recent": self.recent, "lpend": self.lpend, "lead_err": self.lead_err.to_list(), "nblk": self.nblk,
                 "run": [[lo, c.tolist()] for lo, c, _ in self.run]}
 
     def load_state_dict(self, d: Mapping) -> None:
@@ -583,18 +459,13 @@ class StuckDetector:
         self.kind = "dead" if d.get("kind") == "dead" else "stuck"
         self.detail = str(d.get("detail", ""))
         self.alive = bool(d.get("alive", False))
-        self.out_k, self.out_n = (int(v) for v in (d.get("out") or [0, 0]))
-        sp = list(d.get("spread") or []) + [0.0, 0, 0.0, 0][len(d.get("spread") or []):]
-        self.spread = [float(sp[0]), int(sp[1]), float(sp[2]), int(sp[3])]
-        pd = list(d.get("pend") or []) + [0, 0, 0.0, 0, 0.0, 0][len(d.get("pend") or []):]
-        self.pend = [int(pd[0]), int(pd[1]), float(pd[2]), int(pd[3]), float(pd[4]), int(pd[5])]
+        self.codes = CodeTally.from_lists(d.get("out"), d.get("spread"))
+        self.pend = CodeTally.from_list(d.get("pend"))
         self.run = [(int(lo), np.asarray(c, dtype=float), {}) for lo, c in (d.get("run") or [])]
-        jt, jp = d.get("jitter") or [0.0, 0.0, 0], d.get("jpend") or [0.0, 0.0, 0]
-        self.jitter = [float(jt[0]), float(jt[1]), int(jt[2])]
-        self.jpend = [float(jp[0]), float(jp[1]), int(jp[2])]
+        self.jitter = JitterTally.from_list(d.get("jitter"))
+        self.jpend = JitterTally.from_list(d.get("jpend"))
         self.prev_level = None
         self.recent = [(int(i), float(m)) for i, m in (d.get("recent") or [])]
         self.lpend = [(int(i), float(m)) for i, m in (d.get("lpend") or [])]
-        le = d.get("lead_err") or [0.0, 0, 0.0, 0]
-        self.lead_err = [float(le[0]), int(le[1]), float(le[2]), int(le[3])]
+        self.lead_err = LeadErrors.from_list(d.get("lead_err"))
         self.nblk = int(d.get("nblk", 0))

@@ -22,10 +22,10 @@ import numpy as np
 from companion.health.faults import FAULT, FaultEvent, OK, Observation, debounce
 from companion.timebase import period_of
 
-REF_BLOCKS = 10
-HOLD = 5
-DROP = 0.7
-JITTER = 0.2
+REF_BLOCKS = 10  # blocks whose median rate is the reference
+HOLD = 5  # bad (good) blocks in a row that flag (clear) it
+DROP = 0.7  # the rate below this share of the reference: the sensor itself slowed by 30 %
+JITTER = 0.2  # rms interval scatter over the period (ArduPilot's 100 Hz streams show a few %)
 
 
 class TimingDetector:

@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 
 from companion.mavlink.tlog_writer import encode_frames, heartbeat_payload, imu_payloads
-from companion.sim.vehicle import IMU_MESSAGES  # IMU0, IMU1, IMU2 as ArduPilot sends them
+from companion.sim.vehicle_spec import IMU_MESSAGES  # IMU0, IMU1, IMU2 as ArduPilot sends them
 from companion.sources import messages as M
 
-DEFAULT_TEMPERATURE_C = 42.0
+DEFAULT_TEMPERATURE_C = 42.0  #: IMU temperature sent when the simulator has none (a warm autopilot board)
 
 
 def block_frames(t, gyro, accel, temperature, sending, hb_times, hb_armed, seq0: int, sysid: int,

@@ -28,10 +28,10 @@ import numpy as np
 
 from companion.sources import messages as M
 
-G0 = 9.80665
-DEFAULT_GYRO_SCALE = 1e-3  # rad/s per LSB (mrad/s)
+G0 = 9.80665  # m/s^2, standard gravity: ArduPilot's accelerometer unit mG is G0 / 1000
+DEFAULT_GYRO_SCALE = 1e-3  # rad/s per LSB (mrad/s, ArduPilot's RAW_IMU/SCALED_IMU gyro unit)
 DEFAULT_ACCEL_SCALE = G0 * 1e-3  # m/s^2 per LSB (mG)
-MAV_STATE_ACTIVE = 4
+MAV_STATE_ACTIVE = 4  # HEARTBEAT system_status of a running autopilot (MAVLink MAV_STATE_ACTIVE)
 
 
 def _int16(values: np.ndarray) -> np.ndarray:

@@ -11,7 +11,8 @@ Stable API
 ::
 
     from companion.sim.vehicle import (VehicleSimulator, Fault, Flight, Handling, Schedule, WarmUp,
-                                       ImuSpread, Degradation, write_tlog)
+                                       ImuSpread, Degradation)
+    from companion.mavlink.vehicle_tlog import write_tlog   # the MAVLink encoding, an adapter
 
     sim = VehicleSimulator(model, imus=2, seed=1,
                            schedule=Schedule(flights=[Flight(arm_at=600, disarm_at=1500)],
@@ -74,196 +75,66 @@ from typing import Mapping
 
 import numpy as np
 
+from companion.allan.terms import validate_term
+from companion.sim.imu_errors import ImuErrors, warmup_amplitudes
 from companion.sim.motion import (BodyMotion, Flight, Handling, Schedule, _err, _finite, body_rates,
                                    rotation_nb, specific_force_at_rest)
-from companion.allan.terms import validate_term
-from companion.sim.synth import flicker, quantization
 from companion.sim.realism import Realism, SensorStage
+from companion.sim.synth import flicker, quantization
+from companion.sim.vehicle_block import VehicleBlock
+from companion.sim.vehicle_spec import (ACCEL_AXES, FAULT_DEFAULT_SIZE, FAULT_KINDS, FAULT_SIZE_UNITS, GYRO_AXES,
+                                        IMU_MESSAGES, MAX_IMUS, Degradation, Fault, ImuSpread, WarmUp)
 
-GYRO_AXES = ("gx", "gy", "gz")
-ACCEL_AXES = ("ax", "ay", "az")
-MAX_IMUS = 3
-#: MAVLink message of each IMU index in a tlog or on the link (ArduPilot's convention)
-IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
+DEFAULT_ACCEL_NOISE = 0.02  #: m/s^2 per-sample std, so that an accelerometer the model leaves out is not noise-free
 
-FAULT_KINDS = ("stuck", "noise", "bias", "spikes", "drift", "saturate")
-#: what ``Fault.size`` means for each kind (SI)
-FAULT_SIZE_UNITS = {
-    "stuck": "std in rad/s of a dither added to the frozen value (0: exactly frozen)",
-    "noise": "factor on the axis' white-noise std (e.g. 6: six times noisier)",
-    "bias": "step in rad/s added to the output (signed)",
-    "spikes": "fraction of samples (0-1] hit by a +-amplitude outlier",
-    "drift": "ramp in rad/s per s added from the fault on (signed)",
-    "saturate": "clip level in rad/s: the output is limited to +-size",
-}
-FAULT_DEFAULT_SIZE = {"stuck": 0.0, "noise": 6.0, "bias": math.radians(1.0), "spikes": 0.005,
-                      "drift": 1e-4, "saturate": 0.5}
-DEFAULT_ACCEL_NOISE = 0.02  # m/s^2 per-sample std when the model has no accelerometer terms
-
-
-# ----------------------------------------------------------------------------------------------- configuration
-@dataclass(frozen=True)
-class Fault:
-    """One gyro fault on IMU ``imu``, axis ``axis`` (gx, gy, gz), from ``at`` s after the simulation start.
-
-    ``size`` (None: the kind's default, :data:`FAULT_DEFAULT_SIZE`), in SI, for each ``kind``:
-
-    - ``stuck``: the output freezes at its value of the last sample before ``at``; ``size`` is the std
-      (rad/s) of a white dither added to the frozen value (0: bit-identical samples).
-    - ``noise``: the axis' white-noise term (``white_noise`` in the model) has its std multiplied by
-      ``size`` (>= 0); the other terms are unchanged.
-    - ``bias``: ``size`` rad/s is added to every sample (a step).
-    - ``spikes``: each sample is hit independently with probability ``size`` (0 < size <= 1) by an
-      outlier of ``+amplitude`` or ``-amplitude`` rad/s (random sign) added to it.
-    - ``drift``: ``size * (s - at)`` rad/s is added (a ramp of ``size`` rad/s per s; s = time since start).
-    - ``saturate``: the output is clipped to ``[-size, +size]`` rad/s (``size`` > 0).
-
-    The fault acts on the SI output before any int16 rounding of a MAVLink writer.
-    """
-
-    kind: str
-    at: float
-    size: float | None = None
-    imu: int = 0
-    axis: str = "gx"
-    amplitude: float = 0.3  # rad/s, spikes only
-
-    def __post_init__(self):
-        if self.kind not in FAULT_KINDS:
-            raise _err(f"fault kind {self.kind!r} unknown; expected one of {', '.join(FAULT_KINDS)}")
-        object.__setattr__(self, "at", _finite("fault time (at)", self.at, lo=0.0))
-        size = FAULT_DEFAULT_SIZE[self.kind] if self.size is None else self.size
-        name = f"size of a {self.kind} fault ({FAULT_SIZE_UNITS[self.kind]})"
-        if self.kind in ("stuck", "noise"):
-            size = _finite(name, size, lo=0.0)
-        elif self.kind == "spikes":
-            size = _finite(name, size, lo=0.0, hi=1.0, lo_open=True)
-        elif self.kind == "saturate":
-            size = _finite(name, size, lo=0.0, lo_open=True)
-        else:
-            size = _finite(name, size)
-        object.__setattr__(self, "size", size)
-        if isinstance(self.imu, bool) or not isinstance(self.imu, (int, np.integer)) or not 0 <= self.imu < MAX_IMUS:
-            raise _err(f"fault IMU must be 0, 1 or 2, got {self.imu!r}")
-        if self.axis not in GYRO_AXES:
-            raise _err(f"fault axis {self.axis!r} unknown; expected gx, gy or gz")
-        object.__setattr__(self, "amplitude", _finite("spike amplitude (rad/s)", self.amplitude, lo=0.0, lo_open=True))
-
-    def describe(self) -> str:
-        unit = {"stuck": " rad/s dither", "noise": "x white noise", "bias": " rad/s", "spikes": " of samples",
-                "drift": " rad/s/s", "saturate": " rad/s clip"}[self.kind]
-        size = f"{100 * self.size:g} %" if self.kind == "spikes" else f"{self.size:g}{unit}"
-        return f"IMU{self.imu} {self.axis} {self.kind} {size} at {self.at:g} s"
 
 
 @dataclass(frozen=True)
-class Degradation:
-    """A noise term that grows: from ``at`` on, an independent term ``{"effect": ..., param: value}`` is added
-    to IMU ``imu``'s ``axis`` (e.g. white_noise N*sqrt(F^2-1) makes the white noise F times larger).
-    A random walk starts from 0 at ``at`` and continues."""
+class _FrozenAt:
+    """A stuck fault's frozen value, first in force at sample ``index`` of the current block."""
 
-    at: float
-    axis: str
-    term: Mapping
-    imu: int = 0
-
-    def __post_init__(self):
-        _finite("degradation time", self.at, lo=0.0)
-        if self.axis not in GYRO_AXES + ACCEL_AXES:
-            raise _err(f"degradation axis {self.axis!r} unknown")
-        if self.term.get("effect") not in ("white_noise", "bias_instability", "random_walk", "gauss_markov"):
-            raise _err("degradation term must be white_noise, bias_instability, random_walk or gauss_markov")
-
-
-@dataclass(frozen=True)
-class WarmUp:
-    """Cold-start bias drift: each IMU gyro axis' bias moves by up to ``amplitude`` rad/s as
-    ``a exp(-t / tau_s)`` (t since boot), |a| uniform in [amplitude/2, amplitude], random sign."""
-
-    amplitude: float = math.radians(0.1)
-    tau_s: float = 200.0
-
-    def __post_init__(self):
-        _finite("warm-up amplitude (rad/s)", self.amplitude, lo=0.0)
-        _finite("warm-up time constant (s)", self.tau_s, lo=0.0, lo_open=True)
-
-
-@dataclass(frozen=True)
-class ImuSpread:
-    """How much the IMUs differ: scale-factor error per axis uniform in +-``scale`` (fraction), a
-    misalignment angle uniform in [0, ``misalignment_deg``] about a random axis, constant biases of std
-    ``gyro_bias`` rad/s and ``accel_bias`` m/s^2 per axis."""
-
-    scale: float = 0.005
-    misalignment_deg: float = 0.3
-    gyro_bias: float = 2e-3
-    accel_bias: float = 0.05
-
-    def __post_init__(self):
-        _finite("scale-factor spread", self.scale, lo=0.0, hi=0.2)
-        _finite("misalignment (deg)", self.misalignment_deg, lo=0.0, hi=10.0)
-        _finite("gyro bias std (rad/s)", self.gyro_bias, lo=0.0)
-        _finite("accel bias std (m/s^2)", self.accel_bias, lo=0.0)
-
-
-@dataclass
-class VehicleBlock:
-    """Samples of all IMUs at common times (see the module docstring)."""
-
-    t: np.ndarray  # (n,) s since boot
-    gyro: np.ndarray  # (imus, n, 3) rad/s
-    accel: np.ndarray  # (imus, n, 3) m/s^2
-    armed: np.ndarray  # (n,) bool
-    rate_true: np.ndarray  # (n, 3) rad/s, body
-    accel_true: np.ndarray  # (n, 3) m/s^2, body specific force
-    temperature: np.ndarray | None = None  # (imus, n) degC (with Realism), else None
-    t_imu: np.ndarray | None = None  # (imus, n) each IMU's own time stamp (Realism stamp="own"), else None
-
-    @property
-    def n(self) -> int:
-        return int(self.t.shape[0])
-
-    def imu(self, i: int):
-        return (self.t if self.t_imu is None else self.t_imu[i]), self.gyro[i], self.accel[i]
-
-    def __getitem__(self, sl) -> "VehicleBlock":
-        return VehicleBlock(self.t[sl], self.gyro[:, sl], self.accel[:, sl], self.armed[sl],
-                            self.rate_true[sl], self.accel_true[sl],
-                            None if self.temperature is None else self.temperature[:, sl],
-                            None if self.t_imu is None else self.t_imu[:, sl])
-
-    @staticmethod
-    def concat(blocks: list, imus: int) -> "VehicleBlock":
-        if not blocks:
-            z3 = np.zeros((0, 3))
-            return VehicleBlock(np.zeros(0), np.zeros((imus, 0, 3)), np.zeros((imus, 0, 3)), np.zeros(0, bool), z3, z3)
-        temp = None if blocks[0].temperature is None else np.concatenate([b.temperature for b in blocks], axis=1)
-        t_imu = None if blocks[0].t_imu is None else np.concatenate([b.t_imu for b in blocks], axis=1)
-        return VehicleBlock(np.concatenate([b.t for b in blocks]), np.concatenate([b.gyro for b in blocks], axis=1),
-                            np.concatenate([b.accel for b in blocks], axis=1),
-                            np.concatenate([b.armed for b in blocks]),
-                            np.concatenate([b.rate_true for b in blocks]), np.concatenate([b.accel_true for b in blocks]),
-                            temp, t_imu)
-
-
-def _misalignment(rng, max_deg: float) -> np.ndarray:
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    ang = math.radians(max_deg) * rng.random()
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K
+    index: int
+    value: float
 
 
 # ----------------------------------------------------------------------------------------------- the simulator
 class VehicleSimulator:
     """Samples of 1-3 IMUs on one vehicle, block by block (see the module docstring)."""
 
-    BLOCK_S = 600.0
+    BLOCK_S = 600.0  #: s per internal block: flicker noise is synthesised per block, memory stays bounded
 
     def __init__(self, model, imus: int = 1, seed: int = 0, rate_hz: float | None = None,
                  schedule: Schedule | None = None, fault: Fault | None = None, warmup: WarmUp | None = None,
                  spread: ImuSpread | None = None, degrade: Degradation | None = None, t_start: float = 1.0,
                  rest_tilt_deg: float = 2.0, realism: Realism | None = None):
+        self._load_model(model, rate_hz)
+        if isinstance(imus, bool) or not isinstance(imus, (int, np.integer)) or not 1 <= imus <= MAX_IMUS:
+            raise _err(f"number of IMUs must be 1, 2 or 3, got {imus!r}")
+        self.imus = int(imus)
+        self.schedule = schedule or Schedule()
+        self._check_fault(fault, degrade)
+        self.fault = fault
+        self.degrade = degrade
+        self.warmup = warmup
+        self.spread = spread or ImuSpread()
+        self.t_start = _finite("t_start", t_start, lo=0.0)
+        self.seed = seed
+        ss = np.random.SeedSequence(seed)
+        rng_motion, rng_spread, rng_warm = self._seed_streams(ss)
+        errors = ImuErrors.draw(self.spread, rng_spread)
+        self.gyro_matrix, self.accel_matrix = errors.gyro_matrix, errors.accel_matrix
+        self.gyro_bias, self.accel_bias = errors.gyro_bias, errors.accel_bias
+        self.misalignment = errors.misalignment
+        self.warmup_amplitude = warmup_amplitudes(warmup, rng_warm)
+        self.motion = BodyMotion(self.schedule, rng_motion, self.rate_hz, rest_tilt_deg)
+        self.realism = realism
+        self._stage = None
+        if realism is not None:
+            self._init_realism(realism, ss)
+        self._reset_stream()
+
+    def _load_model(self, model, rate_hz: float | None) -> None:
+        """``self.rate_hz`` and ``self.axes`` (every axis, its terms validated) from a model mapping or object."""
         self.rate_hz = float(model["rate_hz"] if isinstance(model, Mapping) else model.rate_hz) if rate_hz is None else float(rate_hz)
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise _err(f"rate must be > 0 Hz, got {rate_hz!r}")
@@ -281,24 +152,21 @@ class VehicleSimulator:
                 f0 = t.get("f0") if t["effect"] == "bias_instability" else None
                 if f0 is not None and abs(f0 - self.rate_hz / 2.0) > 1e-9 * self.rate_hz:
                     raise _err(f"model axis {a}: bias_instability is synthesised with f0 = rate/2; omit f0 or set it so")
-        if isinstance(imus, bool) or not isinstance(imus, (int, np.integer)) or not 1 <= imus <= MAX_IMUS:
-            raise _err(f"number of IMUs must be 1, 2 or 3, got {imus!r}")
-        self.imus = int(imus)
-        self.schedule = schedule or Schedule()
-        self.fault = fault
+
+    def _check_fault(self, fault: Fault | None, degrade: Degradation | None) -> None:
+        """The fault and the degradation must sit on an IMU the vehicle has (a noise fault on a white term)."""
         if fault is not None:
             if fault.imu >= self.imus:
                 raise _err(f"fault on IMU{fault.imu} but the vehicle has {self.imus} IMU(s) (IMU0..IMU{self.imus - 1})")
             if fault.kind == "noise" and not any(t["effect"] == "white_noise" for t in self.axes[fault.axis]):
                 raise _err(f"noise fault on {fault.axis}: the model has no white_noise term there (the fault scales it)")
-        self.degrade = degrade
         if degrade is not None and degrade.imu >= self.imus:
             raise _err(f"degradation on IMU{degrade.imu} but the vehicle has {self.imus} IMU(s)")
-        self.warmup = warmup
-        self.spread = spread or ImuSpread()
-        self.t_start = _finite("t_start", t_start, lo=0.0)
-        self.seed = seed
-        ss = np.random.SeedSequence(seed)
+
+    def _seed_streams(self, ss: np.random.SeedSequence):
+        """The random streams, each a child of ``ss`` in a fixed order (so a seed gives the same vehicle and IMU
+        0's noise does not depend on the IMU count); returns the (motion, spread, warm-up) generators used only
+        while constructing."""
         c = ss.spawn(6 + 2 * MAX_IMUS)
         rng_motion, self._rng_vib, rng_spread, self._rng_fault, rng_warm = (np.random.default_rng(x) for x in c[:5])
         self._rng_noise = [np.random.default_rng(x) for x in c[5:5 + MAX_IMUS]]
@@ -306,38 +174,24 @@ class VehicleSimulator:
         rng_phase = np.random.default_rng(c[6 + MAX_IMUS])
         self._phases = {(i, ax, k): float(rng_phase.uniform(0, 2 * np.pi))
                         for i in range(MAX_IMUS) for ax in GYRO_AXES + ACCEL_AXES for k in range(len(self.axes[ax]))}
-        # per-IMU errors (drawn for MAX_IMUS so IMU i does not depend on the IMU count)
-        sp = self.spread
-        self.gyro_matrix = np.zeros((MAX_IMUS, 3, 3))
-        self.accel_matrix = np.zeros((MAX_IMUS, 3, 3))
-        self.gyro_bias = np.zeros((MAX_IMUS, 3))
-        self.accel_bias = np.zeros((MAX_IMUS, 3))
-        self.misalignment = np.zeros((MAX_IMUS, 3, 3))
-        for i in range(MAX_IMUS):
-            Rm = _misalignment(rng_spread, sp.misalignment_deg)
-            self.misalignment[i] = Rm
-            self.gyro_matrix[i] = np.diag(1.0 + rng_spread.uniform(-sp.scale, sp.scale, 3)) @ Rm
-            self.accel_matrix[i] = np.diag(1.0 + rng_spread.uniform(-sp.scale, sp.scale, 3)) @ Rm
-            self.gyro_bias[i] = rng_spread.normal(0.0, sp.gyro_bias, 3)
-            self.accel_bias[i] = rng_spread.normal(0.0, sp.accel_bias, 3)
-        amp = rng_warm.uniform(0.5, 1.0, (MAX_IMUS, 3)) * rng_warm.choice([-1.0, 1.0], (MAX_IMUS, 3))
-        self.warmup_amplitude = amp * (warmup.amplitude if warmup is not None else 0.0)
-        self.motion = BodyMotion(self.schedule, rng_motion, self.rate_hz, rest_tilt_deg)
-        # the realistic gyro path: its own random streams (spawned after the others: old draws unchanged)
-        self.realism = realism
-        self._stage = None
-        if realism is not None:
-            if not isinstance(realism, Realism):
-                raise _err("realism must be a companion.sim.realism.Realism")
-            if realism.sensor_rate_hz < self.rate_hz:
-                raise _err(f"sensor_rate_hz ({realism.sensor_rate_hz:g}) is below the logged rate ({self.rate_hz:g} Hz)")
-            r_ch = ss.spawn(3 + MAX_IMUS)
-            rng_r, rng_timing = np.random.default_rng(r_ch[0]), np.random.default_rng(r_ch[1])
-            self._rng_gmb = np.random.default_rng(r_ch[2])
-            self._rng_sensor = [np.random.default_rng(x) for x in r_ch[3:]]
-            self.temp_slope = rng_r.normal(0.0, realism.temp_slope, (MAX_IMUS, 3))  # rad/s per K (truth)
-            self._stage = SensorStage(realism, self.imus, self.t_start, rng_timing)
-        # stream state
+        return rng_motion, rng_spread, rng_warm
+
+    def _init_realism(self, realism: Realism, ss: np.random.SeedSequence) -> None:
+        """The realistic gyro path: its own random streams, spawned after the others so that the streams of
+        the plain path stay the same for a seed."""
+        if not isinstance(realism, Realism):
+            raise _err("realism must be a companion.sim.realism.Realism")
+        if realism.sensor_rate_hz < self.rate_hz:
+            raise _err(f"sensor_rate_hz ({realism.sensor_rate_hz:g}) is below the logged rate ({self.rate_hz:g} Hz)")
+        r_ch = ss.spawn(3 + MAX_IMUS)
+        rng_r, rng_timing = np.random.default_rng(r_ch[0]), np.random.default_rng(r_ch[1])
+        self._rng_gmb = np.random.default_rng(r_ch[2])
+        self._rng_sensor = [np.random.default_rng(x) for x in r_ch[3:]]
+        self.temp_slope = rng_r.normal(0.0, realism.temp_slope, (MAX_IMUS, 3))  # rad/s per K (truth)
+        self._stage = SensorStage(realism, self.imus, self.t_start, rng_timing)
+
+    def _reset_stream(self) -> None:
+        """Nothing taken yet: the position, the noise state carried between blocks, the current block."""
         self.t_next = self.t_start
         self._state: dict = {}  # stateful noise components at the last sample taken
         self._frozen = None  # stuck fault: the frozen value, once the first faulty sample was taken
@@ -345,9 +199,10 @@ class VehicleSimulator:
         self._blk: VehicleBlock | None = None
         self._blk_state: dict = {}
         self._blk_raw = None
-        self._blk_frozen = None
+        self._blk_frozen: _FrozenAt | None = None
         self._i = 0
-        self.interval_set = False  # used by sim-autopilot: SET_MESSAGE_INTERVAL wins over REQUEST_DATA_STREAM
+        self.interval_set = False  # sim-autopilot: a SET_MESSAGE_INTERVAL wins over REQUEST_DATA_STREAM
+
 
     # ----------------------------------------------------------------- schedule queries
     def armed_at(self, t) -> np.ndarray | bool:
@@ -397,8 +252,8 @@ class VehicleSimulator:
         for k, arr in self._blk_state.items():
             self._state[k] = float(arr[j - 1])
         self._prev_raw = self._blk_raw[:, j - 1].copy()
-        if self._blk_frozen is not None and j > self._blk_frozen[0]:
-            self._frozen = self._blk_frozen[1]
+        if self._blk_frozen is not None and j > self._blk_frozen.index:
+            self._frozen = self._blk_frozen.value
 
     def temperature_at(self, t) -> np.ndarray:
         """(imus, n) IMU temperatures (degC) at times since boot ``t`` (with Realism; else the ambient 25 C)."""
@@ -582,12 +437,12 @@ class VehicleSimulator:
         if fl.kind == "stuck":
             if i0 > 0:
                 frozen = float(y[i0 - 1])
-                self._blk_frozen = (i0, frozen)
+                self._blk_frozen = _FrozenAt(i0, frozen)
             elif self._frozen is not None:
                 frozen = self._frozen
             else:
                 frozen = float(self._prev_raw[fl.imu, j]) if self._prev_raw is not None else float(y[0])
-                self._blk_frozen = (0, frozen)
+                self._blk_frozen = _FrozenAt(0, frozen)
             dither = self._rng_fault.normal(0.0, fl.size, n_on) if fl.size > 0 else 0.0
             y[on] = frozen + dither
         elif fl.kind == "noise":
@@ -604,42 +459,6 @@ class VehicleSimulator:
             y[on] = np.clip(y[on], -fl.size, fl.size)
 
 
-# ----------------------------------------------------------------------------------------------- tlog output
-def write_tlog(path, sim: VehicleSimulator, duration_s: float, sysid: int = 1, compid: int = 1,
-               heartbeat_hz: float = 1.0, mavlink2: bool = True, t0_unix: float = 1.7e9,
-               block_s: float = 600.0) -> dict:
-    """Write ``duration_s`` of the simulator to a tlog as an ArduPilot autopilot would send it.
-
-    IMU0 as RAW_IMU (``time_usec``), IMU1 as SCALED_IMU2, IMU2 as SCALED_IMU3 (``time_boot_ms``), gyro
-    int16 mrad/s and accel int16 mG, rounded to the nearest LSB and clipped to int16; a HEARTBEAT every
-    ``1/heartbeat_hz`` s of simulated time from the first sample on, with the armed bit (``base_mode``
-    128) set while a flight is armed. Written block by block (constant memory). The encoder is
-    :mod:`companion.mavlink.tlog_writer`'s. Returns counts ``{"imu_messages", "heartbeats"}``.
-    """
-    from companion.mavlink.tlog_writer import ImuTlogStream
-
-    duration_s = _finite("duration (s)", duration_s, lo=0.0, lo_open=True)
-    counts = {"imu_messages": 0, "heartbeats": 0}
-    next_hb = sim.t_next
-    with ImuTlogStream(path, sysid=sysid, compid=compid, mavlink2=mavlink2, t0_unix=t0_unix) as out:
-        for blk in sim.blocks(duration_s, block_s):
-            if blk.n == 0:
-                continue
-            hb = []
-            if heartbeat_hz > 0:
-                t_last = blk.t[-1]
-                while next_hb <= t_last:
-                    hb.append(next_hb)
-                    next_hb += 1.0 / heartbeat_hz
-            hb = np.asarray(hb)
-            streams = [(IMU_MESSAGES[i], i, *blk.imu(i)) + (() if blk.temperature is None else (blk.temperature[i],))
-                       for i in range(sim.imus)]
-            out.write(streams, hb, np.asarray(sim.armed_at(hb), dtype=bool).reshape(-1))
-            counts["imu_messages"] += blk.n * sim.imus
-            counts["heartbeats"] += hb.size
-    return counts
-
-
 __all__ = ["VehicleSimulator", "VehicleBlock", "Fault", "Degradation", "Flight", "Handling", "Schedule", "WarmUp",
-           "ImuSpread", "write_tlog", "FAULT_KINDS", "FAULT_SIZE_UNITS", "FAULT_DEFAULT_SIZE", "IMU_MESSAGES",
+           "ImuSpread", "FAULT_KINDS", "FAULT_SIZE_UNITS", "FAULT_DEFAULT_SIZE", "IMU_MESSAGES",
            "rotation_nb", "body_rates", "specific_force_at_rest"]
