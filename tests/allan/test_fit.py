@@ -284,7 +284,7 @@ def test_a_ramp_does_not_displace_white_noise_from_the_selection():
     model error added for that misfit (70-75 % on all 20 seeds here) stayed when white noise came back. A base
     term now comes back where it lowers the BIC: no model error, N and R resolved, both intervals covering
     (R's covered 11 of these 20 while the covariance of the longest clusters was summed too coarsely: see
-    tests/test_allan_confidence.py)."""
+    tests/allan/test_confidence.py)."""
     from companion.allan.adev import oavar
 
     fs, n, N, R = 10.0, 1033, 1.05e-4, 1.9e-5

@@ -113,7 +113,7 @@ def test_sample_tlog_analyses(repo_root):
 
 def test_bound_of_a_left_out_random_walk_holds():
     """A rate random walk too weak for the selection in 2 h at 50 Hz (expected evidence lambda 2.6, the
-    draw of tests/test_fit.py): analyze reports its 95 % upper bound by test inversion, the points' covariance
+    draw of tests/allan/test_fit.py): analyze reports its 95 % upper bound by test inversion, the points' covariance
     evaluated at the bound (:func:`companion.allan.fit.upper_bounds`), and it lies above the truth (1.9 x).
     The online report's rule, the covariance at the fitted model where the term is 0, gave 0.56 x the truth
     here: a 'bound' below the value it bounds."""

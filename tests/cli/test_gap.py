@@ -66,7 +66,7 @@ def test_raw_imu_tlog_names_rate_quantization(raw_imu_tlog, tmp_path, capsys):
     new = yaml.safe_load(out_model.read_text())
     assert new["axes"]["gy"] == [{"effect": "white_noise", "N": 2e-4}]  # other axes unchanged
     # the log's rounding is a term of the measurement: gap derives it from the log again, the sensor's
-    # model does not carry it (tests/test_gap_out_model.py: the round trip)
+    # model does not carry it (tests/cli/test_gap_out_model.py: the round trip)
     nq = 1e-3 * math.sqrt(1 / (12 * RATE))
     assert {"effect": "white_noise", "N": pytest.approx(nq)} not in new["axes"]["gx"]
     assert new["rate_hz"] == RATE

@@ -18,7 +18,7 @@ from companion.sim.ulog_writer import write_ulog
 from companion.sources import load
 
 from tests.support import fuzz
-from tests.test_adev import nbs14_1000
+from tests.allan.test_adev import nbs14_1000
 
 MUTATIONS = 120  # per reader: a few seconds in all
 

@@ -16,7 +16,7 @@ from companion import units
 from companion.cli.main import main
 from companion.sim.model import load_model
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 LSB = 1e-3  # RAW_IMU gyro: int16 mrad/s; dithered rounding adds white noise N_q = LSB sqrt(tau0 / 12)
 
 

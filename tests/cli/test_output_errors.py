@@ -14,7 +14,7 @@ import pytest
 
 from companion.cli.main import main
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = str(ROOT / "tlogs" / "sample.tlog")
 MODEL = str(ROOT / "tlogs" / "sample_model.yaml")
 

@@ -158,7 +158,7 @@ def test_srukf_near_the_optimal_filter_on_gauss_markov_wander():
     optimal filter of the true model (scalar steady-state Kalman filter with the known parameters). The
     ARIMA(1,1,1) cannot describe a GM process exactly; over 20 benchmark seeds the SR-UKF's rmse stayed within
     1.16x of the optimal, so 1.25x bounds it."""
-    from tests.test_compensation_arima import gauss_markov_plus_noise
+    from tests.compensation.test_arima import gauss_markov_plus_noise
 
     tau_c, sigma, sigma_v, rate = 5.0, 0.01, 5e-3, 100.0
     a = np.exp(-1.0 / (rate * tau_c))

@@ -147,7 +147,7 @@ def test_a_term_too_short_to_resolve_stays_in_the_model_and_n_keeps_the_truth():
 @pytest.mark.parametrize("seed", [7, 9])
 def test_online_bound_of_a_left_out_random_walk_holds(seed):
     """A rate random walk too weak for the selection in 2 h at 50 Hz (the truth of
-    tests/test_analyze.py::test_bound_of_a_left_out_random_walk_holds): the online report's K bound is at least
+    tests/cli/test_analyze.py::test_bound_of_a_left_out_random_walk_holds): the online report's K bound is at least
     the offline analysis' bound by test inversion and lies above the truth. Seeds 0-11 leave K out in 8 draws;
     the report's own rule (the covariance at the fitted model, where K is 0) bounded it below the truth in two
     of them, these (0.72 x and 0.90 x), the inverted bound in none (1.03-1.64 x)."""

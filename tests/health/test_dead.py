@@ -14,7 +14,7 @@ import pytest
 from companion.health.dead import constant_axes, dead_gyro_text
 from companion.sim.dataflash_writer import write_imu_log
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 REAL = Path("/work/reallogs/erle/pxf_rover_2-8-2014_mpu9250-ms5611_7.BIN")  # local copy of a public log
 
 

@@ -23,7 +23,7 @@ from tests.support.loopback import env, free_udp_port, link_losses, pacing, read
 
 pytestmark = pytest.mark.network
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 N_SI = 3e-3
 RATE = 100.0
 LSB = 1e-3

@@ -18,7 +18,7 @@ from tests.support.readiness import DEADLINE_S, READY, kill_left, wait_for_text,
 
 from companion.cli.main import main
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 MODEL = "rate_hz: 100.0\naxes:\n" + "".join(f"  {a}: [{{effect: white_noise, N: 3.0e-3}}]\n" for a in ("gx", "gy", "gz"))
 
 

@@ -24,7 +24,7 @@ from companion.service.state import load_state, save_state
 from tests.support.readiness import DEADLINE_S, READY, wait_for_text
 from tests.support.sinks import RecordingSink
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 KEY = StreamKey(1, 1, "RAW_IMU", 0)
 N = 3e-3
 FS = 100.0

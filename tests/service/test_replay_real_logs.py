@@ -14,7 +14,7 @@ import pytest
 
 from companion.sim.dataflash_writer import write_imu_log
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SHARED = REPO.parent / "shared" / "data"
 LOG171 = SHARED / "ardupilot" / "dronekit_log171.bin"
 DEG = np.pi / 180.0
@@ -69,7 +69,7 @@ def test_plane_noise_drop_with_distinct_values_is_not_stuck(tmp_path):
     vibration falls on the accelerometer too, as in the real logs (pxf_plane_5-12-2014 and 4-12-2014_329:
     in 398 of 408 blocks where the gyro's variance was below 0.26 of its reference, the accelerometer's was
     below half of its own); the same gyro drop with the accelerometer unchanged is what a gyro frozen with a
-    dither looks like (tests/test_fault_vibration.py)."""
+    dither looks like (tests/health/test_vibration.py)."""
     rng = np.random.default_rng(1)
     n = 10 * 400
     g = lowpassed(rng, n, 0.09 * DEG)

@@ -16,7 +16,7 @@ from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig
 from tests.support.sinks import RecordingSink
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "tlogs" / "sample.tlog"
 KEY = StreamKey(1, 1, "HIGHRES_IMU", 0)
 FS = 50.0

@@ -62,7 +62,7 @@ def test_a_binary_file_given_as_model_config_or_baseline_is_one_error_line(tmp_p
     traceback; now one line naming the file, the byte that is not UTF-8, and what belongs there."""
     tlog = tmp_path / "flight.tlog"
     tlog.write_bytes(b"\x00\x05\x8f\x2a\xd7\xfe\x01" * 40)  # a tlog's 8-byte time and a MAVLink frame's bytes
-    sample = str(Path(__file__).resolve().parents[1] / "tlogs" / "sample.tlog")
+    sample = str(Path(__file__).resolve().parents[2] / "tlogs" / "sample.tlog")
     calls = [
         (["simulate", str(tlog), "--duration", "1", "--out", str(tmp_path / "x.csv")], "a noise model is a YAML file"),
         (["gap", sample, "--model", str(tlog)], "a noise model is a YAML file"),

@@ -462,7 +462,7 @@ def test_start_end_and_tlog_gz(tmp_path, capsys):
     assert st["ranges_s"][0][0] >= 20 and st["ranges_s"][-1][1] <= 90
     assert 69 <= st["duration_s"] <= 70.5
     capsys.readouterr()
-    tl = Path(__file__).resolve().parent.parent / "tlogs" / "sample.tlog"
+    tl = Path(__file__).resolve().parents[2] / "tlogs" / "sample.tlog"
     if tl.exists():
         gz = tmp_path / "s.tlog.gz"
         gz.write_bytes(gzip.compress(tl.read_bytes()))

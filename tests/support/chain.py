@@ -1,7 +1,7 @@
 """Helpers for the chain tests and benchmarks: `companion sim-autopilot` -> a router (MAVProxy from PyPI) ->
 `companion run --gcs udpout:...` -> a pymavlink ground-station listener, all over UDP on 127.0.0.1.
 
-Not a test file: tests/test_chain.py and benchmarks/bench_chain.py import from here. Every wait is for a
+Not a test file: tests/loopback/test_chain.py and benchmarks/bench_chain.py import from here. Every wait is for a
 signal with a deadline; every process started here is the caller's to stop.
 """
 
