@@ -62,11 +62,17 @@ def test_simulate_tlog_then_analyze_json(tmp_path, model, capsys):
 
 
 def test_quantization_not_dithered_is_reported():
-    y = np.round(np.random.default_rng(0).normal(0, 1e-4, 20000) / 1e-3) * 1e-3  # noise 0.1 LSB
-    r = analyze_axis(y, 50.0, lsb=1e-3)
-    assert r["status"] in ("ok", "constant")
-    if r["status"] == "ok":
-        assert r["quantization"]["dithered"] is False and "not dithered" in r["quantization"]["note"]
+    # 0.3 LSB of noise on a bias drifting across 4 codes: the rounded output moves (status "ok"), its noise per
+    # sample is below the 0.5 LSB that dithers the rounding; at 1 LSB of noise it is dithered
+    rng = np.random.default_rng(0)
+    t = np.arange(20000) / 50.0
+    drift = 2e-3 * np.sin(2 * np.pi * t / 300.0)
+    r = analyze_axis(np.round((rng.normal(0, 3e-4, t.size) + drift) / 1e-3) * 1e-3, 50.0, lsb=1e-3)
+    assert r["status"] == "ok"
+    assert r["quantization"]["dithered"] is False and "not dithered" in r["quantization"]["note"]
+    r = analyze_axis(np.round((rng.normal(0, 1e-3, t.size) + drift) / 1e-3) * 1e-3, 50.0, lsb=1e-3)
+    assert r["status"] == "ok" and r["quantization"]["dithered"] is True
+    assert "not dithered" not in r["quantization"]["note"]
 
 
 def test_csv_and_plot(tmp_path, model, capsys):
