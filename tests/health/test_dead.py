@@ -15,7 +15,6 @@ from companion.health.dead import constant_axes, dead_gyro_text
 from companion.sim.dataflash_writer import write_imu_log
 
 REPO = Path(__file__).resolve().parents[2]
-REAL = Path("/work/reallogs/erle/pxf_rover_2-8-2014_mpu9250-ms5611_7.BIN")  # local copy of a public log
 
 
 def companion(*args, cwd=None):
@@ -99,11 +98,21 @@ def test_a_record_too_short_to_name_a_dead_gyro_says_it_read_exactly_zero(tmp_pa
     assert "IMU1 gyro X reads exactly 0: dead" in r.stdout and "read exactly 0 in all" not in r.stdout, r.stdout
 
 
-@pytest.mark.skipif(not REAL.exists(), reason="local copy of the public erlerobot/logs rover log absent")
-def test_real_rover_log_dead_gyro_named_by_inspect_and_analyze():
-    r = companion("inspect", str(REAL))
-    assert "gyro dead: X, Y, Z exactly 0 in all 8578 samples" in r.stdout
-    r = companion("analyze", str(REAL), "--quiet")
+def test_real_rover_log_dead_gyro_named_by_inspect_and_analyze(tmp_path):
+    """The public rover log (erlerobot/logs pxf_rover_2-8-2014_mpu9250-ms5611_7.BIN, not in ../shared/data: no
+    shared log holds a dead gyro) as its properties: the 2015 DataFlash layout (IMU/IMU2, TimeMS), 8578
+    samples at 50 Hz, the second IMU's gyro exactly 0 throughout, armed throughout."""
+    rng = np.random.default_rng(4)
+    n = 8578
+    t = 5.0 + np.arange(n) / 50.0
+    g = np.stack([rng.normal(0.0, 2e-3, (n, 3)), np.zeros((n, 3))])
+    a = np.stack([np.array([0.0, 0.0, -9.81]) + rng.normal(0.0, 0.05, (n, 3)) for _ in range(2)])
+    p = tmp_path / "rover.bin"
+    write_imu_log(p, t, g, a, layout="2015", armed=[(5.0, True)])
+    r = companion("inspect", str(p))
+    assert "IMU[1]" in r.stdout and "gyro dead: X, Y, Z exactly 0 in all 8578 samples" in r.stdout, r.stdout
+    assert "IMU[0] sys0/comp0: gyro dead" not in r.stdout
+    r = companion("analyze", str(p), "--quiet")
     assert r.returncode != 0 and "gyro dead" in r.stderr
 
 
