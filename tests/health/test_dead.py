@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from companion.health.dead import constant_axes, dead_gyro_text
 from companion.sim.dataflash_writer import write_imu_log
