@@ -125,7 +125,7 @@ def test_router_outage_texts_reach_the_gcs_and_health_is_back_to_healthy_at_once
         chain.close()
 
 
-@pytest.mark.skipif(mavlink_routerd() is None, reason="mavlink-routerd not found (set MAVLINK_ROUTERD)")
+@pytest.mark.skipif(mavlink_routerd() is None, reason="mavlink-routerd not found: no Debian 12 package, none on PyPI (set MAVLINK_ROUTERD to a built one)")
 def test_reports_reach_a_gcs_through_mavlink_router_on_the_companion_computer(tmp_path):
     """mavlink-router forwards between its endpoints: `companion run` on one UDP endpoint (no --gcs), the
     GCS on another; the GCS receives every NAMED_VALUE_FLOAT name and every STATUSTEXT the companion sent,
