@@ -11,6 +11,7 @@ from companion.gap.selection import RECAL_PENALTY
 from companion.gap.trend import detrend, detrended_measure, residual_random_walk
 from companion.gap.workflow import NOISE_FLOOR_G
 from companion.sim.synth import synthesize_axis
+from tests.support.stats import coverage_floor
 
 RATE = 20.0
 N_1H = int(3600 * RATE)
@@ -49,16 +50,24 @@ def test_a_ramp_leaves_no_random_walk_after_its_line(seed):
     assert ev["lr"] < RECAL_PENALTY
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
-def test_a_random_walk_keeps_its_allan_variance_after_the_line(seed):
+def test_a_random_walk_keeps_its_allan_variance_after_the_line():
     """Random walk + white + flicker: the least-squares line takes only a share ~1.2 tau / T of the random
-    walk's Allan variance; the detrended record still needs it (LR above 10.8) and K is found within 50 %
-    (a realisation that happens to run straight loses more to the line: K 0.66x on seed 3; at K 2.4e-5 some
-    draws fall below 10.8, which is the limit of any test on one record)."""
-    y = synthesize_axis(BASE + [RW], RATE, N_1H, np.random.default_rng(seed))
-    ev = residual_random_walk(detrended_measure([y], RATE), BASE, [])
-    assert ev["lr"] > RECAL_PENALTY
-    assert ev["K"] == pytest.approx(RW["K"], rel=0.5)
+    walk's Allan variance; the detrended record still needs it (LR above 10.8) and K is found within 50 %.
+    One record cannot promise either (a realisation that runs straight loses more to the line: K 0.31x and
+    LR 2.1 on seed 11), so over 40 seeds (0.07 s each): both in at least 90 % of draws (binomial counts,
+    false failure <= 1e-3 each when the rate is 90 %; measured 38-40 and 39-40 of 40 over seeds 1-120), and
+    the median K within 0.75-1.15x the truth (0.87-0.96x measured; the spread of log K is 0.34, the
+    median's about 0.07)."""
+    ratio, needed = [], []
+    for seed in range(1, 41):
+        y = synthesize_axis(BASE + [RW], RATE, N_1H, np.random.default_rng(seed))
+        ev = residual_random_walk(detrended_measure([y], RATE), BASE, [])
+        needed.append(ev["lr"] > RECAL_PENALTY)
+        ratio.append(ev["K"] / RW["K"])
+    ratio = np.array(ratio)
+    assert sum(needed) >= coverage_floor(40, 0.9), needed
+    assert np.sum(np.abs(ratio - 1.0) < 0.5) >= coverage_floor(40, 0.9), ratio
+    assert 0.75 <= np.median(ratio) <= 1.15, ratio
 
 
 RATE_50 = 50.0

@@ -12,6 +12,7 @@ from companion.allan.terms import adev_model
 from companion.gap import run_gap
 from companion.gap.workflow import NOISE_FLOOR_G
 from companion.sim.synth import synthesize_axis
+from tests.support.stats import coverage_floor
 
 RATE = 20.0
 N_2H = int(2 * 3600 * RATE)
@@ -129,16 +130,18 @@ def test_low_flicker_draw_keeps_b():
     assert [e["verdict"] for e in r.recalibrated] == ["consistent", "consistent"]
 
 
-@pytest.mark.parametrize("seed", [53, 54, 55])
-def test_b_far_off_still_called_missized(seed):
-    """The correction must not blind the test: a model B 5x too small is still named (truth: simulator).
-    Not every draw: seed 52 (measured B plateau 0.69x the truth, raw LR 13.3) is kept; see docs/gap.md."""
+def test_b_far_off_still_called_missized():
+    """The correction must not blind the test: a model B 5x too small is still named (truth: simulator), with
+    the fitted B within 0.7-1.4x the truth, in most draws: 12 consecutive seeds, the detection's power at
+    least 0.75 (a binomial count, false failure <= 1e-3; measured 13-14 of 16 over seeds 50-65: a draw
+    whose flicker floor reads 0.69x the truth, seed 52, is called consistent; see docs/gap.md)."""
     model = [{"effect": "white_noise", "N": 1e-3}, {"effect": "bias_instability", "B": 1e-4 / 5}]
-    r = run_gap(_measure(WB, seed), RATE, model, seed=seed, simulate=False)
-    assert r.added == []
-    b = r.recalibrated[1]
-    assert b["verdict"] == "too small"
-    assert 0.7e-4 <= b["fitted"] <= 1.4e-4
+    named = []
+    for seed in range(50, 62):
+        r = run_gap(_measure(WB, seed), RATE, model, seed=seed, simulate=False)
+        b = r.recalibrated[1]
+        named.append(r.added == [] and b["verdict"] == "too small" and 0.7e-4 <= b["fitted"] <= 1.4e-4)
+    assert sum(named) >= coverage_floor(len(named), 0.75), named
 
 # --- ArduPilot-style rate rounding (RAW_IMU int16 mrad/s) -------------------------------------------
 LSB = 1e-3
