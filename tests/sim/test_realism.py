@@ -297,9 +297,14 @@ def test_rate_change_on_the_realistic_path():
 
 @pytest.mark.shared
 def test_copter_preset_matches_log171(shared_data):
-    """The copter preset against the log it was fitted to (ArduCopter 3.3, 3 IMUs at 50 Hz, still 31-70 s
-    after boot, INS_GYRO_FILTER 20 Hz): per-IMU ground noise (median 2-s std) within 15 %, the IMU1/IMU0 ratio
-    (about 9) within 15 %, and the still-run temperatures rising as the log's do (IMU2 the fastest)."""
+    """A regression check of the copter preset's fit, not a validation: the preset was fitted to this log
+    (ArduCopter 3.3, 3 IMUs at 50 Hz, still 31-70 s after boot, INS_GYRO_FILTER 20 Hz; no other log of the
+    kind is in ../shared/data), so agreement shows the simulator still reproduces its fit: per-IMU ground
+    noise (median 2-s std) within 15 %, the IMU1/IMU0 ratio (about 9) within 15 %, the still-run temperatures
+    rising as the log's do (IMU2 the fastest). The independent reference is ../shared/data/README.md's reading
+    of the log (its authors', not this code's): "on the ground the three IMUs' noise differs by about 10x (a
+    quiet one and two noisier ones)": the spread (largest / smallest 5-20x) is checked on the log as this test
+    measures it and on the simulation; the count is not (in this still window two IMUs are quiet, one 9x)."""
     from companion.sources import load
 
     d = load(str(shared_data / "ardupilot" / "dronekit_log171.bin"))
@@ -321,6 +326,8 @@ def test_copter_preset_matches_log171(shared_data):
         sims.append([noise(blk.t, blk.gyro[i]) for i in range(3)])
         dT = blk.temperature[:, np.searchsorted(blk.t, 70.0) - 1] - blk.temperature[:, np.searchsorted(blk.t, 31.0)]
     sim_noise = np.median(sims, axis=0)
+    for noise_of in (real, sim_noise):  # the independent reading: the IMUs' noise differs by about 10x
+        assert 5.0 <= noise_of.max() / noise_of.min() <= 20.0, noise_of
     assert np.allclose(sim_noise, real, rtol=0.15), (sim_noise, real)
     assert sim_noise[1] / sim_noise[0] == pytest.approx(real[1] / real[0], rel=0.15)
     assert np.argmax(dT) == np.argmax(dT_real) == 2 and np.allclose(dT, dT_real, atol=0.8), (dT, dT_real)
