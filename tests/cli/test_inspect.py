@@ -115,7 +115,7 @@ def test_inspect_live_udp_loopback(tmp_path, capsys):
             sock.sendto(m.pack(mav), ("127.0.0.1", port))
             mav.seq = (mav.seq + 1) % 256
             k += 1
-            time.sleep(0.01)
+            time.sleep(0.01)  # the sender's pacing (100 Hz)
         sock.close()
 
     th = threading.Thread(target=sender, daemon=True)

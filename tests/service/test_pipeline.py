@@ -281,7 +281,7 @@ def test_link_identity_and_replies_only_to_the_imu_sender():
     try:
         link = Link(conn, LinkConfig(), sysid=None)
         intruder.sendto(enc_i.heartbeat_encode(6, 8, 0, 0, 4).pack(enc_i), ("127.0.0.1", port))
-        time.sleep(0.05)
+        time.sleep(0.05)  # pacing: the intruder's datagram queued first (same process; no wait for another)
         vehicle.sendto(enc_v.heartbeat_encode(2, 3, 0, 0, 3).pack(enc_v), ("127.0.0.1", port))
         vehicle.sendto(enc_v.raw_imu_encode(1_000_000, 0, 0, -1000, 1, 2, 3, 0, 0, 0).pack(enc_v), ("127.0.0.1", port))
         got = []
