@@ -27,6 +27,7 @@ def repo_root() -> Path:
     return ROOT
 
 
+@pytest.hookimpl(optionalhook=True)  # an xdist hook: without xdist (``-p no:xdist``) pytest must not reject it
 def pytest_xdist_auto_num_workers(config):
     """``-n auto``: one worker more than the cores. The loopback tests spend part of their time waiting on the
     processes they start (a worker then idles); the extra worker fills those gaps (on 2 cores, idle: 389 s

@@ -1,7 +1,7 @@
 """Helpers for the chain tests and benchmarks: `companion sim-autopilot` -> a router (MAVProxy from PyPI) ->
 `companion run --gcs udpout:...` -> a pymavlink ground-station listener, all over UDP on 127.0.0.1.
 
-Not a test file: tests/test_chain.py and benchmarks/bench_chain.py import from here. Every wait is for a
+Not a test file: tests/loopback/test_chain.py and benchmarks/bench_chain.py import from here. Every wait is for a
 signal with a deadline; every process started here is the caller's to stop.
 """
 
@@ -41,6 +41,10 @@ class Listener:
         self.texts: list[tuple[float, str]] = []
         self.heartbeats = 0
         self.health: list[tuple[float, float]] = []  # (arrival, IMU0G_HLTH value)
+        self.received = 0  # the companion's messages received so far: an arrival order free of the wall clock
+        #: (arrival order, IMU0G_HLTH value, its message time in s); texts as (arrival order, text)
+        self.health_seq: list[tuple[int, float, float]] = []
+        self.texts_seq: list[tuple[int, str]] = []
         self.lock = threading.Lock()
         self._stop = False
         self.thread = threading.Thread(target=self._loop, daemon=True)
@@ -52,13 +56,16 @@ class Listener:
             if msg is None or msg.get_srcComponent() != COMPANION:
                 continue
             with self.lock:
+                self.received += 1
                 t = msg.get_type()
                 if t == "NAMED_VALUE_FLOAT":
                     self.names[msg.name] = msg.value
                     if msg.name == "IMU0G_HLTH":
                         self.health.append((time.monotonic(), msg.value))
+                        self.health_seq.append((self.received, msg.value, msg.time_boot_ms / 1000.0))
                 elif t == "STATUSTEXT":
                     self.texts.append((time.monotonic(), msg.text))
+                    self.texts_seq.append((self.received, msg.text))
                 elif t == "HEARTBEAT":
                     self.heartbeats += 1
 

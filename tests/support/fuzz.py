@@ -1,4 +1,4 @@
-"""A seeded mutation fuzzer for the file readers (used by tests/test_input_handling.py and
+"""A seeded mutation fuzzer for the file readers (used by tests/cli/test_input_handling.py and
 benchmarks/bench_fuzz.py).
 
 ``mutate(data, rng, hot)`` applies 1-4 random damages of the kinds a log meets in practice: bit/byte flips,

@@ -97,7 +97,7 @@ def sim_against_run(tmp_path, model_text, sim_args, duration, speedup, run_args=
     stop run (SIGTERM); returns (nvf, texts) as sim-autopilot recorded them (``t_sim`` = time since boot,
     the simulation starts at 1 s). Fails with a clear message when the link lost more than ``max_loss`` of the IMU messages (default
     25 %: a busy machine's UDP receiver drops what it cannot take, and the pipeline is shown within 5 % at 20 %
-    random or bursty loss in tests/test_link_health.py, so a loaded CI run stays green)."""
+    random or bursty loss in tests/mavlink/test_link.py, so a loaded CI run stays green)."""
     (tmp_path / "model.yaml").write_text(model_text)
     port = free_udp_port()
     wall = duration / speedup

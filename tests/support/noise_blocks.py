@@ -1,5 +1,5 @@
-"""One axis' blocks for the noise test's unit tests (health/noise.py), shared by tests/test_noise_quantized.py and
-tests/test_noise_reference.py."""
+"""One axis' blocks for the noise test's unit tests (health/noise.py), shared by tests/health/test_noise_quantized.py and
+tests/health/test_noise_reference.py."""
 
 from __future__ import annotations
 

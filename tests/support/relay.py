@@ -1,5 +1,5 @@
 """A lossy UDP relay between `companion sim-autopilot` and `companion run` on 127.0.0.1, and the loop through
-it: what tests/test_link_health.py checks and benchmarks/bench_loss.py measures (not a test file, so both
+it: what tests/mavlink/test_link.py checks and benchmarks/bench_loss.py measures (not a test file, so both
 can import it).
 
 Test model: white noise N = 3e-3 rad/s/sqrt(Hz) per gyro axis at 100 Hz with 1 mrad/s rounding.
