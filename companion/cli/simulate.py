@@ -5,10 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 
-import numpy as np
-
 from companion.errors import CompanionError
-from companion.samples import ACCEL_AXES, GYRO_AXES
+from companion.sim.synth import imu_arrays
 
 DESCRIPTION = """\
 Synthesise every noise term of MODEL.yaml (white noise, angle quantization, flicker bias instability by
@@ -95,20 +93,6 @@ def run_vehicle(args, model) -> int:
     return 0
 
 
-def synthesize(model, duration_s: float, seed: int):
-    """(t, gyro (n,3), accel (n,3)) SI arrays for a model."""
-    from companion.sim.synth import simulate_model
-
-    data = simulate_model(model, duration_s, seed)
-    n = int(round(duration_s * model.rate_hz))
-    t = np.arange(n) / model.rate_hz
-    gyro = np.column_stack([data.get(a, np.zeros(n)) for a in GYRO_AXES])
-    accel = np.column_stack([data.get(a, np.zeros(n)) for a in ACCEL_AXES])
-    if not any(a in model.axes for a in ACCEL_AXES):
-        accel[:, 2] = -9.80665
-    return t, gyro, accel
-
-
 #: most samples per IMU written in one run (about 1.2 GB of arrays per IMU)
 MAX_SAMPLES = 50_000_000
 
@@ -161,7 +145,7 @@ def run(args) -> int:
     _check_noise_run(args, model, n)
     out = args.out
     try:
-        t, gyro, accel = synthesize(model, args.duration, args.seed)
+        t, gyro, accel = imu_arrays(model, args.duration, args.seed)
     except ValueError as exc:
         raise CompanionError(f"{args.model}: {exc}") from None
     try:

@@ -176,3 +176,22 @@ def simulate_model(model, duration_s: float, seed: int | None = 0) -> dict[str, 
         seq = children[idx] if idx < len(children) else np.random.SeedSequence([seed or 0, abs(hash(axis)) % 2**32])
         out[axis] = synthesize_axis(terms, rate_hz, n, np.random.default_rng(seq))
     return out
+
+
+#: standard gravity, m/s^2: the accelerometer of a level vehicle at rest when a model lists no accel axis
+STANDARD_GRAVITY = 9.80665
+
+
+def imu_arrays(model, duration_s: float, seed: int | None = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, gyro (n, 3), accel (n, 3))`` in SI for a noise model: the axes it lists synthesised, the others 0;
+    with no accelerometer axis at all, az = -g (a level vehicle at rest)."""
+    from companion.samples import ACCEL_AXES, GYRO_AXES
+
+    data = simulate_model(model, duration_s, seed)
+    n = int(round(duration_s * model.rate_hz))
+    t = np.arange(n) / model.rate_hz
+    gyro = np.column_stack([data.get(a, np.zeros(n)) for a in GYRO_AXES])
+    accel = np.column_stack([data.get(a, np.zeros(n)) for a in ACCEL_AXES])
+    if not any(a in model.axes for a in ACCEL_AXES):
+        accel[:, 2] = -STANDARD_GRAVITY
+    return t, gyro, accel
