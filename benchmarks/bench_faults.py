@@ -24,13 +24,13 @@ rad/s, vibration, landing, disarm) and handlings (picked up, turned, put down in
 rounding with 0.7 LSB of noise (even runs) or 2-30 LSB (odd runs); any fault or degradation
 STATUSTEXT is a false alarm.
 
-    python benchmarks/bench_faults.py --quick          # 3 seeds per kind (no B x2), 2 healthy IMU-hours
-    python benchmarks/bench_faults.py                  # 20 seeds per kind, 100 healthy IMU-hours
-    python benchmarks/bench_faults.py --skip-healthy --seeds 5 --kinds stuck,noise
-    python benchmarks/bench_faults.py --skip-faults --preset copter,plane,rover,px4 --healthy-runs 8 --healthy-hours 1
-    python benchmarks/bench_faults.py --skip-faults --preset plane,rover,copter,px4 --healthy-runs 8 --first-run 8 \
+    python -m benchmarks.bench_faults --quick          # 3 seeds per kind (no B x2), 2 healthy IMU-hours
+    python -m benchmarks.bench_faults                  # 20 seeds per kind, 100 healthy IMU-hours
+    python -m benchmarks.bench_faults --skip-healthy --seeds 5 --kinds stuck,noise
+    python -m benchmarks.bench_faults --skip-faults --preset copter,plane,rover,px4 --healthy-runs 8 --healthy-hours 1
+    python -m benchmarks.bench_faults --skip-faults --preset plane,rover,copter,px4 --healthy-runs 8 --first-run 8 \
         --healthy-hours 1 --jobs 2 --log soak.jsonl       # pieces append to one file ...
-    python benchmarks/bench_faults.py --summary soak.jsonl  # ... and add up
+    python -m benchmarks.bench_faults --summary soak.jsonl  # ... and add up
 
 --preset: the healthy runs use the realistic simulator (companion.sim.realism with the vehicle presets: each
 preset's IMUs, logged rate, gyro low-pass and decimation, vibration per flight phase, IMU timing skew,
@@ -48,8 +48,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from benchmarks import results
 from companion import units  # noqa: E402
 from companion.health import bias, disagreement, noise, stuck  # noqa: E402
 from companion.health.limits import FaultLimits  # noqa: E402
@@ -529,4 +529,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(results.run(main))

@@ -1,8 +1,8 @@
 """Benchmark of the gap workflow (companion.gap) on hidden cases with FRESH RANDOM parameters.
 
-    python benchmarks/bench_gap.py --quick                # a few seeds per tier, ~2 min: for development
-    python benchmarks/bench_gap.py --seeds 40             # the measurement quoted in docs/gap.md
-    python benchmarks/bench_gap.py --legacy --seeds 6     # also the fixed-case tables of the earlier versions
+    python -m benchmarks.bench_gap --quick                # a few seeds per tier, ~2 min: for development
+    python -m benchmarks.bench_gap --seeds 40             # the measurement quoted in docs/gap.md
+    python -m benchmarks.bench_gap --legacy --seeds 6     # also the fixed-case tables of the earlier versions
 
 Every draw is 2 h at 50 Hz. The model is white + flicker + rate random walk with random magnitudes (N
 log-uniform 3e-4..3e-3 rad/s/sqrt(Hz); the white/flicker crossover 1-100 s; the flicker/random-walk
@@ -38,8 +38,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
+from benchmarks import results
+from benchmarks.results import SHARED_DATA
 from companion.gap import run_gap  # noqa: E402
 from companion.gap.workflow import NOISE_FLOOR_G  # noqa: E402
 from companion.sim.synth import synthesize_axis  # noqa: E402
@@ -694,7 +695,7 @@ def main():
     ap.add_argument("--effects", help="comma-separated effects of the single tier to run (default all; each "
                     "keeps its seeds)")
     ap.add_argument("--skip-real", action="store_true")
-    ap.add_argument("--shared", default=str(ROOT.parent / "shared" / "data"))
+    ap.add_argument("--shared", default=str(SHARED_DATA))
     a = ap.parse_args()
     if a.quick:
         a.seeds = 4
@@ -738,4 +739,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(results.run(main))

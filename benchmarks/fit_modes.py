@@ -1,5 +1,5 @@
-"""Modes of benchmarks/bench_fit.py for filtered and real data (run through bench_fit.py: `real`, `filtered`,
-`draws`).
+"""Modes of benchmarks/bench_fit.py for filtered, real and drawn data: `python -m benchmarks.bench_fit MODE`
+(real, filtered, draws, short, plain, preset, gm, shape; its --help lists them).
 
 real: every gyro axis of the real still stretches in ../shared/data through `companion analyze --online --json`
 (the user's path), against an independent reference: the white-noise plateau of ADEV sqrt(tau), i.e. the
@@ -24,13 +24,13 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from benchmarks.results import SHARED_DATA
 from companion.allan.adev import cluster_sizes, oavar  # noqa: E402
 from companion.allan.confidence import edf_simple  # noqa: E402
 from companion.allan.fit import fit_avar  # noqa: E402
 from companion.allan.terms import avar_white_noise  # noqa: E402
 
-DATA = ROOT.parent / "shared" / "data"
+DATA = SHARED_DATA
 RAD2DEG_SQRTH = 180.0 / math.pi * 60.0  # rad/s/sqrt(Hz) -> deg/sqrt(h)
 RAD2DEG_H = 180.0 / math.pi * 3600.0
 
