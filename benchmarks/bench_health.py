@@ -135,7 +135,7 @@ def main():
     ap.add_argument("--step-at-h", type=float, default=1.0, help="step time after start (hours)")
     ap.add_argument("--max-delay-h", type=float, default=4.0)
     ap.add_argument("--skip-healthy", action="store_true")
-    args = results.parse_args(ap, {"healthy_runs": 1, "healthy_hours": 2.0, "seeds": 1})
+    args = results.parse_args(ap, {"healthy_runs": 1, "healthy_hours": 1.0, "seeds": 1, "step_at_h": 0.5, "max_delay_h": 0.25})
     cfg = PipelineConfig()
     if args.baseline_s:
         cfg.baseline_s = args.baseline_s
