@@ -26,11 +26,10 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
 
 from benchmarks import results
-from tests.support.chain import FAULT_WORDS, imu_times, low_rate_episodes, start_chain  # noqa: E402
-from tests.support.loopback import stop  # noqa: E402
+from tests.support.chain import FAULT_WORDS, imu_times, low_rate_episodes, start_chain
+from tests.support.loopback import stop
 
 CLK_TCK = 100.0  # Linux USER_HZ: the unit of utime/stime in /proc/PID/stat
 

@@ -34,12 +34,11 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-ROOT = Path(__file__).resolve().parent.parent
 
 from benchmarks import results
 from benchmarks.results import SHARED_DATA
-from companion.compensation.arima import optimal_error_std  # noqa: E402
-from companion.compensation.pipeline import compensate  # noqa: E402
+from companion.compensation.arima import optimal_error_std
+from companion.compensation.pipeline import compensate
 
 RATE = 100.0
 TAUS = (0.01, 0.16, 1.28, 81.92)

@@ -29,9 +29,9 @@ import numpy as np
 
 from benchmarks import results
 from benchmarks.results import SHARED_DATA
-from companion.sim.dataflash_writer import write_imu_log  # noqa: E402
-from companion.sources import dataflash as df  # noqa: E402
-from companion.sources import load  # noqa: E402
+from companion.sim.dataflash_writer import write_imu_log
+from companion.sources import dataflash as df
+from companion.sources import load
 
 SHARED = SHARED_DATA / "ardupilot" / "dronekit_log171.bin"
 IMU_TYPES = ["IMU", "IMU2", "IMU3"]

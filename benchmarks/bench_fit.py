@@ -53,17 +53,16 @@ range of about 91-98); N within a few % of the truth; no term invented where the
 
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import nnls
 
 from benchmarks import results
-from companion.allan.adev import cluster_sizes, oavar  # noqa: E402
-from companion.allan.confidence import edf_simple  # noqa: E402
-from companion.allan.fit import fit_avar  # noqa: E402
-from companion.allan.terms import linear_basis  # noqa: E402
-from companion.sim.synth import synthesize_axis  # noqa: E402
+from companion.allan.adev import cluster_sizes, oavar
+from companion.allan.confidence import edf_simple
+from companion.allan.fit import fit_avar
+from companion.allan.terms import linear_basis
+from companion.sim.synth import synthesize_axis
 
 RATE, N = 50.0, int(2 * 3600 * 50)
 TRUTH = {"N": 1e-3, "B": 5e-4, "K": 6e-5}

@@ -38,7 +38,7 @@ import time
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_v] = "1"
 
-import numpy as np  # noqa: E402
+import numpy as np  # noqa: E402  (after the thread settings, which numpy reads on import)
 
 from benchmarks import results  # noqa: E402
 

@@ -39,7 +39,6 @@ from benchmarks.results import SHARED_DATA
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
 SHARED = SHARED_DATA
 CHUNK = 500  # mutations per task
 

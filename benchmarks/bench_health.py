@@ -20,17 +20,16 @@ import argparse
 import math
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
 
 from benchmarks import results
-from companion import units  # noqa: E402
-from companion.health.detector import DEGRADING  # noqa: E402
-from companion.mavlink.reporter import Reporter  # noqa: E402
-from companion.service.pipeline import Channel, Pipeline, PipelineConfig  # noqa: E402
-from companion.sim.synth import synthesize_axis  # noqa: E402
+from companion import units
+from companion.health.detector import DEGRADING
+from companion.mavlink.reporter import Reporter
+from companion.service.pipeline import Channel, Pipeline, PipelineConfig
+from companion.sim.synth import synthesize_axis
 
 RATE = 100.0
 LSB = 1e-3

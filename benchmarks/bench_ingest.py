@@ -26,8 +26,8 @@ import numpy as np
 
 
 from benchmarks import results
-from companion.mavlink.tlog_writer import write_imu_tlog  # noqa: E402
-from companion.sources import load  # noqa: E402
+from companion.mavlink.tlog_writer import write_imu_tlog
+from companion.sources import load
 
 
 def pymavlink_read(path, want=("time_usec", "xgyro", "ygyro", "zgyro")):

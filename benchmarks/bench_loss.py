@@ -20,10 +20,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
 
 from benchmarks import results
-from tests.support.relay import N_TRUE, loop_through_relay  # noqa: E402
+from tests.support.relay import N_TRUE, loop_through_relay
 
 CASES = {
     "0": {"p": 0.0},

@@ -26,16 +26,15 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-
 from benchmarks import results
 from benchmarks.results import SHARED_DATA
-from companion.allan.adev import cluster_sizes, oavar  # noqa: E402
-from companion.allan.confidence import edf_simple  # noqa: E402
-from companion.allan.fit import fit_avar  # noqa: E402
-from companion.estimators import make_estimator  # noqa: E402
-from companion.sim.synth import synthesize_axis  # noqa: E402
+from companion.allan.adev import cluster_sizes, oavar
+from companion.allan.confidence import edf_simple
+from companion.allan.fit import fit_avar
+from companion.estimators import make_estimator
+from companion.sim.synth import synthesize_axis
 
+ROOT = Path(__file__).resolve().parent.parent
 SHARED = SHARED_DATA / "adis16405"
 D2R = math.pi / 180.0
 # the paper's gyro Y (Table 2, offline Allan): N 2.2437 deg/sqrt(h), B 28.3976 deg/h, K 62.1752 deg/h^1.5
@@ -330,8 +329,8 @@ def section_convergence(fs=100.0, n=1_800_000, plot=True):
 def offline_report(y, fs):
     """Offline reference with the same model selection, bound rule and rules on N as the online report: the
     overlapping ADEV at octave cluster sizes (all samples) through companion.estimators.report.select / report
-    and companion.allan.white.apply_white_rules (the local N refit under misfit, which the online report has
-    applied since 2026-12-01: without it here, the ADIS z axes' 19.7 Hz line made the two differ by 7-9 % in N)."""
+    and companion.allan.white.apply_white_rules (the local N refit under misfit, which the online report applies:
+    without it here, the ADIS z axes' 19.7 Hz line makes the two differ by 7-9 % in N)."""
     from companion.allan.white import apply_white_rules
     from companion.estimators.report import _inverted_bounds, _larger_bound, report, select
 

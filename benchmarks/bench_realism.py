@@ -42,8 +42,8 @@ from scipy import signal
 
 from benchmarks import results
 from benchmarks.results import SHARED_DATA
-from companion.sim.preset import load_preset  # noqa: E402
-from companion.sim.vehicle import Flight, Schedule, VehicleSimulator  # noqa: E402
+from companion.sim.preset import load_preset
+from companion.sim.vehicle import Flight, Schedule, VehicleSimulator
 
 HERE = Path(__file__).resolve().parents[1]
 SHARED = SHARED_DATA

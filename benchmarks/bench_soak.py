@@ -33,10 +33,10 @@ import numpy as np
 import companion.cli.run  # noqa: E402,F401  (what the live process imports)
 import companion.mavlink.link  # noqa: E402,F401
 from benchmarks import results
-from companion.mavlink.reporter import Reporter  # noqa: E402
-from companion.samples import StreamKey  # noqa: E402
-from companion.service.pipeline import Pipeline, PipelineConfig  # noqa: E402
-from companion.service.state import save_state  # noqa: E402
+from companion.mavlink.reporter import Reporter
+from companion.samples import StreamKey
+from companion.service.pipeline import Pipeline, PipelineConfig
+from companion.service.state import save_state
 
 N = 3e-3
 TARGET_MIB = 100.0 * 1e6 / 2**20  # 100 MB

@@ -28,9 +28,9 @@ import numpy as np
 
 
 from benchmarks import results
-from companion.mavlink.tlog_writer import write_imu_tlog  # noqa: E402
-from companion.sim.synth import simulate_model  # noqa: E402
-from companion.sim.vehicle import Schedule, VehicleSimulator, WarmUp, write_tlog  # noqa: E402
+from companion.mavlink.tlog_writer import write_imu_tlog
+from companion.sim.synth import simulate_model
+from companion.sim.vehicle import Schedule, VehicleSimulator, WarmUp, write_tlog
 
 MODEL = {"rate_hz": 100.0, "axes": {
     **{a: [{"effect": "white_noise", "N": 3e-3}, {"effect": "bias_instability", "B": 5e-5},
