@@ -60,12 +60,12 @@ def _warm():
 
 def _analyze(store_path, folder, workers, quiet=True):
     from companion.fleet.discover import discover
-    from companion.fleet.runner import Progress, close_client, open_client, plan, run_dask, run_serial
+    from companion.fleet.runner import FleetProgress, close_client, open_client, plan, run_dask, run_serial
     from companion.fleet.store import FleetStore
 
     with FleetStore(store_path) as store:
         work = plan(store, discover([folder]))[0]
-        prog = Progress(len(work), enabled=not quiet)
+        prog = FleetProgress(len(work), enabled=not quiet)
         if workers == 0:
             _warm()
             c0 = time.process_time()
