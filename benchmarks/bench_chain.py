@@ -48,7 +48,7 @@ def proc_usage(pid: int):
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration", type=float, default=1800.0, help="simulated seconds")
     ap.add_argument("--speedup", type=float, default=8.0)
     ap.add_argument("--wall-seconds", type=float, metavar="S",

@@ -36,6 +36,8 @@ STATUSTEXT is a false alarm.
 preset's IMUs, logged rate, gyro low-pass and decimation, vibration per flight phase, IMU timing skew,
 temperature-driven bias with its temperature carried to the pipeline as a log carries it, Gauss-Markov bias,
 sensor LSB), random flights (1.5 per hour) and handlings (2 per hour); IMU-hours = hours x the preset's IMUs.
+
+Target: each kind named right within its delay target (stuck and noise 10 s, bias jump 15 s, spikes and N x2 30 s, N x1.5 120 s, in-flight stuck or disagreement 10 s: the TARGET column), close to the oracle limit; 0 false alarms in 100 healthy IMU-hours.
 """
 
 from __future__ import annotations

@@ -233,7 +233,7 @@ def _shape(detail: str) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--count", type=int, default=100_000, help="mutated inputs per reader (default 100000)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seconds", type=float, default=None, help="stop handing out work after this long")

@@ -240,7 +240,7 @@ def explain(name: str, alarm: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("dirs", nargs="*", default=["/work/reallogs"], help="directories of fetched logs (recursive)")
     ap.add_argument("--json", metavar="OUT", help="write every row as JSON")
     ap.add_argument("--jobs", type=int, default=2, help="logs replayed in parallel (default 2)")
