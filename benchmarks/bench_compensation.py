@@ -1,9 +1,9 @@
 """Benchmark of the three compensation methods (Shi et al.): ADEV reduction, accuracy, speed, factor validity.
 
-    python benchmarks/bench_compensation.py                      # 10^6 simulated + ADIS16405 gy 10^6 + gx/gz 10^5
-    python benchmarks/bench_compensation.py --samples 100000     # quicker
-    python benchmarks/bench_compensation.py --data ../shared/data --json /tmp/bench_comp.json
-    python benchmarks/bench_compensation.py --gauss-markov 20   # seeds 1-20 of Gauss-Markov + white noise only
+    python -m benchmarks.bench_compensation                      # 10^6 simulated + ADIS16405 gy 10^6 + gx/gz 10^5
+    python -m benchmarks.bench_compensation --samples 100000     # quicker
+    python -m benchmarks.bench_compensation --data ../shared/data --json /tmp/bench_comp.json
+    python -m benchmarks.bench_compensation --gauss-markov 20   # seeds 1-20 of Gauss-Markov + white noise only
 
 Simulated: ARIMA(1,1,1) (phi 0.8, delta1 2e-3, delta2 6e-4 rad/s) plus white noise 5e-3 rad/s at 100 Hz, so
 the truth x is known: the table gives the RMS error of each estimate against it and against the optimal
@@ -18,6 +18,8 @@ reference is the optimal filter for that exact model (scalar steady-state Kalman
 parameters): per seed and method, ADEV(method)/ADEV(optimal) at tau0 and rmse/rmse(optimal) against the truth.
 For every series: ADEV(compensated) / ADEV(raw) at short and long tau, samples/s, and whether the
 covariance factor stayed valid (no NaN, positive diagonal) at every step (smallest diagonal element shown).
+
+Target: every method lowers ADEV at the shortest tau below the raw data's, its RMS error close to the optimal filter's, and its covariance factor valid at every step.
 """
 
 from __future__ import annotations
@@ -32,11 +34,11 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from companion.compensation.arima import optimal_error_std  # noqa: E402
-from companion.compensation.pipeline import compensate  # noqa: E402
+from benchmarks import results
+from benchmarks.results import SHARED_DATA
+from companion.compensation.arima import optimal_error_std
+from companion.compensation.pipeline import compensate
 
 RATE = 100.0
 TAUS = (0.01, 0.16, 1.28, 81.92)
@@ -133,13 +135,13 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--samples", type=int, default=1_000_000, help="samples of the long runs (default 10^6)")
     ap.add_argument("--short", type=int, default=100_000, help="samples of the other ADIS axes (default 10^5)")
-    ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
+    ap.add_argument("--data", default=str(SHARED_DATA))
     ap.add_argument("--json", help="write all figures as JSON")
     ap.add_argument("--skip-sim", action="store_true")
     ap.add_argument("--gauss-markov", type=int, default=0, metavar="K",
                     help="only the Gauss-Markov + white noise cases, seeds 1..K")
     ap.add_argument("--gm-samples", type=int, default=50_000, help="samples per Gauss-Markov case (default 5x10^4)")
-    args = ap.parse_args(argv)
+    args = results.parse_args(ap, {"samples": 100_000, "short": 20_000}, argv)
     out = {}
     t0 = time.time()
     if args.gauss_markov > 0:
@@ -171,4 +173,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(main))

@@ -1,7 +1,7 @@
 """DataFlash .bin reading: companion's numpy reader vs pymavlink's DFReader, same files, same run.
 
-    python benchmarks/bench_dataflash.py                 # the shared 3-IMU log + a written 4.x log (200 s, 3 IMUs, 400 Hz)
-    python benchmarks/bench_dataflash.py --seconds 60    # smaller written log
+    python -m benchmarks.bench_dataflash                 # the shared 3-IMU log + a written 4.x log (200 s, 3 IMUs, 400 Hz)
+    python -m benchmarks.bench_dataflash --seconds 60    # smaller written log
 
 Timed (best of --repeat runs, wall and CPU):
 - DFReader: ``DFReader_binary(path)`` (its Cython indexer when installed) + ``recv_match(type=IMU*)`` to the
@@ -12,6 +12,8 @@ Timed (best of --repeat runs, wall and CPU):
 Memory: the reader's peak traced allocation (tracemalloc, numpy included) beside the size of the IMU arrays it
 returns; the file itself is memory-mapped.
 Values are compared element by element (time, gyro, accel of every IMU message) and must be identical.
+
+Target: values identical to DFReader's, element by element; the speed ratio is the figure.
 """
 
 from __future__ import annotations
@@ -24,14 +26,15 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from companion.sim.dataflash_writer import write_imu_log  # noqa: E402
-from companion.sources import dataflash as df  # noqa: E402
-from companion.sources.dataflash_imu import imu_raw_streams  # noqa: E402
-from companion.sources import load  # noqa: E402
+from benchmarks import results
+from benchmarks.results import SHARED_DATA
+from companion.sim.dataflash_writer import write_imu_log
+from companion.sources import dataflash as df
+from companion.sources import load
+from companion.sources.dataflash_imu import imu_raw_streams
 
-SHARED = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "ardupilot" / "dronekit_log171.bin"
+SHARED = SHARED_DATA / "ardupilot" / "dronekit_log171.bin"
 IMU_TYPES = ["IMU", "IMU2", "IMU3"]
 
 
@@ -101,7 +104,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=200.0, help="length of the written 400 Hz 3-IMU log")
     ap.add_argument("--repeat", type=int, default=3)
-    args = ap.parse_args(argv)
+    args = results.parse_args(ap, {"seconds": 60.0, "repeat": 2}, argv)
     ok = True
     if SHARED.exists():
         ok &= bench(SHARED, args.repeat)
@@ -119,4 +122,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(main))

@@ -1,19 +1,25 @@
 """Fleet benchmarks: the trend threshold's calibration, and scale (parallel efficiency, memory, queries).
 
-    python benchmarks/bench_fleet.py calibrate [--vehicles 50 --flights 10 --duration 60 --rate 50]
+    python -m benchmarks.bench_fleet calibrate [--vehicles 50 --flights 10 --duration 60 --rate 50]
         A simulated fleet (every 5th IMU's N rising 1.5x, the rest healthy) through the whole pipeline
         (tlogs -> fleet analyze on 2 Dask workers -> trend test). Prints the per-test p-value calibration
         of healthy IMUs (fraction below 0.1, 0.01, 0.001 vs nominal), the per-IMU exceedance of evidence
         thresholds for healthy and degrading IMUs, and draws docs/img/fleet_threshold.png.
 
-    python benchmarks/bench_fleet.py scale [--logs 1000 --duration 600 --rate 100 --imus 1]
+    python -m benchmarks.bench_fleet scale [--logs 1000 --duration 600 --rate 100 --imus 1]
         N logs of D seconds at R Hz: the same logs analysed in one process (--workers 0 code path) and on
         a LocalCluster of 2 worker processes; prints wall time, logs/s, parallel efficiency
         T1 / (2 T2), each worker's RSS sampled over the run (memory flat in the number of logs?), and
         the time to query one IMU's history from the database. ``--serial-logs K`` times the one-process
         run on the first K logs only (rate extrapolated, said so in the output).
 
-Figures are printed with the command line that produced them; docs/fleet.md quotes them.
+    python -m benchmarks.bench_fleet scale --quick
+        40 logs of 60 s at 50 Hz (the run recorded in RESULTS.md).
+
+Each subcommand records its own section of benchmarks/RESULTS.md.
+
+Target: healthy IMUs' p-values at their nominal rates (calibration); parallel efficiency near 1 on 2 workers and
+worker memory flat in the number of logs (scale).
 """
 
 from __future__ import annotations
@@ -32,11 +38,12 @@ import time
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_v] = "1"
 
-import numpy as np  # noqa: E402
+import numpy as np  # noqa: E402  (after the thread settings, which numpy reads on import)
+
+from benchmarks import results  # noqa: E402
 
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
 
 def _warm():
@@ -53,12 +60,12 @@ def _warm():
 
 def _analyze(store_path, folder, workers, quiet=True):
     from companion.fleet.discover import discover
-    from companion.fleet.runner import Progress, close_client, open_client, plan, run_dask, run_serial
+    from companion.fleet.runner import FleetProgress, close_client, open_client, plan, run_dask, run_serial
     from companion.fleet.store import FleetStore
 
     with FleetStore(store_path) as store:
         work = plan(store, discover([folder]))[0]
-        prog = Progress(len(work), enabled=not quiet)
+        prog = FleetProgress(len(work), enabled=not quiet)
         if workers == 0:
             _warm()
             c0 = time.process_time()
@@ -122,7 +129,7 @@ def calibrate(args):
         null = [e for e in entries if (e["vehicle"], e["imu"]) not in sick]
         bad = [e for e in entries if (e["vehicle"], e["imu"]) in sick]
         pvals = np.array([10 ** t.log10_p for e in null for t in e["_tests"].values()])
-        print(f"command: python benchmarks/bench_fleet.py calibrate --vehicles {args.vehicles} --flights "
+        print(f"command: python -m benchmarks.bench_fleet calibrate --vehicles {args.vehicles} --flights "
               f"{args.flights} --imus {args.imus} --duration {args.duration:g} --rate {args.rate:g} --seed {args.seed}")
         print(f"fleet: {len(entries)} IMUs ({len(null)} healthy, {len(bad)} with N x{args.rise:g}), "
               f"{args.flights} flights of {args.duration:g} s at {args.rate:g} Hz; simulated in {t_sim:.0f} s, "
@@ -190,7 +197,7 @@ def scale(args):
                        args.duration, args.rate, args.seed)
         t_sim = time.time() - t0
         size = sum(os.path.getsize(os.path.join(r, f)) for r, _, fs in os.walk(os.path.join(tmp, "logs")) for f in fs)
-        print(f"command: python benchmarks/bench_fleet.py scale --logs {args.logs} --duration {args.duration:g} "
+        print(f"command: python -m benchmarks.bench_fleet scale --logs {args.logs} --duration {args.duration:g} "
               f"--rate {args.rate:g} --imus {args.imus} --serial-logs {args.serial_logs}")
         print(f"load average at start {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (a shared machine)")
         print(f"{n} logs ({vehicles} vehicles x {flights} flights), {args.imus} IMU(s) each, {args.duration:g} s at "
@@ -307,7 +314,7 @@ def sched(args):
         dt = time.perf_counter() - t
     finally:
         close_client(client, cluster)
-    print(f"command: python benchmarks/bench_fleet.py sched --tasks {args.tasks} --workers {args.workers}")
+    print(f"command: python -m benchmarks.bench_fleet sched --tasks {args.tasks} --workers {args.workers}")
     print(f"{args.tasks} no-op tasks on a LocalCluster of {args.workers} processes: {dt:.1f} s = "
           f"{args.tasks / dt:.0f} tasks/s ({1e3 * dt / args.tasks:.2f} ms per task); load average "
           f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
@@ -339,9 +346,14 @@ def main():
     d = sub.add_parser("sched")
     d.add_argument("--tasks", type=int, default=5000)
     d.add_argument("--workers", type=int, default=2)
-    args = ap.parse_args()
+    argv = sys.argv[1:]
+    if "--quick" in argv:
+        s.set_defaults(logs=40, duration=60.0, rate=50.0, flights=10)
+    s.add_argument("--quick", action="store_true", help="40 logs of 60 s at 50 Hz, 10 flights per vehicle")
+    args = ap.parse_args(argv)
     {"calibrate": calibrate, "scale": scale, "sched": sched}[args.cmd](args)
 
 
 if __name__ == "__main__":
-    main()
+    sub_cmd = next((a for a in sys.argv[1:] if a in ("calibrate", "scale", "sched")), "")
+    sys.exit(results.run(main, f"bench_fleet {sub_cmd}".strip()))

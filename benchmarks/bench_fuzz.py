@@ -17,8 +17,8 @@ distinct traceback/invalid class (exception type and the innermost companion fra
 first input that shows it (``--replay`` writes that input to a file). Target: 0 tracebacks and 0 invalid
 over >= 100,000 inputs per reader.
 
-    nice -n 10 python benchmarks/bench_fuzz.py --count 100000 --workers 2 [--seconds 3600] [--readers bin,ulg]
-    python benchmarks/bench_fuzz.py --replay bin:1:123:45 --out /tmp/x.bin   # base 1, seed 123, input 45
+    nice -n 10 python -m benchmarks.bench_fuzz --count 100000 --workers 2 [--seconds 3600] [--readers bin,ulg]
+    python -m benchmarks.bench_fuzz --replay bin:1:123:45 --out /tmp/x.bin   # base 1, seed 123, input 45
 """
 
 from __future__ import annotations
@@ -34,11 +34,12 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from benchmarks import results
+from benchmarks.results import SHARED_DATA
+
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-SHARED = ROOT.parent / "shared" / "data"
+SHARED = SHARED_DATA
 CHUNK = 500  # mutations per task
 
 REAL = {
@@ -232,7 +233,7 @@ def _shape(detail: str) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--count", type=int, default=100_000, help="mutated inputs per reader (default 100000)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seconds", type=float, default=None, help="stop handing out work after this long")
@@ -240,7 +241,7 @@ def main(argv=None) -> int:
     ap.add_argument("--first-seed", type=int, default=0, help="seeds used: first-seed, first-seed+1, ...")
     ap.add_argument("--replay", metavar="EXT:BASE:SEED:INDEX", help="write that input to --out and stop")
     ap.add_argument("--out", help="where --replay writes")
-    args = ap.parse_args(argv)
+    args = results.parse_args(ap, {"count": 2000}, argv)
     if args.replay:
         ext, base, seed, i = args.replay.split(":")
         Path(args.out).write_bytes(input_of(ext, int(base), int(seed), int(i)))
@@ -294,4 +295,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(main))

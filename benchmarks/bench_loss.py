@@ -8,8 +8,10 @@ simulated seconds at 10x, white noise N = 3e-3 rad/s/sqrt(Hz) per axis at 100 Hz
 (truth 10.31 deg/sqrt(h)). Printed per case: frames dropped by the relay and counted by run, the loss
 STATUSTEXT, N per axis and its worst ratio to the truth.
 
-    python benchmarks/bench_loss.py                  # 0, 10, 20, 30 % random; bursts of 12.5 and 50 frames
-    python benchmarks/bench_loss.py --cases 20       # one case
+    python -m benchmarks.bench_loss                  # 0, 10, 20, 30 % random; bursts of 12.5 and 50 frames
+    python -m benchmarks.bench_loss --cases 20       # one case
+
+Target: every lost frame counted exactly, the loss STATUSTEXT sent, N within 5 % of the truth.
 """
 
 from __future__ import annotations
@@ -20,10 +22,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from tests.support.relay import N_TRUE, loop_through_relay  # noqa: E402
+from benchmarks import results
+from tests.support.relay import N_TRUE, loop_through_relay
 
 CASES = {
     "0": {"p": 0.0},
@@ -38,7 +39,7 @@ CASES = {
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", default=",".join(CASES), help=f"comma list of {', '.join(CASES)}")
-    args = ap.parse_args()
+    args = results.parse_args(ap, {"cases": "20,burst12"})
     names = [c.strip() for c in args.cases.split(",") if c.strip()]
     bad = [c for c in names if c not in CASES]
     if bad:
@@ -65,4 +66,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(main))

@@ -20,8 +20,10 @@ schedule (still, then armed/flying as the log says), IMU count, rate and start t
 The table's gap columns: |ln(sim / log)| for magnitudes (0 = equal, 0.69 = a factor 2), |sim - log| in Hz or
 ms for frequencies and skews. Each simulated figure is the median over ``--seeds`` seeds.
 
-    python benchmarks/bench_realism.py                # the table (docs/vehicle.md)
-    python benchmarks/bench_realism.py --fit copter   # the preset's per-IMU noise and vibration gains, fitted
+    python -m benchmarks.bench_realism                # the table (docs/vehicle.md)
+    python -m benchmarks.bench_realism --fit copter   # the preset's per-IMU noise and vibration gains, fitted
+
+Target: no fixed threshold: the gap columns show how far the simulator is from each log (0 equal; 0.69 a factor 2), before and after the realistic path. The public logs are used where fetched ($COMPANION_REALLOGS).
 """
 
 from __future__ import annotations
@@ -37,13 +39,14 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from companion.sim.preset import load_preset  # noqa: E402
-from companion.sim.vehicle import Flight, Schedule, VehicleSimulator  # noqa: E402
+from benchmarks import results
+from benchmarks.results import SHARED_DATA
+from companion.sim.preset import load_preset
+from companion.sim.vehicle import Flight, Schedule, VehicleSimulator
 
 HERE = Path(__file__).resolve().parents[1]
-SHARED = HERE.parent / "shared" / "data"
+SHARED = SHARED_DATA
 REAL = Path(os.environ.get("COMPANION_REALLOGS", "/work/reallogs/erle"))
 
 # (label, path, preset, message/instances to use, whole log is a flight)
@@ -372,7 +375,7 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--fit", metavar="PRESET")
     ap.add_argument("--only", metavar="TEXT", help="only logs whose label contains TEXT")
-    a = ap.parse_args(argv)
+    a = results.parse_args(ap, {"seeds": 1}, argv)
     if a.fit:
         fit(a.fit, a.seeds)
         return 0
@@ -393,4 +396,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(results.run(main))

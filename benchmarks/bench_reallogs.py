@@ -11,11 +11,13 @@ what was found in the data around each alarm (see EXPLAIN below, measured by han
 an alarm without one is printed as "UNEXPLAINED". The logs are not part of the repository (public logs
 without a licence allowing redistribution are used locally only).
 
-    python benchmarks/bench_reallogs.py [DIR ...] [--json OUT] [--jobs 2] [--skip-analyze]
+    python -m benchmarks.bench_reallogs [DIR ...] [--json OUT] [--jobs 2] [--skip-analyze]
 
 Prints one row per alarm and a summary: logs, log-hours, alarms by kind; with analyze, run's N against
 analyze's on every gyro axis where both resolve it (each from its own still data: run's motion gate, analyze's
 still selection), and the axes more than 10 % apart.
+
+Target: every alarm explained (0 UNEXPLAINED; each false alarm is a finding); run's N within 10 % of analyze's on every axis both resolve. The quick run reads only the shared data.
 """
 
 from __future__ import annotations
@@ -31,9 +33,12 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from benchmarks import results
+from benchmarks.results import SHARED_DATA
+
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-SHARED = REPO.parent / "shared" / "data"
+SHARED = SHARED_DATA
 EXTS = (".bin", ".ulg", ".tlog", ".tlog.gz", ".bin.gz", ".ulg.gz")
 
 #: log-name substring -> {kind or kind@IMUi: explanation}: what the data around each alarm showed
@@ -235,14 +240,14 @@ def explain(name: str, alarm: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("dirs", nargs="*", default=["/work/reallogs"], help="directories of fetched logs (recursive)")
     ap.add_argument("--json", metavar="OUT", help="write every row as JSON")
     ap.add_argument("--jobs", type=int, default=2, help="logs replayed in parallel (default 2)")
     ap.add_argument("--skip-analyze", action="store_true", help="only `companion run`")
     ap.add_argument("--match", help="only logs whose path contains this string")
     ap.add_argument("--from-json", metavar="IN", help="print the table of an earlier --json run (explanations redone)")
-    args = ap.parse_args(argv)
+    args = results.parse_args(ap, {"dirs": []}, argv)
     if args.from_json:
         rows = json.loads(Path(args.from_json).read_text())["rows"]
         for row in rows:
@@ -306,4 +311,4 @@ def report(rows: list[dict], args, t0: float) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(main))

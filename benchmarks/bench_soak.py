@@ -10,8 +10,10 @@ Every simulated hour it prints the process RSS (``/proc/self/status`` VmRSS) and
 Python heap in use (tracemalloc, with --heap), and the size of the saved state (JSON, written atomically);
 at the end the ratio of the final RSS to the 100 MB target.
 
-    python benchmarks/bench_soak.py                          # 24 h, 3 IMUs at 400 Hz (about 50 min on a free core)
-    python benchmarks/bench_soak.py --hours 2 --imus 1 --rate 100   # quick look
+    python -m benchmarks.bench_soak                          # 24 h, 3 IMUs at 400 Hz (about 50 min on a free core)
+    python -m benchmarks.bench_soak --hours 2 --imus 1 --rate 100   # quick look
+
+Target: resident memory flat over the hours and below 100 MB; no false alarm.
 """
 
 from __future__ import annotations
@@ -27,14 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import companion.cli.run  # noqa: E402,F401  (what the live process imports)
 import companion.mavlink.link  # noqa: E402,F401
-from companion.mavlink.reporter import Reporter  # noqa: E402
-from companion.samples import StreamKey  # noqa: E402
-from companion.service.pipeline import Pipeline, PipelineConfig  # noqa: E402
-from companion.service.state import save_state  # noqa: E402
+from benchmarks import results
+from companion.mavlink.reporter import Reporter
+from companion.samples import StreamKey
+from companion.service.pipeline import Pipeline, PipelineConfig
+from companion.service.state import save_state
 
 N = 3e-3
 TARGET_MIB = 100.0 * 1e6 / 2**20  # 100 MB
@@ -69,7 +71,7 @@ def main():
     ap.add_argument("--imus", type=int, default=3, help="number of IMUs (RAW_IMU, SCALED_IMU2, SCALED_IMU3)")
     ap.add_argument("--rate", type=float, default=400.0, help="IMU rate in Hz (default 400)")
     ap.add_argument("--heap", action="store_true", help="also trace the Python heap (tracemalloc; slower)")
-    args = ap.parse_args()
+    args = results.parse_args(ap, {"hours": 2.0, "imus": 1, "rate": 100.0})
     os.environ["MAVLINK20"] = "1"
     from pymavlink import mavutil  # noqa: F401  the live process holds pymavlink and its dialect
     from pymavlink.dialects.v20 import ardupilotmega  # noqa: F401
@@ -135,4 +137,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(results.run(main))

@@ -8,8 +8,8 @@ the median wall time and child CPU time are printed with the ratio to the numpy 
   ("companion run: listening on ..."), i.e. signal handlers installed and the socket open, target within 3x;
   its resident memory (VmRSS) at that moment is printed too.
 
-    python benchmarks/bench_startup.py              # 7 repeats
-    python benchmarks/bench_startup.py --repeat 3
+    python -m benchmarks.bench_startup              # 7 repeats
+    python -m benchmarks.bench_startup --repeat 3
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from benchmarks import results
 
 ROOT = Path(__file__).resolve().parent.parent
 READY = "companion run: listening on"
@@ -91,7 +93,7 @@ def run_ready() -> tuple[float, float, int]:
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeat", type=int, default=7)
-    args = ap.parse_args()
+    args = results.parse_args(ap, {"repeat": 3})
     py = sys.executable
     cases = {
         'python -c "import numpy"': lambda: timed([py, "-c", "import numpy"]),
@@ -122,4 +124,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(results.run(main))

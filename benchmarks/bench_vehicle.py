@@ -1,7 +1,7 @@
 """Vehicle simulator speed, side by side with the plain noise synthesiser, and its tlog writer beside write_imu_tlog.
 
-    python benchmarks/bench_vehicle.py             # 1 h, 3 IMUs at 100 Hz, random flights and handling
-    python benchmarks/bench_vehicle.py --hours 0.2 # quicker
+    python -m benchmarks.bench_vehicle             # 1 h, 3 IMUs at 100 Hz, random flights and handling
+    python -m benchmarks.bench_vehicle --hours 0.2 # quicker
 
 1. ``companion.sim.vehicle.VehicleSimulator`` (3 IMUs: body motion, vibration, per-IMU errors, warm-up,
    model noise; 600 s blocks) against ``companion.sim.synth.simulate_model`` of the same model for the
@@ -12,6 +12,8 @@
    against ``companion.mavlink.tlog_writer.write_imu_tlog`` writing the same samples as 3 separate tlogs.
 Times are CPU seconds of this process (the machine is shared). Also printed: how much of the run was armed
 or handled, and the peak body rate.
+
+Target: no fixed threshold: many times faster than real time; the price of the vehicle over the plain noise synthesis (ratio) is the figure.
 """
 
 from __future__ import annotations
@@ -24,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from companion.mavlink.tlog_writer import write_imu_tlog  # noqa: E402
-from companion.sim.synth import simulate_model  # noqa: E402
-from companion.mavlink.vehicle_tlog import write_tlog  # noqa: E402
-from companion.sim.vehicle import Schedule, VehicleSimulator, WarmUp  # noqa: E402
+from benchmarks import results
+from companion.mavlink.tlog_writer import write_imu_tlog
+from companion.sim.synth import simulate_model
+from companion.mavlink.vehicle_tlog import write_tlog
+from companion.sim.vehicle import Schedule, VehicleSimulator, WarmUp
 
 MODEL = {"rate_hz": 100.0, "axes": {
     **{a: [{"effect": "white_noise", "N": 3e-3}, {"effect": "bias_instability", "B": 5e-5},
@@ -42,7 +44,7 @@ def main() -> int:
     ap.add_argument("--hours", type=float, default=1.0)
     ap.add_argument("--seed", type=int, default=2)
     ap.add_argument("--preset", default="copter", help="preset of the realistic run (copter, plane, rover)")
-    args = ap.parse_args()
+    args = results.parse_args(ap, {"hours": 0.25})
     dur = args.hours * 3600.0
     sch = Schedule.random(dur, seed=args.seed, flights_per_hour=3, handlings_per_hour=3)
 
@@ -84,11 +86,16 @@ def main() -> int:
             write_imu_tlog(Path(d) / f"{i}.tlog", t, np.concatenate([b.gyro[i] for b in blocks]),
                            np.concatenate([b.accel[i] for b in blocks]), message=msg, instance=i)
         t_single = time.process_time() - t0
-    rate = counts["imu_messages"] / max(t_write, 1e-9)
-    print(f"tlog      write_tlog {max(t_write, 0):6.2f} s ({rate / 1e6:.2f} M IMU messages/s, {size / 1e6:.1f} MB, "
+    if t_write < 0.1 * t_single:  # a short run: the writing is within the simulation's timing noise
+        print(f"tlog      write_tlog {t_write + t_vehicle:6.2f} s with the simulation ({size / 1e6:.1f} MB, "
+              f"{counts['heartbeats']} HEARTBEAT): the writing alone is below the timing noise of a run this short "
+              f"| write_imu_tlog x3 {t_single:6.2f} s")
+        return 0
+    rate = counts["imu_messages"] / t_write
+    print(f"tlog      write_tlog {t_write:6.2f} s ({rate / 1e6:.2f} M IMU messages/s, {size / 1e6:.1f} MB, "
           f"{counts['heartbeats']} HEARTBEAT) | write_imu_tlog x3 {t_single:6.2f} s | ratio {t_write / t_single:.2f}")
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(results.run(main))

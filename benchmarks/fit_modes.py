@@ -1,5 +1,5 @@
-"""Modes of benchmarks/bench_fit.py for filtered and real data (run through bench_fit.py: `real`, `filtered`,
-`draws`).
+"""Modes of benchmarks/bench_fit.py for filtered, real and drawn data: `python -m benchmarks.bench_fit MODE`
+(real, filtered, draws, short, plain, preset, gm, shape; its --help lists them).
 
 real: every gyro axis of the real still stretches in ../shared/data through `companion analyze --online --json`
 (the user's path), against an independent reference: the white-noise plateau of ADEV sqrt(tau), i.e. the
@@ -23,14 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from companion.allan.adev import cluster_sizes, oavar  # noqa: E402
-from companion.allan.confidence import edf_simple  # noqa: E402
-from companion.allan.fit import fit_avar  # noqa: E402
-from companion.allan.terms import avar_white_noise  # noqa: E402
+from benchmarks.fit_draws import run_draws
+from benchmarks.results import SHARED_DATA
+from companion.allan.adev import cluster_sizes, oavar
+from companion.allan.confidence import edf_simple
+from companion.allan.fit import fit_avar
+from companion.allan.terms import avar_white_noise
 
-DATA = ROOT.parent / "shared" / "data"
+ROOT = Path(__file__).resolve().parent.parent
+DATA = SHARED_DATA
 RAD2DEG_SQRTH = 180.0 / math.pi * 60.0  # rad/s/sqrt(Hz) -> deg/sqrt(h)
 RAD2DEG_H = 180.0 / math.pi * 3600.0
 
@@ -346,171 +347,6 @@ def run_shape(args):
               f"{np.median(ratio):.3f} (5-95 % {np.percentile(ratio, 5):.2f}-{np.percentile(ratio, 95):.2f}); "
               f"95 % interval covers it in {cover}/{len(ratio)}; models: "
               + ", ".join(f"{k} {v}" for k, v in kinds.most_common()))
-
-
-def _evidence(terms, effect, tau, m, n, fs):
-    """Expected evidence for ``effect`` in a record made of ``terms``: the noncentrality
-    lambda = |P_perp C^-1/2 a theta|^2 of the chi^2 drop its column brings (the GLS with the true covariance C,
-    the other terms' columns projected out). A term with lambda ~ 3 is a 1.7-sigma effect: any test on the
-    AVAR misses it about half the time, so "found" is judged where lambda >= 9 (3 sigma)."""
-    from companion.allan.confidence import oavar_covariance
-    from companion.allan.fit import _columns, _Problem
-    from companion.allan.terms import avar_model
-
-    mod = avar_model(terms, tau)
-    sc = float(np.median(mod))
-    prob = _Problem(tau, mod / sc, oavar_covariance(terms, m, n, fs) / sc**2, None, 1.0 / fs)
-    others = [t["effect"] for t in terms if t["effect"] != effect]
-    t = next(t for t in terms if t["effect"] == effect)
-    p = {"white_noise": "N", "bias_instability": "B", "random_walk": "K"}[effect]
-    q, _ = np.linalg.qr(prob._w(_columns(others, [], tau)))
-    a = prob._w(_columns([effect], [], tau))[:, 0] * t[p] ** 2 / sc
-    r = a - q @ (q.T @ a)
-    return float(r @ r)
-
-
-def _detectable(terms, effect, m, n, fs):
-    """Whether ``effect`` is detectable at all in a record of ``n`` samples made of ``terms``, judged without
-    any fit and without the record's realisation: at some octave cluster time up to a tenth of the record (the
-    longest a single record resolves, EDF ~ 10 there; the fit's record rule, RESOLVE_RECORD_FACTOR) the 95 %
-    band of the Allan variance estimate with the term lies wholly above the 95 % band without it (bands
-    chi^2(EDF) / EDF of the expected AVAR, EDF from the true noise mix, :func:`edf_model`). Where the bands
-    overlap at every such tau, no estimator can tell the term from its absence in a sizeable share of records;
-    the honest output there is a bound. Returns (detectable, the tau with the widest separation, separation =
-    lower end with / upper end without)."""
-    from companion.allan.confidence import edf_model
-    from companion.allan.special import chi2_ppf
-    from companion.allan.terms import avar_model
-
-    m = np.asarray(m)
-    m = m[m / fs <= n / fs / 10.0]
-    tau = m / fs
-    rest = [t for t in terms if t["effect"] != effect]
-    v1, v0 = avar_model(terms, tau), avar_model(rest, tau)
-    e1, e0 = edf_model(terms, m, n, fs), edf_model(rest, m, n, fs)
-    lo1 = v1 * e1 / np.array([chi2_ppf(0.975, e) for e in e1])
-    hi0 = v0 * np.array([chi2_ppf(0.975, e) for e in e0]) / e0
-    sep = lo1 / hi0
-    i = int(np.argmax(sep))
-    return bool(sep[i] > 1.0), float(tau[i]), float(sep[i])
-
-
-def run_draws(args):
-    """Random N/B/K, each with a region where it dominates (N log-uniform 2e-4..3e-3 rad/s/sqrt(Hz), the AVAR
-    crossings N-B at 0.5-20 s and B-K at max(15 x that, 50)-600 s), 2 h at 50 Hz: terms found and coverage of
-    the 95 % intervals (a missing term counts as not covered), also split by the term's expected evidence
-    (:func:`_evidence`: a K whose B-K crossing is past ~300 s rests on the last 2-3 octaves, lambda ~ 2-4).
-    Each term is also judged *detectable* or not without any fit (:func:`_detectable`: the 95 % bands of the
-    AVAR with and without it apart at some tau up to a tenth of the record); found and covered are counted
-    for both groups, and "value covers or bound holds" counts a left-out term whose bound lies above the truth.
-    A term the fit leaves out gets a 95 % upper bound: the fit's (:func:`companion.allan.fit.upper_bounds`,
-    the covariance evaluated at the bound; what ``companion analyze`` reports) and the online report's rule
-    (:func:`companion.estimators.report.bounds_for_fit`, evaluated at the fitted model); the benchmark says
-    whether each holds.
-    ``draws null [draws=100]``: the same N and B with K = 0: how often a random walk is invented. A third
-    argument ``fresh`` (an integer, default 0) draws a different set: parameters from seed 22 + fresh, records
-    from 10000 + 1000 fresh + d."""
-    from companion.allan.fit import upper_bounds
-    from companion.estimators.report import bounds_for_fit
-    from companion.sim.synth import synthesize_axis
-
-    null = bool(args) and args[0] == "null"
-    args = args[1:] if null else args
-    draws = int(args[0]) if args else 100
-    fresh = int(args[1]) if len(args) > 1 else 0
-    fs, n = 50.0, int(2 * 3600 * 50)
-    m = cluster_sizes(n, "octave")
-    edf = edf_simple(n + 1, m, 0)
-    rng = np.random.default_rng(22 + fresh)
-    names = {"N": "white_noise", "B": "bias_instability", "K": "random_walk"}
-    found = {p: 0 for p in names}
-    inside = {p: 0 for p in names}
-    zero = {p: 0 for p in names}  # found, but the interval reaches 0: `companion analyze` reports its bound
-    held = {p: [0, 0, 0] for p in names}  # missing terms: count, fit's / report rule's bound above the truth
-    missing = []
-    strong = {p: [0, 0, 0] for p in names}  # draws with lambda >= 9: count, found, covered
-    # detectable (:func:`_detectable`): count, found, covered; not detectable: count, found, covered,
-    # left out with the fit's bound above the truth
-    det = {p: [0, 0, 0] for p in names}
-    undet = {p: [0, 0, 0, 0] for p in names}
-    t_fit, t_bound = [], []
-    for d in range(draws):
-        # every term visible in 2 h: white meets the flicker floor at tau_NB in 0.5-20 s, the floor meets the
-        # random walk at tau_BK in max(15 tau_NB, 50)-600 s (AVAR crossings)
-        Nv = 10 ** rng.uniform(math.log10(2e-4), math.log10(3e-3))
-        t_nb = 10 ** rng.uniform(math.log10(0.5), math.log10(20.0))
-        Bv = Nv / math.sqrt(0.4413 * t_nb)
-        t_bk = 10 ** rng.uniform(math.log10(max(15 * t_nb, 50.0)), math.log10(600.0))
-        truth = {"N": Nv, "B": Bv, "K": math.sqrt(3 * 0.4413) * Bv / math.sqrt(t_bk)}
-        if null:
-            truth.pop("K")
-        terms = [{"effect": names[p], p: v} for p, v in truth.items()]
-        y = synthesize_axis(terms, fs, n, np.random.default_rng(10_000 + 1000 * fresh + d))
-        tau, av = oavar(y, fs, m=m)[:2]
-        t0 = time.perf_counter()
-        fr = fit_avar(tau, av, edf, n=n, rate_hz=fs, m=m)
-        t_fit.append(time.perf_counter() - t0)
-        if null:
-            found["K"] += fr.term("random_walk") is not None
-            for p in ("N", "B"):
-                t = fr.term(names[p])
-                found[p] += t is not None
-                inside[p] += t is not None and t["ci95"][p][0] <= truth[p] <= t["ci95"][p][1]
-            continue
-        bounds = None
-        for p, e in names.items():
-            t = fr.term(e)
-            lam = _evidence(terms, e, tau, m, n, fs)
-            strong[p][0] += lam >= 9.0
-            ok, tau_s, sep = _detectable(terms, e, m, n, fs)
-            (det if ok else undet)[p][0] += 1
-            if t is None:
-                if bounds is None:
-                    t0 = time.perf_counter()
-                    bounds = (upper_bounds(fr, tau, av, n=n, rate_hz=fs, m=m), bounds_for_fit(fr, tau, av, edf, fs, n))
-                    t_bound.append(time.perf_counter() - t0)
-                b, b_rep = (next((x for x in bs if x["effect"] == e), None) for bs in bounds)
-                held[p][0] += 1
-                held[p][1] += b is not None and truth[p] <= b[p]
-                held[p][2] += b_rep is not None and truth[p] <= b_rep[p]
-                if not ok:
-                    undet[p][3] += b is not None and truth[p] <= b[p]
-                missing.append((d, p, {k: f"{v:.2g}" for k, v in truth.items()}, f"t_BK {t_bk:.0f} s",
-                                f"lambda {lam:.1f}", ("detectable" if ok else "not detectable")
-                                + f" (bands {sep:.2f} at {tau_s:.3g} s)",
-                                "bound " + ("-" if b is None else f"{b[p] / truth[p]:.2f} x truth")
-                                + " (report rule " + ("-" if b_rep is None else f"{b_rep[p] / truth[p]:.2f}") + ")"))
-                continue
-            found[p] += 1
-            strong[p][1] += lam >= 9.0
-            lo, hi = t["ci95"][p]
-            zero[p] += not lo > 0
-            inside[p] += lo <= truth[p] <= hi
-            strong[p][2] += lam >= 9.0 and lo <= truth[p] <= hi
-            (det if ok else undet)[p][1] += 1
-            (det if ok else undet)[p][2] += lo <= truth[p] <= hi
-    if null:
-        print(f"{draws} draws of N and B with K = 0 (set {fresh}), 2 h at 50 Hz")
-        print(f"  K invented in {found['K']}/{draws}")
-        for p in ("N", "B"):
-            print(f"  {p}: found {found[p]}/{draws}, 95 % interval covers the truth in {inside[p]}/{draws}")
-        return
-    print(f"{draws} random N/B/K draws (set {fresh}), 2 h at 50 Hz; fit median {np.median(t_fit):.2f} s, "
-          f"bounds of the left-out terms median {np.median(t_bound) if t_bound else 0:.2f} s per draw")
-    for p in names:
-        print(f"  {p}: found {found[p]}/{draws}, 95 % interval covers the truth in {inside[p]}/{draws} "
-              f"({100 * inside[p] / draws:.0f} %); where its expected evidence lambda >= 9: found "
-              f"{strong[p][1]}/{strong[p][0]}, covers {strong[p][2]}/{strong[p][0]}"
-              + (f"; found with an interval reaching 0 (analyze: a bound) in {zero[p]}" if zero[p] else "")
-              + (f"; left out in {held[p][0]}, its 95 % upper bound above the truth in {held[p][1]} "
-                 f"(the online report's rule: {held[p][2]})" if held[p][0] else ""))
-        dd, uu = det[p], undet[p]
-        print(f"     detectable (bands apart at some tau <= T/10) in {dd[0]}: found {dd[1]}/{dd[0]}, covers "
-              f"{dd[2]}/{dd[0]}; not detectable in {uu[0]}: found {uu[1]} (covers {uu[2]}), left out "
-              f"{uu[0] - uu[1]} (bound above the truth {uu[3]}/{uu[0] - uu[1]}); value covers or bound holds: "
-              f"{dd[2] + uu[2] + uu[3] + (held[p][1] - uu[3])}/{draws}")
-    for x in missing[:30]:
-        print("  missing:", x)
 
 
 def preset_white_level(preset: dict, imu: int, axis: str) -> float:
