@@ -45,9 +45,8 @@ from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTI
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
 from companion.service.config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
-from companion.service.blocks import RATE_CHANGE
+from companion.service.rate_tracker import block_off_rate  # noqa: F401  (re-exported)
 from companion.service.imu_group import ImuGroup
-from companion.timebase import period_of
 from companion.units import datasheet_unit, to_datasheet
 
 # the per-axis faults that describe the sensor itself, said again after a restart while they last
@@ -58,28 +57,10 @@ SLOW_PARAMS = ("B", "K", "R")
 STATE_FORMAT = "companion-run-state"
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
 CONFIRM_BLOCKS = 3  # still blocks after a bias jump is flagged before its size is confirmed
-OFF_RATE_BLOCKS = 3  # consecutive blocks at one new rate before the channel switches to it
 #: rate switches of one IMU logged line by line; the later ones are counted and summed up in the summary: a
 #: router that sets the stream rates every 15 s, or an autopilot that slows its telemetry streams while the
 #: radio is busy (a real 1000-s tlog at 1.6-4.2 Hz: 86 lines), would otherwise fill the log
 RATE_SWITCHES_LOGGED = 3
-FEW_INTERVALS = 8  # a block with fewer intervals (a stream below 8 Hz) is off rate only when every one is
-
-
-def block_off_rate(d: np.ndarray, rate_hz: float, resolution: float = 0.0) -> float | None:
-    """The rate of a block with intervals ``d`` when it is off the stream's ``rate_hz`` by more than
-    RATE_CHANGE, else None. A block of a slow stream holds two or three intervals, and one late message splits
-    a period into a short and a long interval (a 2 Hz telemetry stream: 0.13 + 0.87 s) that no period rule
-    reads on its own: such a block is off rate only when all its intervals are off the period, the same way
-    (a stream requested at another rate); the blocks held back for it cost the estimators their long taus."""
-    p = period_of(d, resolution)
-    if not (p > 0) or abs(1.0 / (p * rate_hz) - 1.0) <= RATE_CHANGE:
-        return None
-    if d.shape[0] < FEW_INTERVALS:
-        k = d * rate_hz  # the intervals in periods of the stream
-        if not (np.all(k < 1.0 / (1.0 + RATE_CHANGE)) or np.all(k > 1.0 + RATE_CHANGE)):
-            return None
-    return 1.0 / p
 
 
 class Pipeline:
@@ -310,22 +291,16 @@ class Pipeline:
                 new, old = ch.cutter.rate_hz, ch.cutter.prev_rate_hz
                 ch.cutter.rate_hz = old
                 self._switch_rate(ch, new, data[:, 0], old)
-            ch.off_rate = []
+            ch.rates.off_rate = []
             return rate_event == "changed"
         if ch.rate_hz is None or data.shape[0] < 3:
             return False
-        r = block_off_rate(np.diff(data[:, 0]), ch.rate_hz, ch.time_res)
-        if r is None:
-            ch.off_rate = []
-            return False
-        if ch.off_rate and abs(r / ch.off_rate[-1] - 1.0) > RATE_CHANGE:
-            ch.off_rate = []
-        ch.off_rate.append(r)
-        ch.drop_lookahead()
-        if len(ch.off_rate) >= OFF_RATE_BLOCKS:
-            old = ch.rate_hz
-            self._switch_rate(ch, float(np.median(ch.off_rate)), data[:, 0], old)
-        return True
+        held, new_rate = ch.rates.observe(data[:, 0], ch.rate_hz, ch.time_res)
+        if held:
+            ch.drop_lookahead()
+        if new_rate is not None:
+            self._switch_rate(ch, new_rate, data[:, 0], ch.rate_hz)
+        return held
 
     def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None) -> None:
         back = ch.switch_rate(rate, t_block)
