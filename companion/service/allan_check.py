@@ -99,3 +99,22 @@ class AllanCheck:
         """(ratio, param) of the largest degrading Allan term of an axis."""
         worst = [(d.ratio, p) for (a, p), d in self.detector.detectors.items() if a == ax and d.state == DEGRADING]
         return max(worst) if worst else (math.nan, "N")
+
+
+def bias_extra_var(baseline, imu: int, block_s: float) -> dict[str, float]:
+    """Per gyro axis the Allan-predicted variance of a block mean's wander around the bias reference,
+    0.44 B^2 + K^2 T / 3 with T the reference's span (REF_TAU_BLOCKS blocks): the bias tests allow for it."""
+    from companion.health.bias import REF_TAU_BLOCKS
+
+    out = {}
+    for ax in GYRO_AXES:
+        b = baseline.get(imu, ax) if baseline is not None else None
+        if not b:
+            continue
+        v = 0.0
+        if "B" in b and math.isfinite(b["B"][0]):
+            v += 0.44 * b["B"][0] ** 2
+        if "K" in b and math.isfinite(b["K"][0]):
+            v += b["K"][0] ** 2 * REF_TAU_BLOCKS * block_s / 3.0
+        out[ax] = v
+    return out

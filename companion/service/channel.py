@@ -45,9 +45,9 @@ from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.service.allan_check import AllanCheck, CheckResult, StreamFacts
 from companion.service.blocks import BlockCutter
 from companion.service.config import PipelineConfig
-from companion.service.estimator_bank import COLUMNS, EstimatorBank  # noqa: F401  (COLUMNS: the row layout)
+from companion.service.estimator_bank import EstimatorBank
 from companion.service.motion import MotionGate, Peer, noise_ratio
-from companion.service.rate_tracker import KEPT_RATES, RateProfile, RateTracker  # noqa: F401
+from companion.service.rate_tracker import RateProfile, RateTracker
 from companion.service.settling import StillSettler
 from companion.sources.messages import IMU_LAYOUTS
 from companion.sources.timing import stamp_resolution

@@ -23,6 +23,10 @@ FEW_INTERVALS = 8  # a block with fewer intervals (a stream below 8 Hz) is off r
 #: other rates whose estimators and references are kept for when the stream returns to them (memory: each
 #: holds three estimator banks per axis)
 KEPT_RATES = 4
+#: rate switches of one IMU logged line by line; the later ones are counted and summed up in the summary: a
+#: router that sets the stream rates every 15 s, or an autopilot that slows its telemetry streams while the
+#: radio is busy, would otherwise fill the log
+RATE_SWITCHES_LOGGED = 3
 
 
 def block_off_rate(d: np.ndarray, rate_hz: float, resolution: float = 0.0) -> float | None:
