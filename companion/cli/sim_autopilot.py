@@ -36,8 +36,8 @@ turned by hand for --handle-s seconds and put down in another attitude. --warmup
 drift (exponential, --warmup-tau-s).
 
 """ + FAULT_HELP + """\
-The older noise degradation (--degrade-at S: term --degrade-term of axis --degrade-axis multiplied by
---degrade-factor by adding an independent component of the same kind scaled by sqrt(F^2 - 1)) still works.
+A noise degradation is also available (--degrade-at S: term --degrade-term of axis --degrade-axis multiplied
+by --degrade-factor by adding an independent component of the same kind scaled by sqrt(F^2 - 1)).
 """
 
 EPILOG = """\

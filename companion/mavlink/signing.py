@@ -25,7 +25,7 @@ from pathlib import Path
 
 from companion.errors import CompanionError
 
-KEY_LEN = 32
+KEY_LEN = 32  # bytes of a MAVLink 2 signing key (SETUP_SIGNING.secret_key)
 
 
 def load_signing_key(path, warn=None) -> bytes:

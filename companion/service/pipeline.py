@@ -42,7 +42,7 @@ from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 from companion.service.imu_group import ImuGroup
 from companion.units import datasheet_unit, to_datasheet
 
-IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
+IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")  # the messages decoded as IMU data
 CONFIRM_BLOCKS = 3  # still blocks after a bias jump is flagged before its size is confirmed
 
 

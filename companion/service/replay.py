@@ -178,7 +178,7 @@ def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: Fa
     return used
 
 
-MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_MODE_FLAG_SAFETY_ARMED = 128  # HEARTBEAT base_mode bit of an armed vehicle (MAVLink common.xml)
 _AUTOPILOT = {"dataflash": 3, "ulog": 12}  # MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4; else GENERIC (0)
 
 
@@ -196,7 +196,7 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
     Per IMU instance the stream with the most samples is replayed (a ULog holds sensor_combined,
     sensor_gyro and vehicle_imu of the same IMU). A DataFlash log's batch-sampler bursts (ISB_*) are not
     replayed: a kHz burst of a second every few seconds is no stream for the blocks of a live monitor (the
-    bursts outnumber the IMU messages, were chosen, gave no block and left the IMU unwatched); ``analyze``
+    bursts outnumber the IMU messages: chosen, they would give no block and leave the IMU unwatched); ``analyze``
     reads them.
     The log's armed state becomes a HEARTBEAT (base_mode armed flag) at every transition and once a
     second, exactly as a live vehicle sends them; a source without armed state sends none.
