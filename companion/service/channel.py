@@ -15,10 +15,13 @@ state:
   estimators and fault references kept for other rates;
 * :class:`~companion.service.allan_check.AllanCheck` (``allan``): the degradation test.
 
-Inputs: rows through :attr:`Channel.cutter`; closed blocks through :meth:`stats`, :meth:`is_still` and
-:meth:`on_block` (still or not is decided with the other IMUs by the pipeline); the look-ahead through
-:meth:`settle`; still settled blocks through :meth:`feed`. Outputs: FaultEvents, the check's transitions
-(:meth:`check`), the reported terms and the state (:meth:`state_dict`).
+The interface, in the order a block goes through it: rows through :attr:`Channel.cutter`; each closed
+block through :meth:`stats`, :meth:`is_still` (with the other IMUs' latest blocks) and :meth:`on_block`
+(the per-block fault detectors); the look-ahead through :meth:`settle`; a settled still block through
+:meth:`on_quiet` (the detectors that need rest) and :meth:`feed` (the estimators; True when the baseline is
+learned, then :meth:`learned_terms`); every ``check_s`` :meth:`check`. A rate change is
+:meth:`switch_rate`, a time discontinuity :meth:`on_break`. Outputs: FaultEvents, the check's
+transitions, the reported terms (:meth:`report_terms`), :meth:`health` and the state (:meth:`state_dict`).
 
 A still block that does not follow the last one fed (motion, a handling, a flight or a time gap between
 them) starts a new segment of the estimators (no Allan cluster straddles the junction, as in the offline
@@ -29,7 +32,6 @@ step^2 tau / record, the shape of a rate random walk (K).
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from typing import Mapping
 
@@ -39,7 +41,7 @@ from companion.analysis.filters import sampling
 from companion.estimators import make_estimator
 from companion.health.baseline import check_params
 from companion.health.detector import DEGRADING, LEARNING
-from companion.health.faults import CARRY, MIN_NOISE_SAMPLES, BlockStats, FaultEvent, block_stats
+from companion.health.faults import CARRY, BlockStats, FaultEvent, block_stats
 from companion.health.monitor import ImuFaults
 from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.service.allan_check import AllanCheck, CheckResult, StreamFacts
@@ -158,42 +160,10 @@ class Channel:
         returns to them (:meth:`switch_rate`): the still data of this IMU that are not in this rate's figures."""
         return self.rates.kept_summary()
 
-    # ------------------------------------------------------------------ notes of the summary
     def see(self, gyro: np.ndarray) -> None:
         """Every arriving gyro row (n, 3): notes a non-zero value."""
         if not self.gyro_moved and gyro.size:
             self.gyro_moved = bool(np.any(gyro != 0.0))
-
-    def all_zero(self) -> str | None:
-        """A note when every gyro sample of the run read exactly 0 but no fault says so (a record too short
-        for the dead test); else None."""
-        n = self.cutter.counts["samples"]
-        if self.gyro_moved or n == 0 or self.faults.active():
-            return None
-        dur = f" ({n / self.rate_hz:.1f} s)" if self.rate_hz else ""
-        why = ("dead, or a gyro quieter than the message's 1 mrad/s at rest" if self.message in INT16_MESSAGES
-               else "dead, absent or not started (a live gyro's float never reads exactly 0)")
-        return (f"IMU{self.imu}: gyro X, Y, Z read exactly 0 in all {n} samples{dur}: {why}; too few for the dead "
-                "test to name it")
-
-    def transient_note(self) -> str | None:
-        """What the Allan estimates leave out for transient faults (the summary's note), or None."""
-        if self.restored_s <= 0:
-            return None
-        return (f"IMU{self.imu}: {self.restored_s:.0f} s of still data fed during noise or spike faults were taken "
-                "back out of the Allan estimates when the faults cleared")
-
-    def too_slow(self) -> str | None:
-        """What a stream too slow for the per-IMU fault tests is watched for, in words; None when it is not."""
-        if not self.rate_hz:
-            return None
-        per_block = int(math.floor(self.cfg.block_s * self.rate_hz + 0.5)) + 1
-        if per_block >= MIN_NOISE_SAMPLES:
-            return None
-        return (f"IMU{self.imu}: at {self.rate_hz:.1f} Hz a {self.cfg.block_s:g}-s block holds {per_block} samples, "
-                f"fewer than the {MIN_NOISE_SAMPLES} the noise, bias, spikes and stuck-at-rest tests need: only a dead "
-                "gyro, a gyro frozen in flight, a disagreement with another IMU and the Allan terms are watched "
-                "(stream it at 4 Hz or more)")
 
     # ------------------------------------------------------------------ parts made afresh
     def _new_faults(self) -> ImuFaults:
@@ -223,9 +193,6 @@ class Channel:
         """Learn the baseline afresh (estimators without forgetting from now on)."""
         self.bank.relearn(self.axes, self._make_estimator)
 
-    def stop_learning(self) -> None:
-        self.bank.stop_learning()
-
     def set_filters(self, filters: dict) -> bool:
         """The autopilot's low-pass cut-offs ({"gyro": Hz, "accel": Hz}) became known or changed: the
         estimators that exist (and those kept for other rates) model them from their next report on (the
@@ -248,7 +215,7 @@ class Channel:
         self.make_estimators(learning=learning)
         self._fed_end_t, self._junction, self.next_check_t = None, True, None
         self.allan.current = {}
-        self.restart_settling()
+        self.settler.restart()
         if self.faults.active():
             return False
         self.faults = self._new_faults()
@@ -268,7 +235,7 @@ class Channel:
         self.cutter.prev_rate_hz, self.cutter.rate_hz = old, float(new_rate)
         self.cutter.dts.clear()
         self.cutter.dts.extend(np.diff(np.asarray(t_block, dtype=float)).tolist())
-        self.drop_lookahead()
+        self.settler.drop_lookahead()
         self._tail = None
         self.rates.switched()
         if back is not None:
@@ -281,18 +248,10 @@ class Channel:
         return False
 
     # ------------------------------------------------------------------ blocks
-    def restart_settling(self) -> None:
-        """Motion or a time discontinuity: drop the look-ahead and settle again."""
-        self.settler.restart()
-
-    def drop_lookahead(self) -> None:
-        """A rate change: the look-ahead block is dropped, the still time counts on (StillSettler)."""
-        self.settler.drop_lookahead()
-
     def on_break(self) -> None:
         """Time discontinuity: the partial block, the look-ahead and the recent blocks are dropped."""
         self.cutter.drop()
-        self.restart_settling()
+        self.settler.restart()
         self.next_check_t = None
         self.recent.clear()
         self._tail = None
@@ -424,10 +383,6 @@ class Channel:
         if self.bank.learn or not has_baseline:
             return LEARNING
         return self.allan.detector.state
-
-    def allan_worst(self, ax: str) -> tuple[float, str]:
-        """(ratio, param) of the largest degrading Allan term of an axis."""
-        return self.allan.worst(ax)
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict:

@@ -4,8 +4,11 @@ health, counts, the active faults in words, the notes, and per axis the final te
 
 from __future__ import annotations
 
+import math
+
 from companion.health.detector import STATE_NAMES
-from companion.health.faults import FAULT, FaultEvent
+from companion.health.faults import FAULT, MIN_NOISE_SAMPLES, FaultEvent
+from companion.service.channel import INT16_MESSAGES
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 
 
@@ -13,7 +16,7 @@ def summary_rows(pipeline) -> list[dict]:
     """One row per IMU, sorted by instance."""
     out = []
     for imu, ch in sorted(pipeline.channels.items()):
-        notes = (ch.too_slow(), ch.all_zero(), ch.transient_note(), rate_note(pipeline, ch))
+        notes = (too_slow_note(ch), all_zero_note(ch), transient_note(ch), rate_note(pipeline, ch))
         row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
                "other_rates": ch.kept_rates(), "health": STATE_NAMES[pipeline.health(ch)], "counts": ch.counts,
                "axes": {}, "faults": fault_texts(pipeline, ch), "notes": [n for n in notes if n]}
@@ -34,7 +37,7 @@ def fault_texts(pipeline, ch) -> list[str]:
         if kind == "disagree":
             ev = FaultEvent(ch.imu, ax, kind, FAULT, detail=pipeline.group.detail(ch.imu, ax))
         elif kind == "allan":
-            r, p = ch.allan_worst(ax)
+            r, p = ch.allan.worst(ax)
             ev = FaultEvent(ch.imu, ax, kind, FAULT, detail=f"degrading: {p} {r:.1f}x baseline")
         else:
             ev = ch.faults.event_of(kind, ax)
@@ -87,3 +90,37 @@ def send_final(pipeline) -> int:
                 reporter.send_now(name, v, t)
                 n += 1
     return n
+
+
+def all_zero_note(ch) -> str | None:
+    """A note when every gyro sample of the run read exactly 0 but no fault says so (a record too short
+    for the dead test); else None."""
+    n = ch.cutter.counts["samples"]
+    if ch.gyro_moved or n == 0 or ch.faults.active():
+        return None
+    dur = f" ({n / ch.rate_hz:.1f} s)" if ch.rate_hz else ""
+    why = ("dead, or a gyro quieter than the message's 1 mrad/s at rest" if ch.message in INT16_MESSAGES
+           else "dead, absent or not started (a live gyro's float never reads exactly 0)")
+    return (f"IMU{ch.imu}: gyro X, Y, Z read exactly 0 in all {n} samples{dur}: {why}; too few for the dead "
+            "test to name it")
+
+
+def transient_note(ch) -> str | None:
+    """What the Allan estimates leave out for transient faults (the summary's note), or None."""
+    if ch.restored_s <= 0:
+        return None
+    return (f"IMU{ch.imu}: {ch.restored_s:.0f} s of still data fed during noise or spike faults were taken "
+            "back out of the Allan estimates when the faults cleared")
+
+
+def too_slow_note(ch) -> str | None:
+    """What a stream too slow for the per-IMU fault tests is watched for, in words; None when it is not."""
+    if not ch.rate_hz:
+        return None
+    per_block = int(math.floor(ch.cfg.block_s * ch.rate_hz + 0.5)) + 1
+    if per_block >= MIN_NOISE_SAMPLES:
+        return None
+    return (f"IMU{ch.imu}: at {ch.rate_hz:.1f} Hz a {ch.cfg.block_s:g}-s block holds {per_block} samples, "
+            f"fewer than the {MIN_NOISE_SAMPLES} the noise, bias, spikes and stuck-at-rest tests need: only a dead "
+            "gyro, a gyro frozen in flight, a disagreement with another IMU and the Allan terms are watched "
+            "(stream it at 4 Hz or more)")

@@ -36,7 +36,7 @@ from companion.service.allan_check import bias_extra_var
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
 from companion.service.config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
-from companion.service.imu_summary import fault_texts, final_terms, rate_note, send_final, summary_rows
+from companion.service.imu_summary import fault_texts, final_terms, rate_note, send_final, summary_rows, too_slow_note
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 from companion.service.imu_group import ImuGroup
@@ -280,7 +280,7 @@ class Pipeline:
             return False
         held, new_rate = ch.rates.observe(data[:, 0], ch.rate_hz, ch.time_res)
         if held:
-            ch.drop_lookahead()
+            ch.settler.drop_lookahead()
         if new_rate is not None:
             self._switch_rate(ch, new_rate, data[:, 0], ch.rate_hz)
         return held
@@ -288,7 +288,7 @@ class Pipeline:
     def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None) -> None:
         back = ch.switch_rate(rate, t_block)
         if self._has_baseline(ch):
-            ch.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
+            ch.bank.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
         self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
         if ch.rate_switches <= RATE_SWITCHES_LOGGED:
             self.log(f"IMU{ch.imu}: rate changed {old:.1f} -> {ch.rate_hz:.1f} Hz (a stream request, not a gyro fault): "
@@ -317,7 +317,7 @@ class Pipeline:
                     return
             ch.make_estimators(learning=not self._has_baseline(ch))
             self.log(f"IMU{ch.imu}: {ch.rate_hz:.1f} Hz")
-            slow = ch.too_slow()
+            slow = too_slow_note(ch)
             if slow:
                 self.log(slow)
         if ch.rate_hz is None:

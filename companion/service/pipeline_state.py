@@ -42,7 +42,7 @@ def load_pipeline_state(p, d: Mapping) -> None:
         p.baseline = baseline
     for ch in channels.values():
         if p._has_baseline(ch):
-            ch.stop_learning()
+            ch.bank.stop_learning()
         elif not ch.learn:  # no baseline for this IMU and nothing being learned: learn afresh
             ch.relearn()
     p.channels = channels
