@@ -9,9 +9,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Callable
 
 from companion.errors import CompanionError
+
+if TYPE_CHECKING:  # the types only: building the options imports them when a run starts
+    from companion.health.baseline import Baseline
+    from companion.mavlink.link import LinkConfig
+    from companion.service.config import PipelineConfig
+    from companion.sources.decode import ScaleTable
 
 
 def _nothing(*_args) -> None:
@@ -35,16 +41,16 @@ class RunOptions:
     """One run: the source (a live link or a log to replay) and everything that shapes it."""
 
     source: str
-    pipeline: Any  # service.config.PipelineConfig
-    link: Any = None  # mavlink.link.LinkConfig (live links)
+    pipeline: PipelineConfig
+    link: LinkConfig | None = None  # live links
     report_period: float = 1.0  # seconds of message time between two reports of a value
-    baseline: Any = None  # health.baseline.Baseline loaded from a file, None: learn it
-    scales: Any = None  # sources.decode.ScaleTable
+    baseline: Baseline | None = None  # loaded from a file, None: learn it
+    scales: ScaleTable | None = None  # the IMU messages' scales (the configuration's streams:)
     state: Path | None = None  # the state file, None: no state kept
     relearn: bool = False  # drop the baseline kept in the state file
     save_period: float = 60.0  # wall seconds between two state saves on a live link
     baud: int | None = None  # serial links
-    signing: bytes | None = None  # MAVLink 2 signing key (live links)
+    signing: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (live links)
     accept_unsigned: bool = False
     duration: float | None = None  # wall-clock seconds of a live run, None: until stopped
     gcs: tuple[str, ...] = field(default_factory=tuple)  # ground-station links that get a copy of the reports

@@ -7,10 +7,14 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from companion.errors import CompanionError, not_text
 from companion.service.run_options import RunHooks, RunOptions
+
+if TYPE_CHECKING:
+    from companion.mavlink.link import Link
+    from companion.service.pipeline import Pipeline
 
 
 class ReplaySink:
@@ -120,18 +124,19 @@ def replay(opts: RunOptions, hooks: RunHooks, writer=None):
 class RunResult:
     """What a run leaves for the summary: the pipeline, and the link of a live run (its health lines)."""
 
-    pipeline: Any
-    link: Any = None
+    pipeline: Pipeline
+    link: Link | None = None
 
 
 def _open_writer(opts: RunOptions):
     """The --out-tlog recorder, or None."""
     if not opts.out_tlog:
         return None
+    from companion.mavlink.link import LinkConfig
     from companion.mavlink.tlog_writer import TlogWriter
 
     try:
-        return TlogWriter(opts.out_tlog, sysid=opts.pipeline.sysid or 1, compid=opts.link.compid)
+        return TlogWriter(opts.out_tlog, sysid=opts.pipeline.sysid or 1, compid=(opts.link or LinkConfig()).compid)
     except OSError as exc:
         raise CompanionError(f"{opts.out_tlog}: cannot write ({exc.strerror or exc})") from None
 
