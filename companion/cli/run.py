@@ -88,54 +88,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def build(args, log):
-    """Configuration objects from the config file and the command line (user errors -> CompanionError)."""
-    from companion.config import LINK, RUNNER
-    from companion.mavlink.link import IMU_MESSAGE_IDS, LinkConfig
-    from companion.service.pipeline import PipelineConfig
-    from companion.service.runner import load_baseline
-    from companion.sources import load_config
-    from companion.sources.decode import ScaleTable
-
-    config = load_config(args.config) if args.config else {}
-    run_cfg = dict(config.get("run") or {})
-    if not isinstance(config.get("run") or {}, dict):
-        raise CompanionError("config: 'run' must be a mapping")
-    link_cfg = LinkConfig()
-    for k in LINK:
-        if k in run_cfg:
-            v = run_cfg.pop(k)
-            setattr(link_cfg, k, tuple(v) if k == "messages" else type(getattr(link_cfg, k))(v))
-    for m in link_cfg.messages:
-        if m not in IMU_MESSAGE_IDS:
-            raise CompanionError(f"config run.messages: unknown message {m!r} (one of {', '.join(IMU_MESSAGE_IDS)})")
-    extra = {k: run_cfg.pop(k) for k in RUNNER if k in run_cfg}
-    if "estimator" not in run_cfg and isinstance(config.get("estimator"), dict):
-        run_cfg["estimator"] = {k: v for k, v in config["estimator"].items() if v is not None}
-    try:
-        pcfg = PipelineConfig.from_mapping(run_cfg)
-    except (ValueError, TypeError) as exc:
-        raise CompanionError(f"config: {exc}") from None
-    if args.sysid is not None:
-        pcfg.sysid = args.sysid
-    if getattr(args, "baseline_force", False):
-        pcfg.baseline_force = True
-    if args.baseline_s is not None:
-        if not args.baseline_s > 0:
-            raise CompanionError("--baseline-s must be > 0")
-        pcfg.baseline_s = args.baseline_s
-    if args.rate is not None:
-        if not args.rate > 0:
-            raise CompanionError("--rate must be > 0")
-        link_cfg.rate_hz = args.rate
-    period = float(args.report_period if args.report_period is not None else extra.get("report_period_s", RUNNER["report_period_s"].default))
-    if not period > 0:
-        raise CompanionError("--report-period must be > 0")
-    baseline = load_baseline(args.baseline) if args.baseline else None
-    scales = ScaleTable(config)
-    return pcfg, link_cfg, period, extra, baseline, scales
-
-
 def print_summary(pipeline, out=None) -> None:
     from companion.service.runner import summary_lines
 
@@ -159,89 +111,28 @@ def run(args) -> int:
 
 
 def _run(args, stop) -> int:
-    from companion.config import RUNNER
     from companion.service import runner
-
-    quiet = args.quiet
+    from companion.service.run_options import RunHooks, build_options
 
     def log(line):
-        if not quiet:
+        if not args.quiet:
             print(f"companion run: {line}", file=sys.stderr, flush=True)
 
     def warn(line):
         print(f"companion run: warning: {line}", file=sys.stderr, flush=True)
 
-    if args.duration is not None and not args.duration > 0:
-        raise CompanionError("--duration must be > 0")
-    pcfg, link_cfg, period, extra, baseline, scales = build(args, log)
-    src = str(args.source)
-    from companion.service.replay import is_replay_source
+    def ready(source):  # printed even with --quiet: the socket/port is open and signals are handled
+        print(f"{READY_LINE} {source}", file=sys.stderr, flush=True)
 
-    is_replay = is_replay_source(src)
-    gcs = tuple(getattr(args, "gcs", None) or ())
-    if not is_replay:
-        from companion.sources.connection import parse_connection
-
-        parse_connection(src, args.baud)  # a clear error before anything else
-        for spec in gcs:
-            if parse_connection(spec)[0] != "net":
-                raise CompanionError(f"--gcs {spec}: expected a network link (udpout:HOST:PORT, tcp:HOST:PORT, ...)")
-    elif gcs:
-        raise CompanionError("--gcs applies to live links, not to a replayed log")
-    state_path = runner.state_path(args.state, extra.get("state_file"), args.no_state, live=not is_replay)
-    save_period = float(extra.get("save_period_s", RUNNER["save_period_s"].default))
-    _check_outputs(args, extra, state_path)  # every output path checked before the work starts
-    args.signing = _signing_key(args, is_replay, warn)
-
-    writer = None
-    try:
-        if args.out_tlog:
-            from companion.mavlink.tlog_writer import TlogWriter
-
-            try:
-                writer = TlogWriter(args.out_tlog, sysid=pcfg.sysid or 1, compid=link_cfg.compid)
-            except OSError as exc:
-                raise CompanionError(f"{args.out_tlog}: cannot write ({exc.strerror or exc})") from None
-        if is_replay:
-            pipeline, sink, totals = runner.replay(src, pcfg, period, baseline, scales, writer, state_path, args.relearn,
-                                                   lambda: stop["flag"], log, warn, echo=None if quiet else print,
-                                                   time_unit=getattr(args, "time_unit", None))
-            log(f"replayed {totals['frames']} frames ({totals['imu_samples']} IMU samples, {totals['bad_frames']} bad frames), "
-                f"{sink.sent} NAMED_VALUE_FLOAT, {len(sink.texts)} STATUSTEXT")
-            if not pipeline.channels:
-                raise CompanionError(f"{src}: no IMU data to replay")
-        else:
-            from companion.service.live import run_live
-
-            def ready(source):  # printed even with --quiet: the socket/port is open and signals are handled
-                print(f"{READY_LINE} {source}", file=sys.stderr, flush=True)
-
-            pipeline, link = run_live(src, args.baud, args.signing, args.accept_unsigned, args.duration, pcfg, link_cfg,
-                                      period, baseline, scales, state_path, args.relearn, save_period, writer, stop,
-                                      log, warn, ready, gcs=gcs)
-        if state_path is not None:
-            runner.save(pipeline, state_path, warn)
-        print_summary(pipeline)
-        if not is_replay:  # link health (loss, reordering, late, rejected frames) per source
-            for line in link.stats.summary_lines():
-                print(line)
-        return 0
-    finally:
-        if writer is not None:
-            writer.close()
-
-
-def _signing_key(args, is_replay, warn):
-    """The signing key (bytes) of --signing-key, or None."""
-    if args.accept_unsigned and not args.signing_key:
-        raise CompanionError("--accept-unsigned needs --signing-key")
-    if not args.signing_key:
-        return None
-    if is_replay:
-        raise CompanionError("--signing-key applies to live links, not to a replayed log")
-    from companion.mavlink.signing import load_signing_key
-
-    return load_signing_key(args.signing_key, warn)
+    opts = build_options(args, warn, lambda state, run_keys: _check_outputs(args, run_keys, state))
+    hooks = RunHooks(log=log, warn=warn, stop=lambda: stop["flag"], ready=ready,
+                     echo=None if args.quiet else print)
+    result = runner.run(opts, hooks)
+    print_summary(result.pipeline)
+    if result.link is not None:  # link health (loss, reordering, late, rejected frames) per source
+        for line in result.link.stats.summary_lines():
+            print(line)
+    return 0
 
 
 def _check_outputs(args, extra, state_path) -> None:

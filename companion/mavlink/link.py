@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 from companion.config import LINK
 
+# MAVLink enum values (common.xml) this link sends or reads
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_TYPE_GCS = 6
 MAV_AUTOPILOT_INVALID = 8
@@ -35,6 +36,7 @@ MAV_COMP_ID_ONBOARD_COMPUTER = 191
 MAV_SEVERITY_WARNING = 4
 MAV_SEVERITY_NOTICE = 5
 
+#: message ids of the IMU messages a link may ask for (run.messages)
 IMU_MESSAGE_IDS = {"RAW_IMU": 27, "SCALED_IMU": 26, "SCALED_IMU2": 116, "SCALED_IMU3": 129, "HIGHRES_IMU": 105}
 
 
@@ -381,7 +383,7 @@ class Link:
                 self.use_data_stream = True  # two requests without an answer nor data: old autopilot? fall back too
                 self.log("no answer to SET_MESSAGE_INTERVAL: asking with REQUEST_DATA_STREAM too")
         # the first request of each silence is logged, then that they repeat: every retry_s for as long as an
-        # autopilot is off or rebooting, one line each filled the log
+        # autopilot is off or rebooting, one line each would fill the log
         if self._stale_asks == 1:
             self.log(f"no IMU data yet: asking again every {self.cfg.retry_s:g} s until they come")
         self.request_streams(quiet=self._stale_asks > 0)

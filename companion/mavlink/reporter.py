@@ -49,7 +49,8 @@ import numpy as np
 
 from companion import units
 
-NAME_RE = re.compile(r"^[A-Z0-9_]{1,10}$")
+NAME_RE = re.compile(r"^[A-Z0-9_]{1,10}$")  # a NAMED_VALUE_FLOAT name: char[10], upper case as ArduPilot's
+# MAV_SEVERITY values of STATUSTEXT (MAVLink common.xml)
 MAV_SEVERITY_CRITICAL = 2
 MAV_SEVERITY_WARNING = 4
 MAV_SEVERITY_NOTICE = 5

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from companion.errors import CompanionError
 
-KEY_LEN = 32
+KEY_LEN = 32  # bytes of a MAVLink 2 signing key (SETUP_SIGNING.secret_key)
 
 
 def load_signing_key(path, warn=None) -> bytes:
@@ -60,20 +60,25 @@ def load_signing_key(path, warn=None) -> bytes:
     return key
 
 
+class UnsignedFilter:
+    """pymavlink's ``allow_unsigned_callback`` that lets unsigned frames through but never a wrongly signed
+    one: pymavlink asks it for both, and a failed signature check shows as a rise of ``badsig_count``."""
+
+    def __init__(self):
+        self.bad_seen = 0
+
+    def __call__(self, mav, msgid) -> bool:
+        bad = mav.signing.badsig_count
+        if bad != self.bad_seen:  # a signature was just checked and failed: refuse
+            self.bad_seen = bad
+            return False
+        return True
+
+
 def setup_signing(conn, key: bytes, accept_unsigned: bool = False) -> None:
     """Sign every frame sent on ``conn`` and accept only correctly signed frames (``accept_unsigned``:
     unsigned frames are let through too; wrongly signed ones never are). The connection must speak
     MAVLink 2 from the start (``open_connection(..., mavlink2=True)``): pymavlink would drop the signing
     state when it switches versions."""
-    callback = None  # None: pymavlink refuses every unsigned frame
-    if accept_unsigned:
-        seen = {"bad": 0}
-
-        def callback(mav, msgid):  # pymavlink asks this for unsigned *and* for wrongly signed frames
-            bad = mav.signing.badsig_count
-            if bad != seen["bad"]:  # a signature was just checked and failed: refuse
-                seen["bad"] = bad
-                return False
-            return True
-
+    callback = UnsignedFilter() if accept_unsigned else None  # None: pymavlink refuses every unsigned frame
     conn.setup_signing(key, sign_outgoing=True, allow_unsigned_callback=callback)

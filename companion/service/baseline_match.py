@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import math
 
-RATE_TOL = 0.05  # relative
-LSB_TOL = 0.01  # relative
-N_RATIO_MAX = 20.0
+RATE_TOL = 0.05  # relative rate difference of one stream measured twice (timing jitter), beyond it another stream
+LSB_TOL = 0.01  # relative LSB difference of one sensor scale (float rounding), beyond it another scale
+N_RATIO_MAX = 20.0  # white noise this many times off the baseline's: other units or another sensor, not wear
 
 
 def stream_meta(ch) -> dict:

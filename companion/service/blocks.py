@@ -27,7 +27,7 @@ RATE_CHANGE = 0.2  # relative change of the rate that restarts the estimators
 MIN_INTERVALS = 8  # intervals before the rate is taken
 #: once the rate is known a gap is an interval longer than ``gap_s`` and than GAP_PERIODS periods: at 2 Hz (a
 #: telemetry stream at 2 Hz, a PX4 log's vehicle_imu) half the intervals are a little over 0.5 s,
-#: and with ``gap_s`` alone each was a gap that dropped the block: the stream never had a full block
+#: and with ``gap_s`` alone each would be a gap that drops the block: the stream would never fill one
 GAP_PERIODS = 2.5
 
 
@@ -53,7 +53,7 @@ class BlockCutter:
     def step_rules(self):
         """The timestamp rules at the current rate (GAP_PERIODS)."""
         # before the rate is taken, the median interval so far stands in for the period: at 2 Hz half the
-        # intervals exceed a gap_s of 0.5 s by a few ms, and the first blocks were gaps until 8 intervals were in
+        # intervals exceed a gap_s of 0.5 s by a few ms, and the first blocks would be gaps until 8 intervals are in
         period = 1.0 / self.rate_hz if self.rate_hz else (float(np.median(self.dts)) if self.dts else 0.0)
         gap = max(self.gap_s, GAP_PERIODS * period)
         if gap != self.rules.gap_s:

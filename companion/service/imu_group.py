@@ -20,7 +20,7 @@ import numpy as np
 from companion.health.disagreement import PairDisagreement
 from companion.health.faults import AXES, FAULT, OK, FaultEvent, Observation
 
-MIN_ALIGNED = 10  # samples both IMUs cover before a pair is tested
+MIN_ALIGNED = 10  # samples both IMUs cover before a pair is tested (fewer give no usable block mean)
 #: faults that move a gyro's mean rate: while one of them is active on an axis of either IMU of a pair, the
 #: pair's disagreement on that axis has its cause and is not cleared (a gyro frozen near the rate of a long
 #: hover agrees with the other IMU there: clearing would name the same fault again at the next turn)
@@ -70,9 +70,9 @@ class ImuGroup:
             gj_all = np.concatenate([b[1] for b in cj.recent])
             # compared at the instants of the slower stream, the faster one interpolated there: each block's
             # mean then comes from the same instants on both sides. The other way round a 2 Hz snapshot
-            # stream (a PX4 log's vehicle_imu) was interpolated between its snapshots at a 220 Hz stream's
-            # instants, and in flight the line between two snapshots half a second apart is no rate: a
-            # healthy pair "disagreed" on a public log
+            # stream (a PX4 log's vehicle_imu) would be interpolated between its snapshots at a 220 Hz
+            # stream's instants, and in flight the line between two snapshots half a second apart is no
+            # rate: a healthy pair would disagree
             pi_, pj_ = _period(ti), _period(tj)
             base_i = pi_ >= pj_ or pj_ <= SAME_RATE * pi_  # IMU i's instants unless IMU j is clearly slower
             (ts, gs), (tf, gf), pf = ((ti, gi_all), (tj, gj_all), pj_) if base_i else ((tj, gj_all), (ti, gi_all), pi_)

@@ -57,9 +57,9 @@ def without_glitches(a: np.ndarray) -> np.ndarray:
     """The accelerometer block with isolated one-sample outliers (beyond ``GLITCH_K`` robust sigmas of the
     distance to the median of the sample and its four neighbours, neither neighbour beyond half of that)
     set to that median. A glitch of the IMU (a corrupted sample, often in gyro and accelerometer at once)
-    lifted the block's accel std, the gate called the block motion, and the gyro glitch was weighed as
-    vibration: eight such glitches in 12 s (3 m/s^2 with 0.3 rad/s at 200 Hz) went unnamed. A knock or a
-    handling moves several samples in a row and stays."""
+    would lift the block's accel std, the gate would call the block motion and the gyro glitch would be
+    weighed as vibration, never named as spikes. A knock or a handling moves several samples in a row and
+    stays."""
     n = a.shape[0]
     if n < 5 or not np.all(np.isfinite(a)):
         return a
@@ -123,9 +123,9 @@ class MotionGate:
             if np.any((ratio > cfg.accel_std_factor) & (a_std > cfg.accel_std_min)):
                 return False
             accel_up = float(ratio.max())
-            # per axis: a log that starts with the vehicle in hand taught one axis a reference 60x its rest
-            # level (a parked plane's first block, accel Y 0.41 m/s^2 against 0.007), and for a minute the
-            # gate took knocks on that axis for rest
+            # per axis: a log that starts with the vehicle in hand can teach one axis a reference many times
+            # its rest level while the others are near theirs; tested on all axes at once, the gate would
+            # take knocks on that axis for rest (tests/test_engine_on_ground.py)
             moves = np.ptp(a, axis=0) > 0  # an axis that stops (every value equal) says nothing of its noise
             quieter = moves & (a_std * QUIETER < self.ref_accel_std)
             if a.shape[0] < QUIET_MIN_SAMPLES:

@@ -1,29 +1,19 @@
 """From MAVLink messages to estimates, health and reports, in message time only.
 
-The parts (PX4's DataValidator / DataValidatorGroup split), each with explicit inputs and outputs:
-
-* :mod:`companion.service.blocks`: the block cutter of one stream (timestamp rules, rate, blocks of
-  ``block_s`` of message time; one vectorised path, the live sample is a one-row call);
-* :mod:`companion.service.motion`: the motion gate (still or moving, from the accelerometer and the
-  agreement of IMUs and axes, never from one gyro axis' own noise level);
-* :mod:`companion.service.channel`: one IMU (fault detectors, estimators, baseline learning, Allan check);
-* :mod:`companion.service.imu_group`: the IMUs together (pairwise disagreement, naming the odd IMU);
-* :mod:`companion.service.config`: the configuration.
-
-:class:`Pipeline` routes messages (the first IMU message type seen for an instance is used, other types
-carrying the same IMU and other system ids are ignored), reports and keeps the saved state:
+:class:`Pipeline` routes messages to one :class:`~companion.service.channel.Channel` per IMU (the first IMU
+message type seen for an instance is used, other types carrying the same IMU and other system ids are
+ignored), compares the IMUs (:mod:`companion.service.imu_group`), reports and keeps the saved state
+(:mod:`companion.service.pipeline_state`); the summary is :mod:`companion.service.imu_summary`.
 
 1. Each block is *still* when the vehicle is disarmed (its autopilot's HEARTBEAT ``base_mode`` bit 128
    clear; no HEARTBEAT at all counts as disarmed) AND the motion gate agrees. A block is fed only if the
-   next block is still too (one block of look-ahead, so the start of a handling never leaks in) and the
-   vehicle has been still for ``settle_s`` before it.
-1b. Every block, still or not, goes through the fault detectors (companion.health.monitor: stuck,
-   spikes, saturation, timing; on still fed blocks also noise, bias jump/drift, resolution) and, with two
-   or more IMUs, the pairwise disagreement test on the time both cover; each transition is a STATUSTEXT
-   and sets ``IMU{i}G_HLTH`` / ``IMU{i}G_FLT`` / ``IMU{i}G_FLM`` at once.
-2. Fed blocks go to the channel's estimators; while learning, the baseline is taken after ``baseline_s``
+   next block is still too and the vehicle has been still for ``settle_s`` before it.
+2. Every block, still or not, goes through the fault detectors (companion.health.monitor) and, with two
+   or more IMUs, the pairwise disagreement test; each transition is a STATUSTEXT and sets
+   ``IMU{i}G_HLTH`` / ``IMU{i}G_FLT`` / ``IMU{i}G_FLM`` at once.
+3. Fed blocks go to the channel's estimators; while learning, the baseline is taken after ``baseline_s``
    seconds of still data (unless a baseline was loaded).
-3. Every ``check_s`` of message time the current terms are reported and tested against the baseline
+4. Every ``check_s`` of message time the current terms are reported and tested against the baseline
    (companion.health.detector), health transitions produce a STATUSTEXT.
 
 A loaded baseline in other units or of another sensor stops the pipeline: :attr:`Pipeline.failed` holds
@@ -38,48 +28,22 @@ from typing import Callable, Iterable, Mapping
 import numpy as np
 
 from companion.health.baseline import Baseline
-from companion.health.detector import DEGRADING, LEARNING, STATE_NAMES
+from companion.health.detector import DEGRADING, LEARNING
 from companion.health.faults import FAULT, FaultEvent
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
+from companion.service.allan_check import bias_extra_var
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
 from companion.service.config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
-from companion.service.blocks import RATE_CHANGE
+from companion.service.imu_summary import fault_texts, final_terms, rate_note, send_final, summary_rows, too_slow_note
+from companion.service.pipeline_state import load_pipeline_state, pipeline_state
+from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 from companion.service.imu_group import ImuGroup
-from companion.timebase import period_of
 from companion.units import datasheet_unit, to_datasheet
 
-# the per-axis faults that describe the sensor itself, said again after a restart while they last
-SENSOR_FAULTS = ("dead", "stuck", "noise", "spikes", "resolution")
-
-FAST_PARAMS = ("Q", "N")
-SLOW_PARAMS = ("B", "K", "R")
-STATE_FORMAT = "companion-run-state"
-IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")
+IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")  # the messages decoded as IMU data
 CONFIRM_BLOCKS = 3  # still blocks after a bias jump is flagged before its size is confirmed
-OFF_RATE_BLOCKS = 3  # consecutive blocks at one new rate before the channel switches to it
-#: rate switches of one IMU logged line by line; the later ones are counted and summed up in the summary: a
-#: router that sets the stream rates every 15 s, or an autopilot that slows its telemetry streams while the
-#: radio is busy (a real 1000-s tlog at 1.6-4.2 Hz: 86 lines), would otherwise fill the log
-RATE_SWITCHES_LOGGED = 3
-FEW_INTERVALS = 8  # a block with fewer intervals (a stream below 8 Hz) is off rate only when every one is
-
-
-def block_off_rate(d: np.ndarray, rate_hz: float, resolution: float = 0.0) -> float | None:
-    """The rate of a block with intervals ``d`` when it is off the stream's ``rate_hz`` by more than
-    RATE_CHANGE, else None. A block of a slow stream holds two or three intervals, and one late message splits
-    a period into a short and a long interval (a 2 Hz telemetry stream: 0.13 + 0.87 s) that no period rule
-    reads on its own: such a block is off rate only when all its intervals are off the period, the same way
-    (a stream requested at another rate); the blocks held back for it cost the estimators their long taus."""
-    p = period_of(d, resolution)
-    if not (p > 0) or abs(1.0 / (p * rate_hz) - 1.0) <= RATE_CHANGE:
-        return None
-    if d.shape[0] < FEW_INTERVALS:
-        k = d * rate_hz  # the intervals in periods of the stream
-        if not (np.all(k < 1.0 / (1.0 + RATE_CHANGE)) or np.all(k > 1.0 + RATE_CHANGE)):
-            return None
-    return 1.0 / p
 
 
 class Pipeline:
@@ -310,27 +274,21 @@ class Pipeline:
                 new, old = ch.cutter.rate_hz, ch.cutter.prev_rate_hz
                 ch.cutter.rate_hz = old
                 self._switch_rate(ch, new, data[:, 0], old)
-            ch.off_rate = []
+            ch.rates.off_rate = []
             return rate_event == "changed"
         if ch.rate_hz is None or data.shape[0] < 3:
             return False
-        r = block_off_rate(np.diff(data[:, 0]), ch.rate_hz, ch.time_res)
-        if r is None:
-            ch.off_rate = []
-            return False
-        if ch.off_rate and abs(r / ch.off_rate[-1] - 1.0) > RATE_CHANGE:
-            ch.off_rate = []
-        ch.off_rate.append(r)
-        ch.drop_lookahead()
-        if len(ch.off_rate) >= OFF_RATE_BLOCKS:
-            old = ch.rate_hz
-            self._switch_rate(ch, float(np.median(ch.off_rate)), data[:, 0], old)
-        return True
+        held, new_rate = ch.rates.observe(data[:, 0], ch.rate_hz, ch.time_res)
+        if held:
+            ch.settler.drop_lookahead()
+        if new_rate is not None:
+            self._switch_rate(ch, new_rate, data[:, 0], ch.rate_hz)
+        return held
 
     def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None) -> None:
         back = ch.switch_rate(rate, t_block)
         if self._has_baseline(ch):
-            ch.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
+            ch.bank.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
         self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
         if ch.rate_switches <= RATE_SWITCHES_LOGGED:
             self.log(f"IMU{ch.imu}: rate changed {old:.1f} -> {ch.rate_hz:.1f} Hz (a stream request, not a gyro fault): "
@@ -339,19 +297,6 @@ class Pipeline:
             self.log(f"IMU{ch.imu}: the rate keeps changing (another client's stream requests, or an autopilot that "
                      "slows its streams while the link is busy): further changes are counted in the summary, not logged")
         self._set_state(ch)
-
-    def rate_note(self, ch: Channel) -> str | None:
-        """The summary's word on an IMU whose rate switched more often than the log said line by line."""
-        if ch.rate_switches <= RATE_SWITCHES_LOGGED:
-            return None
-        rates = [r for _, imu, old, new in self.rate_log if imu == ch.imu for r in (old, new) if r]
-        if not rates:
-            return None
-        lo, hi = min(rates), max(rates)
-        return (f"IMU{ch.imu}: the stream's rate changed {ch.rate_switches} times, between {lo:.1f} and {hi:.1f} Hz: "
-                "the Allan estimates of each rate are kept apart (a rate is another sampling of the noise), so each "
-                "holds only part of the still data (on a live link: ask for one rate, --rate, and keep other clients "
-                "from changing it)")
 
     def _close_block(self, ch: Channel, data: np.ndarray, rate_event: str | None) -> None:
         if self._off_rate(ch, data, rate_event):
@@ -372,14 +317,14 @@ class Pipeline:
                     return
             ch.make_estimators(learning=not self._has_baseline(ch))
             self.log(f"IMU{ch.imu}: {ch.rate_hz:.1f} Hz")
-            slow = ch.too_slow()
+            slow = too_slow_note(ch)
             if slow:
                 self.log(slow)
         if ch.rate_hz is None:
             return
         pending, pending_stats = ch.settle(data, st, still)
         if pending is not None:
-            self._report(ch.on_quiet(pending_stats, self._bias_extra_var(ch), pending), float(pending[-1, 0]))
+            self._report(ch.on_quiet(pending_stats, bias_extra_var(self.baseline, ch.imu, self.cfg.block_s), pending), float(pending[-1, 0]))
             self._confirm_bias(ch, float(pending[-1, 0]))
             if ch.feed(pending):
                 self._learn_done(ch, float(pending[-1, 0]))
@@ -408,23 +353,6 @@ class Pipeline:
                 continue
             if abs(o.last_t - ch.last_t) < 2 * self.cfg.block_s:
                 out.append(o.peer())
-        return out
-
-    def _bias_extra_var(self, ch: Channel) -> dict[str, float]:
-        """Allan-predicted wander of a block mean around the bias reference: 0.44 B^2 + K^2 T / 3."""
-        out = {}
-        from companion.health.bias import REF_TAU_BLOCKS
-
-        for ax in ("gx", "gy", "gz"):
-            b = self.baseline.get(ch.imu, ax) if self.baseline is not None else None
-            if not b:
-                continue
-            v = 0.0
-            if "B" in b and math.isfinite(b["B"][0]):
-                v += 0.44 * b["B"][0] ** 2
-            if "K" in b and math.isfinite(b["K"][0]):
-                v += b["K"][0] ** 2 * REF_TAU_BLOCKS * self.cfg.block_s / 3.0
-            out[ax] = v
         return out
 
     def _has_baseline(self, ch: Channel) -> bool:
@@ -521,34 +449,12 @@ class Pipeline:
         self._set_state(ch)
 
     def final_terms(self, ch: Channel, ax: str) -> list[dict]:
-        """The terms of the summary (a fresh model selection on all data fed so far), computed once per state
-        of the estimators: :meth:`send_final` sends exactly these, so the last report and the summary agree."""
-        ch.flush()
-        key = (ch.imu, ax)
-        stamp = (id(ch.fast.get(ax)), ch.fed_s)
-        hit = self._final.get(key)
-        if hit is None or hit[0] != stamp:
-            hit = self._final[key] = (stamp, ch.report_terms(ax, full=True))
-        return hit[1]
+        """The terms of the summary, computed once per state of the estimators (service.imu_summary)."""
+        return final_terms(self, ch, ax)
 
     def send_final(self) -> int:
-        """At the end of a live run: the summary's terms of every reported IMU set and sent at once (values,
-        sigmas, bounds), then its health and fault code, so the last values a ground station got are the
-        summary's. Returns the number of NAMED_VALUE_FLOAT sent."""
-        n = 0
-        for imu, ch in sorted(self.channels.items()):
-            if not ch.fast or ch.fed_s < self.cfg.min_report_s:
-                continue
-            for ax in ch.axes:
-                self.reporter.set_online_terms(imu, ax, self.final_terms(ch, ax))
-            self._set_state(ch)
-            prefix = f"IMU{imu}"
-            t = ch.last_t or 0.0
-            for name, v in sorted(self.reporter.values.items()):
-                if name.startswith(prefix) and not name[len(prefix)].isdigit():
-                    self.reporter.send_now(name, v, t)
-                    n += 1
-        return n
+        """At the end of a live run: the summary's terms sent at once (service.imu_summary); how many."""
+        return send_final(self)
 
     def report_terms(self, ch: Channel, ax: str, full: bool = False) -> list[dict]:
         return ch.report_terms(ax, full)
@@ -567,65 +473,22 @@ class Pipeline:
             self.reporter.send_now(health_name(imu), float(s), ch.last_t or 0.0)
 
     def summary(self) -> list[dict]:
-        out = []
-        for imu, ch in sorted(self.channels.items()):
-            row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
-                   "other_rates": ch.kept_rates(),
-                   "health": STATE_NAMES[self.health(ch)], "counts": ch.counts, "axes": {},
-                   "faults": self.fault_texts(ch), "notes": [n for n in (ch.too_slow(), ch.all_zero(), ch.transient_note(), self.rate_note(ch)) if n]}
-            if ch.fast and ch.fed_s > 0:
-                ch.flush()
-                for ax in ch.axes:
-                    terms = self.final_terms(ch, ax)
-                    row["axes"][ax] = {"current": ch.current_params(ax, terms), "terms": terms,
-                                       "baseline": self.baseline.get(imu, ax) if self.baseline else None}
-            out.append(row)
-        return out
+        """Per IMU: rate, still data, health, counts, faults, notes and per-axis terms (service.imu_summary)."""
+        return summary_rows(self)
 
     def fault_texts(self, ch: Channel) -> list[str]:
         """The active faults of an IMU in plain words, most severe first (what the STATUSTEXTs said)."""
-        out = []
-        for kind, ax in ch.faults.active():
-            if kind == "disagree":
-                ev = FaultEvent(ch.imu, ax, kind, FAULT, detail=self.group.detail(ch.imu, ax))
-            elif kind == "allan":
-                r, p = ch.allan_worst(ax)
-                ev = FaultEvent(ch.imu, ax, kind, FAULT, detail=f"degrading: {p} {r:.1f}x baseline")
-            else:
-                ev = ch.faults.event_of(kind, ax)
-            out.append(ev.text())
-        return out
+        return fault_texts(self, ch)
+
+    def rate_note(self, ch: Channel) -> str | None:
+        """The summary's word on an IMU whose rate switched more often than the log said line by line."""
+        return rate_note(self, ch)
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict:
-        chans = {str(imu): ch.state_dict() for imu, ch in self.channels.items() if ch.rate_hz is not None}
-        return {"format": STATE_FORMAT, "version": 1, "sysid": self.sysid,
-                "baseline": self.baseline.to_dict() if self.baseline is not None else None, "channels": chans,
-                "replayed": list(self.replayed), **self.group.state_dict()}
+        """The saved state (service.pipeline_state)."""
+        return pipeline_state(self)
 
     def load_state_dict(self, d: Mapping) -> None:
         """Restore a saved state; raises ValueError (caller warns and starts fresh) if it is not ours."""
-        if not isinstance(d, Mapping) or d.get("format") != STATE_FORMAT or d.get("version") != 1:
-            raise ValueError("not a companion run state")
-        if self.sysid is not None and d.get("sysid") not in (None, self.sysid):
-            raise ValueError(f"state is for system id {d.get('sysid')}, not {self.sysid}")
-        channels = {int(key): Channel.from_state(int(key), c, self.cfg) for key, c in (d.get("channels") or {}).items()}
-        group = ImuGroup(self.cfg.reset_s, self.cfg.faults)
-        group.load_state_dict(d)
-        self.group = group
-        baseline = None
-        if d.get("baseline") is not None:
-            baseline = Baseline.from_dict(d["baseline"])
-        if not self.baseline_fixed:
-            self.baseline = baseline
-        for ch in channels.values():
-            if self._has_baseline(ch):
-                ch.stop_learning()
-            elif not ch.learn:  # no baseline for this IMU and nothing being learned: learn afresh
-                ch.relearn()
-        self.channels = channels
-        self.replayed = [dict(r) for r in d.get("replayed") or [] if isinstance(r, Mapping) and "sha256" in r]
-        sensor = {imu: [(k, ax) for k, ax in ch.faults.active() if k in SENSOR_FAULTS] for imu, ch in channels.items()}
-        self._restored = {imu: v for imu, v in sensor.items() if v}
-        if d.get("sysid") is not None and self.sysid is None:
-            self.sysid = int(d["sysid"])
+        load_pipeline_state(self, d)

@@ -11,6 +11,7 @@ only: it does not depend on how fast the log was recorded or is replayed).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +65,79 @@ def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: F
             "heartbeats": int(hb.size), "imu_samples": int(sum(s.t.shape[0] for s in streams)), "used": int(used)}
 
 
+@dataclass
+class StreamFeed:
+    """One stream's samples in feed order: their event positions, rows, the samples that must go alone
+    (``irregular``: positions in these arrays) and how far it has been fed (``cur``)."""
+
+    key: object
+    pos: np.ndarray  # event position (rank in the feed order) of each sample
+    t: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    temp: np.ndarray | None
+    irregular: np.ndarray
+    cur: int = 0
+
+    @property
+    def done(self) -> bool:
+        return self.cur >= self.pos.size
+
+    def quiet_end(self, pipeline) -> int:
+        """The index up to which the samples from ``cur`` on close no block and meet no check, and are
+        regular steps: they may go in one call."""
+        c, irr = self.cur, self.irregular
+        i_irr = irr[np.searchsorted(irr, c)] if irr.size and irr[-1] >= c else self.pos.size
+        stop_at = min(int(i_irr), self.pos.size)
+        return c + pipeline.quiet_run(self.key, self.t[c:stop_at]) if stop_at > c else c
+
+    def feed(self, pipeline, e: int, tick: bool = True) -> int:
+        """Samples ``cur`` .. ``e`` to the pipeline in one call; returns the number used."""
+        c = self.cur
+        self.cur = e
+        return pipeline.on_samples(self.key, self.t[c:e], self.gyro[c:e], self.accel[c:e], tick=tick,
+                                   temperature=None if self.temp is None else self.temp[c:e])
+
+
+def _stream_feeds(pipeline, streams, rank, src, row) -> list[StreamFeed]:
+    rules = step_rules(0.0, reset_s=pipeline.cfg.reset_s, gap_s=pipeline.cfg.gap_s)  # the block cutter's
+    feeds = []
+    for k, s in enumerate(streams):
+        sel = np.flatnonzero(src == k)
+        pos = rank[sel]
+        o = np.argsort(pos, kind="stable")
+        pos, r = pos[o], row[sel][o]
+        t = np.asarray(s.t, dtype=float)[r]
+        temp = getattr(s, "temperature", None)
+        # a sample that is not a clean step under the block cutter's rules (and the one after it) goes alone
+        bad = np.flatnonzero(classify_steps(t, None, rules)[1:] != OK) + 1
+        feeds.append(StreamFeed(s.key, pos, t, np.asarray(s.gyro, dtype=float)[r], np.asarray(s.accel, dtype=float)[r],
+                                None if temp is None else np.asarray(temp, dtype=float)[r],
+                                np.unique(np.concatenate([bad, bad + 1]))))
+    return feeds
+
+
+def _feed_quiet(pipeline, feeds: list[StreamFeed], barrier: int, ends: list[int]) -> int:
+    """Every stream's quiet samples before ``barrier``, stream by stream; the reporter's clock over them in
+    file order. Returns the samples used."""
+    used = 0
+    ticks_pos, ticks_t = [], []
+    for f, end in zip(feeds, ends):
+        c = f.cur
+        e = min(end, int(np.searchsorted(f.pos, barrier)))
+        if e > c:
+            u = f.feed(pipeline, e, tick=False)
+            used += u
+            if u:
+                ticks_pos.append(f.pos[c:e])
+                ticks_t.append(f.t[c:e])
+    if len(ticks_t) == 1:
+        pipeline.tick(ticks_t[0])
+    elif ticks_t:
+        pipeline.tick(np.concatenate(ticks_t)[np.argsort(np.concatenate(ticks_pos), kind="stable")])
+    return used
+
+
 def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: False) -> int:
     """Feed events in the order ``order`` (indices into ``src`` / ``row``: ``src`` -1 a HEARTBEAT, handed to
     ``heartbeat(row)``, else sample ``row`` of ``streams[src]``) as arrays: each stream's samples up to the
@@ -75,79 +149,36 @@ def feed_in_order(pipeline, streams, order, src, row, heartbeat, stop=lambda: Fa
     rank[order] = np.arange(order.shape[0])
     hb_pos = np.sort(rank[src < 0])
     hb_row = row[order[hb_pos]] if hb_pos.size else hb_pos
-    feeds = []  # per stream: positions, rows in feed order, times, irregular positions
-    rules = step_rules(0.0, reset_s=pipeline.cfg.reset_s, gap_s=pipeline.cfg.gap_s)  # the block cutter's
-    for k, s in enumerate(streams):
-        sel = np.flatnonzero(src == k)
-        pos = rank[sel]
-        o = np.argsort(pos, kind="stable")
-        pos, r = pos[o], row[sel][o]
-        t = np.asarray(s.t, dtype=float)[r]
-        g = np.asarray(s.gyro, dtype=float)[r]
-        a = np.asarray(s.accel, dtype=float)[r]
-        temp = getattr(s, "temperature", None)
-        tp = None if temp is None else np.asarray(temp, dtype=float)[r]
-        # a sample that is not a clean step under the block cutter's rules (and the one after it) goes alone
-        bad = np.flatnonzero(classify_steps(t, None, rules)[1:] != OK) + 1
-        irregular = np.unique(np.concatenate([bad, bad + 1]))
-        feeds.append((s.key, pos, t, g, a, tp, irregular))
-    cur = [0] * len(streams)
+    feeds = _stream_feeds(pipeline, streams, rank, src, row)
     h = 0
     used = 0
     n_events = order.shape[0]
-    while True:
-        if stop():
-            break
+    while not stop():
         # the next position where something happens that others may see
         barrier = int(hb_pos[h]) if h < hb_pos.size else n_events
-        lims = []
-        for k, (key, pos, t, g, a, tp, irr) in enumerate(feeds):
-            c = cur[k]
-            if c >= pos.size:
-                lims.append(c)
-                continue
-            i_irr = irr[np.searchsorted(irr, c)] if irr.size and irr[-1] >= c else pos.size
-            stop_at = min(int(i_irr), pos.size)
-            q = c + pipeline.quiet_run(key, t[c:stop_at]) if stop_at > c else c
-            lims.append(q)
-            if q < pos.size:
-                barrier = min(barrier, int(pos[q]))
-        # everything before the barrier, stream by stream; the reporter's clock in file order
-        ticks_pos, ticks_t = [], []
-        for k, (key, pos, t, g, a, tp, irr) in enumerate(feeds):
-            c = cur[k]
-            e = min(lims[k], int(np.searchsorted(pos, barrier)))
-            if e > c:
-                u = pipeline.on_samples(key, t[c:e], g[c:e], a[c:e], tick=False,
-                                        temperature=None if tp is None else tp[c:e])
-                used += u
-                if u:
-                    ticks_pos.append(pos[c:e])
-                    ticks_t.append(t[c:e])
-                cur[k] = e
-        if len(ticks_t) == 1:
-            pipeline.tick(ticks_t[0])
-        elif ticks_t:
-            pipeline.tick(np.concatenate(ticks_t)[np.argsort(np.concatenate(ticks_pos), kind="stable")])
+        ends = []
+        for f in feeds:
+            q = f.cur if f.done else f.quiet_end(pipeline)
+            ends.append(q)
+            if q < f.pos.size:
+                barrier = min(barrier, int(f.pos[q]))
+        used += _feed_quiet(pipeline, feeds, barrier, ends)
         if barrier >= n_events:
             break
         if h < hb_pos.size and hb_pos[h] == barrier:
             heartbeat(int(hb_row[h]))
             h += 1
             continue
-        for k, (key, pos, t, g, a, tp, irr) in enumerate(feeds):
-            c = cur[k]
-            if c < pos.size and pos[c] == barrier:
-                used += pipeline.on_samples(key, t[c:c + 1], g[c:c + 1], a[c:c + 1],
-                                            temperature=None if tp is None else tp[c:c + 1])
-                cur[k] = c + 1
+        for f in feeds:
+            if not f.done and f.pos[f.cur] == barrier:
+                used += f.feed(pipeline, f.cur + 1)
                 break
         if pipeline.failed:
             break
     return used
 
 
-MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_MODE_FLAG_SAFETY_ARMED = 128  # HEARTBEAT base_mode bit of an armed vehicle (MAVLink common.xml)
 _AUTOPILOT = {"dataflash": 3, "ulog": 12}  # MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4; else GENERIC (0)
 
 
@@ -165,7 +196,7 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
     Per IMU instance the stream with the most samples is replayed (a ULog holds sensor_combined,
     sensor_gyro and vehicle_imu of the same IMU). A DataFlash log's batch-sampler bursts (ISB_*) are not
     replayed: a kHz burst of a second every few seconds is no stream for the blocks of a live monitor (the
-    bursts outnumber the IMU messages, were chosen, gave no block and left the IMU unwatched); ``analyze``
+    bursts outnumber the IMU messages: chosen, they would give no block and leave the IMU unwatched); ``analyze``
     reads them.
     The log's armed state becomes a HEARTBEAT (base_mode armed flag) at every transition and once a
     second, exactly as a live vehicle sends them; a source without armed state sends none.

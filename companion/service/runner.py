@@ -1,13 +1,20 @@
 """What ``companion run`` does around the pipeline: the replay sink, the state file (where it is, restoring
-and saving it), a log replayed end to end, and the summary lines. Argument parsing and printing stay in
-:mod:`companion.cli.run`."""
+and saving it), a log replayed end to end, a whole run (:func:`run`: replay or live link, the state saved),
+and the summary lines. Argument parsing and printing stay in :mod:`companion.cli.run`."""
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from companion.errors import CompanionError, not_text
+from companion.service.run_options import RunHooks, RunOptions
+
+if TYPE_CHECKING:
+    from companion.mavlink.link import Link
+    from companion.service.pipeline import Pipeline
 
 
 class ReplaySink:
@@ -77,19 +84,19 @@ def save(pipeline, path, warn) -> None:
         warn(f"cannot save state to {path} ({exc.strerror or exc})")
 
 
-def replay(src: str, pcfg, period: float, baseline, scales, writer, state: Path | None, relearn: bool, stop,
-           log, warn, echo=None, time_unit=None):
-    """Replay a log through a new pipeline (its reports go to a :class:`ReplaySink`): (pipeline, sink, totals)."""
+def replay(opts: RunOptions, hooks: RunHooks, writer=None):
+    """Replay the log ``opts.source`` through a new pipeline (its reports go to a :class:`ReplaySink`, and to
+    ``writer`` when given): (pipeline, sink, totals)."""
     from companion.mavlink.reporter import Reporter
     from companion.service.pipeline import Pipeline
     from companion.service.replay import replay_log, replay_tlog
-
-    sink = ReplaySink(writer, echo=echo)
-    reporter = Reporter(sink, period)
-    pipeline = Pipeline(pcfg, reporter, baseline, log, scales)
-    restore(pipeline, state, relearn, warn, log)
     from companion.sources.kind import kind_of
 
+    src, state = opts.source, opts.state
+    sink = ReplaySink(writer, echo=hooks.echo)
+    reporter = Reporter(sink, opts.report_period)
+    pipeline = Pipeline(opts.pipeline, reporter, opts.baseline, hooks.log, opts.scales)
+    restore(pipeline, state, opts.relearn, hooks.warn, hooks.log)
     fp = None
     if state is not None:
         from companion.service.state import fingerprint
@@ -104,13 +111,57 @@ def replay(src: str, pcfg, period: float, baseline, scales, writer, state: Path 
                                  "intervals; give another --state file or --no-state")
     try:
         if kind_of(src) == "tlog":  # frame order with its HEARTBEATs (armed state)
-            totals = replay_tlog(src, pipeline, scales, stop=stop)
+            totals = replay_tlog(src, pipeline, opts.scales, stop=hooks.stop)
         else:
-            totals = replay_log(src, pipeline, stop=stop, time_unit=time_unit)
+            totals = replay_log(src, pipeline, stop=hooks.stop, time_unit=opts.time_unit)
     finally:
         if fp is not None:  # (an interrupted replay fed part of it: that part must not be fed again either)
             pipeline.replayed.append(fp)
     return pipeline, sink, totals
+
+
+@dataclass
+class RunResult:
+    """What a run leaves for the summary: the pipeline, and the link of a live run (its health lines)."""
+
+    pipeline: Pipeline
+    link: Link | None = None
+
+
+def _open_writer(opts: RunOptions):
+    """The --out-tlog recorder, or None."""
+    if not opts.out_tlog:
+        return None
+    from companion.mavlink.link import LinkConfig
+    from companion.mavlink.tlog_writer import TlogWriter
+
+    try:
+        return TlogWriter(opts.out_tlog, sysid=opts.pipeline.sysid or 1, compid=(opts.link or LinkConfig()).compid)
+    except OSError as exc:
+        raise CompanionError(f"{opts.out_tlog}: cannot write ({exc.strerror or exc})") from None
+
+
+def run(opts: RunOptions, hooks: RunHooks) -> RunResult:
+    """One ``companion run``: a log replayed, or a live link until stopped; the state saved at the end."""
+    writer = _open_writer(opts)
+    try:
+        if opts.is_replay:
+            pipeline, sink, totals = replay(opts, hooks, writer)
+            hooks.log(f"replayed {totals['frames']} frames ({totals['imu_samples']} IMU samples, "
+                      f"{totals['bad_frames']} bad frames), {sink.sent} NAMED_VALUE_FLOAT, {len(sink.texts)} STATUSTEXT")
+            if not pipeline.channels:
+                raise CompanionError(f"{opts.source}: no IMU data to replay")
+            result = RunResult(pipeline)
+        else:
+            from companion.service.live import run_live
+
+            result = RunResult(*run_live(opts, hooks, writer))
+        if opts.state is not None:
+            save(result.pipeline, opts.state, hooks.warn)
+        return result
+    finally:
+        if writer is not None:
+            writer.close()
 
 
 def summary_lines(pipeline) -> list[str]:

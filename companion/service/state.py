@@ -44,7 +44,7 @@ def save_state(path, state: dict) -> None:
         pass
 
 
-FINGERPRINT_BYTES = 1 << 20
+FINGERPRINT_BYTES = 1 << 20  # bytes hashed at each end of a log: enough to tell logs apart, cheap on a 1-GB log
 
 
 def fingerprint(path) -> dict:

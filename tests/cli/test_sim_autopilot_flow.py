@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from companion.cli.main import main
-from companion.cli.sim_autopilot import _flow_limit, _udp_queue_bytes
+from companion.mavlink.autopilot_sim import flow_limit, udp_queue_bytes
 
 
 @pytest.mark.skipif(not Path("/proc/net/udp").is_file(), reason="needs Linux /proc/net/udp")
@@ -20,26 +20,26 @@ def test_queue_of_a_real_socket_grows_with_unread_datagrams_and_empties_when_rea
     try:
         rx.bind(("127.0.0.1", 0))
         port = rx.getsockname()[1]
-        assert _udp_queue_bytes([port]) == 0
+        assert udp_queue_bytes([port]) == 0
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.bind(("127.0.0.1", 0))
             closed = s.getsockname()[1]
-        assert _udp_queue_bytes([closed]) is None  # no socket on that port: not observable
+        assert udp_queue_bytes([closed]) is None  # no socket on that port: not observable
         sizes = []
         for n in (5, 20):
             for _ in range(n):
                 tx.sendto(b"x" * 40, ("127.0.0.1", port))
             deadline = time.monotonic() + 10.0
-            while (q := _udp_queue_bytes([port])) < (sizes[-1] if sizes else 0) + n * 40:
+            while (q := udp_queue_bytes([port])) < (sizes[-1] if sizes else 0) + n * 40:
                 assert time.monotonic() < deadline, q
                 time.sleep(0.01)  # polling interval
             sizes.append(q)
         assert sizes[1] >= 5 * sizes[0]  # kernel accounting per datagram, 25 datagrams vs 5
-        assert _flow_limit() >= 16384 and _flow_limit() > sizes[0]  # the threshold lets a few datagrams wait
+        assert flow_limit() >= 16384 and flow_limit() > sizes[0]  # the threshold lets a few datagrams wait
         rx.setblocking(False)
         for _ in range(25):
             rx.recv(100)
-        assert _udp_queue_bytes([port]) == 0
+        assert udp_queue_bytes([port]) == 0
     finally:
         rx.close()
         tx.close()

@@ -71,6 +71,7 @@ def test_run_replays_a_dot_mavlink_file_like_a_tlog(tmp_path, capsys):
 def test_tlog_bin_replays_with_the_logs_heartbeats(tmp_path):
     """A .tlog.bin is replayed in frame order with its HEARTBEATs (armed state), as the .tlog: it used to go
     through the log reader, which has no armed state, and replayed as disarmed."""
+    from companion.service.run_options import RunHooks, RunOptions
     from companion.service.runner import replay
     from companion.service.pipeline import PipelineConfig
     from companion.mavlink.vehicle_tlog import write_tlog
@@ -84,8 +85,8 @@ def test_tlog_bin_replays_with_the_logs_heartbeats(tmp_path):
     results = []
     for name in ("v.tlog", "v.tlog.bin"):
         logs = []
-        pipeline, sink, totals = replay(str(tmp_path / name), PipelineConfig(baseline_s=30.0), 1.0, None, ScaleTable(),
-                                        None, None, False, lambda: False, logs.append, logs.append)
+        opts = RunOptions(str(tmp_path / name), PipelineConfig(baseline_s=30.0), scales=ScaleTable())
+        pipeline, sink, totals = replay(opts, RunHooks(log=logs.append, warn=logs.append))
         results.append((totals, sink.values, logs))
     (t0, v0, l0), (t1, v1, l1) = results
     assert t0["heartbeats"] >= 90 and t1 == t0
