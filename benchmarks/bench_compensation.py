@@ -38,7 +38,7 @@ from scipy.signal import lfilter
 from benchmarks import results
 from benchmarks.results import SHARED_DATA
 from companion.compensation.arima import optimal_error_std
-from companion.compensation.pipeline import compensate
+from companion.compensation.compare_methods import compensate
 
 RATE = 100.0
 TAUS = (0.01, 0.16, 1.28, 81.92)

@@ -60,7 +60,7 @@ def _warm():
 
 def _analyze(store_path, folder, workers, quiet=True):
     from companion.fleet.discover import discover
-    from companion.fleet.runner import FleetProgress, close_client, open_client, plan, run_dask, run_serial
+    from companion.fleet.dask_runner import FleetProgress, close_client, open_client, plan, run_dask, run_serial
     from companion.fleet.store import FleetStore
 
     with FleetStore(store_path) as store:
@@ -108,10 +108,10 @@ def _analyze(store_path, folder, workers, quiet=True):
 
 
 def calibrate(args):
-    from companion.fleet.report import fleet_trends
-    from companion.fleet.simulate import simulate_fleet
+    from companion.fleet.fleet_ranking import fleet_trends
+    from companion.fleet.synthetic_fleet import simulate_fleet
     from companion.fleet.store import FleetStore
-    from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE
+    from companion.fleet.trends import EVIDENCE_THRESHOLD, MIN_RISE
 
     tmp = tempfile.mkdtemp(prefix="bench_fleet_cal_")
     try:
@@ -184,7 +184,7 @@ def calibrate(args):
 def scale(args):
     import resource
 
-    from companion.fleet.simulate import simulate_fleet
+    from companion.fleet.synthetic_fleet import simulate_fleet
     from companion.fleet.store import FleetStore
 
     tmp = tempfile.mkdtemp(prefix="bench_fleet_scale_", dir=args.tmp)
@@ -304,7 +304,7 @@ def _noop(i):
 
 def sched(args):
     """Tasks per second the Dask scheduler of a LocalCluster sustains for no-op tasks."""
-    from companion.fleet.runner import close_client, open_client
+    from companion.fleet.dask_runner import close_client, open_client
 
     client, cluster = open_client(args.workers)
     try:

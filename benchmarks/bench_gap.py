@@ -23,7 +23,7 @@ Tiers (seed ranges disjoint, printed):
 * the ramp-under-random-walk family: ramp R around 4.9e-6 rad/s^2 under N 1.5e-3, B 7.3e-4, K 2e-5 (each x0.8-1.25):
   ramp named vs random walk K recalibrated.
 * ramp or random walk (``--only ramp-rw``, ``--hard-draws`` each): a ramp or a random walk hidden from a mis-sized
-  white + flicker model, both directions of the look-alike rule of companion.gap.trend.
+  white + flicker model, both directions of the look-alike rule of companion.gap.ramp_or_walk.
 """
 
 from __future__ import annotations
@@ -326,7 +326,7 @@ def ramp_rw_tier(draws, seed0=700_000):
     """Ramp or random walk, both directions: a ramp or a rate random walk hidden from a mis-sized (x0.7-1.4)
     white + flicker model (no random-walk term, so 'random_walk' is a candidate beside 'ramp'). Right = the
     hidden one named alone and G after <= 2. Also, wherever a ramp and a random walk both passed on the Allan
-    curve, the ramp-or-random-walk rule's record (companion.gap.trend): the evidence for the random walk (its
+    curve, the ramp-or-random-walk rule's record (companion.gap.ramp_or_walk): the evidence for the random walk (its
     prediction of the detrended record against the ramp's, > 0: the random walk), the free random walk's
     corrected LR in the detrended record, and which of the two led the Allan ranking and which was named."""
     print(f"\n== ramp or random walk: hidden from a mis-sized white + flicker model, {draws} draws each, seeds {seed0}+ ==")

@@ -26,7 +26,7 @@ import numpy as np
 
 from benchmarks import results
 from companion import units
-from companion.health.detector import DEGRADING
+from companion.health.degradation import DEGRADING
 from companion.mavlink.reporter import Reporter
 from companion.service.pipeline import Channel, Pipeline, PipelineConfig
 from companion.sim.synth import synthesize_axis

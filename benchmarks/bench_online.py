@@ -328,11 +328,11 @@ def section_convergence(fs=100.0, n=1_800_000, plot=True):
 # ---------------------------------------------------------------- full model, bounds, coverage
 def offline_report(y, fs):
     """Offline reference with the same model selection, bound rule and rules on N as the online report: the
-    overlapping ADEV at octave cluster sizes (all samples) through companion.estimators.report.select / report
+    overlapping ADEV at octave cluster sizes (all samples) through companion.estimators.online_report.select / report
     and companion.allan.white.apply_white_rules (the local N refit under misfit, which the online report applies:
     without it here, the ADIS z axes' 19.7 Hz line makes the two differ by 7-9 % in N)."""
     from companion.allan.white import apply_white_rules
-    from companion.estimators.report import _inverted_bounds, _larger_bound, report, select
+    from companion.estimators.online_report import _inverted_bounds, _larger_bound, report, select
 
     m = cluster_sizes(y.size, "octave")
     tau, av, _, _ = oavar(y, fs, m=m)

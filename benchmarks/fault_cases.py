@@ -10,7 +10,7 @@ import numpy as np
 
 from companion import units
 from companion.health import bias, disagreement, noise, stuck
-from companion.health.limits import FaultLimits
+from companion.health.evidence_rules import FaultLimits
 from companion.mavlink.reporter import Reporter
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.replay import replay_vehicle

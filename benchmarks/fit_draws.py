@@ -7,7 +7,7 @@ crossings N-B at 0.5-20 s and B-K at max(15 x that, 50)-600 s), 2 h at 50 Hz: te
 (:func:`evidence`) and by whether it is detectable at all (:func:`detectable`, judged without any fit). A term
 the fit leaves out gets a 95 % upper bound: the fit's (:func:`companion.allan.fit.upper_bounds`, the covariance
 evaluated at the bound; what ``companion analyze`` reports) and the online report's rule
-(:func:`companion.estimators.report.bounds_for_fit`, evaluated at the fitted model); the benchmark says whether
+(:func:`companion.estimators.online_report.bounds_for_fit`, evaluated at the fitted model); the benchmark says whether
 each holds. ``null``: the same N and B with K = 0, how often a random walk is invented. The set number draws a
 different set: parameters from seed 22 + set, records from 10000 + 1000 set + d.
 
@@ -153,7 +153,7 @@ def count_null(draw: Draw, rec: Record, tally: Tally) -> None:
 def left_out_bounds(rec: Record, m, edf, tally: Tally):
     """The fit's and the online report's 95 % upper bounds of the terms the fit left out (timed)."""
     from companion.allan.fit import upper_bounds
-    from companion.estimators.report import bounds_for_fit
+    from companion.estimators.online_report import bounds_for_fit
 
     t0 = time.perf_counter()
     bounds = (upper_bounds(rec.fit, rec.tau, rec.avar, n=SAMPLES, rate_hz=FS, m=m),

@@ -187,7 +187,7 @@ def run_real(args):
 
 def run_filtered(args):
     """Coverage of N's 95 % interval on simulated filtered + decimated white noise (10 min records)."""
-    from companion.sim.filtered import filtered_white_noise, logged_white_level
+    from companion.sim.filtered_noise import filtered_white_noise, logged_white_level
 
     seeds = int(args[0]) if args else 100
     for fs, fc, samp in ((50.0, 20.0, "point"), (250.0, 30.0, "average"), (100.0, 20.0, "point")):
@@ -268,7 +268,7 @@ def run_short(args):
     plateau reference of ``real`` on the same simulated records, against the truth and against each other.
     White noise through the copter's filter (2-pole 20 Hz, point-sampled at 50 Hz), ``seconds`` long
     (default 33, the copter log's still window): how far apart two sound estimates of N are on such a record."""
-    from companion.sim.filtered import filtered_white_noise, logged_white_level
+    from companion.sim.filtered_noise import filtered_white_noise, logged_white_level
 
     seeds = int(args[0]) if args else 200
     secs = float(args[1]) if len(args) > 1 else 33.0
@@ -311,7 +311,7 @@ def run_shape(args):
     roll-off left to the data alone."""
     from collections import Counter
 
-    from companion.sim.filtered import filtered_white_noise, logged_white_level
+    from companion.sim.filtered_noise import filtered_white_noise, logged_white_level
     from companion.sim.synth import synthesize_axis
 
     seeds = int(args[0]) if args else 40

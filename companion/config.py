@@ -64,22 +64,22 @@ def _keys_of(cls) -> dict:
 
 
 def _health_keys() -> dict:
-    from companion.health.detector import DetectorConfig
+    from companion.health.degradation import DetectorConfig
 
     return _keys_of(DetectorConfig)
 
 
-#: the degradation test (companion.health.detector.DetectorConfig holds the defaults)
+#: the degradation test (companion.health.degradation.DetectorConfig holds the defaults)
 HEALTH = _health_keys()
 
 
 def _fault_keys() -> dict:
-    from companion.health.limits import FaultLimits
+    from companion.health.evidence_rules import FaultLimits
 
     return _keys_of(FaultLimits)
 
 
-#: the fault detectors' magnitude floors (companion.health.limits.FaultLimits holds the defaults)
+#: the fault detectors' magnitude floors (companion.health.evidence_rules.FaultLimits holds the defaults)
 FAULTS = _fault_keys()
 
 #: keys of the run section that configure the link (companion.mavlink.link.LinkConfig)

@@ -1,5 +1,5 @@
 """The sampling period of a stream from its own timestamps (numpy only): the one period rule that the
-offline timing analysis (:mod:`companion.sources.timing`), the live pipeline and the health checks use."""
+offline timing analysis (:mod:`companion.sources.timestamps`), the live pipeline and the health checks use."""
 
 from __future__ import annotations
 

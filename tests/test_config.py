@@ -87,7 +87,7 @@ def test_a_valid_partial_file_is_accepted(tmp_path):
 ])
 def test_pipeline_config_from_a_mapping_is_checked_against_the_schema(mapping, message):
     """A mapping built in code (not read from a file) goes through the same schema: the key is named."""
-    from companion.service.config import PipelineConfig
+    from companion.service.pipeline_config import PipelineConfig
 
     with pytest.raises(CompanionError, match=message.replace(".", r"\.")):
         PipelineConfig.from_mapping(mapping)

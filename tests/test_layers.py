@@ -123,7 +123,7 @@ def _tree(tmp_path: Path, files: dict[str, str]) -> Path:
 
 @pytest.mark.parametrize("bad, expect", [
     ("from companion.cli.main import main\n", "imports companion.cli.main (cli)"),
-    ("def f():\n    from companion.service import runner\n", "imports companion.service (service/fleet)"),
+    ("def f():\n    from companion.service import run_session\n", "imports companion.service (service/fleet)"),
     ("from ..sources import load\n", "imports companion.sources (adapter)"),
     ("import companion.mavlink.link\n", "imports companion.mavlink.link (adapter)"),
     ("import yaml\n", "imports yaml (only numpy, scipy"),
@@ -137,7 +137,7 @@ def test_a_bad_import_is_found(tmp_path, bad, expect):
         "companion/allan/good.py": "import math\nimport numpy as np\nfrom scipy import stats\nfrom companion.units import x\n",
         "companion/allan/bad.py": bad,
         "companion/sources/__init__.py": "from companion.allan.good import x\n",
-        "companion/cli/main.py": "from companion.service.runner import x\nfrom companion.sources import load\n",
+        "companion/cli/main.py": "from companion.service.run_session import x\nfrom companion.sources import load\n",
     })
     found = violations(root)
     assert len(found) == 1 and "companion/allan/bad.py:" in found[0] and expect in found[0], found

@@ -20,7 +20,7 @@ from companion.allan.confidence import adev_ci, edf_model, edf_simple
 from companion.allan.lsb import lsb_report
 from companion.allan.pooled import pooled_cluster_sizes, pooled_edf, pooled_oavar
 from companion.allan.terms import LINEAR_PARAM
-from companion.analysis.limits import FIT_MIN_RATE_HZ, fast_enough
+from companion.analysis.sufficiency import FIT_MIN_RATE_HZ, fast_enough
 from companion.analysis.taus import parse_taus
 
 #: a piece shorter than this many samples has no octave point of its own
@@ -119,7 +119,7 @@ def _bounds(fit, fp: _FitPoints, rate_hz, edf0) -> list:
     2-h records below its truth far more often (benchmarks/bench_fit.py draws). The report's rule only where
     the inversion gives none."""
     from companion.allan.fit import upper_bounds
-    from companion.estimators.report import bounds_for_fit
+    from companion.estimators.online_report import bounds_for_fit
 
     k = fp.keep
     bounds = upper_bounds(fit, fp.tau[k], fp.avar[k], n=fp.n, rate_hz=rate_hz, m=fp.m[k], segments=fp.segments)

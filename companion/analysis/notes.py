@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from companion.analysis.limits import LONG_TERMS_S, SHORT_TAU_RATE_HZ, fast_enough
+from companion.analysis.sufficiency import LONG_TERMS_S, SHORT_TAU_RATE_HZ, fast_enough
 from companion.health.dead import dead_gyro_text
 
 

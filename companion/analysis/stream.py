@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from companion.analysis.axis import analyze_axis
-from companion.analysis.limits import FIT_MIN_RATE_HZ, FIT_MIN_SECONDS, fast_enough
+from companion.analysis.sufficiency import FIT_MIN_RATE_HZ, FIT_MIN_SECONDS, fast_enough
 from companion.samples import GYRO_AXES
 
 

@@ -103,7 +103,7 @@ def analyze_source(spec, args, axes, progress_enabled=True) -> tuple[list[dict],
 
 def run(args) -> int:
     from companion.analysis.kalibr import kalibr_blockers, kalibr_yaml
-    from companion.analysis.report import format_table
+    from companion.analysis.report_table import format_table
     from companion.cli.output import check_output_path, check_plot_path
 
     for opt, path in (("--json", args.json), ("--kalibr", args.kalibr)):  # outputs checked before the work

@@ -66,7 +66,7 @@ def register(subparsers) -> None:
 
 
 def parse_methods(spec: str) -> tuple:
-    from companion.compensation.pipeline import METHODS  # scipy: loaded only when this command runs
+    from companion.compensation.compare_methods import METHODS  # scipy: loaded only when this command runs
 
     names = [s.strip().lower() for s in spec.split(",") if s.strip()]
     if not names or names == ["all"]:
@@ -94,8 +94,8 @@ def run(args) -> int:
     warn_ignored_options(args, [args.source], "compensate")
     res = load(args.source, args.config, duration=args.duration)
     from companion.compensation.arima import MIN_FIT_SAMPLES
-    from companion.compensation.pipeline import compensate
-    from companion.compensation.table import format_table, json_report, max_tau, nothing_helped, write_series_csv
+    from companion.compensation.compare_methods import compensate
+    from companion.compensation.comparison_table import format_table, json_report, max_tau, nothing_helped, write_series_csv
     from companion.sources.series import select_series
 
     series = select_series(res, axis, args.stream, args.max_samples, MIN_FIT_SAMPLES, "the ARIMA(1,1,1) fit",

@@ -58,7 +58,7 @@ def register(sub) -> None:
 def run_analyze(args) -> int:
     from companion.cli.output import check_output_path
     from companion.fleet.orchestrate import AnalyzeOptions, analyze_fleet
-    from companion.fleet.runner import describe
+    from companion.fleet.dask_runner import describe
 
     opts = AnalyzeOptions(args.logs, args.db, args.axes, args.workers, args.scheduler, args.vehicle, args.batch,
                           args.retry_failed, args.time_limit, args.quiet)

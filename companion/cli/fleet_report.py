@@ -1,4 +1,4 @@
-"""``companion fleet report``: the trend test per IMU, the ranking, HTML and JSON (:mod:`companion.fleet.report`)."""
+"""``companion fleet report``: the trend test per IMU, the ranking, HTML and JSON (:mod:`companion.fleet.fleet_ranking`)."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def register(sub) -> None:
 
 def run_report(args) -> int:
     from companion.cli.output import check_output_path
-    from companion.fleet.report import fleet_trends, identity_notes, ranking_lines
+    from companion.fleet.fleet_ranking import fleet_trends, identity_notes, ranking_lines
     from companion.fleet.store import FleetStore
 
     if args.top < 0 or args.max_plots < 0:
@@ -64,8 +64,8 @@ def run_report(args) -> int:
 
 def _write_reports(args, store, entries) -> None:
     from companion.cli.output import to_json, write_text
-    from companion.fleet.report import report_html, report_json
-    from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE
+    from companion.fleet.fleet_ranking import report_html, report_json
+    from companion.fleet.trends import EVIDENCE_THRESHOLD, MIN_RISE
 
     if args.json:
         write_text(args.json, to_json(report_json(store, entries, EVIDENCE_THRESHOLD, MIN_RISE)) + "\n", "JSON")
@@ -78,7 +78,7 @@ def _write_reports(args, store, entries) -> None:
 def _report_nothing(args, store) -> int:
     """No IMU to rank (every log failed, or none analysed): the files are still written, saying why (a
     nightly job's report page must not silently keep yesterday's), then one error line."""
-    from companion.fleet.report import failure_reasons, nothing_to_rank
+    from companion.fleet.fleet_ranking import failure_reasons, nothing_to_rank
 
     for n, reason in failure_reasons(store.failures()):
         print(f"{n} log(s) failed: {reason}")

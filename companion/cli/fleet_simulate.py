@@ -1,4 +1,4 @@
-"""``companion fleet simulate``: a synthetic fleet in which chosen IMUs degrade (:mod:`companion.fleet.simulate`)."""
+"""``companion fleet simulate``: a synthetic fleet in which chosen IMUs degrade (:mod:`companion.fleet.synthetic_fleet`)."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def register(sub) -> None:
 
 
 def run_simulate(args) -> int:
-    from companion.fleet.simulate import check_fleet_options, degrading_imus, simulate_fleet
+    from companion.fleet.synthetic_fleet import check_fleet_options, degrading_imus, simulate_fleet
 
     check_fleet_options(args.vehicles, args.flights, args.imus, args.degrading, args.rise, args.duration, args.rate,
                         args.seed, args.message, args.format)

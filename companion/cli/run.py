@@ -89,7 +89,7 @@ def register(subparsers) -> None:
 
 
 def print_summary(pipeline, out=None) -> None:
-    from companion.service.runner import summary_lines
+    from companion.service.run_session import summary_lines
 
     for line in summary_lines(pipeline):
         print(line, file=out or sys.stdout)
@@ -111,7 +111,7 @@ def run(args) -> int:
 
 
 def _run(args, stop) -> int:
-    from companion.service import runner
+    from companion.service import run_session
     from companion.service.run_options import RunHooks, build_options
 
     def log(line):
@@ -127,7 +127,7 @@ def _run(args, stop) -> int:
     opts = build_options(args, warn, lambda state, run_keys: _check_outputs(args, run_keys, state))
     hooks = RunHooks(log=log, warn=warn, stop=lambda: stop["flag"], ready=ready,
                      echo=None if args.quiet else print)
-    result = runner.run(opts, hooks)
+    result = run_session.run(opts, hooks)
     print_summary(result.pipeline)
     if result.link is not None:  # link health (loss, reordering, late, rejected frames) per source
         for line in result.link.stats.summary_lines():

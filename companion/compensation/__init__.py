@@ -9,7 +9,7 @@
 """
 
 from companion.compensation.arima import ArimaParams, fit_arima111, simulate_arima111
-from companion.compensation.pipeline import FILTERS, METHODS, CompensationResult, compensate
+from companion.compensation.compare_methods import FILTERS, METHODS, CompensationResult, compensate
 from companion.compensation.srrsukf import SRRSUKF
 from companion.compensation.srukf import SRUKF
 from companion.compensation.stf import STF

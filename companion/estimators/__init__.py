@@ -52,7 +52,7 @@ def make_estimator(kind="octave", rate_hz=None, **cfg):
 def online_terms(y, rate_hz, kind="octave", **cfg) -> list[dict]:
     """Run an online estimator over the samples ``y`` and return its final report: for the octave bank
     (``fit="model"``, the default) the model chosen from the data with every effect of the offline model as
-    a candidate, each linear term resolved or as its 95 % upper bound (companion.estimators.report) -- the
+    a candidate, each linear term resolved or as its 95 % upper bound (companion.estimators.online_report) -- the
     same code path as ``companion run``."""
     est = make_estimator(kind, rate_hz=rate_hz, **cfg)
     est.update(y)

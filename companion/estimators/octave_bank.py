@@ -61,11 +61,11 @@ from companion.allan.lsq import exp_sum  # numpy-only: the live pipeline loads n
 from companion.allan.terms import EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM
 from companion.estimators.coefficient_fit import fit_theta, fit_theta_gls
 
-#: every effect of the offline model (the candidates of the model selection, companion.estimators.report)
+#: every effect of the offline model (the candidates of the model selection, companion.estimators.online_report)
 DEFAULT_EFFECTS = EFFECTS
 _BUF = 2048  # scalar samples buffered before a block update (the same result as one array update)
 #: coefficient fits: ``model`` (default: model chosen from the data, resolved values and 95 % bounds,
-#: companion.estimators.report), diagonal weighted NNLS, a cached GLS, the offline fit_avar (linear effects only)
+#: companion.estimators.online_report), diagonal weighted NNLS, a cached GLS, the offline fit_avar (linear effects only)
 FITS = ("model", "fit_avar", "gls", "diag")
 
 
@@ -147,7 +147,7 @@ class OctaveBankEstimator:
         self._seg_base = 0  # samples of the closed segments no longer listed (forgotten: see new_segment)
         self._buf: list[float] = []
         self._cache: dict = {}  # Cholesky factors of the GLS covariance (derived data, not state)
-        self._structure = None  # selected model (companion.estimators.report.Structure; derived, not state)
+        self._structure = None  # selected model (companion.estimators.online_report.Structure; derived, not state)
         self._report_cache = None  # the last report and what it was made from (derived, not state)
         self.n_rejected = 0
 
@@ -282,11 +282,11 @@ class OctaveBankEstimator:
 
         ``fit="model"``: the model chosen from the data, each linear term resolved (value, ``std``, ``ci95``,
         ``"bound": False``) or as its 95 % upper bound (``"bound": True``), Gauss-Markov and sinusoid terms
-        when selected (:func:`companion.estimators.report.estimator_report`; ``full`` forces a fresh model
+        when selected (:func:`companion.estimators.online_report.estimator_report`; ``full`` forces a fresh model
         selection). Other fits: one term per configured linear effect (0 when not supported by the data),
         ``[{"effect": "white_noise", "N": v, "std": {"N": one_sigma}}, ...]``."""
         if self.fit == "model":
-            from companion.estimators.report import estimator_report
+            from companion.estimators.online_report import estimator_report
 
             return estimator_report(self, full=full)
         effects = tuple(e for e in self.effects if e in LINEAR_EFFECTS)

@@ -1,7 +1,7 @@
 """One ``fleet analyze`` run end to end: the options, the Dask client's life, the plan, the run, the outcome.
 
 :func:`analyze_fleet` opens the database, opens a Dask client (an existing scheduler's, or a local cluster
-once there is work), plans the work (:func:`companion.fleet.runner.plan`), runs it (serially with
+once there is work), plans the work (:func:`companion.fleet.dask_runner.plan`), runs it (serially with
 ``workers=0``, else on Dask) and closes the client; the command line only parses and prints.
 SIGTERM stops the run like Ctrl-C (:class:`TermSignal`).
 """
@@ -99,7 +99,7 @@ class AnalyzeOptions:
 class AnalyzeOutcome:
     """What a run did: its statistics (None when there was nothing to analyse) and the database's counts."""
 
-    stats: object | None  # companion.fleet.runner.RunStats
+    stats: object | None  # companion.fleet.dask_runner.RunStats
     counts: dict[str, int]
 
     def exit_code(self) -> int:
@@ -118,7 +118,7 @@ class AnalyzeOutcome:
 
 
 def plan_summary(n_logs: int, todo, db: str, axes) -> str:
-    """The line that says what a run will do (``todo``: :class:`companion.fleet.runner.Plan`) before it starts."""
+    """The line that says what a run will do (``todo``: :class:`companion.fleet.dask_runner.Plan`) before it starts."""
     more = sum(w.axes is not None for w in todo.work)
     return (f"{n_logs} log(s): {len(todo.work)} to analyse"
             + (f" ({more} of them stored before without some of the axes {','.join(axes)})" if more else "")
@@ -139,7 +139,7 @@ def analyze_fleet(opts: AnalyzeOptions, say) -> AnalyzeOutcome:
     """Run ``fleet analyze`` (module docstring); ``say(line)`` is told what the run will do before it starts
     (unreadable logs, then :func:`plan_summary`)."""
     from companion.fleet.discover import discover
-    from companion.fleet.runner import FleetProgress, close_client, hash_on_cluster, open_client, plan
+    from companion.fleet.dask_runner import FleetProgress, close_client, hash_on_cluster, open_client, plan
     from companion.fleet.store import FleetStore
 
     logs = discover(opts.logs)
@@ -174,7 +174,7 @@ def analyze_fleet(opts: AnalyzeOptions, say) -> AnalyzeOutcome:
 def _run(opts: AnalyzeOptions, store, work, progress, held: _Client, term: TermSignal):
     """The planned ``work``: in this process with ``workers=0`` (and no scheduler), else on Dask (a local
     cluster of ``workers`` processes opened here when no scheduler was given). None without work."""
-    from companion.fleet.runner import open_client, run_dask, run_serial
+    from companion.fleet.dask_runner import open_client, run_dask, run_serial
 
     if not work:
         return None

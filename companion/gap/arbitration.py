@@ -1,6 +1,6 @@
 """Independent evidence between look-alikes the Allan curve cannot separate: the periodogram for a sinusoid
 (:mod:`companion.gap.spectral`) and the log's temperature channel for a temperature-driven rate
-(:mod:`companion.gap.thermal`)."""
+(:mod:`companion.gap.temperature_candidate`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import NamedTuple
 
 from companion.gap import selection
 from companion.gap.spectral import line_evidence
-from companion.gap.thermal import regression_check
+from companion.gap.temperature_candidate import regression_check
 
 
 class Ruling(NamedTuple):

@@ -29,7 +29,7 @@ from companion.gap.likelihood import MODEL_FLOOR, Measured, deviance, gap_metric
 #: The magnitude parameter of each effect (AVAR proportional to its square).
 MAGNITUDE = {"quantization": "Q", "white_noise": "N", "bias_instability": "B", "random_walk": "K",
              "ramp": "R", "gauss_markov": "sigma", "sinusoid": "amplitude",
-             # a rate proportional to the log's temperature (companion.gap.thermal); offered only when the
+             # a rate proportional to the log's temperature (companion.gap.temperature_candidate); offered only when the
              # log has a temperature channel, never by the generic candidate loop
              "temperature": "coef"}
 #: The shape parameter of effects that have one.

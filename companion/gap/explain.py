@@ -207,7 +207,7 @@ def explain_temperature(coef: float, check: dict, axis: str) -> str:
 
 
 def explain_trend(rec: dict) -> str:
-    """Plain words for the ramp-or-random-walk decision (:mod:`companion.gap.trend`)."""
+    """Plain words for the ramp-or-random-walk decision (:mod:`companion.gap.ramp_or_walk`)."""
     walk = rec["named"] == "random_walk"
     head = (f"ramp or random walk: both explain the long-tau rise of the Allan curve (scores {rec['ramp_score']:.1f} "
             f"for the ramp, {rec['random_walk_score']:.1f} for the random walk); the record with its least-squares "

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, fields
 
 from companion.errors import CompanionError
 from companion.gap import log_text
-from companion.gap.result import GapResult
+from companion.gap.gap_result import GapResult
 from companion.gap.sensor_model import sensor_terms
 from companion.gap.workflow import run_gap
 from companion.samples import GYRO_AXES

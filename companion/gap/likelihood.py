@@ -59,7 +59,7 @@ def term_avar(term, tau, rate_hz: float) -> np.ndarray:
         term = dict(term, f0=rate_hz / 2.0)
     if term["effect"] == "temperature":
         # coef (rad/s per K) times the measured temperature record: its AVAR is coef^2 x the AVAR of the
-        # temperature series itself, carried by the term on its own cluster times (companion.gap.thermal)
+        # temperature series itself, carried by the term on its own cluster times (companion.gap.temperature_candidate)
         t_tau, t_avar = np.asarray(term["unit_tau"], dtype=float), np.asarray(term["unit_avar"], dtype=float)
         ln = np.interp(np.log(np.asarray(tau, dtype=float)), np.log(t_tau), np.log(np.maximum(t_avar, 1e-300)))
         return term["coef"] ** 2 * np.exp(ln)

@@ -11,7 +11,7 @@ import numpy as np
 
 from companion.errors import CompanionError
 from companion.gap.explain import datasheet_verdict, describe_term
-from companion.gap.result import NOISE_FLOOR_G, GapResult
+from companion.gap.gap_result import NOISE_FLOOR_G, GapResult
 
 #: still samples an axis needs in all for an Allan variance worth comparing
 MIN_STILL_SAMPLES = 64

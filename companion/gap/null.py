@@ -19,7 +19,7 @@ import numpy as np
 from companion.allan.adev import oavar
 from companion.gap._edf import local_slope, oavar_edf
 from companion.gap.compare import Measured, gap_metric, gap_vs_simulation, measure, measure_pooled, model_avar
-from companion.gap.filtered import synthesize_filtered_white
+from companion.gap.lowpass_check import synthesize_filtered_white
 from companion.sim.synth import synthesize_axis
 
 #: simulated records at most (a share of 1 % is then resolved)

@@ -22,7 +22,7 @@ winner plus a further change is reported with its evidence. The rules, in the or
 4. equal size: between look-alikes with the same number of parameters, the larger likelihood
    (:func:`equal_size_rule`);
 5. trend: a ramp against a random walk, decided by the record with its least-squares line taken out
-   (:mod:`companion.gap.trend`).
+   (:mod:`companion.gap.ramp_or_walk`).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from companion.gap import trend
+from companion.gap import ramp_or_walk
 from companion.gap.candidates import MAGNITUDE, Fit, estimate_covariance, fit_terms, gm_rw_direction, lr_inflation
 from companion.gap.likelihood import Measured
 from companion.gap.ranking import explanations
@@ -170,7 +170,7 @@ def runner_up(ranked, chosen: Explanation):
 
 @dataclass
 class DetrendedRecord:
-    """The record with its least-squares line taken out, for the trend rule (:mod:`companion.gap.trend`)."""
+    """The record with its least-squares line taken out, for the trend rule (:mod:`companion.gap.ramp_or_walk`)."""
 
     meas: Measured
     #: indices of terms that are no model term and stay fixed (a rate-LSB white term)
@@ -277,7 +277,7 @@ def _trend_step(ctx: _Context, c: StepChoice) -> None:
             not any(x.effect == other and x.score > 0 for x in c.ranked):
         return
     rec = ctx.detrended()
-    taken, c.trend = trend.ramp_or_random_walk(rec.meas, best, c.ranked, rec.keep, RECAL_PENALTY, rec.lengths)
+    taken, c.trend = ramp_or_walk.ramp_or_random_walk(rec.meas, best, c.ranked, rec.keep, RECAL_PENALTY, rec.lengths)
     if taken is best:
         return
     c.best = taken

@@ -12,7 +12,7 @@ from companion.gap.backward import hold_test
 from companion.gap.candidates import MAGNITUDE, SHAPE, Fit, fit_terms, lr_inflation, refine_shapes, unit_column
 from companion.gap.likelihood import Measured
 from companion.gap.spectral import line_evidence
-from companion.gap.thermal import regression_check
+from companion.gap.temperature_candidate import regression_check
 
 
 @dataclass

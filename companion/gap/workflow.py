@@ -24,7 +24,7 @@
    effect from the state with that term held.
 7. ``filter_again``: a fitted filter taken over a short Gauss-Markov term is weighed again in the final state.
 8. ``verdicts``: per model term its verdict, per added effect its entry (:mod:`companion.gap.verdicts`); the
-   model after, G after (:mod:`companion.gap.result`), its simulation; the noise floor: the model fits within
+   model after, G after (:mod:`companion.gap.gap_result`), its simulation; the noise floor: the model fits within
    the noise when G <= NOISE_FLOOR_G = 2 and nothing is added or recalibrated.
 9. ``remaining_gap``: G over the cluster times the record resolves, a long-tau term named from too short a
    record, and how often the model after leaves a gap as large on this record's layout
@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.gap import explain, selection, trend
+from companion.gap import explain, selection, ramp_or_walk
 from companion.gap.arbitration import LineVeto, spectral_line, thermal_arbitration
 from companion.gap.backward import drop_unneeded, filter_or_gauss_markov, hold_test, refit
 from companion.gap.candidates import MAGNITUDE, SHAPE, Fit, refine_shapes
@@ -45,11 +45,11 @@ from companion.gap.compare import Measured, disagreements, gap_metric, measure, 
 from companion.gap.cutoff_fit import refine_cutoff
 from companion.gap.null import null_gap, null_text, sim_checks
 from companion.gap.rate_rounding import delta_crit, detect_lsb, rate_rounding
-from companion.gap.result import (NOISE_FLOOR_G, GapResult, record_rule_notes, resolved_gap, resolved_text,
+from companion.gap.gap_result import (NOISE_FLOOR_G, GapResult, record_rule_notes, resolved_gap, resolved_text,
                                   strongest_left)
 from companion.gap.spectral import significant_lines
 from companion.gap.step_records import IterationRecord, SwapRecord, alternative_entry, swap_alternative_entry
-from companion.gap.thermal import thermal_term
+from companion.gap.temperature_candidate import thermal_term
 from companion.gap.verdicts import EffectEvidence, added_effects, model_term_verdicts
 
 __all__ = ["ALPHA", "ALPHA_RECAL", "MAX_ITER", "NESTED", "NOISE_FLOOR_G", "GapResult", "delta_crit", "detect_lsb",
@@ -66,7 +66,7 @@ MAX_ITER = 6
 @dataclass
 class DetrendedProvider:
     """The record with its least-squares line out, measured once, when a ramp and a random walk first
-    compete (:mod:`companion.gap.trend`)."""
+    compete (:mod:`companion.gap.ramp_or_walk`)."""
 
     y_segs: list
     rate_hz: float
@@ -76,7 +76,7 @@ class DetrendedProvider:
 
     def __call__(self) -> selection.DetrendedRecord:
         if self._meas is None:
-            self._meas = trend.detrended_measure(self.y_segs, self.rate_hz)
+            self._meas = ramp_or_walk.detrended_measure(self.y_segs, self.rate_hz)
         lengths = [len(s) / self.rate_hz for s in self.y_segs]
         return selection.DetrendedRecord(self._meas, sorted(self.fixed), lengths)
 

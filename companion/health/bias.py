@@ -27,7 +27,7 @@ takes the mean of the first ``RESTART_BLOCKS`` still blocks of the new run as th
 reference; an active bias fault stays as it was.
 
 Temperature. Where the block carries the IMU temperature (``BlockStats.temperature``), every still-block
-mean is first corrected by the bias the temperature explains (companion.health.thermal: a slope learned
+mean is first corrected by the bias the temperature explains (companion.health.bias_temperature: a slope learned
 from pairs of still blocks that differ in temperature, at most ``FaultLimits.bias_temp_dps_per_k``): the
 tests above see the residual, so a warm-up is not a drift while a drift at a steady temperature is.
 """
@@ -41,8 +41,8 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.faults import FAULT, OK, AxisRef, Cusum, FaultEvent, Observation, debounce
-from companion.health.limits import FaultLimits, capped, floored_mean_llr, wander_var
-from companion.health.thermal import LAG, ThermalBias
+from companion.health.evidence_rules import FaultLimits, capped, floored_mean_llr, wander_var
+from companion.health.bias_temperature import LAG, ThermalBias
 
 DEG = math.pi / 180.0
 DELTA = 0.2 * DEG  #: rad/s, mean shift the jump CUSUMs are tuned to (allowance delta/2 above a warm-up's lag)

@@ -44,7 +44,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from companion.health.limits import FaultLimits, capped, floored_mean_llr
+from companion.health.evidence_rules import FaultLimits, capped, floored_mean_llr
 from companion.health.faults import AXES, FAULT, OK, Cusum, FaultEvent, Observation
 
 DEG = math.pi / 180.0

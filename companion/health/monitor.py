@@ -18,13 +18,13 @@ import numpy as np
 from companion.health.bias import BiasDetector
 from companion.health.faults import (AXES, FAULT, KIND_CODE, KNOCK_RUN, OK, PRIORITY, SPIKE_K, AxisRef, BlockStats,
                                      FaultDetector, FaultEvent, Observation, fault_mask)
-from companion.health.limits import FaultLimits
+from companion.health.evidence_rules import FaultLimits
 from companion.health.noise import NoiseDetector
 from companion.health.resolution import ResolutionDetector
 from companion.health.saturation import SaturationDetector
 from companion.health.spikes import SpikeDetector
 from companion.health.stuck import StuckDetector
-from companion.health.timing import TimingDetector
+from companion.health.timing_faults import TimingDetector
 
 REF_BLOCKS = 30  # still blocks (s) learned as the reference of the fast detectors
 
@@ -220,7 +220,7 @@ class ImuFaults:
 
     def restart(self) -> None:
         """A new run restored from the state: what is judged within a run only starts afresh, the bias
-        (health/bias.py, Restarts) and the timing (health/timing.py); the noise references are the sensor's
+        (health/bias.py, Restarts) and the timing (health/timing_faults.py); the noise references are the sensor's
         and are kept."""
         for af in self.axes.values():
             af.bias.restart()

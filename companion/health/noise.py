@@ -10,7 +10,7 @@ Per 100-sample block (nu ~ 50) this drifts by -2.9 nats under H0 and +4.1 nats u
 h = 20 flags a 1.3x jump after about 5 blocks, 2x after 1-2, 3x and more after one. The information
 limit (faults: h / KL per block, KL = nu/2 (r - 1 - ln r)) is printed beside the measured delay by
 benchmarks/bench_faults.py. The test runs on *quiet* blocks only (disarmed, accelerometer quiet, IMUs
-agreeing: the motion gate of service/motion.py, which never looks at this axis' own noise), after the
+agreeing: the motion gate of service/motion_gate.py, which never looks at this axis' own noise), after the
 settling time; in flight a noisy gyro is seen by disagreement.py when a second IMU exists.
 
 Quantisation. The variance of a rounded gyro is not its noise's: with white noise of std sigma below about
@@ -68,7 +68,7 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.limits import FaultLimits, capped
+from companion.health.evidence_rules import FaultLimits, capped
 from companion.health.faults import Cusum, FaultEvent, OK, Observation, chi2_llr
 
 R1 = 1.69  # variance ratio the CUSUM is tuned to: a 1.3x noise std

@@ -71,7 +71,7 @@ import numpy as np
 from companion.health.code_spread import (_STD_NORMAL, LEVEL_STEP, MAX_CODES, Q_RATIO, _block_level_logs, _pair_counts,
                                           two_code_llr, two_code_outside)
 from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
-from companion.health.limits import equal_codes_llr, p_equal_codes
+from companion.health.evidence_rules import equal_codes_llr, p_equal_codes
 from companion.health.rest_tally import CodeTally, JitterTally, LeadErrors
 
 R1 = 0.1  # variance collapse the CUSUM is tuned to

@@ -135,7 +135,7 @@ class Reporter:
 
     def set_online_terms(self, imu: int, axis: str, terms) -> None:
         """Set the values, their 1-sigma (``_{P}S``; -1 for a 95 % upper bound) and the nonlinear terms of
-        one axis from an online report (companion.estimators.report; SI) -- see the module docstring."""
+        one axis from an online report (companion.estimators.online_report; SI) -- see the module docstring."""
         new: dict[str, float] = {}
         for t in terms or ():
             e = t.get("effect")

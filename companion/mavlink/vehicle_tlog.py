@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from companion.mavlink.tlog_writer import ImuTlogStream
-from companion.sim.motion import _finite
+from companion.sim.body_motion import _finite
 from companion.sim.vehicle import IMU_MESSAGES, VehicleSimulator
 
 

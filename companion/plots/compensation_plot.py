@@ -16,7 +16,7 @@ COLORS = {"stf": "tab:orange", "srukf": "tab:green", "srrsukf": "tab:red"}
 
 def plot_compensation(result, t: np.ndarray, z: np.ndarray, path, title: str = "", unit_scale: float = 180.0 / np.pi,
                       unit: str = "deg/s", max_points: int = 20_000, max_tau: float = np.inf) -> None:
-    """Write the figure for a :class:`companion.compensation.pipeline.CompensationResult` to ``path``.
+    """Write the figure for a :class:`companion.compensation.compare_methods.CompensationResult` to ``path``.
 
     ``t`` and ``z`` are the time (s) and raw series (SI); values are shown times ``unit_scale`` in ``unit``.
     Time series are decimated to at most ``max_points`` points for drawing (the ADEV uses every sample).

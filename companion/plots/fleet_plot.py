@@ -16,7 +16,7 @@ COLORS = {"gx": "tab:red", "gy": "tab:green", "gz": "tab:blue", "ax": "tab:orang
 
 def imu_trend_png(entry: dict, series: dict, tests: dict, dpi: int = 80) -> bytes:
     """PNG of ``series[(axis, param)] = (flight_index, value, lo, hi)`` for N (and the worst parameter
-    when it is not N); ``tests[(axis, param)]``: :class:`companion.fleet.trend.SlopeTest` lines."""
+    when it is not N); ``tests[(axis, param)]``: :class:`companion.fleet.trends.SlopeTest` lines."""
     plt = require_matplotlib()
     params = ["N"] + ([entry["param"]] if entry.get("param") not in (None, "N") else [])
     fig, axs = plt.subplots(1, len(params), figsize=(5.6 * len(params), 2.9), squeeze=False)

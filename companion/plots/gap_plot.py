@@ -12,7 +12,7 @@ from companion.plots import require_matplotlib, save_figure
 
 
 def plot_gap(result, path) -> None:
-    """Write the figure of a :class:`companion.gap.result.GapResult` to ``path`` (PNG, SVG, PDF...)."""
+    """Write the figure of a :class:`companion.gap.gap_result.GapResult` to ``path`` (PNG, SVG, PDF...)."""
     plt = require_matplotlib()
     m = result.measured
     axis = result.axis

@@ -2,7 +2,7 @@
 
 Per axis the reported terms (:meth:`EstimatorBank.report_terms`) give the parameters the window resolves
 (health.baseline.check_params); of those, the ones the estimators' own Allan curves support are compared
-with the baseline (companion.health.detector), and a rise counts only where the measured curves show it
+with the baseline (companion.health.degradation), and a rise counts only where the measured curves show it
 against the levels the baseline was learned from (health.baseline.risen_params). A raised gyro term sets
 the IMU's ``allan`` fault, so the fault code and the health flag carry it.
 """
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from companion.health.baseline import check_params, risen_params, rounding_ceiling, supported_params
-from companion.health.detector import DEGRADING, HealthDetector, Transition
+from companion.health.degradation import DEGRADING, HealthDetector, Transition
 from companion.health.faults import FAULT, OK
 from companion.health.monitor import ImuFaults
 from companion.samples import GYRO_AXES

@@ -3,14 +3,14 @@
 One vectorised path for every caller: the live loop hands it one row, a replay or the simulator whole
 arrays; the blocks, counts and rate are the same either way. Rows are ``(t, gx, gy, gz, ax, ay, az)``.
 
-Timestamp rules (:func:`companion.sources.timing.classify_steps`, the rules of the offline time base with
-the live thresholds ``reset_s`` and ``gap_s`` given to :func:`~companion.sources.timing.step_rules`): a
+Timestamp rules (:func:`companion.sources.timestamps.classify_steps`, the rules of the offline time base with
+the live thresholds ``reset_s`` and ``gap_s`` given to :func:`~companion.sources.timestamps.step_rules`): a
 timestamp more than ``reset_s`` behind the last one is an autopilot reboot (the partial block is dropped);
 a repeated one is a duplicate and one slightly behind goes backwards (both dropped and counted); an
 interval longer than ``gap_s`` (and, once the rate is known, than GAP_PERIODS periods) is a gap (the partial
 block is dropped). A block closes at the first sample with ``t - t0 >= block_s - period / 2``.
 
-The rate is 1 / :func:`companion.sources.timing.period_of` of the last 64 intervals, taken at the first
+The rate is 1 / :func:`companion.sources.timestamps.period_of` of the last 64 intervals, taken at the first
 block close with 8 intervals and re-taken at every close; a change of more than 20 % is reported.
 """
 
@@ -21,7 +21,7 @@ from typing import Iterator
 
 import numpy as np
 
-from companion.sources.timing import BACKWARD, DUPLICATE, OK, RESET, classify_steps, period_of, step_rules
+from companion.sources.timestamps import BACKWARD, DUPLICATE, OK, RESET, classify_steps, period_of, step_rules
 
 RATE_CHANGE = 0.2  # relative change of the rate that restarts the estimators
 MIN_INTERVALS = 8  # intervals before the rate is taken

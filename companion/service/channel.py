@@ -6,7 +6,7 @@ learned from them, and the Allan check against that baseline. It composes small 
 state:
 
 * :class:`~companion.service.blocks.BlockCutter` (``cutter``): timestamps, rate, blocks;
-* :class:`~companion.service.motion.MotionGate` (``gate``) and :class:`~companion.service.settling.StillSettler`
+* :class:`~companion.service.motion_gate.MotionGate` (``gate``) and :class:`~companion.service.settling.StillSettler`
   (``settler``): still or moving, and the look-ahead before a still block is fed;
 * :class:`~companion.health.monitor.ImuFaults` (``faults``): the per-block fault detectors;
 * :class:`~companion.service.estimator_bank.EstimatorBank` (``bank``): the estimators at the current rate,
@@ -40,19 +40,19 @@ import numpy as np
 from companion.analysis.filters import sampling
 from companion.estimators import make_estimator
 from companion.health.baseline import check_params
-from companion.health.detector import DEGRADING, LEARNING
+from companion.health.degradation import DEGRADING, LEARNING
 from companion.health.faults import CARRY, BlockStats, FaultEvent, block_stats
 from companion.health.monitor import ImuFaults
 from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.service.allan_check import AllanCheck, CheckResult, StreamFacts
 from companion.service.blocks import BlockCutter
-from companion.service.config import PipelineConfig
+from companion.service.pipeline_config import PipelineConfig
 from companion.service.estimator_bank import EstimatorBank
-from companion.service.motion import MotionGate, Peer, noise_ratio
+from companion.service.motion_gate import MotionGate, Peer, noise_ratio
 from companion.service.rate_tracker import RateProfile, RateTracker
 from companion.service.settling import StillSettler
 from companion.sources.messages import IMU_LAYOUTS
-from companion.sources.timing import stamp_resolution
+from companion.sources.timestamps import stamp_resolution
 
 # the MAVLink messages whose gyro is an integer (int16, mrad/s by default), from their layouts
 INT16_MESSAGES = tuple(name for name, lay in IMU_LAYOUTS.items() if lay.dtype["xgyro"].kind == "i")

@@ -1,12 +1,12 @@
 """The run summary of a :class:`~companion.service.pipeline.Pipeline` per IMU: rate, still data used,
 health, counts, the active faults in words, the notes, and per axis the final terms against the baseline
-(the rows :func:`companion.service.runner.summary_lines` prints)."""
+(the rows :func:`companion.service.run_session.summary_lines` prints)."""
 
 from __future__ import annotations
 
 import math
 
-from companion.health.detector import STATE_NAMES
+from companion.health.degradation import STATE_NAMES
 from companion.health.faults import FAULT, MIN_NOISE_SAMPLES, FaultEvent
 from companion.service.channel import INT16_MESSAGES
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED

@@ -106,7 +106,7 @@ class LiveLoop:
 
     def housekeeping(self, now: float) -> None:
         """Every pass: the link's heartbeat and requests, the rate check, stale data, the periodic save."""
-        from companion.service.runner import save
+        from companion.service.run_session import save
 
         self.link.service()
         if now - self.last_rate_check >= RATE_CHECK_S:
@@ -122,7 +122,7 @@ class LiveLoop:
 
     def _stale(self, now: float, last_imu: float) -> None:
         """No IMU data for ``stale_s``: warn once, a STATUSTEXT every REPEAT_S, STALE health every second."""
-        from companion.health.detector import STALE
+        from companion.health.degradation import STALE
         from companion.mavlink.reporter import MAV_SEVERITY_WARNING
 
         s = self.stale
@@ -167,7 +167,7 @@ def run_live(opts: RunOptions, hooks: RunHooks, writer=None):
     by the caller); ``writer`` (a TlogWriter) records what was received and sent."""
     from companion.mavlink.reporter import Reporter
     from companion.service.pipeline import Pipeline
-    from companion.service.runner import restore
+    from companion.service.run_session import restore
     from companion.sources.connection import open_connection
 
     conn = open_connection(opts.source, opts.baud, source_system=opts.pipeline.sysid or 1,

@@ -14,7 +14,7 @@ ignored), compares the IMUs (:mod:`companion.service.imu_group`), reports and ke
 3. Fed blocks go to the channel's estimators; while learning, the baseline is taken after ``baseline_s``
    seconds of still data (unless a baseline was loaded).
 4. Every ``check_s`` of message time the current terms are reported and tested against the baseline
-   (companion.health.detector), health transitions produce a STATUSTEXT.
+   (companion.health.degradation), health transitions produce a STATUSTEXT.
 
 A loaded baseline in other units or of another sensor stops the pipeline: :attr:`Pipeline.failed` holds
 the one-line reason and further input is ignored (the caller reports it and exits).
@@ -28,14 +28,14 @@ from typing import Callable, Iterable, Mapping
 import numpy as np
 
 from companion.health.baseline import Baseline
-from companion.health.detector import DEGRADING, LEARNING
+from companion.health.degradation import DEGRADING, LEARNING
 from companion.health.faults import FAULT, FaultEvent
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
 from companion.service.allan_check import bias_extra_var
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
-from companion.service.config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
+from companion.service.pipeline_config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
 from companion.service.imu_summary import fault_texts, final_terms, rate_note, send_final, summary_rows, too_slow_note
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED

@@ -19,7 +19,7 @@ import numpy as np
 from companion.sources import messages as M
 from companion.sources import tlog
 from companion.sources.decode import ScaleTable, split_by_imu
-from companion.sources.timing import OK, classify_steps, step_rules
+from companion.sources.timestamps import OK, classify_steps, step_rules
 
 
 def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: False) -> dict:

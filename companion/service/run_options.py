@@ -16,7 +16,7 @@ from companion.errors import CompanionError
 if TYPE_CHECKING:  # the types only: building the options imports them when a run starts
     from companion.health.baseline import Baseline
     from companion.mavlink.link import LinkConfig
-    from companion.service.config import PipelineConfig
+    from companion.service.pipeline_config import PipelineConfig
     from companion.sources.decode import ScaleTable
 
 
@@ -64,7 +64,7 @@ def _configs(args, config: dict):
     section and the command line."""
     from companion.config import LINK, RUNNER
     from companion.mavlink.link import IMU_MESSAGE_IDS, LinkConfig
-    from companion.service.config import PipelineConfig
+    from companion.service.pipeline_config import PipelineConfig
 
     run_cfg = dict(config.get("run") or {})
     if not isinstance(config.get("run") or {}, dict):
@@ -136,7 +136,7 @@ def build_options(args, warn, check_outputs: Callable[[Path | None, dict], None]
     known and before the signing key is read."""
     from companion.config import RUNNER
     from companion.service.replay import is_replay_source
-    from companion.service.runner import load_baseline, state_path
+    from companion.service.run_session import load_baseline, state_path
     from companion.sources import load_config
     from companion.sources.decode import ScaleTable
 

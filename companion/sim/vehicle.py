@@ -57,7 +57,7 @@ Components (the order in which an IMU's gyro output is built, rad/s):
 4. an optional :class:`Degradation` (an extra independent term of the same kind from a time on).
 5. the :class:`Fault`, if any, on its IMU and axis (SI semantics in the :class:`Fault` docstring).
 
-The body (:mod:`companion.sim.motion`): at rest the vehicle sits still at a small tilt; a :class:`Flight`
+The body (:mod:`companion.sim.body_motion`): at rest the vehicle sits still at a small tilt; a :class:`Flight`
 is armed, takes off, manoeuvres with body rates up to about ``max_rate`` and vibration, lands and
 disarms; a :class:`Handling` is the disarmed vehicle picked up, turned by hand and put down in another
 attitude. Flight, Handling and Schedule are re-exported here.
@@ -77,7 +77,7 @@ import numpy as np
 
 from companion.allan.terms import validate_term
 from companion.sim.imu_errors import ImuErrors, warmup_amplitudes
-from companion.sim.motion import (BodyMotion, Flight, Handling, Schedule, _err, _finite, body_rates,
+from companion.sim.body_motion import (BodyMotion, Flight, Handling, Schedule, _err, _finite, body_rates,
                                    rotation_nb, specific_force_at_rest)
 from companion.sim.realism import Realism, SensorStage
 from companion.sim.synth import flicker, quantization

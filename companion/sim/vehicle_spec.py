@@ -13,7 +13,7 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.sim.motion import _err, _finite
+from companion.sim.body_motion import _err, _finite
 
 GYRO_AXES = ("gx", "gy", "gz")
 ACCEL_AXES = ("ax", "ay", "az")

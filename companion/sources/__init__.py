@@ -9,7 +9,7 @@ MAVLink link, in SI, with their timing.
 (sysid, compid, message, instance), sorted by key, compass-only instances included with
 ``is_imu=False``) and ``totals`` (``frames``, ``bad_bytes``, ``bad_frames``, ``imu_messages``).
 Messages: RAW_IMU, SCALED_IMU, SCALED_IMU2, SCALED_IMU3, HIGHRES_IMU. Units and per-stream scale
-overrides: :mod:`companion.sources.decode`; timing rules: :mod:`companion.sources.timing`; the tlog
+overrides: :mod:`companion.sources.decode`; timing rules: :mod:`companion.sources.timestamps`; the tlog
 walker: :mod:`companion.sources.tlog`; links: :mod:`companion.sources.connection`.
 """
 
@@ -23,7 +23,7 @@ import numpy as np
 
 from companion.errors import CompanionError
 from companion.samples import ImuStream
-from companion.sources import timing as _timing
+from companion.sources import timestamps as _timing
 from companion.sources.kind import kind_of
 from companion.sources.decode import (COMPASS_ONLY_CAN, TIME_RESOLUTION, RawStream, ScaleTable,
                                       imu_sample_from_message)

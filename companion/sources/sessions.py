@@ -2,7 +2,7 @@
 
 A log that spans autopilot reboots (a ground station's tlog across a power cycle; ULog or DataFlash files
 written across a restart) has message times that start again at each boot. Every stream keeps its samples in
-file order, split into segments at the resets (:mod:`companion.sources.timing`), but the still selection,
+file order, split into segments at the resets (:mod:`companion.sources.timestamps`), but the still selection,
 the armed intervals and ``--start/--end`` work on one time axis: with the times of several sessions
 overlapping, a record would run backwards (its last sample before its first) and could not be analysed.
 

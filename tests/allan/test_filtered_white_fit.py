@@ -11,7 +11,7 @@ from companion.allan.adev import cluster_sizes, oadev
 from companion.allan.confidence import _gcov, edf_simple, oavar_covariance
 from companion.allan.fit import fit_avar
 from companion.allan.terms import avar_term, avar_white_noise, validate_term
-from companion.sim.filtered import filtered_white_noise, logged_white_level
+from companion.sim.filtered_noise import filtered_white_noise, logged_white_level
 
 
 def _avar_by_quadrature(tau, N, fc):

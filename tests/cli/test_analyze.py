@@ -149,7 +149,7 @@ def test_plot_draws_an_unresolved_n_as_its_bound_touching_the_data():
     import matplotlib.pyplot as plt
 
     from companion.plots.adev_plot import draw_axis
-    from companion.sim.filtered import filtered_white_noise
+    from companion.sim.filtered_noise import filtered_white_noise
     from companion.sim.synth import synthesize_axis
 
     fs, fc, n = 50.0, 1.0, 30000
@@ -244,7 +244,7 @@ def test_plot_says_n_comes_from_the_local_refit_and_how_far_the_line_misses():
     pytest.importorskip("matplotlib")
     import matplotlib.pyplot as plt
 
-    from companion.analysis.report import format_table
+    from companion.analysis.report_table import format_table
     from companion.plots.adev_plot import overlay_figure, stream_figure
 
     r = _misfit_axis()

@@ -411,7 +411,7 @@ def test_output_paths_are_checked_before_any_work(tmp_path, capsys, monkeypatch)
     """--db in a missing directory or on a directory, --html/--json that cannot be written: one error line
     naming the option, exit 2, before any log is read or any trend computed."""
     import companion.fleet.discover as discover_mod
-    import companion.fleet.report as report_mod
+    import companion.fleet.fleet_ranking as report_mod
 
     def boom(*a, **k):
         raise AssertionError("work started before the output paths were checked")

@@ -1,7 +1,7 @@
 """`companion analyze --online` and `companion run` on the shipped sample log, against the truth of its
 model file (tlogs/sample_model.yaml): the reported values within their 95 % intervals as often as such
 intervals hold the truth (the log is one realisation: a binomial count over its intervals, false failure
-<= 1e-3 for calibrated intervals; coverage over many seeds is tests/estimators/test_report.py's), every
+<= 1e-3 for calibrated intervals; coverage over many seeds is tests/estimators/test_online_report.py's), every
 effect absent from the truth reported as a 95 % upper bound, and both commands print the same report."""
 
 from __future__ import annotations

@@ -143,7 +143,7 @@ def test_real_adis16405_factor_valid_and_noise_reduced(shared_data):
 
     with gzip.open(shared_data / "adis16405" / "adis16405_imu1.csv.gz", "rt") as fh:
         arr = np.loadtxt(fh, delimiter=",", skiprows=1, max_rows=20_000)
-    from companion.compensation.pipeline import compensate
+    from companion.compensation.compare_methods import compensate
 
     res = compensate(arr[:, 2], 100.0)
     for m in res.methods.values():

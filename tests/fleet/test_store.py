@@ -75,7 +75,7 @@ def test_report_on_missing_or_foreign_database_is_one_line(tmp_path):
 
 def test_plan_skips_known_and_duplicate_content_and_reports_unreadable(tmp_path):
     from companion.fleet.discover import discover
-    from companion.fleet.runner import plan
+    from companion.fleet.dask_runner import plan
 
     for name, data in (("a.tlog", b"A" * 100), ("b.tlog", b"B" * 100), ("c.tlog", b"A" * 100), ("d.tlog", b"D")):
         (tmp_path / name).write_bytes(data)

@@ -8,7 +8,7 @@ import pytest
 
 from companion.cli.main import main
 from companion.fleet.discover import discover, hash_file
-from companion.fleet.simulate import simulate_fleet
+from companion.fleet.synthetic_fleet import simulate_fleet
 from companion.fleet.task import analyze_log
 from companion.errors import CompanionError
 

@@ -81,7 +81,7 @@ def test_a_filter_the_data_show_is_kept():
     the one-parameter filter)."""
     from companion.gap.backward import filter_or_gauss_markov as _filter_or_gauss_markov
 
-    from companion.gap.filtered import synthesize_filtered_white
+    from companion.gap.lowpass_check import synthesize_filtered_white
 
     white = {"effect": "white_noise", "N": 1e-3, "cutoff_hz": 5.0, "order": 2}
     y = synthesize_filtered_white(1e-3, 5.0, RATE, 100_000, np.random.default_rng(3))

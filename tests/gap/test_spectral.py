@@ -94,7 +94,7 @@ def test_lines_searched_over_the_spectrum_none_in_noise_and_the_true_one_found()
     """significant_lines: no line in filtered, interval-averaged noise (a band fit from below the Nyquist
     frequency named one in a third of such records), and a line at 0.47 x the rate found within a Welch
     bin with its amplitude (as the averaged samples carry it) within 25 %."""
-    from companion.gap.filtered import synthesize_filtered_white
+    from companion.gap.lowpass_check import synthesize_filtered_white
     from companion.gap.spectral import significant_lines
 
     rate, n = 250.0, 15000

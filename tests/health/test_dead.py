@@ -121,7 +121,7 @@ def test_a_float_gyro_reading_exactly_zero_at_10_and_25_hz_is_named_dead():
     Now 100 equal values in a row however they fall into blocks: 10 s at 10 Hz, 4 s at 25 Hz."""
     from companion.mavlink.reporter import Reporter
     from companion.samples import StreamKey
-    from companion.service.config import PipelineConfig
+    from companion.service.pipeline_config import PipelineConfig
     from companion.service.pipeline import Pipeline
     from tests.support.sinks import RecordingSink
 

@@ -7,7 +7,7 @@ import pytest
 
 from companion.estimators import make_estimator
 from companion.health.baseline import Baseline, check_params, params_from_terms
-from companion.health.detector import (DEGRADING, HEALTHY, DetectorConfig, HealthDetector, ParamDetector,
+from companion.health.degradation import (DEGRADING, HEALTHY, DetectorConfig, HealthDetector, ParamDetector,
                                        log_ratio_bound)
 
 

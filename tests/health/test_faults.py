@@ -15,7 +15,7 @@ from companion.health.noise import NoiseDetector
 from companion.health.saturation import SaturationDetector
 from companion.health.spikes import SpikeDetector
 from companion.health.stuck import StuckDetector
-from companion.health.timing import TimingDetector
+from companion.health.timing_faults import TimingDetector
 
 FS = 100
 LSB = 1e-3

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from companion.health.baseline import check_params
-from companion.health.detector import DEGRADING, HEALTHY, HealthDetector, log_ratio_bound
+from companion.health.degradation import DEGRADING, HEALTHY, HealthDetector, log_ratio_bound
 from companion.health.faults import REF_MAX_FACTOR, AxisRef, Observation, block_stats
 from companion.health.noise import NoiseDetector, quantized_ceiling, quantized_var
 
@@ -176,7 +176,7 @@ def _still_with_a_junction(gap_s: float, seed: int = 3):
     K, the check's K at the end, the transitions)."""
     from companion.health.baseline import Baseline
     from companion.service.channel import Channel
-    from companion.service.config import PipelineConfig
+    from companion.service.pipeline_config import PipelineConfig
     from companion.sim.synth import synthesize_axis
 
     fs = 50.0

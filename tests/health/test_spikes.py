@@ -10,7 +10,7 @@ import numpy as np
 
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
-from companion.service.config import PipelineConfig
+from companion.service.pipeline_config import PipelineConfig
 from companion.service.pipeline import Pipeline
 from tests.support.sinks import RecordingSink
 

@@ -107,7 +107,7 @@ def test_pymavlink_decodes_what_we_send():
 def test_a_replay_stamps_a_statustext_with_the_time_of_what_it_reports():
     """A replay's sink took the time of its last NAMED_VALUE_FLOAT for a STATUSTEXT: the first alarms of a
     public PX4 log (before any value was sent) were written at t = 0 s into the replay's tlog and echoed so."""
-    from companion.service.runner import ReplaySink
+    from companion.service.run_session import ReplaySink
 
     said = []
     sink = ReplaySink(echo=said.append)

@@ -14,7 +14,7 @@ from companion.mavlink.tlog_writer import TlogWriter
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.replay import replay_log, replay_tlog
 from companion.sim.dataflash_writer import write_imu_log
-from companion.sim.filtered import filtered_white_noise, logged_white_level
+from companion.sim.filtered_noise import filtered_white_noise, logged_white_level
 from companion.sources import load
 from companion.analysis.stream import stream_filters
 from tests.support.sinks import RecordingSink

@@ -13,7 +13,7 @@ import numpy as np
 
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
-from companion.service.config import PipelineConfig
+from companion.service.pipeline_config import PipelineConfig
 from companion.service.pipeline import Pipeline
 from companion.sources import build_stream
 from companion.sources.decode import RawStream

@@ -16,7 +16,7 @@ import pytest
 
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
-from companion.service.config import PipelineConfig
+from companion.service.pipeline_config import PipelineConfig
 from companion.service.pipeline import Pipeline
 from tests.support.sinks import RecordingSink
 
@@ -86,7 +86,7 @@ def test_a_biased_imu_logged_at_2_hz_is_named_against_its_200_hz_twin():
 def test_a_stream_too_slow_for_the_per_imu_tests_is_said_so():
     # a 1-s block of a 2 Hz stream holds 3 samples, fewer than a block's noise needs: the tests that read it
     # (noise, bias, spikes, stuck at rest) never learn a reference; the user is told what is watched instead
-    from companion.service.runner import summary_lines
+    from companion.service.run_session import summary_lines
 
     p = _fly(2.0, 0, seconds=60.0)
     notes = {r["imu"]: r["notes"] for r in p.summary()}

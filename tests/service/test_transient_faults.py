@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.health.detector import DEGRADING, HEALTHY, DetectorConfig, HealthDetector
+from companion.health.degradation import DEGRADING, HEALTHY, DetectorConfig, HealthDetector
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline, PipelineConfig

@@ -557,7 +557,7 @@ def test_run_replays_the_imu_messages_not_the_batch_bursts(shared_data):
     """The batch sampler's bursts outnumber a log's IMU messages; replayed as IMU 0 they gave no block (a
     second of kHz data every few seconds) and left IMU 0 unwatched. run takes the IMU messages."""
     from companion.mavlink.reporter import Reporter
-    from companion.service.config import PipelineConfig
+    from companion.service.pipeline_config import PipelineConfig
     from companion.service.pipeline import Pipeline
     from companion.service.replay import replay_log
     from tests.support.sinks import RecordingSink

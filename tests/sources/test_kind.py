@@ -72,7 +72,7 @@ def test_tlog_bin_replays_with_the_logs_heartbeats(tmp_path):
     """A .tlog.bin is replayed in frame order with its HEARTBEATs (armed state), as the .tlog: it used to go
     through the log reader, which has no armed state, and replayed as disarmed."""
     from companion.service.run_options import RunHooks, RunOptions
-    from companion.service.runner import replay
+    from companion.service.run_session import replay
     from companion.service.pipeline import PipelineConfig
     from companion.mavlink.vehicle_tlog import write_tlog
     from companion.sim.vehicle import Flight, Schedule, VehicleSimulator

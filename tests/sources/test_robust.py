@@ -10,7 +10,7 @@ import pytest
 from companion.errors import CompanionError
 from companion.mavlink.tlog_writer import write_imu_tlog
 from companion.sources import load, tlog
-from companion.sources.timing import analyse
+from companion.sources.timestamps import analyse
 
 
 @pytest.fixture

@@ -34,7 +34,7 @@ from companion.allan.fit.constants import (AUTO_EFFECTS, EXTRA_BIC_MARGIN, FILTE
 from companion.allan.fit.gls import _columns, _Problem
 from companion.allan.fit.intervals import _scaled_chi2_ci, forced_intervals
 from companion.allan.fit.record_rule import dominates_from, record_needed
-from companion.allan.fit.result import FitResult
+from companion.allan.fit.fit_result import FitResult
 from companion.allan.fit.rolloff import _profile_white_ci
 from companion.allan.fit.steps import fit_avar
 from companion.allan.fit.term_selection import quantization_slope

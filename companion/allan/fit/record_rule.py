@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from companion.allan.fit.constants import RESOLVE_EFFECTS, RESOLVE_MIN_RECORD_S, RESOLVE_RECORD_FACTOR
-from companion.allan.fit.result import FitResult
+from companion.allan.fit.fit_result import FitResult
 from companion.allan.terms import avar_model, avar_term
 
 #: the share grid spans this many decades of cluster time above tau0 (a term dominating later dominates nowhere)

@@ -24,7 +24,7 @@ from companion.allan.fit.intervals import (_cov_along, _inverted_ci, _profile_ci
                                            _selection_envelope)
 from companion.allan.fit.point_cov import _flicker_shape_cov
 from companion.allan.fit.record_rule import apply_record_rule
-from companion.allan.fit.result import FitResult
+from companion.allan.fit.fit_result import FitResult
 from companion.allan.fit.rolloff import _filter_summary, _profile_white_ci, model_rolloff
 from companion.allan.fit.term_selection import quantization_slope
 from companion.allan.terms import BASE_EFFECTS, LINEAR_EFFECTS, LINEAR_PARAM, avar_model, white_filter_of

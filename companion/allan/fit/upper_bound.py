@@ -23,7 +23,7 @@ import numpy as np
 from companion.allan.fit.constants import NL_SHAPE, NONLINEAR_EFFECTS, ORDER, Z95_ONE_SIDED
 from companion.allan.fit.gls import _columns, _Problem
 from companion.allan.fit.point_cov import _points_cov, _with_shape_errors
-from companion.allan.fit.result import FitResult
+from companion.allan.fit.fit_result import FitResult
 from companion.allan.terms import LINEAR_EFFECTS, LINEAR_PARAM, avar_model, white_filter_of
 
 #: the fixed point is reached when log(step(u) / u) is within this

@@ -1,11 +1,11 @@
-"""companion.health.limits: the floors and evidence rules, against simulated truth."""
+"""companion.health.evidence_rules: the floors and evidence rules, against simulated truth."""
 
 import math
 
 import numpy as np
 import pytest
 
-from companion.health.limits import (DEG, FaultLimits, allan_wander_var, capped, equal_codes_llr, floored_mean_llr,
+from companion.health.evidence_rules import (DEG, FaultLimits, allan_wander_var, capped, equal_codes_llr, floored_mean_llr,
                                      p_equal_codes, wander_var)
 
 

@@ -1,4 +1,4 @@
-"""What ``compensate`` shows of a :class:`companion.compensation.pipeline.CompensationResult`: the ADEV ratio
+"""What ``compensate`` shows of a :class:`companion.compensation.compare_methods.CompensationResult`: the ADEV ratio
 table at a few cluster times, the warning when no method helped, the JSON report and the CSV of the series.
 
 The table stops at T/10 of the record (:func:`max_tau`): beyond it the overlapping Allan estimate rests on

@@ -167,7 +167,7 @@ def run(opts: RunOptions, hooks: RunHooks) -> RunResult:
 def summary_lines(pipeline) -> list[str]:
     """The run summary: per IMU its health, data used and counts, active faults and per-axis estimates,
     then the health transitions."""
-    from companion.estimators.report import summary_line
+    from companion.estimators.online_report import summary_line
 
     rows = pipeline.summary()
     if not rows:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.fleet.trend import EVIDENCE_THRESHOLD, Z95, imu_trend, log_sd, slope_test
+from companion.fleet.trends import EVIDENCE_THRESHOLD, Z95, imu_trend, log_sd, slope_test
 
 
 def _series(rng, flights, sd, rise=1.0, scatter=1.0, n0=2e-4):

@@ -7,7 +7,7 @@ import pytest
 
 from companion.mavlink.tlog_writer import write_imu_tlog
 from companion.sources import load
-from companion.sources.timing import analyse
+from companion.sources.timestamps import analyse
 
 
 def test_clean_stream():
@@ -70,7 +70,7 @@ def test_reboot_and_gap_in_a_tlog(tmp_path, message):
 
 
 def test_period_of_ms_stamped_streams_and_lost_samples():
-    from companion.sources.timing import period_of
+    from companion.sources.timestamps import period_of
 
     for rate in (400.0, 300.0, 250.0, 150.0, 100.0):
         t = np.floor((5.0 + np.arange(4000) / rate) * 1e3) / 1e3
@@ -83,7 +83,7 @@ def test_period_of_ms_stamped_streams_and_lost_samples():
 def test_period_of_late_messages_split_a_period_without_biasing_it():
     """A telemetry stream at 2 Hz whose late messages split one period into 0.12 + 0.88 s or 0.22 + 0.78 s
     (the shared ArduSub tlog): the short part alone was kept and took the rate 3 % high on 64 intervals."""
-    from companion.sources.timing import period_of
+    from companion.sources.timestamps import period_of
 
     rng = np.random.default_rng(3)
     for seed in range(20):
@@ -114,7 +114,7 @@ def _messy(rng, n, period, res):
 def test_classify_steps_counts_equal_analyse(seed):
     """The vectorised step rules (what a live block cutter calls, block by block or one sample at a time)
     count what the offline analysis counts, and keep the same samples."""
-    from companion.sources.timing import (BACKWARD, DUPLICATE, GAP, RESET, SPLIT, analyse, classify_steps,
+    from companion.sources.timestamps import (BACKWARD, DUPLICATE, GAP, RESET, SPLIT, analyse, classify_steps,
                                           step_rules)
 
     rng = np.random.default_rng(seed)

@@ -1,5 +1,5 @@
 """Still bias against IMU temperature: a warm-up the temperature explains is not a fault, a drift at a steady
-temperature still is (companion.health.thermal through the bias detectors of companion.health.monitor).
+temperature still is (companion.health.bias_temperature through the bias detectors of companion.health.monitor).
 
 Simulated still blocks with known parameters: white noise of 4 LSB at 1 mrad/s, a Gauss-Markov bias wander
 (0.017 deg/s, 60 s), an exponential warm-up of 24 K (tau 150 s) and a bias-temperature slope of
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from companion.health.faults import FAULT, block_stats
-from companion.health.limits import FaultLimits
+from companion.health.evidence_rules import FaultLimits
 from companion.health.monitor import ImuFaults
-from companion.health.thermal import ThermalBias
+from companion.health.bias_temperature import ThermalBias
 
 DEG = math.pi / 180.0
 FS = 25

@@ -1,5 +1,5 @@
 """The low-pass + decimation AVAR (companion.allan.filtered_white) against the gap workflow's simulation of
-it (companion.gap.filtered), and the filter named on simulated filtered data, not on unfiltered data."""
+it (companion.gap.lowpass_check), and the filter named on simulated filtered data, not on unfiltered data."""
 
 import math
 
@@ -10,7 +10,7 @@ from scipy.integrate import quad
 from companion.allan.adev import oavar
 from companion.gap import run_gap
 from companion.allan.filtered_white import aliasing_gain, autocovariance, avar_filtered_white
-from companion.gap.filtered import synthesize_filtered_white
+from companion.gap.lowpass_check import synthesize_filtered_white
 from companion.gap.workflow import NOISE_FLOOR_G
 
 

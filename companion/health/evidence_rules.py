@@ -45,7 +45,7 @@ class FaultLimits:
       deg/s for 0.5 s; in fast manoeuvres healthy pairs differ by up to ~10 % of the rate (each IMU sampled
       and filtered at its own time, percent-level scale factors).
     * ``bias_temp_dps_per_k``: the largest bias-temperature slope the bias tests accept as explaining a
-      still-bias change where the log carries the IMU temperature (companion.health.thermal): 0.1 deg/s/K,
+      still-bias change where the log carries the IMU temperature (companion.health.bias_temperature): 0.1 deg/s/K,
       the MPU-6000's datasheet bound (+-20 deg/s over -40..85 degC); typical parts are 0.01-0.05 deg/s/K.
       0 turns the temperature model off.
     * ``noise_hold_blocks`` / ``bias_hold_blocks`` / ``disagree_hold_blocks``: the least number of blocks

@@ -1,4 +1,4 @@
-"""Ramp or random walk (companion.gap.trend): the Allan curve of a finite record can fit a ramp and a rate
+"""Ramp or random walk (companion.gap.ramp_or_walk): the Allan curve of a finite record can fit a ramp and a rate
 random walk about equally well; the record's time series tells them apart (a ramp is a straight line in the
 rate, a random walk's increments are independent). Independent truth: simulated records with known terms."""
 
@@ -8,7 +8,7 @@ import pytest
 from companion.gap import run_gap
 from companion.gap.compare import measure
 from companion.gap.selection import RECAL_PENALTY
-from companion.gap.trend import detrend, detrended_measure, residual_random_walk
+from companion.gap.ramp_or_walk import detrend, detrended_measure, residual_random_walk
 from companion.gap.workflow import NOISE_FLOOR_G
 from companion.sim.synth import synthesize_axis
 from tests.support.stats import coverage_floor
@@ -114,7 +114,7 @@ def test_detrended_random_walk_keeps_the_predicted_share_of_its_allan_variance(l
     detrended_walk_avar within 10 % at every octave from 8 samples to a quarter of the longest segment (1000
     records: within 4 %), where the plain K^2 tau / 3 is off by more than 20 % at the longest."""
     from companion.allan.pooled import pooled_oavar
-    from companion.gap.trend import detrended_walk_avar
+    from companion.gap.ramp_or_walk import detrended_walk_avar
 
     rate, K = 1.0, 1e-3
     rng = np.random.default_rng(11)
@@ -153,7 +153,7 @@ def test_gap_over_the_resolved_cluster_times_leaves_out_the_octaves_beyond_a_ten
     octaves is far above the noise floor, over the resolved ones (tau <= T/10) exactly 0."""
     from companion.gap.compare import measure
     from companion.gap.likelihood import gap_metric, model_avar
-    from companion.gap.result import GapResult, resolved_gap as _resolved_gap
+    from companion.gap.gap_result import GapResult, resolved_gap as _resolved_gap
 
     rate, n = 50.0, 1600
     terms = [{"effect": "white_noise", "N": 1e-3}]

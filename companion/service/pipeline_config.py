@@ -12,8 +12,8 @@ from typing import Mapping
 
 from companion.config import PIPELINE, check
 from companion.errors import CompanionError
-from companion.health.detector import DetectorConfig
-from companion.health.limits import FaultLimits
+from companion.health.degradation import DetectorConfig
+from companion.health.evidence_rules import FaultLimits
 
 _D = {k: v.default for k, v in PIPELINE.items() if not isinstance(v, dict)}
 

@@ -1,4 +1,4 @@
-"""The online report (companion.estimators.report): the model chosen from the data, resolved values and
+"""The online report (companion.estimators.online_report): the model chosen from the data, resolved values and
 95 % upper bounds, against simulated truth over several seeds (calibration over 100 seeds is measured by
 benchmarks/bench_online.py coverage)."""
 
@@ -135,7 +135,7 @@ def test_a_term_too_short_to_resolve_stays_in_the_model_and_n_keeps_the_truth():
     Gauss-Markov hump moves) while N does not, and the report between selections must keep N too."""
     from companion.allan.confidence import edf_simple
     from companion.allan.terms import avar_model
-    from companion.estimators.report import report, rescaled_cov, select
+    from companion.estimators.online_report import report, rescaled_cov, select
 
     n_true, b_true = 7.6e-5, 1.0e-4
     white = {"effect": "white_noise", "N": n_true, "filter_hz": 21.6, "sample_hz": FS}
@@ -182,7 +182,7 @@ def test_a_selected_term_whose_interval_reaches_zero_is_a_bound_online_and_offli
     # deg/h" on the shared ArduSub tlog) where the data do not tell it from 0: now its bound, as the offline
     # table gives it, and the bound holds the truth
     from companion.analysis.axis import analyze_axis
-    from companion.estimators.report import estimator_report
+    from companion.estimators.online_report import estimator_report
     from companion.sim.synth import flicker, random_walk, white_noise
 
     rate, flagged = 10.0, 0

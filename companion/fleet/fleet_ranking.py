@@ -2,7 +2,7 @@
 degradation; as a list of dicts (``fleet report --json``) and as one self-contained HTML file.
 
 An IMU is (vehicle, sysid, compid, message, imu instance). Its flights are the logs holding it, in
-start-time order; the trend test is :func:`companion.fleet.trend.imu_trend`. Ranking: flagged IMUs
+start-time order; the trend test is :func:`companion.fleet.trends.imu_trend`. Ranking: flagged IMUs
 first, then by decreasing evidence.
 """
 
@@ -17,7 +17,7 @@ from operator import itemgetter
 
 import numpy as np
 
-from companion.fleet.trend import EVIDENCE_THRESHOLD, MIN_RISE, TREND_PARAMS, imu_trend
+from companion.fleet.trends import EVIDENCE_THRESHOLD, MIN_RISE, TREND_PARAMS, imu_trend
 
 
 def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float = MIN_RISE) -> list[dict]:

@@ -81,9 +81,9 @@ def format_table(report: dict) -> str:
 
 
 def _online_row(r: dict, a: str) -> str:
-    """'online N 1.05 [1.04, 1.06] ... B < 31 ...': the online report (companion.estimators.report, the same
+    """'online N 1.05 [1.04, 1.06] ... B < 31 ...': the online report (companion.estimators.online_report, the same
     text as `companion run`'s summary): resolved values with 95 % intervals, 95 % upper bounds as '< x'."""
-    from companion.estimators.report import cell, extra_text
+    from companion.estimators.online_report import cell, extra_text
 
     cells = {p: cell(r["online"], p, a) for p in ("N", "B", "K")}
     return (f"{'online':<5} {cells['N']:<28}{cells['B']:<26}{cells['K']:<26} "
