@@ -167,9 +167,7 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     inside = lo == lo0 and hi == hi0
     key = None
     if inside:
-        shapes = tuple((t["effect"], t.get("filter_hz"), t.get("sample_hz"), t.get("filter_order"), t.get("tau_c"),
-                        t.get("freq_hz"))
-                       for t in kern)
+        shapes = tuple(_shape(t) for t in kern)
         key = (m1, m2, M1 - M2, lo, hi, tau0, step_div, shapes, bool(Q2))
         forms = _PAIR_FORMS.get(key, lambda: _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div,
                                                           inside))
@@ -178,6 +176,31 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     G0, Gf, h0, hf = forms
     mm = float(M1) if inside else 0.0
     return float(mm * (a @ G0 @ a) + a @ Gf @ a), float(mm * (h0 @ a) + hf @ a)
+
+
+#: c_k(l) of one unit term per pair geometry: a fit's iterations change one term's shape (a Gauss-Markov tau_c)
+#: and keep the others', whose rows (the costly part of a pair's forms) are then looked up; 16 MB holds the rows
+#: of one axis' fit
+_UNIT_ROWS = BoundedMemo(1 << 16, read_only=True, max_bytes=48 << 20)
+
+
+def _shape(term: Mapping) -> tuple:
+    """What fixes a term's G up to its magnitude."""
+    return (term["effect"], term.get("filter_hz"), term.get("sample_hz"), term.get("filter_order"), term.get("tau_c"),
+            term.get("freq_hz"))
+
+
+def _unit_row(term, l, shift, weight, step, tau0) -> np.ndarray:
+    """c(l) = sum_pq a_p b_q G(l + q - p) of one unit term at the lags ``l`` (tap offsets ``shift``, weights
+    ``weight``)."""
+    if np.all(shift % step == 0):
+        # the nine rows of lags l + shift are shifted copies of one grid of spacing `step`: the term is
+        # evaluated once per grid point (a quarter to a ninth of the lags) and the rows gathered from it
+        lo_shift = int(shift.min())
+        grid = np.arange(l[0] + lo_shift, l[-1] + int(shift.max()) + 1, step, dtype=np.int64)
+        at = np.arange(l.shape[0])[None, :] + ((shift - lo_shift) // step)[:, None]
+        return weight @ _gcov(term, grid, tau0)[at]
+    return weight @ _gcov(term, l[None, :] + shift[:, None], tau0)
 
 
 def _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside):
@@ -199,18 +222,9 @@ def _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside):
     unit = [dict(t, **{_MAGNITUDE[t["effect"]]: 1.0}) for t in kern]
     k = len(unit) + (1 if has_q else 0)
     C = np.zeros((k, l.shape[0]))
-    if np.all(shift % step == 0):
-        # the nine rows of lags l + shift are shifted copies of one grid of spacing `step`: each term is
-        # evaluated once per grid point (a quarter to a ninth of the lags) and the rows gathered from it
-        lo_shift = int(shift.min())
-        grid = np.arange(l[0] + lo_shift, l[-1] + int(shift.max()) + 1, step, dtype=np.int64)
-        at = np.arange(l.shape[0])[None, :] + ((shift - lo_shift) // step)[:, None]
-        for i, term in enumerate(unit):
-            C[i] = weight @ _gcov(term, grid, tau0)[at]
-    else:
-        lags = l[None, :] + shift[:, None]
-        for i, term in enumerate(unit):
-            C[i] = weight @ _gcov(term, lags, tau0)
+    for i, term in enumerate(unit):
+        C[i] = _UNIT_ROWS.get((_shape(term), m1, m2, lo, hi, step, tau0),
+                              lambda term=term: _unit_row(term, l, shift, weight, step, tau0))
     # pairs (i, j), 0 <= i < M1, 0 <= j < M2, with j - i = l: M1 + f(l) within the record
     count = (np.minimum(M1 - 1, M2 - 1 - l) - np.maximum(0, -l) + 1).astype(float)
     f = count - M1 if inside else np.maximum(count, 0.0)

@@ -130,13 +130,23 @@ def _bounds(fit, fp: _FitPoints, rate_hz, edf0) -> list:
     return bounds
 
 
+def _points_at(fp: _FitPoints, m, rate_hz):
+    """(tau, avar, m) of the pooled AVAR at cluster sizes ``m``: the fit's octave points where ``m`` is the same
+    set (the default --taus; each point costs passes over the whole record), else computed."""
+    m = np.asarray(m, dtype=np.int64)
+    if np.array_equal(m[(m >= 1) & (m <= max(fp.lengths) // 2)], fp.m):
+        return fp.tau, fp.avar, fp.m
+    tau, avar, m, _ = pooled_oavar(fp.pieces, rate_hz, m=m)
+    return tau, avar, m
+
+
 def _curve(fit, fp: _FitPoints, taus, rate_hz, level) -> dict:
     """Step: the Allan deviation at the requested cluster times with its ``level`` interval, the EDF from the
     fitted model (:func:`companion.allan.confidence.edf_model`, pooled where there are pieces) where it is
     finite, else the simple one."""
     longest = max(fp.lengths)
     m = parse_taus(taus, longest, rate_hz) if isinstance(taus, str) else cluster_sizes(longest, taus)
-    tau, avar, m, _ = pooled_oavar(fp.pieces, rate_hz, m=m)
+    tau, avar, m = _points_at(fp, m, rate_hz)
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in fit.terms]
     simple = np.array([edf_simple(longest + 1, mm, 0) for mm in m])
     if plain:
