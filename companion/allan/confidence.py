@@ -179,9 +179,9 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
 
 
 #: c_k(l) of one unit term per pair geometry: a fit's iterations change one term's shape (a Gauss-Markov tau_c)
-#: and keep the others', whose rows (the costly part of a pair's forms) are then looked up; 16 MB holds the rows
+#: and keep the others', whose rows (the costly part of a pair's forms) are then looked up; 24 MB holds most rows
 #: of one axis' fit
-_UNIT_ROWS = BoundedMemo(1 << 16, read_only=True, max_bytes=48 << 20)
+_UNIT_ROWS = BoundedMemo(1 << 16, read_only=True, max_bytes=8 << 20)
 
 
 def _shape(term: Mapping) -> tuple:

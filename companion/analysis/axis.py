@@ -71,10 +71,10 @@ def _usable_pieces(y, segments, out) -> list | None:
         out["status"] = "too_short"
         out["note"] = f"only {n} samples"
         return None
-    allv = np.concatenate(pieces)
-    if np.all(allv == allv[0]):
+    first = pieces[0][0]
+    if all(np.all(p == first) for p in pieces):
         out["status"] = "constant"
-        out["note"] = ("all samples equal (" + ("all zero" if allv[0] == 0 else f"{allv[0]:g}") + "): no noise to "
+        out["note"] = ("all samples equal (" + ("all zero" if first == 0 else f"{first:g}") + "): no noise to "
                        "analyse; a sensor at rest reads noise, so this one is frozen, dead or below its resolution")
         return None
     return pieces
