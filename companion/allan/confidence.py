@@ -45,7 +45,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from companion.allan.memo import BoundedMemo
+from companion.allan.memo import BoundedMemo, release_free_memory
 
 #: power-law exponent alpha of the rate PSD (S_y ~ f^alpha) for the effects that are power laws
 ALPHA = {"quantization": 2, "white_noise": 0, "bias_instability": -1, "random_walk": -2}
@@ -179,9 +179,16 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
 
 
 #: c_k(l) of one unit term per pair geometry: a fit's iterations change one term's shape (a Gauss-Markov tau_c)
-#: and keep the others', whose rows (the costly part of a pair's forms) are then looked up; 24 MB holds most rows
-#: of one axis' fit
-_UNIT_ROWS = BoundedMemo(1 << 16, read_only=True, max_bytes=8 << 20)
+#: and keep the others', whose rows (the costly part of a pair's forms) are then looked up. 24 MB holds the rows
+#: of one axis' fit (13 MB on average for 1 M samples); other axes share few of them (:func:`forget_rows`)
+_UNIT_ROWS = BoundedMemo(1 << 16, read_only=True, max_bytes=24 << 20)
+
+
+def forget_rows() -> None:
+    """Drop the remembered unit-term rows and give the freed pages back: called when one record's analysis is
+    done (another record's filter and Gauss-Markov shapes differ, so its rows would only hold memory)."""
+    _UNIT_ROWS.clear()
+    release_free_memory()
 
 
 def _shape(term: Mapping) -> tuple:

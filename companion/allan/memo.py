@@ -6,7 +6,29 @@ means the inputs moved on)."""
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 from typing import Callable, Hashable
+
+
+def release_free_memory() -> None:
+    """Give the heap's free pages back to the system (glibc ``malloc_trim``; nothing elsewhere). Arrays between
+    1 and 32 MB come from the heap once one of that size was freed, and the small memo values left between them
+    keep the freed pages resident: on a 1 M-sample record the resident size grows by ~10 MB per axis without
+    this."""
+    global _LIBC
+    if _LIBC is None:
+        name = ctypes.util.find_library("c")
+        try:
+            _LIBC = ctypes.CDLL(name) if name else False
+        except OSError:
+            _LIBC = False
+    trim = getattr(_LIBC, "malloc_trim", None) if _LIBC else None
+    if trim is not None:
+        trim(0)
+
+
+_LIBC = None  # the C library once looked up (False: none with malloc_trim)
 
 
 class BoundedMemo:

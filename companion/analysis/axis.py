@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.allan.adev import cluster_sizes
-from companion.allan.confidence import adev_ci, edf_model, edf_simple
+from companion.allan.confidence import adev_ci, edf_model, edf_simple, forget_rows
 from companion.allan.lsb import lsb_report
 from companion.allan.pooled import pooled_cluster_sizes, pooled_edf, pooled_oavar
 from companion.allan.terms import LINEAR_PARAM
@@ -237,6 +237,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     fit, edf0 = _fit(fp, rate_hz, effects, level, white_filter, sampling)
     bounds = _bounds(fit, fp, rate_hz, edf0)
     curve = _curve(fit, fp, taus, rate_hz, level)
+    forget_rows()
     notes = list(fit.notes)
     refit: dict = {}
     terms, bounds = _white_rules(fit, fp, rate_hz, edf0, bounds, notes, refit)
