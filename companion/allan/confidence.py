@@ -41,6 +41,7 @@ Intervals (:func:`adev_ci`): v_hat EDF / v ~ chi^2(EDF), so the ``level`` interv
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Iterable, Mapping
 
 import numpy as np
@@ -147,8 +148,27 @@ _MAGNITUDE = {"white_noise": "N", "bias_instability": "B", "random_walk": "K", "
 _PAIR_FORMS = BoundedMemo(8192)
 
 
+@dataclass(frozen=True)
+class _Mixture:
+    """The terms of a covariance as the pair sums use them, made once per matrix: the kernel terms, their squared
+    magnitudes a (the quantization's Q^2 last when present) and shapes (:func:`_shape`)."""
+
+    kern: list
+    has_q: bool
+    a: np.ndarray
+    shapes: tuple
+
+    @classmethod
+    def of(cls, terms) -> "_Mixture":
+        kern = [t for t in terms if t["effect"] in _MAGNITUDE]
+        Q2 = sum(t["Q"] ** 2 for t in terms if t["effect"] == "quantization")
+        a = np.array([float(t[_MAGNITUDE[t["effect"]]]) ** 2 for t in kern] + ([Q2] if Q2 else []))
+        return cls(kern, bool(Q2), a, tuple(_shape(t) for t in kern))
+
+
 def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div: int = 32):
-    """(sum_ij c(j-i)^2, sum_ij c(j-i)) for cluster sizes m1 <= m2 (Riemann sum with step ~ m1/step_div).
+    """(sum_ij c(j-i)^2, sum_ij c(j-i)) for cluster sizes m1 <= m2 (Riemann sum with step ~ m1/step_div);
+    ``terms``: the term dicts or their :class:`_Mixture`.
 
     c is linear in the terms' squared magnitudes a_k (c = sum a_k c_k, c_k of the unit term), and the number
     of pairs at lag l is M1 + f(l) with f fixed by m1 and m2 (M1 - M2 = 2 (m2 - m1)) while the lags stay
@@ -156,23 +176,20 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     s2 = step (M1 a'G0 a + a'Gf a), s1 = step (M1 h0'a + hf'a). The forms depend only on the pair's geometry
     and the terms' shapes (filter, tau_c, frequency) and are remembered. Lags clipped by a short record
     (the longest cluster sizes) are summed with their own counts and not remembered."""
-    kern = [t for t in terms if t["effect"] in _MAGNITUDE]
-    Q2 = sum(t["Q"] ** 2 for t in terms if t["effect"] == "quantization")
-    a = np.array([float(t[_MAGNITUDE[t["effect"]]]) ** 2 for t in kern] + ([Q2] if Q2 else []))
+    mix = terms if isinstance(terms, _Mixture) else _Mixture.of(terms)
+    kern, has_q, a = mix.kern, mix.has_q, mix.a
     if a.size == 0:
         return 0.0, 0.0
     tail = _tail(kern, m2, tau0) if m2 <= 16 * m1 else 0  # long-memory tails: only near pairs correlate
     lo0, hi0 = -(2 * m2 + tail), 2 * m1 + tail
     lo, hi = max(lo0, -(M1 - 1)), min(hi0, M2 - 1)
     inside = lo == lo0 and hi == hi0
-    key = None
     if inside:
-        shapes = tuple(_shape(t) for t in kern)
-        key = (m1, m2, M1 - M2, lo, hi, tau0, step_div, shapes, bool(Q2))
-        forms = _PAIR_FORMS.get(key, lambda: _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div,
+        key = (m1, m2, M1 - M2, lo, hi, tau0, step_div, mix.shapes, has_q)
+        forms = _PAIR_FORMS.get(key, lambda: _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div,
                                                           inside))
     else:
-        forms = _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div, inside)
+        forms = _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside)
     G0, Gf, h0, hf = forms
     mm = float(M1) if inside else 0.0
     return float(mm * (a @ G0 @ a) + a @ Gf @ a), float(mm * (h0 @ a) + hf @ a)
@@ -277,11 +294,12 @@ def oavar_covariance(terms: Iterable[Mapping], m, n: int, rate_hz: float, max_ra
     ramp_sq = sum(t["R"] ** 2 for t in terms if t["effect"] == "ramp")
     k = m.shape[0]
     cov = np.zeros((k, k))
+    mix = _Mixture.of(terms)
     for i in range(k):
         for j in range(i, k):
             if m[j] > max_ratio * m[i]:
                 break
-            s2, s1 = _pair_sums(terms, int(m[i]), int(m[j]), int(M[i]), int(M[j]), tau0)
+            s2, s1 = _pair_sums(mix, int(m[i]), int(m[j]), int(M[i]), int(M[j]), tau0)
             v = 2.0 * s2
             if ramp_sq:
                 v += 4.0 * ramp_sq * tau[i] ** 2 * tau[j] ** 2 * s1
