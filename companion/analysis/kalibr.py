@@ -10,8 +10,8 @@ from companion.samples import ACCEL_AXES, GYRO_AXES
 
 def kalibr_yaml(report: dict) -> str:
     """Kalibr imu.yaml from the longest IMU stream: N and K of each sensor (continuous-time SI densities, as the
-    report holds them: N in rad/s/sqrt(Hz) = rad/sqrt(s), K in rad/s^2/sqrt(Hz) = rad/s/sqrt(s); m/s for the
-    accelerometer).
+    report holds them: N in rad/s/sqrt(Hz) = rad/sqrt(s), K in rad/s^2/sqrt(Hz) = rad/s/sqrt(s); m/s in place of rad
+    for the accelerometer).
 
     K of an axis is the analysis' own (:func:`axis_random_walk`): the fitted K, or its 95 % upper bound where the
     fit did not resolve it (said in a comment). Kalibr takes one value per sensor: the largest over its three axes,
@@ -31,11 +31,13 @@ def kalibr_yaml(report: dict) -> str:
                 Ns.append(terms["white_noise"]["N"])
             k = axis_random_walk(r)
             if k is not None:
-                Ks.append(k.value)
-                if k.note:
-                    notes.append(f"{a}: {k.note}; {sensor}_random_walk is an upper bound")
+                Ks.append((k.value, a, k.note))
         out[f"{sensor}_noise_density"] = max(Ns) if Ns else 0.0
-        out[f"{sensor}_random_walk"] = max(Ks) if Ks else 0.0
+        out[f"{sensor}_random_walk"] = 0.0
+        if Ks:
+            value, axis, note = max(Ks, key=lambda k: k[0])
+            out[f"{sensor}_random_walk"] = value
+            notes.append(f"{sensor}_random_walk from {axis}: {note or 'its fitted K'}")
         if not Ns:
             notes.append(f"{sensor}: no usable axis; values 0")
     lines = ["# Kalibr IMU noise model written by `companion analyze` (continuous-time, SI):",
@@ -70,7 +72,7 @@ def axis_random_walk(entry: dict) -> AxisRandomWalk | None:
     if entry.get("tau"):
         return AxisRandomWalk(math.sqrt(3.0 * entry["adev"][-1] ** 2 / entry["tau"][-1]),
                               "no random-walk region in the record and no bound from the fit: "
-                              "sqrt(3 AVAR(tau_max) / tau_max)")
+                              "the upper bound sqrt(3 AVAR(tau_max) / tau_max)")
     return None
 
 
