@@ -41,11 +41,12 @@ Intervals (:func:`adev_ci`): v_hat EDF / v ~ chi^2(EDF), so the ``level`` interv
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Iterable, Mapping
 
 import numpy as np
 
-from companion.allan.memo import BoundedMemo
+from companion.allan.memo import BoundedMemo, release_free_memory
 
 #: power-law exponent alpha of the rate PSD (S_y ~ f^alpha) for the effects that are power laws
 ALPHA = {"quantization": 2, "white_noise": 0, "bias_instability": -1, "random_walk": -2}
@@ -147,8 +148,27 @@ _MAGNITUDE = {"white_noise": "N", "bias_instability": "B", "random_walk": "K", "
 _PAIR_FORMS = BoundedMemo(8192)
 
 
+@dataclass(frozen=True)
+class _Mixture:
+    """The terms of a covariance as the pair sums use them, made once per matrix: the kernel terms, their squared
+    magnitudes a (the quantization's Q^2 last when present) and shapes (:func:`_shape`)."""
+
+    kern: list
+    has_q: bool
+    a: np.ndarray
+    shapes: tuple
+
+    @classmethod
+    def of(cls, terms) -> "_Mixture":
+        kern = [t for t in terms if t["effect"] in _MAGNITUDE]
+        Q2 = sum(t["Q"] ** 2 for t in terms if t["effect"] == "quantization")
+        a = np.array([float(t[_MAGNITUDE[t["effect"]]]) ** 2 for t in kern] + ([Q2] if Q2 else []))
+        return cls(kern, bool(Q2), a, tuple(_shape(t) for t in kern))
+
+
 def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div: int = 32):
-    """(sum_ij c(j-i)^2, sum_ij c(j-i)) for cluster sizes m1 <= m2 (Riemann sum with step ~ m1/step_div).
+    """(sum_ij c(j-i)^2, sum_ij c(j-i)) for cluster sizes m1 <= m2 (Riemann sum with step ~ m1/step_div);
+    ``terms``: the term dicts or their :class:`_Mixture`.
 
     c is linear in the terms' squared magnitudes a_k (c = sum a_k c_k, c_k of the unit term), and the number
     of pairs at lag l is M1 + f(l) with f fixed by m1 and m2 (M1 - M2 = 2 (m2 - m1)) while the lags stay
@@ -156,28 +176,55 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     s2 = step (M1 a'G0 a + a'Gf a), s1 = step (M1 h0'a + hf'a). The forms depend only on the pair's geometry
     and the terms' shapes (filter, tau_c, frequency) and are remembered. Lags clipped by a short record
     (the longest cluster sizes) are summed with their own counts and not remembered."""
-    kern = [t for t in terms if t["effect"] in _MAGNITUDE]
-    Q2 = sum(t["Q"] ** 2 for t in terms if t["effect"] == "quantization")
-    a = np.array([float(t[_MAGNITUDE[t["effect"]]]) ** 2 for t in kern] + ([Q2] if Q2 else []))
+    mix = terms if isinstance(terms, _Mixture) else _Mixture.of(terms)
+    kern, has_q, a = mix.kern, mix.has_q, mix.a
     if a.size == 0:
         return 0.0, 0.0
     tail = _tail(kern, m2, tau0) if m2 <= 16 * m1 else 0  # long-memory tails: only near pairs correlate
     lo0, hi0 = -(2 * m2 + tail), 2 * m1 + tail
     lo, hi = max(lo0, -(M1 - 1)), min(hi0, M2 - 1)
     inside = lo == lo0 and hi == hi0
-    key = None
     if inside:
-        shapes = tuple((t["effect"], t.get("filter_hz"), t.get("sample_hz"), t.get("filter_order"), t.get("tau_c"),
-                        t.get("freq_hz"))
-                       for t in kern)
-        key = (m1, m2, M1 - M2, lo, hi, tau0, step_div, shapes, bool(Q2))
-        forms = _PAIR_FORMS.get(key, lambda: _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div,
+        key = (m1, m2, M1 - M2, lo, hi, tau0, step_div, mix.shapes, has_q)
+        forms = _PAIR_FORMS.get(key, lambda: _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div,
                                                           inside))
     else:
-        forms = _pair_forms(kern, bool(Q2), m1, m2, M1, M2, lo, hi, tau0, step_div, inside)
+        forms = _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside)
     G0, Gf, h0, hf = forms
     mm = float(M1) if inside else 0.0
     return float(mm * (a @ G0 @ a) + a @ Gf @ a), float(mm * (h0 @ a) + hf @ a)
+
+
+#: c_k(l) of one unit term per pair geometry: a fit's iterations change one term's shape (a Gauss-Markov tau_c)
+#: and keep the others', whose rows (the costly part of a pair's forms) are then looked up. 24 MB holds the rows
+#: of one axis' fit (13 MB on average for 1 M samples); other axes share few of them (:func:`forget_rows`)
+_UNIT_ROWS = BoundedMemo(1 << 16, read_only=True, max_bytes=24 << 20)
+
+
+def forget_rows() -> None:
+    """Drop the remembered unit-term rows and give the freed pages back: called when one record's analysis is
+    done (another record's filter and Gauss-Markov shapes differ, so its rows would only hold memory)."""
+    _UNIT_ROWS.clear()
+    release_free_memory()
+
+
+def _shape(term: Mapping) -> tuple:
+    """What fixes a term's G up to its magnitude."""
+    return (term["effect"], term.get("filter_hz"), term.get("sample_hz"), term.get("filter_order"), term.get("tau_c"),
+            term.get("freq_hz"))
+
+
+def _unit_row(term, l, shift, weight, step, tau0) -> np.ndarray:
+    """c(l) = sum_pq a_p b_q G(l + q - p) of one unit term at the lags ``l`` (tap offsets ``shift``, weights
+    ``weight``)."""
+    if np.all(shift % step == 0):
+        # the nine rows of lags l + shift are shifted copies of one grid of spacing `step`: the term is
+        # evaluated once per grid point (a quarter to a ninth of the lags) and the rows gathered from it
+        lo_shift = int(shift.min())
+        grid = np.arange(l[0] + lo_shift, l[-1] + int(shift.max()) + 1, step, dtype=np.int64)
+        at = np.arange(l.shape[0])[None, :] + ((shift - lo_shift) // step)[:, None]
+        return weight @ _gcov(term, grid, tau0)[at]
+    return weight @ _gcov(term, l[None, :] + shift[:, None], tau0)
 
 
 def _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside):
@@ -199,18 +246,9 @@ def _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside):
     unit = [dict(t, **{_MAGNITUDE[t["effect"]]: 1.0}) for t in kern]
     k = len(unit) + (1 if has_q else 0)
     C = np.zeros((k, l.shape[0]))
-    if np.all(shift % step == 0):
-        # the nine rows of lags l + shift are shifted copies of one grid of spacing `step`: each term is
-        # evaluated once per grid point (a quarter to a ninth of the lags) and the rows gathered from it
-        lo_shift = int(shift.min())
-        grid = np.arange(l[0] + lo_shift, l[-1] + int(shift.max()) + 1, step, dtype=np.int64)
-        at = np.arange(l.shape[0])[None, :] + ((shift - lo_shift) // step)[:, None]
-        for i, term in enumerate(unit):
-            C[i] = weight @ _gcov(term, grid, tau0)[at]
-    else:
-        lags = l[None, :] + shift[:, None]
-        for i, term in enumerate(unit):
-            C[i] = weight @ _gcov(term, lags, tau0)
+    for i, term in enumerate(unit):
+        C[i] = _UNIT_ROWS.get((_shape(term), m1, m2, lo, hi, step, tau0),
+                              lambda term=term: _unit_row(term, l, shift, weight, step, tau0))
     # pairs (i, j), 0 <= i < M1, 0 <= j < M2, with j - i = l: M1 + f(l) within the record
     count = (np.minimum(M1 - 1, M2 - 1 - l) - np.maximum(0, -l) + 1).astype(float)
     f = count - M1 if inside else np.maximum(count, 0.0)
@@ -256,11 +294,12 @@ def oavar_covariance(terms: Iterable[Mapping], m, n: int, rate_hz: float, max_ra
     ramp_sq = sum(t["R"] ** 2 for t in terms if t["effect"] == "ramp")
     k = m.shape[0]
     cov = np.zeros((k, k))
+    mix = _Mixture.of(terms)
     for i in range(k):
         for j in range(i, k):
             if m[j] > max_ratio * m[i]:
                 break
-            s2, s1 = _pair_sums(terms, int(m[i]), int(m[j]), int(M[i]), int(M[j]), tau0)
+            s2, s1 = _pair_sums(mix, int(m[i]), int(m[j]), int(M[i]), int(M[j]), tau0)
             v = 2.0 * s2
             if ramp_sq:
                 v += 4.0 * ramp_sq * tau[i] ** 2 * tau[j] ** 2 * s1

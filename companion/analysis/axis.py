@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.allan.adev import cluster_sizes
-from companion.allan.confidence import adev_ci, edf_model, edf_simple
+from companion.allan.confidence import adev_ci, edf_model, edf_simple, forget_rows
 from companion.allan.lsb import lsb_report
 from companion.allan.pooled import pooled_cluster_sizes, pooled_edf, pooled_oavar
 from companion.allan.terms import LINEAR_PARAM
@@ -71,10 +71,10 @@ def _usable_pieces(y, segments, out) -> list | None:
         out["status"] = "too_short"
         out["note"] = f"only {n} samples"
         return None
-    allv = np.concatenate(pieces)
-    if np.all(allv == allv[0]):
+    first = pieces[0][0]
+    if all(np.all(p == first) for p in pieces):
         out["status"] = "constant"
-        out["note"] = ("all samples equal (" + ("all zero" if allv[0] == 0 else f"{allv[0]:g}") + "): no noise to "
+        out["note"] = ("all samples equal (" + ("all zero" if first == 0 else f"{first:g}") + "): no noise to "
                        "analyse; a sensor at rest reads noise, so this one is frozen, dead or below its resolution")
         return None
     return pieces
@@ -130,13 +130,23 @@ def _bounds(fit, fp: _FitPoints, rate_hz, edf0) -> list:
     return bounds
 
 
+def _points_at(fp: _FitPoints, m, rate_hz):
+    """(tau, avar, m) of the pooled AVAR at cluster sizes ``m``: the fit's octave points where ``m`` is the same
+    set (the default --taus; each point costs passes over the whole record), else computed."""
+    m = np.asarray(m, dtype=np.int64)
+    if np.array_equal(m[(m >= 1) & (m <= max(fp.lengths) // 2)], fp.m):
+        return fp.tau, fp.avar, fp.m
+    tau, avar, m, _ = pooled_oavar(fp.pieces, rate_hz, m=m)
+    return tau, avar, m
+
+
 def _curve(fit, fp: _FitPoints, taus, rate_hz, level) -> dict:
     """Step: the Allan deviation at the requested cluster times with its ``level`` interval, the EDF from the
     fitted model (:func:`companion.allan.confidence.edf_model`, pooled where there are pieces) where it is
     finite, else the simple one."""
     longest = max(fp.lengths)
     m = parse_taus(taus, longest, rate_hz) if isinstance(taus, str) else cluster_sizes(longest, taus)
-    tau, avar, m, _ = pooled_oavar(fp.pieces, rate_hz, m=m)
+    tau, avar, m = _points_at(fp, m, rate_hz)
     plain = [{k: v for k, v in t.items() if k != "ci95"} for t in fit.terms]
     simple = np.array([edf_simple(longest + 1, mm, 0) for mm in m])
     if plain:
@@ -227,6 +237,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     fit, edf0 = _fit(fp, rate_hz, effects, level, white_filter, sampling)
     bounds = _bounds(fit, fp, rate_hz, edf0)
     curve = _curve(fit, fp, taus, rate_hz, level)
+    forget_rows()
     notes = list(fit.notes)
     refit: dict = {}
     terms, bounds = _white_rules(fit, fp, rate_hz, edf0, bounds, notes, refit)

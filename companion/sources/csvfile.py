@@ -29,6 +29,14 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 #: off by the same factor's square root (a 1 kHz log read as 1 GHz gives N 1000x too small).
 MIN_RATE_HZ, MAX_RATE_HZ = 0.01, 1e5
 CSV_KEY = StreamKey(0, 0, "CSV", 0)
+#: text decompressed and parsed at a time: large enough that numpy's parser dominates, small beside the columns
+BLOCK_BYTES = 1 << 22
+#: the shortest row of seven numbers ("0,0,0,0,0,0,0\\n"): the most rows a text of a given size can hold
+MIN_ROW_BYTES = 14
+#: times tested per block for whole numbers
+WHOLE_BLOCK = 1 << 16
+#: a gzip member's header and trailer take 18 bytes: a shorter file has no size trailer to read
+GZIP_MIN_BYTES = 18
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -55,8 +63,31 @@ def read_csv(path, time_unit: str | None = None) -> RawStream:
     path = Path(path)
     if time_unit is not None and time_unit not in TIME_UNITS:
         raise CompanionError(f"time unit {time_unit!r}: expected one of {', '.join(TIME_UNITS)}")
-    data = _read_bytes(path)
-    head, _, body = data.partition(b"\n")
+    cols = _read_columns(path)
+    if cols is None:  # a file the block reader refuses: read whole, for the error's line number
+        cols = _columns_of(_read_whole(path))
+    t, gyro, accel = cols
+    if t.shape[0] == 0:
+        raise CompanionError(f"{path}: no data rows after the header")
+    bad = ~(np.isfinite(t) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1))
+    if np.any(bad):
+        raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {int(np.flatnonzero(bad)[0]) + 1}")
+    if time_unit is None:
+        check_time_unit(path, t)
+    else:
+        t *= TIME_UNITS[time_unit]
+    check_rate(path, t)
+    notes = []
+    back = int(np.count_nonzero(np.diff(t) < 0))
+    if back:
+        order = np.argsort(t, kind="stable")
+        t, gyro, accel = t[order], gyro[order], accel[order]
+        notes.append(f"{path.name}: rows were not in time order ({back} backward steps): sorted by time_s")
+    return RawStream(CSV_KEY, t, gyro, accel, None, True, None, None, 0.0, notes)
+
+
+def _usecols(path, head: bytes) -> list[int]:
+    """The indices of COLUMNS in the header line ``head``."""
     try:
         header = head.decode("utf-8-sig").strip()
     except UnicodeDecodeError:
@@ -66,39 +97,97 @@ def read_csv(path, time_unit: str | None = None) -> RawStream:
     if missing:
         raise CompanionError(f"{path}: missing column(s) {', '.join(missing)}; expected header "
                              f"{','.join(COLUMNS)} (gyro rad/s, accel m/s^2)")
-    usecols = [names.index(c) for c in COLUMNS]
+    return [names.index(c) for c in COLUMNS]
+
+
+def _read_whole(path) -> np.ndarray:
+    """The data rows (COLUMNS order) of the whole file parsed at once: the errors name the file's line."""
+    data = _read_bytes(path)
+    head, _, body = data.partition(b"\n")
+    usecols = _usecols(path, head)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
-            arr = np.loadtxt(io.BytesIO(body), delimiter=",", usecols=usecols, ndmin=2, dtype=np.float64)
+        return _parse(body, usecols)
     except (ValueError, IndexError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if "invalid column index" in msg:
             raise CompanionError(f"{path}: a data row has fewer columns than the header "
-                                 f"({len(names)})") from None
+                                 f"({len(head.split(b','))})") from None
         msg = _to_file_lines(msg)  # numpy counts data rows from 0; the file has a header line first
         raise CompanionError(f"{path}: bad CSV data: {msg}") from None
-    if arr.shape[0] == 0:
-        raise CompanionError(f"{path}: no data rows after the header")
-    if not np.all(np.isfinite(arr)):
-        row = int(np.flatnonzero(~np.all(np.isfinite(arr), axis=1))[0])
-        raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {row + 1}")
-    t = arr[:, 0].copy()
-    if time_unit is None:
-        check_time_unit(path, t)
-    else:
-        t = t * TIME_UNITS[time_unit]
-        arr[:, 0] = t
-    check_rate(path, t)
-    notes = []
-    back = int(np.count_nonzero(np.diff(t) < 0))
-    if back:
-        order = np.argsort(t, kind="stable")
-        arr = arr[order]
-        t = arr[:, 0].copy()
-        notes.append(f"{path.name}: rows were not in time order ({back} backward steps): sorted by time_s")
-    return RawStream(CSV_KEY, t, arr[:, 1:4].copy(), arr[:, 4:7].copy(), None, True,
-                     None, None, 0.0, notes)
+
+
+def _parse(text: bytes, usecols) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported by the caller
+        return np.loadtxt(io.BytesIO(text), delimiter=",", usecols=usecols, ndmin=2, dtype=np.float64)
+
+
+def _columns_of(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return arr[:, 0].copy(), arr[:, 1:4].copy(), arr[:, 4:7].copy()
+
+
+class _Columns:
+    """Time, gyro and accel columns filled block by block, with room for ``capacity`` rows (grown when short).
+    Rows not yet filled are never touched, so an over-estimated capacity costs address space, not memory."""
+
+    def __init__(self, capacity: int):
+        self.n = 0
+        self.t, self.gyro, self.accel = np.empty(capacity), np.empty((capacity, 3)), np.empty((capacity, 3))
+
+    def add(self, arr: np.ndarray) -> None:
+        k = arr.shape[0]
+        if self.n + k > self.t.shape[0]:
+            self._grow(max(2 * self.t.shape[0], self.n + k))
+        self.t[self.n:self.n + k] = arr[:, 0]
+        self.gyro[self.n:self.n + k] = arr[:, 1:4]
+        self.accel[self.n:self.n + k] = arr[:, 4:7]
+        self.n += k
+
+    def _grow(self, cap: int) -> None:
+        t, gyro, accel = np.empty(cap), np.empty((cap, 3)), np.empty((cap, 3))
+        t[:self.n], gyro[:self.n], accel[:self.n] = self.t[:self.n], self.gyro[:self.n], self.accel[:self.n]
+        self.t, self.gyro, self.accel = t, gyro, accel
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.t[:self.n], self.gyro[:self.n], self.accel[:self.n]
+
+
+def _open(path: Path):
+    """(binary stream of the file's text, its size in bytes: for a gzip file the trailer's, modulo 2^32)."""
+    size = path.stat().st_size
+    if not path.name.endswith(".gz"):
+        return open(path, "rb"), size
+    if size >= GZIP_MIN_BYTES:
+        with open(path, "rb") as fh:
+            fh.seek(-4, 2)
+            size = int.from_bytes(fh.read(4), "little")
+    return gzip.open(path, "rb"), size
+
+
+def _read_columns(path: Path):
+    """The columns read in blocks of BLOCK_BYTES (a block is parsed whole rows at a time, and the whole text is
+    never held: the peak memory is the columns themselves); None where a block does not parse, the caller
+    then reads the file whole for the error message with its line number."""
+    try:
+        fh, size = _open(path)
+        with fh:
+            usecols = _usecols(path, fh.readline())
+            cols = _Columns(max(size // MIN_ROW_BYTES, 1))
+            rest = b""
+            while True:
+                block = fh.read(BLOCK_BYTES)
+                text = rest + block
+                cut = text.rfind(b"\n") + 1 if block else len(text)
+                rest = text[cut:]
+                if cut and text[:cut].strip():
+                    arr = _parse(text[:cut], usecols)
+                    if arr.shape[1] != len(COLUMNS):
+                        return None
+                    cols.add(arr)
+                if not block:
+                    return cols.arrays()
+    except (ValueError, IndexError, OSError, EOFError, zlib.error):
+        return None
 
 
 def check_time_unit(path, t: np.ndarray) -> None:
@@ -109,12 +198,10 @@ def check_time_unit(path, t: np.ndarray) -> None:
     a 100 Hz log look like 0.1 Hz data and N 30x too large, so it is refused with the fix."""
     if t.shape[0] < 3:
         return
-    d = np.diff(np.sort(t))
-    d = d[d > 0]
-    if d.shape[0] == 0:
+    step = _median_step(t)
+    if step is None:
         return
-    step = float(np.median(d))
-    integral = bool(np.all(t == np.round(t)))
+    integral = _all_whole(t)
     if step >= 1.0 and (integral or float(np.max(np.abs(t))) > 1e5):
         unit, div = ("microseconds", 1e6) if step >= 100.0 else ("milliseconds", 1e3)
         raise CompanionError(f"{path}: time_s looks like {unit} (median step {step:g}, "
@@ -125,16 +212,30 @@ def check_time_unit(path, t: np.ndarray) -> None:
 
 def check_rate(path, t: np.ndarray) -> None:
     """Refuse a sample rate no gyro log has (see ``MIN_RATE_HZ``, ``MAX_RATE_HZ``), with the reason."""
-    d = np.diff(np.sort(t))
-    d = d[d > 0]
-    if d.shape[0] == 0:
+    step = _median_step(t)
+    if step is None:
         return
-    step = float(np.median(d))
     rate = 1.0 / step
     if not (MIN_RATE_HZ <= rate <= MAX_RATE_HZ):
         raise CompanionError(f"{path}: time_s gives {rate:.3g} Hz (median step {step:.3g} s), outside the "
                              f"{MIN_RATE_HZ:g} Hz - {MAX_RATE_HZ:.0f} Hz of any gyro log: a wrong time unit "
                              "(--time-unit s|ms|us) or a broken time column")
+
+
+def _median_step(t: np.ndarray) -> float | None:
+    """The median of the positive steps of the sorted times (None without any); a column already in order
+    (the usual case) is not copied to be sorted."""
+    d = np.diff(t)
+    if np.any(d < 0):
+        d = np.diff(np.sort(t))
+    if not np.all(d > 0):
+        d = d[d > 0]
+    return float(np.median(d)) if d.shape[0] else None
+
+
+def _all_whole(t: np.ndarray) -> bool:
+    """Whether every time is a whole number, tested a block at a time (no rounded copy of the column)."""
+    return all(bool(np.all(b == np.round(b))) for b in np.array_split(t, max(1, t.shape[0] // WHOLE_BLOCK)))
 
 
 def _to_file_lines(msg: str) -> str:

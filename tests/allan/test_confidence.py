@@ -164,3 +164,32 @@ def test_covariance_of_the_longest_clusters_and_a_ramp_equals_the_matrix_computa
     d = np.sqrt(np.outer(np.diag(ref), np.diag(ref)))
     assert np.max(np.abs(ours - ref) / d) < 0.01, np.round((ours - ref) / d, 3)
     assert np.linalg.eigvalsh(ours / d).min() > -1e-9  # a covariance
+
+
+def test_remembered_rows_give_the_covariance_of_a_fresh_computation(monkeypatch):
+    """The unit-term rows are remembered per pair geometry and term shape: after a fit step changes one term's
+    shape (a Gauss-Markov tau_c) the other terms' rows are looked up, and the covariance is bit for bit the one
+    computed from nothing; so it is where the byte budget clears the rows in the middle of a matrix. Both
+    equal the difference-matrix construction (within the Riemann sum's 1 %)."""
+    from companion.allan import confidence
+
+    rate, n = 50.0, 400
+    m = np.array([1, 2, 4, 8, 16, 64])  # 64: the Riemann step (m / 32) and its gathered grid
+    base = [{"effect": "white_noise", "N": 2e-3, "filter_hz": 8.0, "sample_hz": rate},
+            {"effect": "random_walk", "K": 3e-4}, {"effect": "gauss_markov", "sigma": 4e-3, "tau_c": 0.3}]
+    moved = [dict(t, tau_c=0.5) if t["effect"] == "gauss_markov" else t for t in base]
+
+    def fresh(terms):
+        confidence._PAIR_FORMS.clear()
+        confidence.forget_rows()
+        return oavar_covariance(terms, m, n, rate)
+
+    fresh(base)
+    confidence._PAIR_FORMS.clear()  # the forms change with tau_c anyway: only the rows are looked up
+    reused = oavar_covariance(moved, m, n, rate)
+    assert np.array_equal(reused, fresh(moved))
+    monkeypatch.setattr(confidence._UNIT_ROWS, "max_bytes", 4096)  # a few rows: cleared mid-matrix
+    assert np.array_equal(fresh(moved), reused)
+    ref = _brute_force_cov(moved, m, n, rate)
+    d = np.sqrt(np.outer(np.diag(ref), np.diag(ref)))
+    assert np.max(np.abs(reused - ref) / d) < 0.01
