@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from companion.errors import CompanionError
+from companion.sources.kind import opens_as_gzip
 from companion.samples import AXES, StreamKey
 from companion.sources.decode import RawStream
 
@@ -33,7 +34,7 @@ CSV_KEY = StreamKey(0, 0, "CSV", 0)
 
 def _read_bytes(path: Path) -> bytes:
     try:
-        if path.name.endswith(".gz"):
+        if opens_as_gzip(path):
             with gzip.open(path, "rb") as fh:
                 return fh.read()
         return path.read_bytes()

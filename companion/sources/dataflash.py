@@ -41,6 +41,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from companion.errors import CompanionError
+from companion.sources.kind import opens_as_gzip
 
 HEAD1, HEAD2 = 0xA3, 0x95  #: the two bytes that start every message
 FMT_TYPE = 0x80  #: message type of the FMT records that define the others
@@ -209,7 +210,7 @@ def read_bytes(path) -> np.ndarray:
     """The bytes of a (possibly gzip-compressed) log as uint8; plain files are memory-mapped."""
     path = Path(path)
     try:
-        if path.name.lower().endswith(".gz"):
+        if opens_as_gzip(path):
             with gzip.open(path, "rb") as fh:
                 return np.frombuffer(fh.read(), dtype=np.uint8)
         with open(path, "rb") as fh:
