@@ -159,6 +159,7 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
     if log.bad_bytes - log.truncated > 0:
         meta["notes"].append(f"{name}: {log.bad_bytes - log.truncated} bytes outside valid messages skipped "
                              "(corrupt blocks or headers of undefined message types)")
+    meta["notes"] += [f"{name}: {text}" for text in log.implausible]
     for mname, why in sorted(log.damaged.items()):
         meta["notes"].append(f"{name}: message {mname} not read, its FMT record is damaged: {why}")
     totals["damaged_types"] = len(log.damaged)

@@ -30,6 +30,10 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 #: off by the same factor's square root (a 1 kHz log read as 1 GHz gives N 1000x too small).
 MIN_RATE_HZ, MAX_RATE_HZ = 0.01, 1e5
 CSV_KEY = StreamKey(0, 0, "CSV", 0)
+WHOLE_TOLERANCE = 1e-9  #: relative: a time this close to a whole number is one (float noise of a ms clock)
+#: a restart (time stepping back) between runs this long (median) is a new series; shorter runs are rows out
+#: of order: 100 rows is a second at 100 Hz, far more than a shuffled export's runs of about 2
+RESTART_RUN_ROWS = 100
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -85,57 +89,111 @@ def read_csv(path, time_unit: str | None = None) -> RawStream:
         row = int(np.flatnonzero(~np.all(np.isfinite(arr), axis=1))[0])
         raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {row + 1}")
     t = arr[:, 0].copy()
+    check_resolution(path, t)
     if time_unit is None:
         check_time_unit(path, t)
     else:
         t = t * TIME_UNITS[time_unit]
         arr[:, 0] = t
     check_rate(path, t)
-    notes = []
-    back = int(np.count_nonzero(np.diff(t) < 0))
-    if back:
-        order = np.argsort(t, kind="stable")
-        arr = arr[order]
-        t = arr[:, 0].copy()
-        notes.append(f"{path.name}: rows were not in time order ({back} backward steps): sorted by time_s")
-    return RawStream(CSV_KEY, t, arr[:, 1:4].copy(), arr[:, 4:7].copy(), None, True,
+    arr, notes = in_time_order(path, arr)
+    return RawStream(CSV_KEY, arr[:, 0].copy(), arr[:, 1:4].copy(), arr[:, 4:7].copy(), None, True,
                      None, None, 0.0, notes)
 
 
-def check_time_unit(path, t: np.ndarray) -> None:
-    """Refuse a ``time_s`` column that is evidently in milliseconds or microseconds.
-
-    IMU data come at >= 1 Hz; a median step of >= 1 with whole-number times (or times beyond 1e5, i.e. more
-    than a day "since boot") is a clock in ms (step 1-100) or us (step >= 100). Read as seconds it would make
-    a 100 Hz log look like 0.1 Hz data and N 30x too large, so it is refused with the fix."""
-    if t.shape[0] < 3:
-        return
+def _median_step(t: np.ndarray) -> float | None:
+    """The median positive interval of the sorted times, None when there is none."""
     d = np.diff(np.sort(t))
     d = d[d > 0]
-    if d.shape[0] == 0:
+    return float(np.median(d)) if d.shape[0] else None
+
+
+def _whole_numbers(t: np.ndarray) -> bool:
+    """True when every time is a whole number up to float noise (30.000000000000004 from 3 * 10.0 ms):
+    a relative tolerance of 1e-9 is a million times float64's rounding and far below any clock's tick."""
+    return bool(np.all(np.abs(t - np.round(t)) <= WHOLE_TOLERANCE * np.maximum(1.0, np.abs(t))))
+
+
+def check_resolution(path, t: np.ndarray) -> None:
+    """Refuse a time column coarser than the sample rate: more than half the rows repeat the time of the row
+    before (whole-second times on 100 rows a second). Read at any unit, the repeats would be dropped as
+    duplicates and the few rows left give a rate and noise density off by the rows-per-tick factor; a few
+    repeated rows (a logger writing a row twice) stay below the half and are counted by the timing rules."""
+    n = t.shape[0]
+    if n < 3:
         return
-    step = float(np.median(d))
-    integral = bool(np.all(t == np.round(t)))
-    if step >= 1.0 and (integral or float(np.max(np.abs(t))) > 1e5):
+    distinct = n - int(np.count_nonzero(np.diff(t) == 0))  # runs of equal times, in file order
+    if 2 * distinct < n:
+        raise CompanionError(f"{path}: {n} rows carry only {distinct} distinct times ({n / distinct:.3g} rows per "
+                             "time value): the time column's resolution is coarser than the sample rate, so the "
+                             "samples cannot be timed; write time_s with more digits")
+
+
+def check_time_unit(path, t: np.ndarray) -> None:
+    """Refuse a ``time_s`` column whose spacing says it is not in seconds, or may not be.
+
+    The unit is decided from the median spacing of the sorted times (robust to gaps and a few bad rows). A
+    median step below 1 is seconds (gyro logs run at >= 1 Hz). A median step >= 1 with whole numbers (up to
+    float noise, :func:`_whole_numbers`) or times beyond 1e5 (more than a day "since boot") is a clock in ms
+    (step 1-100) or us (step >= 100). Any other step >= 1 is ambiguous (2.5 is 0.4 Hz in s and 400 Hz in
+    ms): refused with the rates each unit gives. Read as seconds, a 100 Hz ms log looks like 0.1 Hz data and
+    its N is 30x too large, so the user chooses with --time-unit."""
+    if t.shape[0] < 3:
+        return
+    step = _median_step(t)
+    if step is None or step < 1.0:
+        return
+    integral = _whole_numbers(t)
+    if integral or float(np.max(np.abs(t))) > 1e5:
         unit, div = ("microseconds", 1e6) if step >= 100.0 else ("milliseconds", 1e3)
         raise CompanionError(f"{path}: time_s looks like {unit} (median step {step:g}, "
                              f"{'whole numbers' if integral else 'values up to %g' % float(np.max(t))}): "
                              f"pass --time-unit {'us' if div == 1e6 else 'ms'} (or divide the column by {div:g}); "
                              "--time-unit s if the times really are whole seconds")
+    raise CompanionError(f"{path}: time_s steps by a median of {step:g}: {1 / step:.3g} Hz in seconds, "
+                         f"{1e3 / step:.3g} Hz in milliseconds, {1e6 / step:.3g} Hz in microseconds; pass "
+                         "--time-unit s, ms or us to say which")
 
 
 def check_rate(path, t: np.ndarray) -> None:
     """Refuse a sample rate no gyro log has (see ``MIN_RATE_HZ``, ``MAX_RATE_HZ``), with the reason."""
-    d = np.diff(np.sort(t))
-    d = d[d > 0]
-    if d.shape[0] == 0:
+    step = _median_step(t)
+    if step is None:
         return
-    step = float(np.median(d))
     rate = 1.0 / step
     if not (MIN_RATE_HZ <= rate <= MAX_RATE_HZ):
         raise CompanionError(f"{path}: time_s gives {rate:.3g} Hz (median step {step:.3g} s), outside the "
                              f"{MIN_RATE_HZ:g} Hz - {MAX_RATE_HZ:.0f} Hz of any gyro log: a wrong time unit "
                              "(--time-unit s|ms|us) or a broken time column")
+
+
+def in_time_order(path, arr: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """The rows (time in s in column 0) in the order they are read, and the note on that order.
+
+    Rows in time order are kept. Where the time restarts (steps back by more than the reset threshold of
+    :mod:`companion.sources.timing`, max(1 s, 10 periods), between runs of at least ``RESTART_RUN_ROWS``
+    rows, median) the file holds series one after another: the rows stay in file order and the timing rules
+    make each restart a new segment, as a reboot in a log; sorting would interleave the series into one
+    with doubled rate. Otherwise the backward steps are rows out of order (an export that shuffled them):
+    the rows are sorted by time."""
+    name = Path(path).name
+    t = arr[:, 0]
+    d = np.diff(t)
+    back = int(np.count_nonzero(d < 0))
+    if not back:
+        return arr, []
+    from companion.sources.timing import step_rules
+
+    reset_s = step_rules(_median_step(t) or 1.0).reset_s
+    restarts = np.flatnonzero(d < -reset_s)
+    if restarts.shape[0]:
+        runs = np.diff(np.r_[0, restarts + 1, t.shape[0]])
+        if float(np.median(runs)) >= RESTART_RUN_ROWS:
+            lines = ", ".join(str(int(i) + 3) for i in restarts[:3]) + (", ..." if restarts.shape[0] > 3 else "")
+            return arr, [f"{name}: time_s restarts {restarts.shape[0]} time(s) (line {lines}): the rows are read "
+                         "in file order, each restart a new segment, not sorted into the earlier rows"]
+    order = np.argsort(t, kind="stable")
+    return arr[order], [f"{name}: rows were not in time order ({back} backward steps): sorted by time_s"]
 
 
 def _to_file_lines(msg: str) -> str:

@@ -81,6 +81,9 @@ class DataFlashLog:
     #: their messages are skipped and reported, never decoded with a wrong layout
     damaged: dict[str, str] = field(default_factory=dict)
     truncated: int = 0  # bytes of a last message cut short by the end of the file
+    #: records skipped as implausible (damaged values that decode, such as an IMU instance no autopilot has):
+    #: one sentence each, shown as notes
+    implausible: list[str] = field(default_factory=list)
 
     def counts(self) -> dict[str, int]:
         return {self.formats[t].name: int(o.shape[0]) for t, o in self.offsets.items() if t in self.formats}
