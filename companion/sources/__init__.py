@@ -159,6 +159,8 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
     if log.bad_bytes - log.truncated > 0:
         meta["notes"].append(f"{name}: {log.bad_bytes - log.truncated} bytes outside valid messages skipped "
                              "(corrupt blocks or headers of undefined message types)")
+    if log.text_lines_skipped:
+        meta["notes"].append(f"{name}: {log.text_lines_skipped} line(s) of the text log fit no FMT layout, skipped")
     meta["notes"] += [f"{name}: {text}" for text in log.implausible]
     for mname, why in sorted(log.damaged.items()):
         meta["notes"].append(f"{name}: message {mname} not read, its FMT record is damaged: {why}")

@@ -84,6 +84,7 @@ class DataFlashLog:
     #: records skipped as implausible (damaged values that decode, such as an IMU instance no autopilot has):
     #: one sentence each, shown as notes
     implausible: list[str] = field(default_factory=list)
+    text_lines_skipped: int | None = None  # a text log (Mission Planner .log): lines that fit no layout
 
     def counts(self) -> dict[str, int]:
         return {self.formats[t].name: int(o.shape[0]) for t, o in self.offsets.items() if t in self.formats}
@@ -364,4 +365,14 @@ def _orbit(succ: np.ndarray, known: np.ndarray, block: int = 1 << 18) -> tuple[n
 
 
 def open_log(path) -> DataFlashLog:
-    return index(read_bytes(path), str(path))
+    """The indexed log of a binary DataFlash file or of a DataFlash text log (packed to binary first,
+    :mod:`companion.sources.dataflash_text`; its skipped lines are counted in ``text_lines_skipped``)."""
+    from companion.sources import dataflash_text
+
+    buf = read_bytes(path)
+    if buf.shape[0] and buf[0] != HEAD1 and dataflash_text.is_text_log(bytes(buf[:65536])):
+        data, skipped = dataflash_text.to_binary(bytes(buf))
+        log = index(np.frombuffer(data, dtype=np.uint8), str(path))
+        log.text_lines_skipped = skipped
+        return log
+    return index(buf, str(path))

@@ -4,9 +4,9 @@ discovery all use, so that a file one command reads is read the same way by ever
 A file's kind comes from its content (:func:`content_kind`: magic bytes and structure, through gzip when the
 file is gzip-compressed), with the name as a hint: where the content is not recognised the name decides (the
 reader of that kind then says what is wrong with the file); where the two disagree the content wins and
-:func:`decide` returns a one-line note naming both. A file that cannot be read by content (a Git LFS pointer,
-a DataFlash text log) is refused with what it is and what to do. A spec that is not an existing file is
-classified by name: a log suffix (optionally followed by ``.gz``), else a connection string.
+:func:`decide` returns a one-line note naming both (a DataFlash text log, Mission Planner's ``.log``, is read as
+DataFlash with such a note). A file that holds no log (a Git LFS pointer) is refused with what it is and what
+to do. A spec that is not an existing file is classified by name: a log suffix (optionally followed by ``.gz``), else a connection string.
 Tlog names are tested before DataFlash ``.bin`` because MAVProxy/QGC also write ``.tlog.bin``.
 """
 
@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from companion.errors import CompanionError
+from companion.sources.dataflash_text import is_text_log
 
 #: kind -> file-name suffixes (lower case, without a trailing ``.gz``), in the order they are tested
 FILE_SUFFIXES = {
@@ -34,6 +35,7 @@ LOG_SUFFIXES = tuple(s + gz for suffixes in FILE_SUFFIXES.values() for s in suff
 #: how a note names each kind's content
 KIND_WORDS = {"tlog": "a MAVLink telemetry log (tlog)", "csv": "a CSV file", "dataflash": "a DataFlash log",
               "ulog": "a PX4 ULog"}
+TEXT_LOG_WORD = "a DataFlash text log (Mission Planner .log)"  #: how a note names a text log's content
 #: how the reading is named ("read as DataFlash")
 KIND_NAMES = {"tlog": "tlog", "csv": "CSV", "dataflash": "DataFlash", "ulog": "ULog"}
 
@@ -45,8 +47,6 @@ HEAD_BYTES = 65536  #: bytes of a file's (decompressed) start read to decide its
 TLOG_RECORDS = 3  #: consecutive well-formed tlog records needed (chance of 3 in random bytes < 1e-7)
 TLOG_SEARCH = 1024  #: a tlog may start mid-record (a capture joined late): look for the chain this far in
 STAMP_BYTES = 8  #: a tlog record's big-endian unix-microsecond time stamp before each frame
-#: a DataFlash text log line: a message name, a comma, a value (Mission Planner's .log, mavlogdump --format)
-_TEXT_FMT_LINE = re.compile(rb"^FMT, *\d+, *\d+, *[A-Za-z0-9_]+, *[A-Za-z]+,", re.MULTILINE)
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,7 @@ class Content:
     kind: str | None
     gzip: bool = False
     refusal: str | None = None
+    text: bool = False  # a DataFlash text log (Mission Planner .log)
 
 
 @dataclass(frozen=True)
@@ -156,10 +157,8 @@ def _text_kind(path: Path, head: bytes) -> Content:
         what = f" of a {int(size.group(1)):,} byte file" if size else ""
         return Content(None, refusal=f"{path}: a Git LFS pointer{what}, not the log itself: fetch the log "
                                      "with `git lfs pull` (in the repository that holds it) and read it again")
-    if _TEXT_FMT_LINE.search(head):
-        return Content(None, refusal=f"{path}: a DataFlash text log (Mission Planner .log: lines 'FMT, ...'), "
-                                     "which companion does not read: use the flight's binary DataFlash log "
-                                     "(.bin, as downloaded from the autopilot)")
+    if is_text_log(head):
+        return Content("dataflash", text=True)
     first = head.split(b"\n", 1)[0].decode("utf-8-sig", errors="replace").lower()
     if "time_s" in [c.strip() for c in first.split(",")]:
         return Content("csv")
@@ -185,7 +184,7 @@ def content_kind(path) -> Content | None:
     if _has_dataflash_fmt(head):
         return Content("dataflash", gz)
     c = _text_kind(path, head)
-    return Content(c.kind, gz, c.refusal)
+    return Content(c.kind, gz, c.refusal, c.text)
 
 
 def decide(spec) -> Decision:
@@ -197,9 +196,10 @@ def decide(spec) -> Decision:
         content = content_kind(path)
         if content is not None and content.refusal:
             raise CompanionError(content.refusal)
-        if content is not None and content.kind is not None and content.kind != by_name:
+        if content is not None and content.kind is not None and (content.kind != by_name or content.text):
             kind = content.kind
-            return Decision(kind, f"{path.name}: the content is {KIND_WORDS[kind]}; read as {KIND_NAMES[kind]}")
+            word = TEXT_LOG_WORD if content.text else KIND_WORDS[kind]
+            return Decision(kind, f"{path.name}: the content is {word}; read as {KIND_NAMES[kind]}")
     if by_name is not None:
         return Decision(by_name)
     from companion.sources.connection import is_connection_string

@@ -1,5 +1,5 @@
 """A file's kind from its content, the name as a hint: a log renamed to another kind's suffix is read by what
-it holds with one note naming both; a Git LFS pointer and a DataFlash text log are refused with what they are;
+it holds with one note naming both; a Git LFS pointer is refused with what it is; a DataFlash text log (Mission Planner .log) is read;
 a gzip file is opened through gzip whatever its name."""
 
 from __future__ import annotations
@@ -104,22 +104,6 @@ def test_a_git_lfs_pointer_is_named_not_read(tmp_path, capsys, name):
                    "the log with `git lfs pull` (in the repository that holds it) and read it again\n")
 
 
-MP_LOG = """FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns
-FMT, 130, 45, IMU, QBffffffIIfBBHH, TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz
-PARM, 31056000, INS_GYRO_FILTER, 20
-IMU, 31057000, 0, 0.001, -0.002, 0.0003, 0.01, 0.02, -9.81, 0, 0, 40.5, 1, 1, 1000, 1000
-"""
-
-
-def test_a_mission_planner_text_log_is_named(tmp_path, capsys):
-    """It gave "unknown file type"."""
-    p = tmp_path / "2024-05-01 10-00-00.log"
-    p.write_text(MP_LOG)
-    assert main(["inspect", str(p)]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "a DataFlash text log (Mission Planner .log" in err
-
-
 def test_unrecognised_content_keeps_the_name_and_its_readers_error(tmp_path, capsys):
     p = tmp_path / "junk.bin"
     p.write_bytes(bytes(range(256)) * 4)
@@ -134,3 +118,42 @@ def test_unrecognised_content_keeps_the_name_and_its_readers_error(tmp_path, cap
 def test_a_spec_that_is_no_file_is_classified_by_name(tmp_path):
     assert kind_of(tmp_path / "missing.tlog") == "tlog"
     assert kind_of("udpin:0.0.0.0:14550") == "connection"
+
+
+def _as_text_log(binary, text):
+    """The Mission Planner text form of a binary log: one ``NAME, value, ...`` line per message (DFReader's
+    values: scaled formats divided, strings decoded), FMT lines included."""
+    from pymavlink import DFReader
+
+    r = DFReader.DFReader_binary(str(binary), zero_time_base=False)
+    lines = []
+    while True:
+        m = r.recv_msg()
+        if m is None:
+            break
+        lines.append(", ".join([m.get_type()] + [str(getattr(m, c)) for c in m.get_fieldnames()]))
+    text.write_text("\n".join(lines) + "\n")
+
+
+def test_a_mission_planner_text_log_is_read_as_its_binary_log(tmp_path, capsys):
+    """It gave "unknown file type"; read now with the DataFlash reader's numbers and one note."""
+    from companion.sim.dataflash_writer import write_imu_log
+
+    t, g, a = _data()
+    write_imu_log(tmp_path / "f.bin", t, np.stack([g, -g]), np.stack([a, a]), params={"INS_GYRO_FILTER": 20},
+                  armed=[(5.0, True), (20.0, False)], modes=[(4.0, 5)], messages=["ArduCopter V4.5.0 (abc, def)"])
+    p = tmp_path / "2024-05-01 10-00-00.log"
+    _as_text_log(tmp_path / "f.bin", p)
+    assert p.read_text().startswith("FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns\n")
+    ref, res = load(tmp_path / "f.bin"), load(p)
+    assert len(res.streams) == 2
+    for s, r in zip(res.streams, ref.streams):
+        assert s.key == r.key
+        np.testing.assert_array_equal(s.t, r.t)
+        np.testing.assert_array_equal(s.gyro, r.gyro)
+        np.testing.assert_array_equal(s.accel, r.accel)
+    assert res.meta["params"] == ref.meta["params"] and res.meta["armed"] == ref.meta["armed"]
+    note = "2024-05-01 10-00-00.log: the content is a DataFlash text log (Mission Planner .log); read as DataFlash"
+    assert res.meta["notes"][0] == note
+    assert main(["inspect", str(p)]) == 0
+    assert capsys.readouterr().out.count(note) == 1
