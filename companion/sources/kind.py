@@ -193,6 +193,8 @@ def decide(spec) -> Decision:
     by_name = file_kind(spec)
     path = Path(str(spec))
     if path.is_file():
+        if path.stat().st_size == 0:
+            raise CompanionError(f"{path}: empty file (0 bytes): no log to read")
         content = content_kind(path)
         if content is not None and content.refusal:
             raise CompanionError(content.refusal)

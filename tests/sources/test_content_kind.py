@@ -157,3 +157,11 @@ def test_a_mission_planner_text_log_is_read_as_its_binary_log(tmp_path, capsys):
     assert res.meta["notes"][0] == note
     assert main(["inspect", str(p)]) == 0
     assert capsys.readouterr().out.count(note) == 1
+
+
+def test_an_empty_file_is_named(tmp_path, capsys):
+    """It gave "no IMU data" (as a tlog of 0 frames)."""
+    p = tmp_path / "flight.tlog"
+    p.write_bytes(b"")
+    assert main(["inspect", str(p)]) == 2
+    assert capsys.readouterr().err == f"companion: error: {p}: empty file (0 bytes): no log to read\n"
