@@ -96,18 +96,26 @@ def opens_as_gzip(path) -> bool:
         return False  # the reader reports what is wrong with the file
 
 
-def _head(path: Path) -> tuple[bytes, bool] | None:
-    """The first :data:`HEAD_BYTES` of the file, decompressed when it is gzip; None when unreadable."""
+@dataclass(frozen=True)
+class _Head:
+    """A file's first :data:`HEAD_BYTES`, decompressed when it is gzip (None: a gzip stream cut short)."""
+
+    data: bytes | None
+    gzip: bool
+
+
+def _head(path: Path) -> _Head | None:
+    """The start of the file (see :class:`_Head`); None when the file cannot be read."""
     try:
         with open(path, "rb") as fh:
             raw = fh.read(HEAD_BYTES)
         if not raw.startswith(GZIP_MAGIC):
-            return raw, False
+            return _Head(raw, False)
         with gzip.open(path, "rb") as fh:
             try:
-                return fh.read(HEAD_BYTES), True
+                return _Head(fh.read(HEAD_BYTES), True)
             except EOFError:
-                return None, True
+                return _Head(None, True)
     except (OSError, EOFError, zlib.error):
         return None
 
@@ -172,7 +180,7 @@ def content_kind(path) -> Content | None:
     got = _head(path)
     if got is None:
         return None
-    head, gz = got
+    head, gz = got.data, got.gzip
     if head is None:
         return Content(None, gz)
     if head.startswith(ULOG_MAGIC):
@@ -189,7 +197,7 @@ def content_kind(path) -> Content | None:
 
 def decide(spec) -> Decision:
     """The kind of ``spec`` (see the module docstring) and the note when a file's name and content disagree.
-    Raises :class:`CompanionError` for a file that holds no readable log (an LFS pointer, a text log)."""
+    Raises :class:`CompanionError` for a file that holds no log (empty, a Git LFS pointer)."""
     by_name = file_kind(spec)
     path = Path(str(spec))
     if path.is_file():
