@@ -6,7 +6,8 @@ file is gzip-compressed), with the name as a hint: where the content is not reco
 reader of that kind then says what is wrong with the file); where the two disagree the content wins and
 :func:`decide` returns a one-line note naming both (a DataFlash text log, Mission Planner's ``.log``, is read as
 DataFlash with such a note). A file that holds no log (a Git LFS pointer) is refused with what it is and what
-to do. A spec that is not an existing file is classified by name: a log suffix (optionally followed by ``.gz``), else a connection string.
+to do. A spec that is not an existing file is classified by name: a log suffix (optionally followed by
+``.gz``), else a connection string.
 Tlog names are tested before DataFlash ``.bin`` because MAVProxy/QGC also write ``.tlog.bin``.
 """
 

@@ -1,6 +1,6 @@
 """A file's kind from its content, the name as a hint: a log renamed to another kind's suffix is read by what
-it holds with one note naming both; a Git LFS pointer is refused with what it is; a DataFlash text log (Mission Planner .log) is read;
-a gzip file is opened through gzip whatever its name."""
+it holds with one note naming both; a Git LFS pointer or an empty file is refused with what it is; a DataFlash
+text log (Mission Planner .log) is read; a gzip file is opened through gzip whatever its name."""
 
 from __future__ import annotations
 
