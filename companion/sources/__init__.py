@@ -24,7 +24,7 @@ import numpy as np
 from companion.errors import CompanionError
 from companion.samples import ImuStream
 from companion.sources import timestamps as _timing
-from companion.sources.kind import kind_of
+from companion.sources.kind import decide, kind_of
 from companion.sources.decode import (COMPASS_ONLY_CAN, TIME_RESOLUTION, RawStream, ScaleTable,
                                       imu_sample_from_message)
 
@@ -159,6 +159,9 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
     if log.bad_bytes - log.truncated > 0:
         meta["notes"].append(f"{name}: {log.bad_bytes - log.truncated} bytes outside valid messages skipped "
                              "(corrupt blocks or headers of undefined message types)")
+    if log.text_lines_skipped:
+        meta["notes"].append(f"{name}: {log.text_lines_skipped} line(s) of the text log fit no FMT layout, skipped")
+    meta["notes"] += [f"{name}: {text}" for text in log.implausible]
     for mname, why in sorted(log.damaged.items()):
         meta["notes"].append(f"{name}: message {mname} not read, its FMT record is damaged: {why}")
     totals["damaged_types"] = len(log.damaged)
@@ -258,7 +261,8 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
     from companion.sources.connection import parse_connection
 
     s = str(spec)
-    kind = kind_of(s)
+    decision = decide(s)
+    kind = decision.kind
     if kind == "csv":
         res = load_csv(s, split_periods, time_unit)
     elif kind == "tlog":
@@ -271,11 +275,13 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
         parse_connection(s, baud)  # validate before anything else
         res = load_live(s, duration or 0.0, config, baud, split_periods)
     elif Path(s).is_file():
-        raise CompanionError(f"{s}: unknown file type; expected .tlog, .bin (DataFlash), .ulg (ULog) or "
-                             ".csv (each optionally .gz)")
+        raise CompanionError(f"{s}: unknown file type: its content is none of a tlog, a DataFlash .bin, a ULog "
+                             ".ulg or a CSV with a time_s header (each optionally gzip-compressed)")
     else:
         parse_connection(s, baud)  # raises the 'unknown source' error
         raise CompanionError(f"{s}: unknown source")  # pragma: no cover - parse_connection raised
+    if decision.note:
+        res.meta.setdefault("notes", []).insert(0, decision.note)
     from companion.sources.sessions import join_sessions
 
     return join_sessions(_check_has_imu(res, require_imu))

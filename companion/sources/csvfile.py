@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from companion.errors import CompanionError
+from companion.sources.kind import opens_as_gzip
 from companion.samples import AXES, StreamKey
 from companion.sources.decode import RawStream
 
@@ -37,11 +38,15 @@ MIN_ROW_BYTES = 14
 WHOLE_BLOCK = 1 << 16
 #: a gzip member's header and trailer take 18 bytes: a shorter file has no size trailer to read
 GZIP_MIN_BYTES = 18
+WHOLE_TOLERANCE = 1e-9  #: relative: a time this close to a whole number is one (float noise of a ms clock)
+#: a restart (time stepping back) between runs this long (median) is a new series; shorter runs are rows out
+#: of order: 100 rows is a second at 100 Hz, far more than a shuffled export's runs of about 2
+RESTART_RUN_ROWS = 100
 
 
 def _read_bytes(path: Path) -> bytes:
     try:
-        if path.name.endswith(".gz"):
+        if opens_as_gzip(path):
             with gzip.open(path, "rb") as fh:
                 return fh.read()
         return path.read_bytes()
@@ -72,17 +77,15 @@ def read_csv(path, time_unit: str | None = None) -> RawStream:
     bad = ~(np.isfinite(t) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1))
     if np.any(bad):
         raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {int(np.flatnonzero(bad)[0]) + 1}")
+    check_resolution(path, t)
     if time_unit is None:
         check_time_unit(path, t)
     else:
         t *= TIME_UNITS[time_unit]
     check_rate(path, t)
-    notes = []
-    back = int(np.count_nonzero(np.diff(t) < 0))
-    if back:
-        order = np.argsort(t, kind="stable")
+    order, notes = in_time_order(path, t)
+    if order is not None:
         t, gyro, accel = t[order], gyro[order], accel[order]
-        notes.append(f"{path.name}: rows were not in time order ({back} backward steps): sorted by time_s")
     return RawStream(CSV_KEY, t, gyro, accel, None, True, None, None, 0.0, notes)
 
 
@@ -155,7 +158,7 @@ class _Columns:
 def _open(path: Path):
     """(binary stream of the file's text, its size in bytes: for a gzip file the trailer's, modulo 2^32)."""
     size = path.stat().st_size
-    if not path.name.endswith(".gz"):
+    if not opens_as_gzip(path):
         return open(path, "rb"), size
     if size >= GZIP_MIN_BYTES:
         with open(path, "rb") as fh:
@@ -190,24 +193,45 @@ def _read_columns(path: Path):
         return None
 
 
-def check_time_unit(path, t: np.ndarray) -> None:
-    """Refuse a ``time_s`` column that is evidently in milliseconds or microseconds.
+def check_resolution(path, t: np.ndarray) -> None:
+    """Refuse a time column coarser than the sample rate: more than half the rows repeat the time of the row
+    before (whole-second times on 100 rows a second). Read at any unit, the repeats would be dropped as
+    duplicates and the few rows left give a rate and noise density off by the rows-per-tick factor; a few
+    repeated rows (a logger writing a row twice) stay below the half and are counted by the timing rules."""
+    n = t.shape[0]
+    if n < 3:
+        return
+    distinct = n - int(np.count_nonzero(np.diff(t) == 0))  # runs of equal times, in file order
+    if 2 * distinct < n:
+        raise CompanionError(f"{path}: {n} rows carry only {distinct} distinct times ({n / distinct:.3g} rows per "
+                             "time value): the time column's resolution is coarser than the sample rate, so the "
+                             "samples cannot be timed; write time_s with more digits")
 
-    IMU data come at >= 1 Hz; a median step of >= 1 with whole-number times (or times beyond 1e5, i.e. more
-    than a day "since boot") is a clock in ms (step 1-100) or us (step >= 100). Read as seconds it would make
-    a 100 Hz log look like 0.1 Hz data and N 30x too large, so it is refused with the fix."""
+
+def check_time_unit(path, t: np.ndarray) -> None:
+    """Refuse a ``time_s`` column whose spacing says it is not in seconds, or may not be.
+
+    The unit is decided from the median spacing of the sorted times (robust to gaps and a few bad rows). A
+    median step below 1 is seconds (gyro logs run at >= 1 Hz). A median step >= 1 with whole numbers (up to
+    float noise, :func:`_whole_numbers`) or times beyond 1e5 (more than a day "since boot") is a clock in ms
+    (step 1-100) or us (step >= 100). Any other step >= 1 is ambiguous (2.5 is 0.4 Hz in s and 400 Hz in
+    ms): refused with the rates each unit gives. Read as seconds, a 100 Hz ms log looks like 0.1 Hz data and
+    its N is 30x too large, so the user chooses with --time-unit."""
     if t.shape[0] < 3:
         return
     step = _median_step(t)
-    if step is None:
+    if step is None or step < 1.0:
         return
-    integral = _all_whole(t)
-    if step >= 1.0 and (integral or float(np.max(np.abs(t))) > 1e5):
+    integral = _whole_numbers(t)
+    if integral or float(np.max(np.abs(t))) > 1e5:
         unit, div = ("microseconds", 1e6) if step >= 100.0 else ("milliseconds", 1e3)
         raise CompanionError(f"{path}: time_s looks like {unit} (median step {step:g}, "
                              f"{'whole numbers' if integral else 'values up to %g' % float(np.max(t))}): "
                              f"pass --time-unit {'us' if div == 1e6 else 'ms'} (or divide the column by {div:g}); "
                              "--time-unit s if the times really are whole seconds")
+    raise CompanionError(f"{path}: time_s steps by a median of {step:g}: {1 / step:.3g} Hz in seconds, "
+                         f"{1e3 / step:.3g} Hz in milliseconds, {1e6 / step:.3g} Hz in microseconds; pass "
+                         "--time-unit s, ms or us to say which")
 
 
 def check_rate(path, t: np.ndarray) -> None:
@@ -233,9 +257,39 @@ def _median_step(t: np.ndarray) -> float | None:
     return float(np.median(d)) if d.shape[0] else None
 
 
-def _all_whole(t: np.ndarray) -> bool:
-    """Whether every time is a whole number, tested a block at a time (no rounded copy of the column)."""
-    return all(bool(np.all(b == np.round(b))) for b in np.array_split(t, max(1, t.shape[0] // WHOLE_BLOCK)))
+def _whole_numbers(t: np.ndarray) -> bool:
+    """True when every time is a whole number up to float noise (30.000000000000004 from 3 * 10.0 ms): a
+    relative tolerance of 1e-9 is a million times float64's rounding and far below any clock's tick. Tested a
+    block at a time (no rounded copy of the whole column)."""
+    return all(bool(np.all(np.abs(b - np.round(b)) <= WHOLE_TOLERANCE * np.maximum(1.0, np.abs(b))))
+               for b in np.array_split(t, max(1, t.shape[0] // WHOLE_BLOCK)))
+
+
+def in_time_order(path, t: np.ndarray) -> tuple[np.ndarray | None, list[str]]:
+    """The order to read the rows in (None: as they are; time in s) and the note on that order.
+
+    Rows in time order are kept. Where the time restarts (steps back by more than the reset threshold of
+    :mod:`companion.sources.timestamps`, max(1 s, 10 periods), between runs of at least ``RESTART_RUN_ROWS``
+    rows, median) the file holds series one after another: the rows stay in file order and the timing rules
+    make each restart a new segment, as a reboot in a log; sorting would interleave the series into one
+    with doubled rate. Otherwise the backward steps are rows out of order (an export that shuffled them):
+    the rows are sorted by time."""
+    name = Path(path).name
+    d = np.diff(t)
+    back = int(np.count_nonzero(d < 0))
+    if not back:
+        return None, []
+    from companion.sources.timestamps import step_rules
+
+    reset_s = step_rules(_median_step(t) or 1.0).reset_s
+    restarts = np.flatnonzero(d < -reset_s)
+    if restarts.shape[0]:
+        runs = np.diff(np.r_[0, restarts + 1, t.shape[0]])
+        if float(np.median(runs)) >= RESTART_RUN_ROWS:
+            lines = ", ".join(str(int(i) + 3) for i in restarts[:3]) + (", ..." if restarts.shape[0] > 3 else "")
+            return None, [f"{name}: time_s restarts {restarts.shape[0]} time(s) (line {lines}): the rows are read "
+                          "in file order, each restart a new segment, not sorted into the earlier rows"]
+    return np.argsort(t, kind="stable"), [f"{name}: rows were not in time order ({back} backward steps): sorted by time_s"]
 
 
 def _to_file_lines(msg: str) -> str:

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from companion.errors import CompanionError
+from companion.sources.kind import opens_as_gzip
 
 HEAD1, HEAD2 = 0xA3, 0x95  #: the two bytes that start every message
 FMT_TYPE = 0x80  #: message type of the FMT records that define the others
@@ -80,6 +81,10 @@ class DataFlashLog:
     #: their messages are skipped and reported, never decoded with a wrong layout
     damaged: dict[str, str] = field(default_factory=dict)
     truncated: int = 0  # bytes of a last message cut short by the end of the file
+    #: records skipped as implausible (damaged values that decode, such as an IMU instance no autopilot has):
+    #: one sentence each, shown as notes
+    implausible: list[str] = field(default_factory=list)
+    text_lines_skipped: int | None = None  # a text log (Mission Planner .log): lines that fit no layout
 
     def counts(self) -> dict[str, int]:
         return {self.formats[t].name: int(o.shape[0]) for t, o in self.offsets.items() if t in self.formats}
@@ -209,7 +214,7 @@ def read_bytes(path) -> np.ndarray:
     """The bytes of a (possibly gzip-compressed) log as uint8; plain files are memory-mapped."""
     path = Path(path)
     try:
-        if path.name.lower().endswith(".gz"):
+        if opens_as_gzip(path):
             with gzip.open(path, "rb") as fh:
                 return np.frombuffer(fh.read(), dtype=np.uint8)
         with open(path, "rb") as fh:
@@ -360,4 +365,14 @@ def _orbit(succ: np.ndarray, known: np.ndarray, block: int = 1 << 18) -> tuple[n
 
 
 def open_log(path) -> DataFlashLog:
-    return index(read_bytes(path), str(path))
+    """The indexed log of a binary DataFlash file or of a DataFlash text log (packed to binary first,
+    :mod:`companion.sources.dataflash_text`; its skipped lines are counted in ``text_lines_skipped``)."""
+    from companion.sources import dataflash_text
+
+    buf = read_bytes(path)
+    if buf.shape[0] and buf[0] != HEAD1 and dataflash_text.is_text_log(bytes(buf[:65536])):
+        data, skipped = dataflash_text.to_binary(bytes(buf))
+        log = index(np.frombuffer(data, dtype=np.uint8), str(path))
+        log.text_lines_skipped = skipped
+        return log
+    return index(buf, str(path))

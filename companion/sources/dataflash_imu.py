@@ -68,6 +68,35 @@ def _imu_columns(log: DataFlashLog, name: str) -> _ImuColumns:
     return _ImuColumns(t, gyro, accel, temp, inst, res, extra)
 
 
+#: ArduPilot logs at most 3 IMUs (INS_MAX_INSTANCES); 0-9 leaves room for boards with more. A larger ``I`` is a
+#: damaged record whose bytes still decode (a flipped bit in the instance field), not an IMU
+MAX_IMU_INSTANCE = 9
+#: an instance with fewer samples than this while another has at least ``PHANTOM_RATIO`` times as many is damaged
+#: records: a real IMU is logged at >= 25 Hz from boot to the end of the log, like the others
+PHANTOM_SAMPLES = 10
+PHANTOM_RATIO = 100
+
+
+def _real_instances(log: DataFlashLog, name: str, inst: np.ndarray) -> list[int]:
+    """The IMU instances of message ``name`` that are IMUs; the records of the others (an instance outside
+    0-``MAX_IMU_INSTANCE``, or a few samples beside thousands: :data:`PHANTOM_SAMPLES`) are noise from
+    damaged records, skipped and noted in ``log.implausible``."""
+    ids, counts = np.unique(inst, return_counts=True)
+    most = int(counts.max()) if counts.shape[0] else 0
+    keep = []
+    for k, n in zip(ids.tolist(), counts.tolist()):
+        if not 0 <= k <= MAX_IMU_INSTANCE:
+            why = f"instance {k} is outside 0-{MAX_IMU_INSTANCE}"
+        elif n < PHANTOM_SAMPLES and most >= PHANTOM_RATIO * n:
+            why = f"{n} sample(s) beside {most} of another instance"
+        else:
+            keep.append(k)
+            continue
+        log.implausible.append(f"{n} {name} record(s) with instance {k} skipped as damaged records ({why}), "
+                               "not an IMU")
+    return keep
+
+
 def imu_raw_streams(log: DataFlashLog):
     """RawStreams of every IMU instance (all three layouts) plus per-instance extras (errors, health)."""
     out, extras = [], {}
@@ -79,7 +108,7 @@ def imu_raw_streams(log: DataFlashLog):
             continue
         c = _imu_columns(log, name)
         inst = c.instance if c.instance is not None else np.full(c.t.shape[0], default_inst, dtype=np.int64)
-        for k in np.unique(inst):
+        for k in _real_instances(log, name, inst):
             sel = inst == k
             key = StreamKey(0, 0, "IMU", int(k))
             out.append(RawStream(key, c.t[sel], c.gyro[sel], c.accel[sel], None if c.temp is None else c.temp[sel],

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from companion.errors import CompanionError
+from companion.sources.kind import opens_as_gzip
 from companion.sources import messages as M
 
 
@@ -226,7 +227,7 @@ def read_file(path) -> bytes:
     import zlib
 
     try:
-        if str(path).lower().endswith(".gz"):
+        if opens_as_gzip(path):
             with gzip.open(path, "rb") as fh:
                 return fh.read()
         with open(path, "rb") as fh:

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from companion.errors import CompanionError
+from companion.sources.kind import opens_as_gzip
 from companion.samples import StreamKey
 from companion.sources.decode import RawStream
 
@@ -90,7 +91,7 @@ def open_ulog(path):
         raise CompanionError("reading .ulg needs pyulog: pip install pyulog") from None
     path = Path(path)
     try:
-        if path.name.lower().endswith(".gz"):
+        if opens_as_gzip(path):
             with gzip.open(path, "rb") as fh:
                 data = fh.read()
         else:
