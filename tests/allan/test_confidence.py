@@ -150,6 +150,7 @@ def test_covariance_equals_the_matrix_computation_for_any_record_length(seed):
         assert len(confidence._PAIR_FORMS) > 0
 
 
+@pytest.mark.soak
 def test_covariance_of_the_longest_clusters_and_a_ramp_equals_the_matrix_computation():
     """Where the record clips the lags (the longest clusters: a few clusters left) the pair counts change
     over the number of clusters, not over m; summed with a Riemann step of m/32 the longest point's variance

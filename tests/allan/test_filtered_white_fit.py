@@ -333,6 +333,7 @@ def test_a_first_order_roll_off_the_log_s_2_pole_cannot_fit():
     np.testing.assert_allclose(one / one[-1], gm / gm[-1], rtol=1e-9)
 
 
+@pytest.mark.soak
 def test_a_first_order_roll_off_without_a_log_is_not_left_to_a_2_pole_and_a_drift_term():
     """The same process with no cut-off from a log (a tlog, a CSV): the data set "no filter" aside for a 2-pole
     of their own, whose model keeps an unresolved bias instability for the difference, and the first-order
@@ -366,6 +367,7 @@ def test_a_first_order_roll_off_without_a_log_is_not_left_to_a_2_pole_and_a_drif
     assert 1 <= spans <= rolled - first  # said where a 2-pole stays and the interval spans the 1-pole's reading
 
 
+@pytest.mark.soak
 def test_n_whose_interval_reaches_zero_is_a_bound_that_holds():
     """Quantization above white noise up to 5 s and a random walk above it from 1.7 s (90 s at 10 Hz, as the
     public plane still whose gx read N 1.43 [0, 2.61] deg/sqrt(h)): white noise dominates nowhere, and a fitted N

@@ -24,6 +24,7 @@ def fit_series(y, effects=None):
     return fit_avar(tau, av, edf_simple(len(y) + 1, m, 0), effects, n=len(y), rate_hz=RATE, m=m)
 
 
+@pytest.mark.soak
 def test_n_b_k_recovered_with_calibrated_intervals():
     errs = {p: [] for p in TRUTH}
     inside = 0
@@ -253,6 +254,7 @@ def test_n_interval_allows_for_a_flicker_the_selection_left_out():
     assert w["N"] / 1.16e-4 > 1.05 and lo <= 1.0 <= hi and hi / lo < 1.2
 
 
+@pytest.mark.soak
 def test_n_interval_coverage_on_short_records_with_every_term():
     """The same records, 300 of them (seeds 5000-5299): N's interval covers the truth in 93-99 % of all (at 95 %
     the binomial sd of 300 records is 1.3 %; measured 97.0 %) and misses in at most 10 of the ~107 where the

@@ -78,6 +78,7 @@ def gauss_markov_plus_noise(n, tau_c, sigma, sigma_v, seed, rate_hz=100.0):
     return x, x + sigma_v * rng.standard_normal(n)
 
 
+@pytest.mark.soak
 def test_auto_split_finds_the_white_noise_under_gauss_markov_wander():
     """Gauss-Markov (tau_c 5 s, sigma twice the white noise) + white noise, ten seeds. The difference of a GM
     process is ARMA(1,1) with theta = 1, so the free fit may land anywhere along the degenerate direction; on some

@@ -73,7 +73,7 @@ def test_null_case_adds_nothing(seed):
     assert r.sim_check_before is not None and r.sim_check_before <= NOISE_FLOOR_G  # simulator == analytic
 
 
-@pytest.mark.parametrize("seed", [31, 32])
+@pytest.mark.parametrize("seed", [31, pytest.param(32, marks=pytest.mark.soak)])
 def test_two_hidden_effects(seed):
     hidden = [{"effect": "gauss_markov", "sigma": 8e-4, "tau_c": 30.0}, {"effect": "quantization", "Q": 6e-4}]
     y = _measure(WB + hidden, seed)
@@ -356,6 +356,7 @@ def test_missized_k_is_chosen_when_it_fits_better():
     assert ranked["ramp"]["delta_dev"] < ranked["recalibrated random_walk K"]["delta_dev"]
 
 
+@pytest.mark.soak
 def test_ramp_beside_gauss_markov_is_not_absorbed_by_a_recalibrated_k():
     """A hard-tier draw (mis-sized model, a ramp and a Gauss-Markov term hidden): after the Gauss-Markov
     term, "random walk K recalibrated" (16x) and the ramp both pass and the ramp fits better; the level of a

@@ -5,6 +5,7 @@ of the gyro; that is not a degradation. A noise rise beyond what rounding can gi
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from companion.health.baseline import rounding_ceiling
 from companion.mavlink.reporter import Reporter
@@ -41,6 +42,7 @@ def test_ceiling_raises_only_a_sub_lsb_baseline():
     assert rounding_ceiling(loud, 100.0, LSB) is loud
 
 
+@pytest.mark.soak
 def test_drift_across_the_code_grid_is_not_n_degradation_but_a_noise_rise_is_named():
     for seed in range(2):  # 0.1 LSB, the bias crossing the code boundary at 0.5 LSB at 80 s (before: N 1.4-1.9x)
         texts = replay(seed, 0.1, 0.005)

@@ -86,6 +86,7 @@ def test_baseline_round_trip_and_analyze_report():
         Baseline.from_dict({"something": "else"})
 
 
+@pytest.mark.soak
 def test_no_false_alarm_on_healthy_white_noise_over_seeds():
     """Healthy data, baseline and forgetting-window estimates from the real estimator: no flag in 20 runs.
 

@@ -7,6 +7,7 @@ one per second for four seconds, and run said "IMU0 gyro Y spikes 0.11 %"."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
@@ -47,6 +48,7 @@ def test_taps_on_a_standing_vehicle_are_not_gyro_spikes():
         assert not _run(seed, taps=(12.3, 13.4, 14.6, 15.5, 16.7, 60.2, 61.1, 62.5, 63.3, 64.8)), seed
 
 
+@pytest.mark.soak
 def test_isolated_glitches_are_spikes_with_or_without_the_accelerometer():
     ts = (60.2, 61.1, 62.5, 63.3, 64.8, 70.2, 71.1, 72.5)  # after the still references (30 blocks) exist
     for seed in range(3):

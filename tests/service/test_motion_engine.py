@@ -10,6 +10,7 @@ Truth: white noise of known density; the vibration 30x its std, the acceleromete
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
@@ -48,6 +49,7 @@ def _n_ratio(p, ax):
     return w[0]["N"] / N if w else None
 
 
+@pytest.mark.soak
 def test_vibration_from_the_first_block_is_not_learned_as_rest_and_a_later_noise_rise_is_named():
     engine_end = 61.0  # 60 s of engine on the ground, then 240 s at rest
     for seed in range(3):
@@ -79,6 +81,7 @@ def test_a_baseline_learned_from_vibration_is_learned_again():
     assert not p.transitions
 
 
+@pytest.mark.soak
 def test_a_healthy_rest_whose_accel_noise_wanders_is_never_taken_for_vibration():
     # gusts or footsteps: the accel std doubles and halves in turn, a quantised-looking quiet accel that
     # freezes (std exactly 0) for a while; gyro white noise throughout: nothing to forget, N as the truth
@@ -94,6 +97,7 @@ def test_a_healthy_rest_whose_accel_noise_wanders_is_never_taken_for_vibration()
             assert abs(_n_ratio(p, ax) - 1.0) < 0.05
 
 
+@pytest.mark.soak
 def test_a_first_block_in_hand_teaches_no_axis_a_loud_rest_and_a_later_knock_is_motion(monkeypatch):
     # the public plane log pxf_plane_4-12-2014_329 starts with the vehicle in hand: its first block (accel Y
     # 0.41 m/s^2, gyro X 5 deg/s) became the rest reference, the other two accel axes near their rest level,

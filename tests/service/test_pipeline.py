@@ -51,6 +51,7 @@ def n_estimate(p, ax="gx"):
     return p.current_params(ch, ax)["N"][0]
 
 
+@pytest.mark.soak
 def test_flight_and_handling_neither_corrupt_nor_flag():
     rng = np.random.default_rng(3)
     p, sink = make_pipeline()

@@ -63,6 +63,7 @@ def test_log171_flight_raises_nothing_before_the_crash():
     assert alarms and all("saturated" in a for _, a in alarms)  # the impact, at the gyros' range
 
 
+@pytest.mark.soak
 def test_plane_noise_drop_with_distinct_values_is_not_stuck(tmp_path):
     """A parked plane's 10 Hz float gyro: the noise falls 5x when the engine stops (0.09 -> 0.018 deg/s),
     every value stays distinct (the old stuck test took the variance drop for a frozen gyro). The engine's
@@ -89,6 +90,7 @@ def test_frozen_float_gyro_is_still_stuck(tmp_path):
     assert alarms and len(hits) == len(alarms) and min(hits) <= 202 + 10
 
 
+@pytest.mark.soak
 def test_healthy_int16_gyro_with_noise_below_one_lsb_is_not_stuck(tmp_path):
     """0.7 LSB of white noise at 1 mrad/s rounding repeats codes 37 % of the time by nature."""
     rng = np.random.default_rng(3)
@@ -97,6 +99,7 @@ def test_healthy_int16_gyro_with_noise_below_one_lsb_is_not_stuck(tmp_path):
     assert run(write(tmp_path / "quiet.bin", g, 50.0)) == []
 
 
+@pytest.mark.soak
 def test_bias_wander_below_the_floor_is_not_a_jump_and_a_step_above_it_is(tmp_path):
     """A standing rover's gyro: 1 s means wander +-0.4 deg/s (slow sway plus knocks); then a 2 deg/s step."""
     # One replay instead of a healthy one and a stepped one: the replay is causal (every alarm is raised from
@@ -117,6 +120,7 @@ def test_bias_wander_below_the_floor_is_not_a_jump_and_a_step_above_it_is(tmp_pa
     assert hits and min(hits) <= step_t + 15, alarms
 
 
+@pytest.mark.soak
 def test_noise_fault_on_one_of_two_imus_names_only_that_imu(tmp_path):
     rng = np.random.default_rng(5)
     rate, n = 50, 50 * 300

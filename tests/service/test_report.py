@@ -23,6 +23,7 @@ FS = 50.0
 N_TRUE = 1.0e-3  # rad/s/sqrt(Hz), white noise only: no B, no K
 
 
+@pytest.mark.soak
 @pytest.mark.parametrize("seed", [0])
 def test_healthy_white_noise_replay_invents_no_b_or_k(seed):
     rng = np.random.default_rng(seed)

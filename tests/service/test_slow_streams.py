@@ -95,6 +95,7 @@ def test_a_stream_too_slow_for_the_per_imu_tests_is_said_so():
     assert not [r for r in _fly(10.0, 0, seconds=40.0).summary() if r["notes"]]
 
 
+@pytest.mark.soak
 def test_a_still_2_hz_stream_with_jitter_is_one_record_for_the_estimators():
     # consecutive 1-s blocks of a 2 Hz stream are one period (0.5 s) apart, which was also the junction
     # threshold (half a block): timestamp jitter made every other pair of blocks a junction, the estimators

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
@@ -49,6 +50,7 @@ def _alarms(p):
     return [x for _, x in p.transitions if "cleared" not in x]
 
 
+@pytest.mark.soak
 def test_a_bias_the_last_run_ended_on_is_no_jump_at_the_next_boot_and_a_jump_in_the_run_is_named():
     for seed in range(3):
         p1 = _fresh()
@@ -118,6 +120,7 @@ def _with_knock(p, seed, t0, duration, knock_at, scale):
     p.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t, g, a)
 
 
+@pytest.mark.soak
 def test_a_knock_among_the_reference_blocks_does_not_make_the_rest_stuck_in_this_run_or_after_a_restart():
     """A public copter log: one block among one IMU's 30 reference blocks had 400x the others' noise; the
     reference was 15x the rest level and the restored run read the same rest as "gyro Y stuck" (here the rest
