@@ -158,22 +158,28 @@ def test_a_term_too_short_to_resolve_stays_in_the_model_and_n_keeps_the_truth():
 
 
 
-@pytest.mark.parametrize("seed", [7, 9])
-def test_online_bound_of_a_left_out_random_walk_holds(seed):
+def test_online_bound_of_a_left_out_random_walk_holds():
     """A rate random walk too weak for the selection in 2 h at 50 Hz (the truth of
-    tests/cli/test_analyze.py::test_bound_of_a_left_out_random_walk_holds): the online report's K bound is at least
-    the offline analysis' bound by test inversion and lies above the truth. Seeds 0-11 leave K out in 8 draws;
-    the report's own rule (the covariance at the fitted model, where K is 0) bounded it below the truth in two
-    of them, these (0.72 x and 0.90 x), the inverted bound in none (1.03-1.64 x)."""
+    tests/cli/test_analyze.py::test_bound_of_a_left_out_random_walk_holds): where the selection leaves K out,
+    the online report's K bound is at least the offline analysis' bound by test inversion and lies above the
+    truth. Seeds 0-11, every draw that leaves K out (8 of the 12); the report's own rule (the covariance at
+    the fitted model, where K is 0) bounded it below the truth in two of them (0.72 x and 0.90 x), the
+    inverted bound in none (1.03-1.64 x)."""
     n = int(2 * 3600 * FS)
     truth = {"N": 1.3480080139673396e-3, "B": 5.891713564593853e-4, "K": 3.270930663897592e-05}
     terms = [{"effect": "white_noise", "N": truth["N"]}, {"effect": "bias_instability", "B": truth["B"]},
              {"effect": "random_walk", "K": truth["K"]}]
-    on = by_effect(online_terms(synthesize_axis(terms, FS, n, np.random.default_rng(seed)), FS))
-    assert not on["white_noise"]["bound"] and not on["bias_instability"]["bound"]
-    k = on["random_walk"]
-    assert k["bound"] and k["ci95"]["K"] == [0.0, k["K"]]
-    assert truth["K"] <= k["K"] < 3.0 * truth["K"]
+    left_out = []
+    for seed in range(12):
+        on = by_effect(online_terms(synthesize_axis(terms, FS, n, np.random.default_rng(seed)), FS))
+        assert not on["white_noise"]["bound"] and not on["bias_instability"]["bound"], seed
+        k = on["random_walk"]
+        if not k["bound"]:
+            continue
+        left_out.append(seed)
+        assert k["ci95"]["K"] == [0.0, k["K"]]
+        assert truth["K"] <= k["K"] < 3.0 * truth["K"], (seed, k["K"] / truth["K"])
+    assert len(left_out) >= 4, left_out  # the case arises: K weak enough to be left out
 
 
 def test_a_selected_term_whose_interval_reaches_zero_is_a_bound_online_and_offline():
