@@ -127,7 +127,8 @@ def test_compensation_error_against_the_known_truth_and_the_optimal_filter():
     assert rmse["srukf"] < 1.05 * opt and rmse["srrsukf"] < 1.1 * opt and rmse["stf"] < 1.2 * opt, (rmse, opt)
 
 
-@pytest.mark.parametrize("cls,n", [(STF, 1_000_000), (SRUKF, 30_000), (SRRSUKF, 30_000)])
+@pytest.mark.parametrize("cls,n", [(STF, 1_000_000), pytest.param(SRUKF, 30_000, marks=pytest.mark.soak),
+                                   pytest.param(SRRSUKF, 30_000, marks=pytest.mark.soak)])
 def test_factor_stays_valid_over_long_runs(cls, n):
     """No NaN and a positive diagonal of the covariance factor at every step. The 10^6-step runs of the UKFs
     (about 2 minutes each) are in benchmarks/bench_compensation.py; here 3 x 10^4 steps."""
@@ -152,6 +153,7 @@ def test_real_adis16405_factor_valid_and_noise_reduced(shared_data):
         assert abs(m.adev[-3] / res.raw_adev[-3] - 1.0) < 0.1  # long-tau behaviour kept
 
 
+@pytest.mark.soak
 def test_srukf_near_the_optimal_filter_on_gauss_markov_wander():
     """Gauss-Markov (tau_c 5 s, sigma 0.01 rad/s) + white noise 5e-3 rad/s, two seeds on which the free fit hid
     the white noise in x (then every filter passed it through: rmse 2-4x the optimal). The reference is the

@@ -75,7 +75,8 @@ FAULT_CASES = {
 }
 
 
-@pytest.mark.parametrize("kind", sorted(FAULT_CASES))
+@pytest.mark.parametrize("kind", [k if k in ("noise", "stuck") else pytest.param(k, marks=pytest.mark.soak)
+                                  for k in sorted(FAULT_CASES)])
 def test_each_fault_kind_is_named_in_a_statustext(tmp_path, kind):
     """One IMU at rest, the baseline learned, then the fault on gyro Y at 100 s: a STATUSTEXT names IMU0,
     axis Y and the kind within 60 s; nothing before the fault."""
@@ -106,7 +107,7 @@ def test_saturation_in_flight_is_named(tmp_path):
     assert hits and at <= hits[0]["t_sim"] - 1.0 <= at + 60.0, [d["text"] for d in texts]
 
 
-@pytest.mark.parametrize("kind, imus", [("stuck", 3), ("bias", 2)])
+@pytest.mark.parametrize("kind, imus", [("stuck", 3), pytest.param("bias", 2, marks=pytest.mark.soak)])
 def test_in_flight_disagreement_names_the_faulty_imu(tmp_path, kind, imus):
     """Armed and flying (the single-IMU tests cannot run): IMU1's gyro X freezes (three IMUs: the odd one out
     is named) or jumps by +10 deg/s (two IMUs) at 120 s; a STATUSTEXT names IMU1 with the disagreement or the

@@ -15,7 +15,7 @@ import pytest
 from companion.sim.dataflash_writer import write_imu_log
 
 REPO = Path(__file__).resolve().parents[2]
-SHARED = REPO.parent / "shared" / "data"
+SHARED = Path(os.environ.get("COMPANION_SHARED", REPO.parent / "shared")) / "data"
 LOG171 = SHARED / "ardupilot" / "dronekit_log171.bin"
 DEG = np.pi / 180.0
 G = np.array([0.0, 0.0, -9.80665])

@@ -232,6 +232,7 @@ def test_still_flight_still_gives_N_within_3_percent(tmp_path, layout):
     assert abs(np.mean(errs)) < 0.01
 
 
+@pytest.mark.soak
 def test_px4_still_flight_still_gives_N_within_3_percent(tmp_path):
     from companion.analysis.source import analyze_source
     from companion.sim.ulog_writer import write_ulog
