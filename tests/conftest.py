@@ -1,4 +1,9 @@
-"""Shared fixtures. Tests that need the real recordings in ../shared skip cleanly when it is absent."""
+"""Shared fixtures. Tests that need the real recordings in ../shared skip cleanly when it is absent.
+
+The layout mirrors companion/ (tests/<package>/test_<module or behaviour>.py, each folder a package so that
+``from tests.support...`` imports under plain ``pytest`` too); loopback/ holds the multi-process tests over
+UDP. Tests marked ``soak`` (long soaks and seed scans) run from benchmarks/soak_checks.py, not from the
+README's command; reference outputs are in tests/golden/ (tests/cli/test_golden.py)."""
 
 from __future__ import annotations
 
