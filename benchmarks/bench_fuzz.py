@@ -1,6 +1,6 @@
 """Mutation fuzzing of the four file readers: tlog, DataFlash .bin, ULog .ulg, CSV.
 
-Every input is a seeded mutation (tests/fuzz.py: byte flips, truncation, insertion, deletion, duplicated
+Every input is a seeded mutation (tests/support/fuzz.py: byte flips, truncation, insertion, deletion, duplicated
 chunks, header damage, and damage aimed at the structure: record headers, message ids, length fields,
 FMT records and ULog format definitions, CSV delimiters) of a SMALL seed log, loaded in this process with
 ``companion.sources.load`` (written to a tmpfs file first: the readers take paths). The seeds are made in

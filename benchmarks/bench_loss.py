@@ -1,7 +1,7 @@
 """Link loss: `companion run` fed by `companion sim-autopilot` through a lossy UDP relay on 127.0.0.1 --
 does run count exactly what was lost, warn, and keep N within 5 %?
 
-The relay and the loop are those of ``tests/relay.py`` (checked in ``tests/test_link_health.py``) (the relay drops vehicle->run datagrams
+The relay and the loop are those of ``tests/support/relay.py`` (checked in ``tests/mavlink/test_link.py``) (the relay drops vehicle->run datagrams
 independently with probability p, or in bursts by a Gilbert model, and hands what it keeps on as fast as
 run reads it, so the only losses are the relay's and it knows how many there were). Each case: 150
 simulated seconds at 10x, white noise N = 3e-3 rad/s/sqrt(Hz) per axis at 100 Hz with 1 mrad/s rounding

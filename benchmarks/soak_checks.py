@@ -2,8 +2,8 @@
 the README's test command, kept out of it for its time (docs/testing.md). Exits with pytest's code: 0 when
 every check passed, 1 when one failed.
 
-    python benchmarks/soak_checks.py            # all, on every core
-    python benchmarks/soak_checks.py -n 0 -k gap # pytest's options pass through
+    python -m benchmarks.soak_checks            # all, on every core
+    python -m benchmarks.soak_checks -n 0 -k gap # pytest's options pass through
 """
 
 from __future__ import annotations

@@ -35,3 +35,13 @@ def test_no_function_over_80_lines():
                 if n > MAX_FUNCTION_LINES:
                     long[f"{p.relative_to(PKG.parent)}:{node.lineno} {node.name}"] = n
     assert not long, long
+
+
+def test_module_names_are_unique_across_packages():
+    """A module is named for its role (issue 46: three report.py, two runner.py ... read alike in a traceback
+    and an import list); only package markers repeat."""
+    seen = {}
+    for p in _modules():
+        if p.name != "__init__.py":
+            seen.setdefault(p.name, []).append(str(p.relative_to(PKG.parent)))
+    assert not {k: v for k, v in seen.items() if len(v) > 1}

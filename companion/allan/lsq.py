@@ -8,8 +8,8 @@
 
 Importing scipy costs 50-80 MB of resident memory and 0.3-1.4 s of CPU on a small board; these two
 (with :mod:`companion.allan.special` for the root finder, bounded minimiser and chi-square quantiles of
-the fit) replace the scipy calls the live pipeline would make (tests/test_startup.py and
-tests/test_special.py compare them with scipy).
+the fit) replace the scipy calls the live pipeline would make (tests/cli/test_startup.py and
+tests/allan/test_special.py compare them with scipy).
 """
 
 from __future__ import annotations

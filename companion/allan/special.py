@@ -2,7 +2,7 @@
 
 `companion run` refits its online report with :mod:`companion.allan.fit`; importing ``scipy.optimize`` and
 ``scipy.stats`` for the three small things it needs would take the process from ~28 MiB to ~100 MiB
-resident. These functions reproduce those calls within numerical tolerance (tests/test_special.py
+resident. These functions reproduce those calls within numerical tolerance (tests/allan/test_special.py
 compares them with scipy over a grid):
 
 - :func:`brentq`: root of a bracketing function, Brent (1973) as in scipy's ``brentq``.

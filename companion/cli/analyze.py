@@ -67,7 +67,8 @@ def register(subparsers) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds to listen on a live link")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
     p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
-                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
+                   help="unit of a CSV's time column (default s; a column whose median step is 1 or more, or coarser than "
+                        "the sample rate, is refused with the unit to pass)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--start", type=float, default=None, metavar="S",
                    help="analyse only from this time (seconds, the log's own clock as inspect shows it)")

@@ -78,7 +78,8 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the simulations (default 0)")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (streams: scale overrides)")
     p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
-                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
+                   help="unit of a CSV's time column (default s; a column whose median step is 1 or more, or coarser than "
+                        "the sample rate, is refused with the unit to pass)")
     p.set_defaults(func=run)
 
 

@@ -44,7 +44,8 @@ def register(subparsers) -> None:
     p.add_argument("--baud", type=int, default=None, help="serial baud rate (default 115200)")
     p.add_argument("--config", metavar="YAML", help="configuration file (its streams: section sets scales)")
     p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
-                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
+                   help="unit of a CSV's time column (default s; a column whose median step is 1 or more, or coarser than "
+                        "the sample rate, is refused with the unit to pass)")
     p.set_defaults(func=run)
 
 

@@ -58,7 +58,8 @@ def register(subparsers) -> None:
     p.add_argument("--baud", type=int, default=None, help="serial baud rate (default 115200)")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (sections run:, estimator:, streams:)")
     p.add_argument("--time-unit", choices=("s", "ms", "us"), default=None, dest="time_unit",
-                   help="unit of a CSV's time column (default s; a column evidently in ms/us is refused)")
+                   help="unit of a CSV's time column (default s; a column whose median step is 1 or more, or coarser than "
+                        "the sample rate, is refused with the unit to pass)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--baseline-s", type=float, metavar="S", help="learn the baseline from the first S s of still data (default 600)")
     g.add_argument("--baseline", metavar="FILE", help="baseline from a `companion analyze` JSON/YAML report or a saved baseline")

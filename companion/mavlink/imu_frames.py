@@ -4,7 +4,7 @@ pymavlink packs one message per Python call (a message object, ``struct.pack``, 
 message, which is most of what a loopback test's simulated autopilot spends (three IMUs at 100 Hz are 300
 messages per simulated second). Here the block's payloads are numpy rows (:func:`imu_payloads`,
 :func:`heartbeat_payload`) and the frames one :func:`encode_frames` call: the same bytes pymavlink's
-``*_send`` would write, in the same order, with the same sequence numbers (tests/test_imu_frames.py checks
+``*_send`` would write, in the same order, with the same sequence numbers (tests/mavlink/test_imu_frames.py checks
 them against pymavlink's own packing). Unsigned MAVLink 2 only; a signed link keeps pymavlink's path.
 """
 

@@ -3,7 +3,7 @@
 A tlog is a sequence of records ``[8-byte big-endian unix time in microseconds][one MAVLink frame]``
 (the format MAVProxy and Mission Planner write). :func:`write_imu_tlog` builds all frames at once
 with numpy (a 720,000-message file takes about a second) and pymavlink decodes them to the same
-values (tests/test_sources_tlog.py checks it).
+values (tests/sources/test_tlog.py checks it).
 
 Units written (ArduPilot's conventions, see ../shared/REFERENCE.md):
 

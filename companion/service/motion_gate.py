@@ -125,7 +125,7 @@ class MotionGate:
             accel_up = float(ratio.max())
             # per axis: a log that starts with the vehicle in hand can teach one axis a reference many times
             # its rest level while the others are near theirs; tested on all axes at once, the gate would
-            # take knocks on that axis for rest (tests/test_engine_on_ground.py)
+            # take knocks on that axis for rest (tests/service/test_motion_engine.py)
             moves = np.ptp(a, axis=0) > 0  # an axis that stops (every value equal) says nothing of its noise
             quieter = moves & (a_std * QUIETER < self.ref_accel_std)
             if a.shape[0] < QUIET_MIN_SAMPLES:

@@ -183,11 +183,16 @@ _AUTOPILOT = {"dataflash": 3, "ulog": 12}  # MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AU
 
 
 def is_replay_source(spec) -> bool:
-    """True for a file ``companion run --source`` replays (every log kind :func:`companion.sources.kind_of`
-    names: .tlog/.tlog.bin/.mavlink, DataFlash .bin, .ulg, .csv; each optionally .gz)."""
-    from companion.sources.kind import file_kind
+    """True for a file ``companion run --source`` replays: a log by its name (.tlog/.tlog.bin/.mavlink,
+    DataFlash .bin, .ulg, .csv; each optionally .gz) or an existing file whose content is a log whatever its
+    name (a Mission Planner text .log, say: :func:`companion.sources.kind_of` decides, the one rule)."""
+    from pathlib import Path
 
-    return file_kind(spec) is not None
+    from companion.sources.kind import FILE_KINDS, file_kind, kind_of
+
+    if file_kind(spec) is not None:
+        return True
+    return Path(str(spec)).is_file() and kind_of(spec) in FILE_KINDS
 
 
 def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None) -> dict:

@@ -1,7 +1,7 @@
 """Synthesis of every IEEE Std 952 noise effect as SI rate samples (numpy only).
 
 Each synthesiser reproduces the analytic Allan variance of :mod:`companion.allan.terms` (checked in
-tests/test_sim_synth.py over many seeds, tolerance from the EDF). Rate y_k is sampled at fs = 1/tau0;
+tests/sim/test_synth.py over many seeds, tolerance from the EDF). Rate y_k is sampled at fs = 1/tau0;
 PSDs are two-sided (IEEE Std 952-1997 Annex C).
 
 =================  =====================================================================================

@@ -184,7 +184,7 @@ def imu_sample_from_message(msg, scales: ScaleTable | None = None) -> ImuSample 
     The int16 messages take a scalar path (one message per call on a live link: a one-row numpy record
     costs ~20 us, most of a message's decoding); its arithmetic is the array path's, operation for
     operation (an int to a double, times the scale), so the samples are bit-identical
-    (tests/test_sources_tlog.py). HIGHRES_IMU keeps the array path (float32 fields rounded as on the wire).
+    (tests/sources/test_tlog.py). HIGHRES_IMU keeps the array path (float32 fields rounded as on the wire).
     """
     global _DEFAULT_TABLE
     name = msg.get_type()

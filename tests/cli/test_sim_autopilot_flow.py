@@ -1,5 +1,5 @@
 """`companion sim-autopilot --flow-control`: the receiver's UDP queue as the kernel shows it, and the options.
-The flow-controlled link itself runs in every loopback test (tests/loopback.py)."""
+The flow-controlled link itself runs in every loopback test (tests/support/loopback.py)."""
 
 from __future__ import annotations
 

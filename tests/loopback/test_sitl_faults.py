@@ -29,7 +29,7 @@ axes:
 """
 BASELINE_S = 60.0
 #: wall-clock speedups that keep the receiver lossless on a busy 2-core machine (about 1000 IMU messages/s):
-#: the pace without flow control (tests/loopback.py), else only the deadlines
+#: the pace without flow control (tests/support/loopback.py), else only the deadlines
 SPEEDUP = {1: 10.0, 2: 5.0, 3: 4.0}
 #: words of a fault report; a healthy run must show none of them (recoveries excluded: RECOVERY)
 FAULT_WORDS = re.compile(r"degrad|stuck|dead|noise|bias|spike|drift|saturat|clip|disagree", re.I)

@@ -37,7 +37,7 @@ QUANT_SLOPE = -1.5
 #: so the next octave still falls like tau^-1.34 or faster, where white noise alone falls like tau^-1. An output
 #: line near the Nyquist frequency lifts the smallest cluster time alone (point samples alternate, pairs
 #: average it out) and passes the first test but not this one
-#: (tests/test_fit.py::test_quantization_only_where_its_slope_is).
+#: (tests/allan/test_fit.py::test_quantization_only_where_its_slope_is).
 QUANT_SLOPE2 = -1.2
 
 #: the log's low-pass cut-off stands unless it lies outside the data's profile interval at this level
@@ -88,7 +88,7 @@ INVERT_MAX_NU = 1e4
 #: ~ N/m at tau = T/10), so that the octaves tau_d .. T/2 carry it. A record therefore needs to be at least
 #: RESOLVE_RECORD_FACTOR x tau_d long, tau_d being the shortest tau from which the term dominates (a factor of
 #: twenty is too strict: K of a 2000 s record with tau_d = 173 s is recovered within its interval,
-#: tests/test_estimators.py).
+#: tests/estimators/test_online.py).
 RESOLVE_RECORD_FACTOR = 10.0
 #: the terms the record rule applies to: those seen only at long cluster times
 RESOLVE_EFFECTS = ("bias_instability", "random_walk")
