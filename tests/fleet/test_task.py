@@ -58,7 +58,7 @@ def test_simulated_parameters_recovered(fleet):
 
 
 @pytest.mark.parametrize("content, reason", [
-    (b"", "no IMU messages"),
+    (b"", "empty file (0 bytes)"),
     (b"\x00garbage" * 1000, "no IMU messages"),
 ])
 def test_bad_log_fails_with_one_line(tmp_path, content, reason):
