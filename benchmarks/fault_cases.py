@@ -119,7 +119,7 @@ def _noise_spec(kind, rng, sig, s_tot, rate):
 
 
 def _bias_spec(rng, s_tot, rate):
-    # a step at or above the floor (health.limits.FaultLimits.bias_jump_dps): smaller ones are wander
+    # a step at or above the floor (health.evidence_rules.FaultLimits.bias_jump_dps): smaller ones are wander
     size = float(rng.uniform(LIMITS.bias_jump_dps, 2.0)) * DEG * (1 if rng.random() < 0.5 else -1)
     return CaseSpec("bias", size, bias.H_ON / (rate * size * size / (2 * s_tot ** 2)), f"{size / DEG:+.2f} deg/s")
 

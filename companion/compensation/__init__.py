@@ -5,7 +5,7 @@
 - :mod:`.srukf`: square-root UKF on model NL (method 2);
 - :mod:`.srrsukf`: square-root risk-sensitive UKF on model NL (method 3);
 - :mod:`.sqrt_ops`: Cholesky rank-1 update/downdate and the QR triangularisation;
-- :mod:`.pipeline`: run the methods on a series and compare Allan deviations.
+- :mod:`.compare_methods`: run the methods on a series and compare Allan deviations.
 """
 
 from companion.compensation.arima import ArimaParams, fit_arima111, simulate_arima111

@@ -49,7 +49,7 @@ def params_from_terms(terms: Iterable[Mapping]) -> dict[str, tuple[float, float]
 
 
 def check_params(terms: Iterable[Mapping], side: str = "current") -> dict[str, tuple[float, float]]:
-    """``{param: (value, s)}`` of the resolved linear terms for the degradation test (detector.py), where
+    """``{param: (value, s)}`` of the resolved linear terms for the degradation test (degradation.py), where
     ``s / value`` is the one-sigma of ln(value) read from the side of the 95 % interval the test looks at.
 
     The test asks whether the current value's *lower* end is above the baseline's *upper* end. The intervals

@@ -1,8 +1,8 @@
 """The hold (debounce) rule shared by the counting detectors: a state changes only after a run of blocks.
 
-PX4-style hysteresis with explicit counts: resolution.py and timing.py (``HOLD`` both ways),
+PX4-style hysteresis with explicit counts: resolution.py and timing_faults.py (``HOLD`` both ways),
 saturation.py (on at once, off after ``CLEAR_BLOCKS``), bias.py's drift (off after ``DRIFT_HOLD``) and
-detector.py's degradation test (``hold_on`` / ``hold_off`` checks). Plain ints; no numpy.
+degradation.py's test (``hold_on`` / ``hold_off`` checks). Plain ints; no numpy.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ moving, armed or not); ``ImuFaults.on_quiet`` the ones valid only on still, sett
 jump/drift, resolution) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them
 (the noise test's level on, on a slow stream, until it holds faults.NU_REF_MIN degrees of freedom).
 Disagreement lives with the pairs of IMUs (disagreement.py, driven by service/imu_group.py) and the Allan
-rise with detector.py; both feed ``set_external`` so that one code per IMU is reported.
+rise with degradation.py; both feed ``set_external`` so that one code per IMU is reported.
 """
 
 from __future__ import annotations

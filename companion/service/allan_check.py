@@ -46,7 +46,7 @@ class AllanCheck:
     """The degradation detector of one IMU and the parameters of its last check (:attr:`current`)."""
 
     def __init__(self, imu: int, cfg):
-        self.cfg = cfg  # service.config.PipelineConfig
+        self.cfg = cfg  # service.pipeline_config.PipelineConfig
         self.detector = HealthDetector(imu, cfg.health)
         self.current: dict[str, Params] = {}  # per axis the parameters the last check resolved
 

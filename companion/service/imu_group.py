@@ -35,7 +35,7 @@ def _period(t: np.ndarray) -> float:
 class ImuGroup:
     def __init__(self, reset_s: float, limits=None):
         self.reset_s = float(reset_s)
-        self.limits = limits  # magnitude floors of the disagreement test (health.limits.FaultLimits)
+        self.limits = limits  # magnitude floors of the disagreement test (health.evidence_rules.FaultLimits)
         self.pairs: dict[tuple[int, int], PairDisagreement] = {}
         self.pair_done: dict[tuple[int, int], float] = {}
         self.disagree: dict[tuple[int, str], str] = {}  # (imu, axis) -> detail of an active disagreement

@@ -96,7 +96,7 @@ RESOLVE_EFFECTS = ("bias_instability", "random_walk")
 #: AVAR rises early (half a minute of a copter at rest, a 0.29 s batch-sampler burst) would "resolve" a rate
 #: random walk or a bias instability from cluster times of a second or of milliseconds, where a drift, a slow
 #: filter or temperature look the same; below 60 s the analysis deems even N unusable
-#: (analysis.limits.FIT_MIN_SECONDS).
+#: (analysis.sufficiency.FIT_MIN_SECONDS).
 RESOLVE_MIN_RECORD_S = 60.0
 
 #: one-sided 95 % normal quantile of an upper bound
