@@ -38,8 +38,19 @@ with --baud), .tlog files, ArduPilot DataFlash .bin logs, PX4 .ulg logs, or CSV 
 """
 
 
+class Parser(argparse.ArgumentParser):
+    """An argument parser that takes options by their full names only: argparse's prefix matching would read
+    ``run --report r.html`` as ``--report-period r.html``, and a script abbreviating an option would change its
+    meaning silently when a longer option is added. Subcommand parsers are made of this class too
+    (``add_subparsers`` uses its parser's class)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs["allow_abbrev"] = False
+        super().__init__(*args, **kwargs)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="companion",
         description="Gyro health from MAVLink IMU data: Allan-variance noise coefficients, online and offline.",
         epilog=EPILOG,

@@ -64,3 +64,18 @@ def test_directory_and_unknown_source_are_named(tmp_path, capsys):
     assert main(["analyze", "nonsense"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "unknown source" in err and ".bin" in err and ".ulg" in err
+
+
+@pytest.mark.parametrize("argv, abbrev", [
+    (["run", "--source", "tlogs/sample.tlog", "--report-p", "3"], "--report-p"),  # --report-period
+    (["analyze", "tlogs/sample.tlog", "--qui"], "--qui"),  # --quiet
+    (["fleet", "report", "--db", "x.sqlite", "--ht", "r.html"], "--ht"),  # --html
+    (["simulate", "tlogs/sample_model.yaml", "--duration", "10", "--out", "x.csv", "--se", "3"], "--se"),  # --seed
+])
+def test_an_abbreviated_option_is_refused_not_guessed(argv, abbrev, capsys):
+    """Options by their full names only: a prefix is a usage error (exit 2), never read as the option it
+    begins, so a script's meaning cannot change when a longer option is added."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert f"unrecognized arguments: {abbrev}" in capsys.readouterr().err
