@@ -36,7 +36,7 @@ from companion.service.allan_check import bias_extra_var
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
 from companion.service.pipeline_config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
-from companion.service.imu_summary import fault_texts, final_terms, rate_note, send_final, summary_rows, too_slow_note
+from companion.service.imu_summary import fault_texts, final_terms, send_final, summary_rows, too_slow_note
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 from companion.service.imu_group import ImuGroup
@@ -479,10 +479,6 @@ class Pipeline:
     def fault_texts(self, ch: Channel) -> list[str]:
         """The active faults of an IMU in plain words, most severe first (what the STATUSTEXTs said)."""
         return fault_texts(self, ch)
-
-    def rate_note(self, ch: Channel) -> str | None:
-        """The summary's word on an IMU whose rate switched more often than the log said line by line."""
-        return rate_note(self, ch)
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict:
