@@ -186,13 +186,10 @@ def is_replay_source(spec) -> bool:
     """True for a file ``companion run --source`` replays: a log by its name (.tlog/.tlog.bin/.mavlink,
     DataFlash .bin, .ulg, .csv; each optionally .gz) or an existing file whose content is a log whatever its
     name (a Mission Planner text .log, say: :func:`companion.sources.kind_of` decides, the one rule)."""
-    from pathlib import Path
-
     from companion.sources.kind import FILE_KINDS, file_kind, kind_of
 
-    if file_kind(spec) is not None:
-        return True
-    return Path(str(spec)).is_file() and kind_of(spec) in FILE_KINDS
+    # by name first: a log named so is replayed (and its reader says what is wrong with it) without reading it
+    return file_kind(spec) is not None or kind_of(spec) in FILE_KINDS
 
 
 def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None) -> dict:
