@@ -10,16 +10,22 @@ from companion.units import fmt_value as _fmt
 
 
 
-def format_term(t: dict, axis: str) -> str:
-    """'B 28.4 [26.1, 31.0] deg/h' style text of a fitted term in datasheet units."""
+def term_parts(t: dict, axis: str, sep: str = " ") -> list[str]:
+    """Each parameter of a fitted term in datasheet units with its interval, ``'B 28.4 [26.1, 31.0] deg/h'``
+    (``sep`` between name and value: the plot's legend writes ``B=...``); one rule for table and figure."""
     parts = []
     for p in PARAMS[t["effect"]]:
         v = units.to_datasheet(p, t[p], axis)
         ci = t.get("ci95", {}).get(p)
-        s = (f"{p} {fmt_interval(v, units.to_datasheet(p, ci[0], axis), units.to_datasheet(p, ci[1], axis))}" if ci
-             else f"{p} {_fmt(v)}")
+        s = (f"{p}{sep}{fmt_interval(v, units.to_datasheet(p, ci[0], axis), units.to_datasheet(p, ci[1], axis))}"
+             if ci else f"{p}{sep}{_fmt(v)}")
         parts.append(s + " " + units.datasheet_unit(p, axis))
-    return ", ".join(parts)
+    return parts
+
+
+def format_term(t: dict, axis: str) -> str:
+    """'B 28.4 [26.1, 31.0] deg/h' style text of a fitted term in datasheet units."""
+    return ", ".join(term_parts(t, axis))
 
 
 def format_table(report: dict) -> str:

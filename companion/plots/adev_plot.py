@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from companion import units
-from companion.allan.terms import PARAMS, avar_term
+from companion.allan.terms import avar_term
+from companion.analysis.report_table import term_parts
 from companion.plots import require_matplotlib, save_figure
 from companion.samples import ACCEL_AXES, GYRO_AXES
-from companion.units import fmt_interval, fmt_value
 
 _LABEL = {"white_noise": "white noise", "bias_instability": "bias instability", "random_walk": "rate random walk",
           "quantization": "quantization", "ramp": "rate ramp", "gauss_markov": "Gauss-Markov",
@@ -33,14 +33,7 @@ _WRAP = 78  #: characters per legend line (see LEGEND_FONT)
 
 
 def _value_text(t, axis):
-    parts = []
-    for p in PARAMS[t["effect"]]:
-        v = units.to_datasheet(p, t[p], axis)
-        ci = t.get("ci95", {}).get(p)
-        # the table's digits, so that figure and text read alike
-        s = (f"{p}={fmt_interval(v, units.to_datasheet(p, ci[0], axis), units.to_datasheet(p, ci[1], axis))}" if ci
-             else f"{p}={fmt_value(v)}")
-        parts.append(s + " " + units.datasheet_unit(p, axis))
+    parts = term_parts(t, axis, sep="=")  # the table's digits, so that figure and text read alike
     if t["effect"] == "white_noise" and t.get("filter_hz"):
         # the dashed white-noise line bends below the filter's corner: say which filter
         parts.append(f"through a {int(t.get('filter_order') or 2)}-pole {t['filter_hz']:.3g} Hz low-pass")
