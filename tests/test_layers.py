@@ -30,6 +30,7 @@ LAYERS = {
     "companion.config": ADAPTER,  # the configuration schema and its YAML loader
     "companion.mavlink": ADAPTER,
     "companion.plots": ADAPTER,
+    "companion.webview": ADAPTER,  # HTML reports and the live page's server (data in, pages out)
     "companion.sim.model": ADAPTER,  # model YAML
     "companion.sim.preset": ADAPTER,  # preset YAML
     "companion.datasheets": ADAPTER,  # the datasheet YAML (companion/datasheets.yaml)

@@ -6,6 +6,7 @@ import argparse
 import signal
 import sys
 
+from companion.cli.run_web import WebRun, add_arguments
 from companion.errors import CompanionError
 
 DESCRIPTION = """\
@@ -80,6 +81,7 @@ def register(subparsers) -> None:
     p.add_argument("--out-tlog", metavar="FILE", help="record what was received and sent (or, for a replay, the reports) to a tlog")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (default: run until Ctrl-C/SIGTERM)")
     p.add_argument("--quiet", action="store_true", help="only warnings and the final summary")
+    add_arguments(p)
     # MAVLink 2 signing (companion/mavlink/signing.py, docs/run.md#signed-links)
     p.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing with this 32-byte key (raw or 64 hex "
                    "digits; the autopilot's key, set with SETUP_SIGNING): sign what we send, accept only "
@@ -126,13 +128,18 @@ def _run(args, stop) -> int:
         print(f"{READY_LINE} {source}", file=sys.stderr, flush=True)
 
     opts = build_options(args, warn, lambda state, run_keys: _check_outputs(args, run_keys, state))
+    web = WebRun(args)  # --report checked, --web bound and serving, before the work
     hooks = RunHooks(log=log, warn=warn, stop=lambda: stop["flag"], ready=ready,
-                     echo=None if args.quiet else print)
-    result = run_session.run(opts, hooks)
-    print_summary(result.pipeline)
-    if result.link is not None:  # link health (loss, reordering, late, rejected frames) per source
-        for line in result.link.stats.summary_lines():
-            print(line)
+                     echo=None if args.quiet else print, started=web.started)
+    try:
+        result = run_session.run(opts, hooks)
+        print_summary(result.pipeline)
+        if result.link is not None:  # link health (loss, reordering, late, rejected frames) per source
+            for line in result.link.stats.summary_lines():
+                print(line)
+        web.finish(result.pipeline, opts.source, lambda: stop["flag"], opts.is_replay)
+    finally:
+        web.close()
     return 0
 
 

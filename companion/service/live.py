@@ -179,6 +179,7 @@ def run_live(opts: RunOptions, hooks: RunHooks, writer=None):
             link.recorder = writer
         pipeline = Pipeline(opts.pipeline, Reporter(link, opts.report_period), opts.baseline, hooks.log, opts.scales)
         restore(pipeline, opts.state, opts.relearn, hooks.warn, hooks.log)
+        hooks.started(pipeline)
         if pipeline.sysid is not None and link.sysid is None:
             link.set_sysid(pipeline.sysid)
         hooks.ready(opts.source)

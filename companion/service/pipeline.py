@@ -35,6 +35,7 @@ from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTI
 from companion.service.allan_check import bias_extra_var
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
+from companion.service.evidence_log import EvidenceLog
 from companion.service.pipeline_config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
 from companion.service.imu_summary import fault_texts, final_terms, send_final, summary_rows, too_slow_note
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
@@ -79,6 +80,7 @@ class Pipeline:
         # belong to (None: MAVLink): each channel's estimators model the low-pass cut-off of its data
         self.params: dict[str, float] = {}
         self.params_format: str | None = None
+        self.evidence = EvidenceLog()  # the data around every alarm (service.evidence_log)
 
     # ------------------------------------------------------------------ input
     def raise_if_failed(self) -> None:
@@ -180,6 +182,7 @@ class Pipeline:
                 self._advance(ch, ev[1])
             elif kind == "block":
                 self._close_block(ch, ev[1], ev[2])
+                self.evidence.on_block(self, ch, ev[1])
                 t_end = float(ev[1][-1, 0])
                 if ch.check_due(t_end):
                     self._check(ch, t_end)
@@ -384,6 +387,7 @@ class Pipeline:
                 self._bias_said[(ev.imu, ev.axis)] = ev.value
             self.transitions.append((t, text))
             self.log(text)
+            self.evidence.on_fault_event(self, ev, t)
             if ev.state == FAULT:
                 sev = MAV_SEVERITY_CRITICAL if ev.critical else MAV_SEVERITY_WARNING
             else:
@@ -438,6 +442,7 @@ class Pipeline:
             return
         for ax, terms in reported.items():
             self.reporter.set_online_terms(ch.imu, ax, terms)
+        self.evidence.on_check(self, ch, reported, transitions, t)
         for tr in transitions:
             text = tr.text()
             self.transitions.append((t, text))

@@ -21,7 +21,7 @@ def pipeline_state(p) -> dict:
     chans = {str(imu): ch.state_dict() for imu, ch in p.channels.items() if ch.rate_hz is not None}
     return {"format": STATE_FORMAT, "version": 1, "sysid": p.sysid,
             "baseline": p.baseline.to_dict() if p.baseline is not None else None, "channels": chans,
-            "replayed": list(p.replayed), **p.group.state_dict()}
+            "replayed": list(p.replayed), "evidence": p.evidence.state_dict(), **p.group.state_dict()}
 
 
 def load_pipeline_state(p, d: Mapping) -> None:
@@ -46,6 +46,7 @@ def load_pipeline_state(p, d: Mapping) -> None:
         elif not ch.learn:  # no baseline for this IMU and nothing being learned: learn afresh
             ch.relearn()
     p.channels = channels
+    p.evidence.load_state_dict(d.get("evidence"))
     p.replayed = [dict(r) for r in d.get("replayed") or [] if isinstance(r, Mapping) and "sha256" in r]
     sensor = {imu: [(k, ax) for k, ax in ch.faults.active() if k in SENSOR_FAULTS] for imu, ch in channels.items()}
     p._restored = {imu: v for imu, v in sensor.items() if v}

@@ -33,6 +33,7 @@ class RunHooks:
     warn: Callable[[str], None] = _nothing
     stop: Callable[[], bool] = lambda: False
     ready: Callable[[str], None] = _nothing
+    started: Callable[[object], None] = _nothing  # the pipeline once made (run --web publishes its snapshots)
     echo: Callable[[str], None] | None = None
 
 

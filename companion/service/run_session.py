@@ -97,6 +97,7 @@ def replay(opts: RunOptions, hooks: RunHooks, writer=None):
     reporter = Reporter(sink, opts.report_period)
     pipeline = Pipeline(opts.pipeline, reporter, opts.baseline, hooks.log, opts.scales)
     restore(pipeline, state, opts.relearn, hooks.warn, hooks.log)
+    hooks.started(pipeline)
     fp = None
     if state is not None:
         from companion.service.state import fingerprint
@@ -156,6 +157,7 @@ def run(opts: RunOptions, hooks: RunHooks) -> RunResult:
             from companion.service.live import run_live
 
             result = RunResult(*run_live(opts, hooks, writer))
+        result.pipeline.evidence.finish()  # alarms whose minute after is not in: kept with what there is
         if opts.state is not None:
             save(result.pipeline, opts.state, hooks.warn)
         return result
