@@ -7,6 +7,7 @@ import argparse
 import math
 import sys
 
+from companion.cli.analyze_report import add_argument as add_report_argument
 from companion.cli.output import to_json, write_text
 from companion.cli.progress import Progress
 from companion.errors import CompanionError
@@ -83,6 +84,7 @@ def register(subparsers) -> None:
                    help="also run the online estimator (octave bank, model chosen from the data, docs/online.md) "
                         "over each axis, the same report as `companion run`: JSON key 'online' per axis (terms with "
                         "'bound': true for 95 %% upper bounds), table row 'online' ('< x' = bound)")
+    add_report_argument(p)
     p.set_defaults(func=run)
 
 
@@ -107,7 +109,7 @@ def run(args) -> int:
     from companion.analysis.report_table import format_table
     from companion.cli.output import check_output_path, check_plot_path
 
-    for opt, path in (("--json", args.json), ("--kalibr", args.kalibr)):  # outputs checked before the work
+    for opt, path in (("--json", args.json), ("--kalibr", args.kalibr), ("--report", args.report)):  # outputs checked before the work
         if path:
             check_output_path(path, opt)
     if args.plot:
@@ -145,6 +147,11 @@ def run(args) -> int:
             print(f"note: {n}")
     report["warnings"] = [f"{st['message']}[{st['instance']}]: {w}" for st in report["streams"] for w in st["warnings"]]
     print(format_table(report))
+    if args.report:  # run's fault detectors over each log: the flagged IMUs' evidence (cli.analyze_report)
+        from companion.cli import analyze_report
+
+        report["evidence"], report["evidence_note"] = analyze_report.evidence(sources, args)
+        analyze_report.write(args.report, report)
     if args.json:
         write_text(args.json, to_json(report) + "\n", "JSON")
         print(f"wrote {args.json}")

@@ -67,11 +67,17 @@ def _write_reports(args, store, entries) -> None:
     from companion.fleet.fleet_ranking import report_html, report_json
     from companion.fleet.trends import EVIDENCE_THRESHOLD, MIN_RISE
 
+    from companion.fleet.fleet_evidence import fleet_evidence, fleet_view
+    from companion.webview.pages import fleet_section
+
     if args.json:
-        write_text(args.json, to_json(report_json(store, entries, EVIDENCE_THRESHOLD, MIN_RISE)) + "\n", "JSON")
+        data = dict(report_json(store, entries, EVIDENCE_THRESHOLD, MIN_RISE), evidence=fleet_evidence(entries))
+        write_text(args.json, to_json(data) + "\n", "JSON")
         print(f"wrote {args.json}")
-    if args.html:
-        write_text(args.html, report_html(store, entries, EVIDENCE_THRESHOLD, MIN_RISE, args.max_plots), "HTML")
+    if args.html:  # the fixed page, then its interactive part (collapsed) before the end
+        page = report_html(store, entries, EVIDENCE_THRESHOLD, MIN_RISE, args.max_plots)
+        page = page.replace("</body></html>", fleet_section(fleet_view(entries, args.max_plots)) + "</body></html>")
+        write_text(args.html, page, "HTML")
         print(f"wrote {args.html}")
 
 

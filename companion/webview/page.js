@@ -82,7 +82,7 @@ var Companion = (function () {
       var a = axes[ax];
       if (!a || !a.tau_s) return;
       series.push({name: ax, x: a.tau_s, y: a.adev, lo: a.lo, hi: a.hi, color: AXIS_COLORS[ax]});
-      if (a.model) series.push({name: ax + " fit", x: a.tau_s, y: a.model, color: AXIS_COLORS[ax], dash: [5, 4], width: 1});
+      if (a.model) series.push({name: "", x: a.tau_s, y: a.model, color: AXIS_COLORS[ax], dash: [5, 4], width: 1});
     });
     if (!series.length) { el("p", {}, parent, title + ": no Allan deviation yet"); return null; }
     return CPlot.plot(plotBox(parent, "adev"), {title: title, xlabel: "cluster time tau (s)", ylabel: axes.unit || "Allan deviation (rad/s)",
@@ -129,6 +129,9 @@ var Companion = (function () {
   }
 
   function renderFleet(d, root) {
+    var det = document.getElementById("interactive");
+    if (det && /interactive/.test(location.hash + location.search)) det.open = true;
+    if (det) det.addEventListener("toggle", CPlot.redrawAll);
     el("h2", {}, root, "Interactive plots");
     d.imus.forEach(function (m) {
       var series = [];
@@ -136,9 +139,8 @@ var Companion = (function () {
         var s = m.series[ax];
         series.push({name: ax, x: s.x, y: s.y, lo: s.lo, hi: s.hi, color: AXIS_COLORS[ax]});
       });
-      var p = CPlot.plot(plotBox(root, "trend"), {title: m.label + ": " + m.param + " per flight (" + m.unit + "), 95 % intervals",
+      CPlot.plot(plotBox(root, "trend"), {title: m.label + ": " + m.param + " per flight (" + m.unit + "), 95 % intervals",
         xlabel: "flight", ylabel: m.unit, series: series, height: 220, width: 900});
-      root.addEventListener("toggle", function () { p.draw(); });
     });
     if (d.evidence && d.evidence.length) {
       el("h2", {}, root, "Evidence of the flagged IMUs");

@@ -10,7 +10,7 @@ var CPlot = (function () {
   function fmt(v) {
     if (!finite(v)) return "n/a";
     var a = Math.abs(v);
-    if (a !== 0 && (a < 1e-3 || a >= 1e5)) return v.toExponential(3);
+    if (a !== 0 && (a < 1e-3 || a >= 1e5)) return v.toExponential(3).replace(/\.?0+e/, "e");
     return (+v.toPrecision(4)).toString();
   }
   function tr(v, log) { return log ? (v > 0 ? Math.log10(v) : NaN) : v; }
@@ -204,5 +204,9 @@ var CPlot = (function () {
   };
   Plot.prototype.update = function (spec) { this.spec = spec; this.reset(); this.draw(); };
 
-  return {plot: function (container, spec) { return new Plot(container, spec); }, fmt: fmt, COLORS: COLORS};
+  var all = [];
+  function redrawAll() { all.forEach(function (p) { if (p.box.isConnected) p.draw(); }); }
+  window.addEventListener("resize", redrawAll);
+  return {plot: function (container, spec) { var p = new Plot(container, spec); all.push(p); return p; },
+          redrawAll: redrawAll, fmt: fmt, COLORS: COLORS};
 })();
