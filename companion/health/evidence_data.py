@@ -150,13 +150,9 @@ def psd_two_sided(y: np.ndarray, rate_hz: float, nperseg: int = 256) -> tuple[np
     return f, p
 
 
-def _axis_word(ax: str) -> str:
-    return f"axis {ax[1].upper()}" if ax else "the IMU"
-
-
 def sentence(kind: str, imu: int, axis: str, value: float, detail: str = "", threshold: float = math.nan) -> str:
     """One sentence a user can read without the docs: what the detector saw and the bar it passed."""
-    who = f"IMU{imu} gyro {_axis_word(axis)}"
+    who = f"IMU{imu} gyro" + (f" axis {axis[1].upper()}" if axis else "")
     h = f"{threshold:g}" if math.isfinite(threshold) else "its threshold"
     v = value if math.isfinite(value) else math.nan
     words = {
