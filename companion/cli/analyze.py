@@ -46,6 +46,7 @@ examples:
   companion analyze before.bin after.bin --plot cmp.png   two logs overlaid in one figure
   companion analyze log.ulg --start 10 --end 95           a time window chosen by hand (still selection inside)
   companion analyze bench.csv --all                       no still selection
+  companion analyze flight.tlog --report analyze.html     interactive page, run's detectors over the log
 
 --taus: octave (1, 2, 4 ... samples), decade (1, 2, 4, 10, 20, 40 ...), all, log:N (N per decade), or a
 comma list of seconds. The fit always uses octave-spaced points with their full covariance; --taus

@@ -38,6 +38,8 @@ examples:
   companion run --source flight.tlog --baseline-s 300          replay a log, print the summary
   companion run --source udpin:127.0.0.1:14551 --duration 60 --out-tlog session.tlog
   companion run --source udpin:0.0.0.0:14550 --gcs udpout:192.168.1.10:14551   reports also to a GCS
+  companion run --source udpin:0.0.0.0:14550 --web 0.0.0.0:8080     a live page for a browser on the network
+  companion run --source flight.tlog --report alarms.html             every alarm with its evidence (docs/reports.md)
 
 watch it in MAVProxy:   graph NAMED_VALUE_FLOAT[IMU0GX_N].value
             in Mission Planner: Ctrl-F > Tuning > MAV_IMU0GX_N
