@@ -30,8 +30,10 @@ DEG = math.pi / 180.0
 STAT_NAMES = {
     "noise": ("CUSUM of the noise-variance log-likelihood ratio", "nats"),
     "spikes": ("CUSUM of the outlier-rate log-likelihood ratio", "nats"),
-    "stuck": ("CUSUM of the frozen-reading evidence (largest of its three tests)", "nats"),
-    "dead": ("CUSUM of the frozen-reading evidence (largest of its three tests)", "nats"),
+    "stuck": ("frozen-reading evidence over its bar (largest of its three CUSUMs and the identical-sample run)",
+              "share of the bar"),
+    "dead": ("frozen-reading evidence over its bar (largest of its three CUSUMs and the identical-sample run)",
+             "share of the bar"),
     "bias_jump": ("CUSUM of the still-block mean shift (larger of up and down)", "nats"),
     "bias_drift": ("distance of the slow bias average from its reference", "deg/s"),
     "saturation": ("largest |rate| of the block", "rad/s"),
@@ -43,7 +45,7 @@ STAT_NAMES = {
 
 
 #: kind -> the bar its statistic passes when the alarm is raised (the allan check's is its ratio_on)
-ALARM_BAR = {"noise": _noise.H_ON, "spikes": _spk.H_ON, "stuck": _stk.H_ON, "dead": _stk.H_ON,
+ALARM_BAR = {"noise": _noise.H_ON, "spikes": _spk.H_ON, "stuck": 1.0, "dead": 1.0,
              "bias_jump": _bias.H_ON, "bias_drift": _bias.DRIFT_TOL / DEG, "resolution": float(_res.HOLD),
              "rate": float(_tim.HOLD), "disagree": _dis.H_ON}
 
@@ -55,8 +57,10 @@ def _cusum(c, h_on: float, h_off: float) -> tuple[float, float, int]:
 def axis_statistics(af, ax: str) -> dict[str, tuple[float, float, int]]:
     """The statistics of one axis' detectors (health.monitor.AxisFaults) after a block, keyed by kind."""
     st = af.stuck
-    s_stuck = max(st.cusum.s, st.two.s, st.vib.s)
-    stuck = (float(s_stuck), _stk.H_ON if st.state == OK else _stk.H_OFF, int(st.state))
+    # the CUSUMs over their bar, and the run of identical samples over the run that flags it (health/stuck.py)
+    bar = _stk.H_ON if st.state == OK else _stk.H_OFF
+    run = st.equal_run / (_stk.EQUAL_BLOCKS * _stk.EQUAL_MIN_SAMPLES) if st.state == OK else 0.0
+    stuck = (float(max(st.cusum.s / bar, st.two.s / bar, st.vib.s / bar, run)), 1.0, int(st.state))
     b = af.bias
     up, down = (b.up, b.down)
     jump = (float(max(up.s, down.s)), _bias.H_ON if b.state == OK else _bias.H_OFF, int(b.state))
@@ -160,8 +164,8 @@ def sentence(kind: str, imu: int, axis: str, value: float, detail: str = "", thr
                  f"variance test passed {h} nats.",
         "spikes": f"{who}: isolated outliers came at {v:.2g} % of samples, more than a healthy gyro's; the CUSUM "
                   f"of the outlier rate passed {h} nats.",
-        "stuck": f"{who}: its readings stopped changing (frozen on one or two codes) while the vehicle still "
-                 f"vibrated or the noise was expected to move them; the evidence passed {h} nats.",
+        "stuck": f"{who}: its readings stopped changing (frozen on one or two codes, or identical samples) while "
+                 "the vehicle still vibrated or the noise was expected to move them.",
         "dead": f"{who}: it read exactly 0 in every sample ({detail or 'dead or below resolution'}).",
         "bias_jump": f"{who}: the mean of still blocks stepped by {v:+.2f} deg/s from its reference; the step "
                      f"CUSUM passed {h} nats.",

@@ -35,6 +35,16 @@ def _r(v) -> list:
     return [float(f"{x:.5g}") if math.isfinite(x) else None for x in np.asarray(v, dtype=float).ravel()]
 
 
+def _mark_trips(stats: dict, prev: Mapping) -> None:
+    """A statistic whose detector raised its alarm in this block is shown at its bar at least: a CUSUM starts
+    its evidence afresh at the alarm (health.faults.Cusum), so the value after the block no longer shows what
+    passed the bar."""
+    for key, (v, h, s) in stats.items():
+        if s == 1 and prev.get(key, (0.0, 0.0, 0))[2] == 0:
+            bar = ALARM_BAR.get(key.split("/")[0], h)
+            stats[key] = (max(v, bar) if math.isfinite(v) else bar, h, s)
+
+
 class ImuRing:
     """The recent data of one IMU: gyro buckets, detector statistics per block, raw samples."""
 
@@ -103,6 +113,7 @@ class EvidenceLog:
         stats.update(pair_statistics(pipeline.group.pairs, ch.imu))
         stats.update(allan_statistics(ch.allan.detector, ch.allan.detector.cfg.ratio_on))
         ring = self.rings.setdefault(ch.imu, ImuRing())
+        _mark_trips(stats, ring.stats[-1][1] if ring.stats else {})
         ring.add(data, stats, ch.rate_hz)
         t = float(data[-1, 0])
         for item in list(self.pending):

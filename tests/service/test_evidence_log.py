@@ -103,3 +103,42 @@ def test_the_kept_alarms_are_capped():
     items = log.all_items()
     assert len(items) == el.MAX_KEPT and items[-1]["text"] == f"alarm {el.MAX_KEPT + 6}"
     assert not items[0]["complete"] and not math.isnan(items[0]["t_s"])
+
+
+#: kind -> (the fault's size, the words of the sentence, the check of the faulty axis' buckets after the alarm
+#: against before: spread (max - min) ratio, mean shift in rad/s, or the largest excursion)
+KINDS = {"stuck": (0.0, "stopped changing", lambda before, after: after["spread"] < 0.2 * before["spread"]),
+         "bias_jump": (0.01745, "stepped by", lambda before, after: abs(after["mid"] - before["mid"]) > 0.012),
+         "spikes": (0.005, "isolated outliers", lambda before, after: after["peak"] > 0.2 > 5 * before["peak"])}
+
+
+@pytest.mark.parametrize("kind", ["stuck", pytest.param("bias_jump", marks=pytest.mark.soak),
+                                  pytest.param("spikes", marks=pytest.mark.soak)])
+def test_each_kind_has_readable_evidence(kind):
+    """A stuck axis, a 1 deg/s bias step, 0.5 % spikes of 0.3 rad/s on IMU1 Y at 100 s: one alarm of the kind,
+    its sentence, its statistic over the bar at the alarm and the fault visible in the faulty axis only."""
+    size, words, shows = KINDS[kind]
+    fault = Fault("bias" if kind == "bias_jump" else kind, at=FAULT_AT, size=size, imu=1, axis="gy")
+    sim = VehicleSimulator(MODEL, imus=2, seed=4, schedule=Schedule(), fault=fault)
+    p = Pipeline(PipelineConfig(baseline_s=60.0), Reporter(RecordingSink(), 1.0))
+    replay_vehicle(sim, p, 170.0, lsb=1e-3)
+    p.evidence.finish()
+    it = _item(p, kind)
+    assert it["imu"] == 1 and it["axis"] == "gy" and words in it["sentence"] and FAULT_AT <= it["t_s"] < FAULT_AT + 30
+    st = it["statistic"]
+    t, state = np.array(st["t_s"], dtype=float), np.array(st["state"])
+    assert np.all(state[t < it["t_s"] - 0.5] == 0) and state[t > it["t_s"] + 0.5][:3].tolist() == [1, 1, 1]
+    if kind != "bias_jump":  # a CUSUM: the evidence reached the bar in the block before the alarm
+        before = np.array(st["value"], dtype=float)[t < it["t_s"] + 0.5]
+        assert before.max() >= 0.5 * st["threshold"][0]
+
+    def view(s, ax, sel):
+        tc = np.array(s["t_s"])
+        lo, hi = np.array(s["lo"][ax])[sel(tc)], np.array(s["hi"][ax])[sel(tc)]
+        return {"spread": np.median(hi - lo), "mid": np.median((hi + lo) / 2), "peak": np.max(np.abs(np.r_[lo, hi]))}
+
+    for s in it["series"]:
+        for ax in ("gx", "gy", "gz"):
+            pre = view(s, ax, lambda tc: tc < FAULT_AT - 1)
+            post = view(s, ax, lambda tc: tc > it["t_s"] + 1)
+            assert shows(pre, post) == (s["imu"] == 1 and ax == "gy"), (s["imu"], ax, pre, post)
