@@ -21,7 +21,7 @@ import numpy as np
 
 from companion.health.evidence_data import (ALARM_BAR, STAT_NAMES, allan_statistics, imu_statistics, minmax_buckets,
                                             pair_statistics, psd_two_sided, sentence)
-from companion.health.faults import FAULT, KIND_WORDS
+from companion.health.faults import FAULT
 
 WINDOW_S = 60.0  #: s of message time kept before and after an alarm
 BUCKET_S = 0.5  #: s per min/max bucket: at most 240 points per series over the two minutes
@@ -144,7 +144,7 @@ class EvidenceLog:
         threshold = ALARM_BAR.get(kind, last[1] if last else math.nan)
         name, unit = STAT_NAMES.get(kind, (kind, ""))
         self.pending.append({
-            "source": "run", "imu": int(imu), "axis": axis, "kind": kind, "kind_words": KIND_WORDS.get(kind, kind),
+            "source": "run", "imu": int(imu), "axis": axis, "kind": kind,
             "t_s": float(t), "text": text, "value": value if math.isfinite(value) else None,
             "sentence": sentence(kind, imu, axis, value, detail, threshold),
             "window_s": [float(t) - WINDOW_S, float(t) + WINDOW_S], "series": [],

@@ -76,7 +76,7 @@ var Companion = (function () {
       }));
   }
 
-  function adevPlot(parent, title, axes) {
+  function adevPlot(parent, title, axes, key) {
     var series = [];
     Object.keys(axes).forEach(function (ax) {
       var a = axes[ax];
@@ -86,7 +86,7 @@ var Companion = (function () {
     });
     if (!series.length) { el("p", {}, parent, title + ": no Allan deviation yet"); return null; }
     return CPlot.plot(plotBox(parent, "adev"), {title: title, xlabel: "cluster time tau (s)", ylabel: axes.unit || "Allan deviation (rad/s)",
-      logx: true, logy: true, series: series, height: 280});
+      logx: true, logy: true, series: series, height: 280, key: key});
   }
 
   function renderAlarms(d, root) {
@@ -169,7 +169,8 @@ var Companion = (function () {
       table(sec, "coef-" + m.imu, ["axis", "N (95 %)", "B (95 %)", "K (95 %)"], rows);
       var adev = {};
       Object.keys(m.axes).forEach(function (ax) { adev[ax] = m.axes[ax].adev; });
-      adevPlot(sec, "IMU" + m.imu + " Allan deviation (rad/s), 95 % bands; still data used " + fmt(m.still_s) + " s", adev);
+      adevPlot(sec, "IMU" + m.imu + " Allan deviation (rad/s), 95 % bands; still data used " + fmt(m.still_s) + " s", adev,
+        "adev-" + m.imu);
     });
     el("h2", {}, root, "Alarms");
     if (!d.alarms.length) el("p", {id: "no-alarms"}, root, "No alarm so far.");
@@ -195,6 +196,16 @@ var Companion = (function () {
     }).catch(function () {}).then(function () { setTimeout(function () { poll(root); }, 1000); });
   }
 
+  /* ?selftest: a wheel step towards the middle of the first plot, then the mouse over it (the browser tests
+     read the zoomed range and the readout from the DOM) */
+  function selftest() {
+    var c = document.querySelector("canvas.cplot-canvas");
+    if (!c) return;
+    var r = c.getBoundingClientRect(), x = r.left + r.width / 2, y = r.top + r.height / 2;
+    c.dispatchEvent(new WheelEvent("wheel", {deltaY: -100, clientX: x, clientY: y, bubbles: true, cancelable: true}));
+    c.dispatchEvent(new MouseEvent("mousemove", {clientX: x, clientY: y, bubbles: true}));
+  }
+
   function start() {
     var node = document.getElementById("companion-data");
     var d = JSON.parse(node.textContent), root = document.getElementById(d.root || "report");
@@ -205,6 +216,7 @@ var Companion = (function () {
       if (location.protocol.indexOf("http") === 0) setTimeout(function () { poll(root); }, 1000);
     }
     document.body.setAttribute("data-rendered", d.kind);
+    if (/selftest/.test(location.search)) selftest();
   }
   return {start: start, evidence: evidence};
 })();

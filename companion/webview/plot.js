@@ -58,10 +58,13 @@ var CPlot = (function () {
     container.appendChild(this.box);
     this.height = spec.height || 260;
     this.reset();
+    if (spec.key && views[spec.key]) { this.xr = views[spec.key].xr.slice(); this.yr = views[spec.key].yr.slice(); }
     this.bind();
     this.draw();
   }
 
+  var views = {};  // spec.key -> the range a user zoomed or panned to (kept when a live page draws the plot again)
+  Plot.prototype.keep = function () { if (this.spec.key) views[this.spec.key] = {xr: this.xr.slice(), yr: this.yr.slice()}; };
   Plot.prototype.reset = function () {
     this.xr = this.spec.xrange ? this.spec.xrange.map(function (v) { return tr(v, this.spec.logx); }, this)
       : extent(this.spec, "x");
@@ -80,6 +83,7 @@ var CPlot = (function () {
     this.w = Math.max(320, this.box.clientWidth || spec.width || 720);
     c.width = Math.round(this.w * dpr); c.height = Math.round(this.height * dpr);
     c.style.width = this.w + "px"; c.style.height = this.height + "px";
+    c.setAttribute("data-xrange", this.xr.map(function (v) { return fmt(untr(v, spec.logx)); }).join(","));
     var g = c.getContext("2d");
     g.setTransform(dpr, 0, 0, dpr, 0, 0);
     g.fillStyle = "#fff"; g.fillRect(0, 0, this.w, this.height);
@@ -185,27 +189,27 @@ var CPlot = (function () {
       var cx = self.xr[0] + fx * (self.xr[1] - self.xr[0]), cy = self.yr[0] + fy * (self.yr[1] - self.yr[0]);
       self.xr = [cx - (cx - self.xr[0]) * k, cx + (self.xr[1] - cx) * k];
       if (!e.shiftKey) self.yr = [cy - (cy - self.yr[0]) * k, cy + (self.yr[1] - cy) * k];
-      self.draw();
+      self.keep(); self.draw();
     }, {passive: false});
     c.addEventListener("mousedown", function (e) { drag = {p: pos(e), xr: self.xr.slice(), yr: self.yr.slice()}; });
-    window.addEventListener("mouseup", function () { drag = null; });
+    c.addEventListener("mouseup", function () { drag = null; });
     c.addEventListener("mousemove", function (e) {
       var p = pos(e);
       if (drag) {
         var dx = (p[0] - drag.p[0]) / (self.w - PAD.l - PAD.r) * (drag.xr[1] - drag.xr[0]);
         var dy = (p[1] - drag.p[1]) / (self.height - PAD.t - PAD.b) * (drag.yr[1] - drag.yr[0]);
         self.xr = [drag.xr[0] - dx, drag.xr[1] - dx]; self.yr = [drag.yr[0] + dy, drag.yr[1] + dy];
-        self.draw();
+        self.keep(); self.draw();
       }
       self.readout(p[0], p[1]);
     });
-    c.addEventListener("mouseleave", function () { self.tip.style.display = "none"; });
-    c.addEventListener("dblclick", function () { self.reset(); self.draw(); });
+    c.addEventListener("mouseleave", function () { drag = null; self.tip.style.display = "none"; });
+    c.addEventListener("dblclick", function () { if (self.spec.key) delete views[self.spec.key]; self.reset(); self.draw(); });
   };
   Plot.prototype.update = function (spec) { this.spec = spec; this.reset(); this.draw(); };
 
   var all = [];
-  function redrawAll() { all.forEach(function (p) { if (p.box.isConnected) p.draw(); }); }
+  function redrawAll() { all = all.filter(function (p) { return p.box.isConnected; }); all.forEach(function (p) { p.draw(); }); }
   window.addEventListener("resize", redrawAll);
   return {plot: function (container, spec) { var p = new Plot(container, spec); all.push(p); return p; },
           redrawAll: redrawAll, fmt: fmt, COLORS: COLORS};

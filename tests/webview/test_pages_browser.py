@@ -65,6 +65,14 @@ def test_alarm_report(noisy_log, tmp_path, capsys):
     assert len(sizes) == 4 and all(w >= 600 and h >= 200 for w, h in sizes), sizes
     px = browser.screenshot(tmp_path / "chr", page.as_uri(), tmp_path / "alarms.png", height=1600)
     assert px.std() > 20 and _colour(px[700:]) > 20000  # the plots below the tables have colour in them
+    # ?selftest: one wheel step in the middle of the first plot zooms its x range to 0.8 about the mouse, and the
+    # readout under the mouse gives the time and every axis' bucket there
+    ranges = re.findall(r'data-xrange="([^"]+)"', html)
+    zoomed = browser.dom(tmp_path / "chr", page.as_uri() + "?selftest")
+    (a0, a1), (b0, b1) = (map(float, r.split(",")) for r in (ranges[0], re.findall(r'data-xrange="([^"]+)"', zoomed)[0]))
+    assert abs((b1 - b0) / (a1 - a0) - 0.8) < 0.01 and abs((b0 + b1) / 2 - (a0 + a1) / 2) < 0.05 * (a1 - a0)
+    tip = re.search(r'<div class="cplot-tip" style="[^"]*display: block[^"]*">([^<]*)', zoomed).group(1)
+    assert tip.startswith("message time (s): ") and all(f"{ax}: " in tip for ax in ("gx", "gy", "gz")), tip
 
 
 def test_analyze_report_with_the_flagged_imus_evidence(noisy_log, tmp_path, capsys):
