@@ -42,6 +42,9 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     if dead and warn is not None:
         for d in dead:
             warn(d)
+    ap = autopilot_entry(res, streams, dead, sel)
+    if ap is not None:
+        summary["autopilot"] = ap
     total = sum(s.samples for s in streams) * len(axes)
     bar = progress(len(streams) * len(axes), total) if progress is not None else None
     entries = []
@@ -59,11 +62,26 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                 continue
             e = analyze_stream(s, axes, taus, bar, online=online, ranges=ranges, filters=stream_filters(s, res.meta))
             e["source"] = str(spec)
+            if ap is not None:
+                e["autopilot"] = next((c for c in ap["cross_check"] if c["instance"] == s.key.instance), None)
             entries.append(e)
     finally:
         if bar is not None:
             bar.close()
     return entries, summary
+
+
+def autopilot_entry(res, streams, dead: list[str], sel) -> dict | None:
+    """The autopilot's own view of its IMUs beside our findings (dead gyros, a gyro that changed alone)."""
+    from companion.sources.autopilot_health import check_report
+
+    ours: dict[int, list[str]] = {}
+    for s in streams:
+        found = [d for d in dead if d.startswith(s.key.label())]
+        if sel.excluded_s(s.key.instance) > 0:
+            found.append(f"gyro changed alone while the vehicle was still ({sel.excluded_s(s.key.instance):.0f} s)")
+        ours[s.key.instance] = found
+    return check_report(res.meta.get("autopilot"), ours, sorted(ours))
 
 
 def dead_gyros(streams) -> list[str]:

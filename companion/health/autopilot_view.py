@@ -50,18 +50,22 @@ class Unhealthy:
     field: str  # e.g. "IMU.GH", "SYS_STATUS", "sensors_status_imu.gyro_healthy"
     sensor: str  # "gyro" or "accel"
     intervals: list[tuple[float, float]]  # message time (s), start of the first bad record to the next good one
+    #: the boot session (1, 2, ...) of each interval: a log across reboots starts its clock again at each
+    boots: list[int] = field(default_factory=list)
 
     def seconds(self) -> float:
         return float(sum(b - a for a, b in self.intervals))
 
     def text(self) -> str:
-        spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in self.intervals[:3])
+        boots = self.boots if len(self.boots) == len(self.intervals) else [1] * len(self.intervals)
+        spans = ", ".join(f"{a:.1f}-{b:.1f} s" + (f" (boot {k})" if max(boots) > 1 else "")
+                          for (a, b), k in zip(self.intervals[:3], boots[:3]))
         more = f" and {len(self.intervals) - 3} more" if len(self.intervals) > 3 else ""
         return f"{self.sensor} unhealthy ({self.field}) {spans}{more}"
 
     def to_dict(self) -> dict:
         return {"field": self.field, "sensor": self.sensor, "intervals": [list(iv) for iv in self.intervals],
-                "seconds": self.seconds()}
+                "boots": list(self.boots), "seconds": self.seconds()}
 
 
 @dataclass
@@ -188,23 +192,32 @@ def count_rise(t: np.ndarray, v: np.ndarray, name: str) -> CountRise | None:
     return CountRise(name, float(v[0]), float(v[-1]), rise, float(t[j[0] + 1]) if j.shape[0] else None)
 
 
+def _bad_runs(healthy: np.ndarray) -> list[tuple[int, int]]:
+    """Index ranges [a, b) of the runs where ``healthy`` is False."""
+    bad = ~np.asarray(healthy, dtype=bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(np.int8), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+
+
 def bad_intervals(t: np.ndarray, healthy: np.ndarray) -> list[tuple[float, float]]:
     """The intervals where ``healthy`` is False: from the first bad record's time to the next good record's
     (or the last record's, when it stays bad to the end)."""
     t = np.asarray(t, dtype=float)
-    h = np.asarray(healthy, dtype=bool)
-    if t.shape[0] == 0:
-        return []
-    bad = ~h
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(np.int8), [0]])))
-    out = []
-    for a, b in zip(edges[::2], edges[1::2]):
-        out.append((float(t[a]), float(t[b] if b < t.shape[0] else t[-1])))
-    return out
+    return [(float(t[a]), float(t[b] if b < t.shape[0] else t[-1])) for a, b in _bad_runs(healthy)]
+
+
+#: a step back in time by more than this is a reboot (as sources/sessions.py counts them)
+RESET_S = 1.0
 
 
 def unhealthy(t: np.ndarray, healthy: np.ndarray, name: str, sensor: str) -> Unhealthy:
-    return Unhealthy(name, sensor, bad_intervals(t, healthy))
+    """The unhealthy intervals of a health flag, each with its boot session (times restart at a reboot)."""
+    t = np.asarray(t, dtype=float)
+    if t.shape[0] == 0:
+        return Unhealthy(name, sensor, [], [])
+    boot = np.concatenate([[1], 1 + np.cumsum(np.diff(t) < -RESET_S)])
+    runs = _bad_runs(healthy)
+    return Unhealthy(name, sensor, bad_intervals(t, healthy), [int(boot[a]) for a, _ in runs])
 
 
 def vector_max(rows: np.ndarray) -> list[float] | None:

@@ -242,7 +242,7 @@ def link_view(fmt: str, sysid: int, ardupilot: bool, status_t: np.ndarray, statu
             if not used.any():
                 continue
             targets = [second] if second is not None else (sorted(set(instances) or {0}) if ardupilot else [0])
-            label = "SYS_STATUS" + (" 3D_GYRO/3D_ACCEL, all IMUs" if second is None and ardupilot else "")
+            label = "SYS_STATUS" + (f" 3D_{sensor.upper()}, all IMUs" if second is None and ardupilot else "")
             ok = ((status["health"] & bit) != 0) | ~used
             for i in targets:
                 r = _imu(view, i, sysid)
@@ -288,3 +288,19 @@ def from_tlog(idx, imu_keys) -> AutopilotView:
                   sorted({k.instance for k in keys}), view)
     view.fields = sorted(set(view.fields))
     return view
+
+
+# ---------------------------------------------------------------------------------------------------- reports
+
+def check_report(view: AutopilotView | None, ours: dict[int, list[str]], instances: list[int]) -> dict | None:
+    """The ``autopilot`` entry of a report: the view, the cross-check per IMU and its printed lines; None when the
+    source carries no autopilot health at all (a CSV, a tlog without SYS_STATUS or VIBRATION)."""
+    from companion.health.autopilot_view import cross_check
+
+    if view is None or not (view.fields or view.error):
+        return None
+    checks = cross_check(view, ours, instances)
+    lines = [c.line() for c in checks] + [e.text() for e in view.events[:10]]
+    if view.error:
+        lines.append(f"health records not read: {view.error}")
+    return {"view": view.to_dict(), "cross_check": [c.to_dict() for c in checks], "lines": lines}
