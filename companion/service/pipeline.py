@@ -79,6 +79,11 @@ class Pipeline:
         # belong to (None: MAVLink): each channel's estimators model the low-pass cut-off of its data
         self.params: dict[str, float] = {}
         self.params_format: str | None = None
+        # the autopilot's own view of its IMUs (service/autopilot_watch.py): a replayed log's, or the link's
+        from companion.sources.autopilot_health import LinkHealth
+
+        self.autopilot_view = None
+        self.autopilot_link = LinkHealth()
 
     # ------------------------------------------------------------------ input
     def raise_if_failed(self) -> None:
@@ -129,6 +134,11 @@ class Pipeline:
         if mtype == "PARAM_VALUE":
             self.on_param(msg.get_srcSystem(), msg.param_id, msg.param_value)
             return False
+        if mtype in ("SYS_STATUS", "VIBRATION"):
+            from companion.service.autopilot_watch import on_message
+
+            on_message(self, msg)
+            return False
         if mtype not in IMU_MESSAGES:
             return False
         if self._decode is None:
@@ -145,6 +155,7 @@ class Pipeline:
             return
         if self.sysid is not None and sysid != self.sysid:
             return
+        self.autopilot_link.on_heartbeat(sysid, autopilot)
         armed = bool(base_mode & 128)
         if armed != self.armed:
             self.log(f"vehicle {'armed' if armed else 'disarmed'}")

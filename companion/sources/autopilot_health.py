@@ -304,3 +304,58 @@ def check_report(view: AutopilotView | None, ours: dict[int, list[str]], instanc
     if view.error:
         lines.append(f"health records not read: {view.error}")
     return {"view": view.to_dict(), "cross_check": [c.to_dict() for c in checks], "lines": lines}
+
+
+class LinkHealth:
+    """SYS_STATUS and VIBRATION of one vehicle as they arrive on a live link (or a replay fed message by message):
+    kept as rows for :meth:`view`, and each gyro health bit that turns unhealthy said once (:meth:`on_message`)."""
+
+    def __init__(self):
+        self.status_t: list[float] = []
+        self.status: list[tuple[int, int, int]] = []
+        self.vib_t: list[float] = []
+        self.vib: list[tuple[float, ...]] = []
+        self.sysid: int | None = None
+        self.ardupilot = False
+        self._was_bad: dict[int, bool] = {}
+
+    def on_heartbeat(self, sysid: int, autopilot: int) -> None:
+        if self.sysid is None or sysid == self.sysid:
+            self.ardupilot = self.ardupilot or autopilot == MAV_AUTOPILOT_ARDUPILOTMEGA
+
+    def on_message(self, msg, sysid: int, t_s: float) -> list[str]:
+        """One SYS_STATUS or VIBRATION of system ``sysid`` at message time ``t_s`` (SYS_STATUS has no time of
+        its own: the caller gives the last IMU sample's). Returns the texts of gyro bits newly unhealthy."""
+        if self.sysid is not None and sysid != self.sysid:
+            return []
+        self.sysid = sysid
+        if msg.get_type() == "VIBRATION":
+            self.vib_t.append(float(msg.time_usec) * 1e-6)
+            self.vib.append((msg.vibration_x, msg.vibration_y, msg.vibration_z, msg.clipping_0, msg.clipping_1,
+                             msg.clipping_2))
+            return []
+        row = (int(msg.onboard_control_sensors_present), int(msg.onboard_control_sensors_enabled),
+               int(msg.onboard_control_sensors_health))
+        self.status_t.append(float(t_s))
+        self.status.append(row)
+        out = []
+        for bit, name in ((SENSOR_GYRO, "3D_GYRO"), (SENSOR_GYRO2, "3D_GYRO2")):
+            bad = bool(row[0] & row[1] & bit) and not row[2] & bit
+            if bad and not self._was_bad.get(bit, False):
+                who = "gyros" if bit == SENSOR_GYRO and self.ardupilot else ("IMU1 gyro" if bit == SENSOR_GYRO2
+                                                                            else "IMU0 gyro")
+                out.append(f"autopilot: {who} unhealthy ({name})")
+            self._was_bad[bit] = bad
+        return out
+
+    def view(self, instances: list[int]) -> AutopilotView | None:
+        if not self.status and not self.vib:
+            return None
+        st = np.array(self.status, dtype=np.uint64).reshape(-1, 3)
+        status = np.zeros(st.shape[0], dtype=_SYS_STATUS_DT)
+        for j, k in enumerate(("present", "enabled", "health")):
+            status[k] = st[:, j]
+        view = link_view("live", self.sysid or 0, self.ardupilot, np.array(self.status_t), status,
+                         np.array(self.vib_t), np.array(self.vib, dtype=float).reshape(-1, 6), instances)
+        view.fields = sorted(set(view.fields))
+        return view
