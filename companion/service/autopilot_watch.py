@@ -4,10 +4,12 @@ our findings (health/autopilot_view.py)."""
 
 from __future__ import annotations
 
+from companion.sources.autopilot_health import LinkHealth  # noqa: F401  (the pipeline's link view)
+
 AUTOPILOT_MESSAGES = ("SYS_STATUS", "VIBRATION")
 
 
-def on_message(pipeline, msg) -> None:
+def on_message(pipeline, msg) -> bool:
     """A SYS_STATUS or VIBRATION of the vehicle: kept; a gyro newly unhealthy is logged and sent as STATUSTEXT at
     the time of the last IMU sample (SYS_STATUS carries no time of its own)."""
     from companion.mavlink.reporter import MAV_SEVERITY_WARNING
@@ -16,6 +18,7 @@ def on_message(pipeline, msg) -> None:
     for text in pipeline.autopilot_link.on_message(msg, msg.get_srcSystem(), t):
         pipeline.log(text)
         pipeline.reporter.statustext(text, MAV_SEVERITY_WARNING, t)
+    return False  # not an IMU sample
 
 
 def report(pipeline) -> dict | None:
