@@ -45,6 +45,7 @@ def main() -> int:
     with_fields: collections.Counter = collections.Counter()
     field_logs: collections.Counter = collections.Counter()
     errors, tracebacks, unread, flagged, events = [], [], [], [], collections.Counter()
+    from_start = []  # IMUs whose error or clip counts were above 0 at the first record (shown, not flagged)
     for p in files:
         try:
             res = load(str(p), require_imu=False)
@@ -67,6 +68,10 @@ def main() -> int:
         for f in fields:
             field_logs[f] += 1
         for r in view.imus:
+            counts = [c for c in (r.gyro_errors, r.accel_errors, r.clip) if c is not None and c.first > 0]
+            if counts:
+                from_start.append(f"{p.parent.name}/{p.name} IMU{r.instance}: "
+                                  + ", ".join(f"{c.field} {c.first:.0f}" for c in counts))
             if r.flagged():
                 flagged.append(f"{p.parent.name}/{p.name} IMU{r.instance}: {'; '.join(r.reasons())}")
         for e in view.events:
@@ -79,6 +84,9 @@ def main() -> int:
         print(f"  {f:48s} {n}")
     print(f"IMUs the autopilot flags: {len(flagged)}")
     for line in flagged:
+        print(f"  {line}")
+    print(f"IMUs with counts above 0 at the log's start (counted before logging; shown, not flagged): {len(from_start)}")
+    for line in from_start:
         print(f"  {line}")
     print("ERR events of IMU-related subsystems (subsystem code: count): "
           + (", ".join(f"{k}: {v}" for k, v in sorted(events.items())) or "none"))
