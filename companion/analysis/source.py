@@ -35,14 +35,15 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
     summary["notes"] += [n for n in sel.notes if sel.intervals]
     dead = dead_gyros(streams)
+    ap = autopilot_entry(res, streams, dead, sel)
     if not sel.intervals:
-        # a dead gyro is said first: it is the reason to look at this log, whatever the armed state says
-        first = "; ".join(dead) + "; " if dead else ""
+        # a dead gyro, and an IMU its autopilot flags, are said first: the reason to look at this log
+        said = dead + [f"autopilot: {c['line']}" for c in (ap or {}).get("cross_check", []) if c["autopilot_flagged"]]
+        first = "; ".join(said) + "; " if said else ""
         raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
     if dead and warn is not None:
         for d in dead:
             warn(d)
-    ap = autopilot_entry(res, streams, dead, sel)
     if ap is not None:
         summary["autopilot"] = ap
     total = sum(s.samples for s in streams) * len(axes)

@@ -180,7 +180,7 @@ def test_real_tlog_unhealthy_gyro_intervals_match_pymavlink():
     assert got == pytest.approx(ref, abs=0.5)
 
 
-def _px4_tlog(path, gyro2_bad=(12.0, 30.5), clip_from=20.0, clip_total=140):
+def _px4_tlog(path, gyro2_bad=(12.0, 30.5), clip_from=20.0, clip_total=140, base_mode=0):
     """A PX4 vehicle's tlog written message by message with pymavlink: RAW_IMU of 3 IMUs at 50 Hz for 60 s,
     HEARTBEAT at 1 Hz, SYS_STATUS at 2 Hz with 3D_GYRO2 unhealthy over ``gyro2_bad``, VIBRATION at 1 Hz with
     clipping_1 rising by 10 a second from ``clip_from`` up to ``clip_total``."""
@@ -194,7 +194,7 @@ def _px4_tlog(path, gyro2_bad=(12.0, 30.5), clip_from=20.0, clip_total=140):
         for k in range(3000):
             t = k * 0.02
             if k % 50 == 0:
-                w.write(mav.heartbeat_encode(2, 12, 0, 0, 3), t0 + t)
+                w.write(mav.heartbeat_encode(2, 12, base_mode, 0, 3), t0 + t)
                 clip = int(min(max(t - clip_from, 0) * 10, clip_total))
                 w.write(mav.vibration_encode(int(t * 1e6), 1.0, 1.2, 2.0, 0, clip, 0), t0 + t)
             if k % 25 == 0:
@@ -240,3 +240,13 @@ def test_ardupilot_sys_status_gyro_bit_applies_to_every_imu(tmp_path):
     view = load(path).meta["autopilot"]
     for i in (0, 1):
         assert view.imu(i).reasons() == ["gyro unhealthy (SYS_STATUS 3D_GYRO, all IMUs) 5.0-8.0 s"]
+
+
+def test_analyze_refusing_a_log_still_names_the_imu_its_autopilot_flags(tmp_path, capsys):
+    """Armed throughout: no still data, so no table; the one error line names the flagged IMU first."""
+    path = tmp_path / "armed.tlog"
+    _px4_tlog(path, base_mode=128)
+    assert main(["analyze", str(path), "--axes", "gx", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "autopilot: IMU1: autopilot: gyro unhealthy (SYS_STATUS) 12.0-30.5 s; clip count rose by 140" in err
+    assert "no still stretch" in err and "IMU0: autopilot" not in err
