@@ -76,7 +76,8 @@ class AutopilotImu:
     fields: list[str] = field(default_factory=list)  # every autopilot field read for it
     gyro_errors: CountRise | None = None
     accel_errors: CountRise | None = None
-    clip: CountRise | None = None  # accelerometer clipping (the gyro's own range is not counted by autopilots)
+    clip: CountRise | None = None  # accelerometer clipping
+    gyro_clip: CountRise | None = None  # gyro clipping (PX4 vehicle_imu_status.gyro_clipping, where logged)
     unhealthy: list[Unhealthy] = field(default_factory=list)
     vibration_max: list[float] | None = None  # m/s/s, x y z (ArduPilot VIBE, VIBRATION)
     gyro_vibration_max: float | None = None  # PX4 gyro_vibration_metric, rad/s
@@ -89,7 +90,7 @@ class AutopilotImu:
         """The autopilot's reasons to distrust this IMU (empty: it saw nothing wrong)."""
         out = [u.text() for u in self.unhealthy if u.intervals]
         for what, c in (("gyro error count", self.gyro_errors), ("accel error count", self.accel_errors),
-                        ("clip count", self.clip)):
+                        ("clip count", self.clip), ("gyro clip count", self.gyro_clip)):
             if c is not None and c.rise > 0:
                 out.append(f"{what} rose by {c.rise:.0f} ({c.field}, first at {c.first_rise_s:.1f} s)")
         return out
@@ -100,7 +101,7 @@ class AutopilotImu:
     def to_dict(self) -> dict:
         d = {"instance": self.instance, "fields": list(self.fields), "flagged": self.flagged(),
              "reasons": self.reasons(), "unhealthy": [u.to_dict() for u in self.unhealthy]}
-        for k in ("gyro_errors", "accel_errors", "clip"):
+        for k in ("gyro_errors", "accel_errors", "clip", "gyro_clip"):
             c = getattr(self, k)
             d[k] = c.to_dict() if c is not None else None
         for k in ("vibration_max", "gyro_vibration_max", "accel_vibration_max", "gyro_inconsistency_max",
@@ -113,7 +114,8 @@ class AutopilotImu:
         if self.flagged():
             return "; ".join(self.reasons())
         parts = []
-        for what, c in (("gyro errors", self.gyro_errors), ("accel errors", self.accel_errors), ("clips", self.clip)):
+        for what, c in (("gyro errors", self.gyro_errors), ("accel errors", self.accel_errors), ("clips", self.clip),
+                        ("gyro clips", self.gyro_clip)):
             if c is not None:
                 parts.append(f"{what} {c.last:.0f}" + (" (from the start)" if c.first > 0 else ""))
         if self.unhealthy:
@@ -151,6 +153,8 @@ class AutopilotView:
     events: list[AutopilotEvent] = field(default_factory=list)
     fields: list[str] = field(default_factory=list)  # every message/field name found, for the counts
     error: str | None = None  # why the health records could not be read (a damaged log), shown as a note
+    #: PX4's pre-flight gyro inconsistency (sensor_preflight, older PX4): the largest distance between gyros, rad/s
+    gyro_inconsistency_max: float | None = None
 
     def imu(self, instance: int, sysid: int | None = None) -> AutopilotImu | None:
         return next((r for r in self.imus if r.instance == instance
@@ -158,6 +162,7 @@ class AutopilotView:
 
     def to_dict(self) -> dict:
         return {"format": self.format, "fields": list(self.fields), "error": self.error,
+                "gyro_inconsistency_max": self.gyro_inconsistency_max,
                 "imus": [r.to_dict() for r in self.imus],
                 "events": [{"t_s": e.t_s, "subsystem": e.subsystem, "code": e.code, "text": e.text()}
                            for e in self.events]}
@@ -169,12 +174,18 @@ def view_lines(view: AutopilotView | None) -> list[str]:
         return []
     out = [f"autopilot: IMU{r.instance}{f' (sys{r.sysid})' if r.sysid is not None else ''}: {r.summary()}"
            for r in view.imus]
+    if view.gyro_inconsistency_max is not None:
+        out.append(f"autopilot: {inconsistency_text(view.gyro_inconsistency_max)}")
     out += [f"autopilot: {e.text()}" for e in view.events[:10]]
     if len(view.events) > 10:
         out.append(f"autopilot: {len(view.events) - 10} more ERR events")
     if view.error:
         out.append(f"autopilot: health records not read: {view.error}")
     return out
+
+
+def inconsistency_text(x: float) -> str:
+    return f"pre-flight gyro inconsistency between IMUs max {x:.3g} rad/s (sensor_preflight)"
 
 
 def count_rise(t: np.ndarray, v: np.ndarray, name: str) -> CountRise | None:

@@ -8,7 +8,8 @@
   :data:`~companion.health.autopilot_view.ERR_SUBSYSTEMS`.
 - ULog: ``vehicle_imu_status`` per instance (error counts, ``accel_clipping[3]``, ``gyro_clipping[3]`` where
   logged, vibration metrics, temperatures); ``sensors_status_imu`` (the voter's ``gyro_healthy[k]``,
-  ``gyro_inconsistency_rad_s[k]``, accel likewise) matched to the instance by device id.
+  ``gyro_inconsistency_rad_s[k]``, accel likewise) matched to the instance by device id; older PX4's
+  ``sensor_preflight`` (one gyro inconsistency for all IMUs, vehicle-wide).
 - MAVLink (tlog, live): ``SYS_STATUS`` bits ``3D_GYRO``/``3D_ACCEL`` and ``3D_GYRO2``/``3D_ACCEL2`` (present,
   enabled and not healthy = unhealthy; ArduPilot sets the first pair for all its IMUs together, so there it
   applies to every IMU of the system) and ``VIBRATION`` (``clipping_0``-``2`` per accelerometer, the primary's
@@ -171,13 +172,11 @@ def from_ulog(ulog) -> AutopilotView:
             if f in d.data:
                 setattr(r, attr, count_rise(t, d.data[f], f"vehicle_imu_status.{f}"))
                 r.fields.append(f"vehicle_imu_status.{f}")
-        for which in ("accel_clipping", "gyro_clipping"):
+        for attr, which in (("clip", "accel_clipping"), ("gyro_clip", "gyro_clipping")):
             axes = _ulog_fields(d, which + "[")
             if axes:
                 total = np.sum([d.data[a].astype(np.float64) for a in axes], axis=0)
-                c = count_rise(t, total, f"vehicle_imu_status.{which}")
-                if which == "accel_clipping" or (c is not None and c.rise > 0):
-                    r.clip = c if r.clip is None or (c and c.rise > r.clip.rise) else r.clip
+                setattr(r, attr, count_rise(t, total, f"vehicle_imu_status.{which}"))
                 r.fields.append(f"vehicle_imu_status.{which}")
         for attr, f in (("gyro_vibration_max", "gyro_vibration_metric"),
                         ("accel_vibration_max", "accel_vibration_metric")):
@@ -195,6 +194,10 @@ def from_ulog(ulog) -> AutopilotView:
     for d in ulog.data_list:
         if d.name == "sensors_status_imu" and "timestamp" in d.data:
             _ulog_voter(d, view, by_dev)
+        inc = d.data.get("gyro_inconsistency_rad_s") if d.name == "sensor_preflight" else None
+        if inc is not None and inc.shape[0] and np.isfinite(inc.astype(np.float64)).any():
+            view.gyro_inconsistency_max = float(np.nanmax(np.abs(inc.astype(np.float64))))
+            view.fields.append("sensor_preflight")
     view.fields = sorted(set(view.fields))
     return view
 
@@ -295,12 +298,14 @@ def from_tlog(idx, imu_keys) -> AutopilotView:
 def check_report(view: AutopilotView | None, ours: dict[int, list[str]], instances: list[int]) -> dict | None:
     """The ``autopilot`` entry of a report: the view, the cross-check per IMU and its printed lines; None when the
     source carries no autopilot health at all (a CSV, a tlog without SYS_STATUS or VIBRATION)."""
-    from companion.health.autopilot_view import cross_check
+    from companion.health.autopilot_view import cross_check, inconsistency_text
 
     if view is None or not (view.fields or view.error):
         return None
     checks = cross_check(view, ours, instances)
     lines = [c.line() for c in checks] + [e.text() for e in view.events[:10]]
+    if view.gyro_inconsistency_max is not None:
+        lines.append(inconsistency_text(view.gyro_inconsistency_max))
     if view.error:
         lines.append(f"health records not read: {view.error}")
     return {"view": view.to_dict(), "cross_check": [c.to_dict() for c in checks], "lines": lines}

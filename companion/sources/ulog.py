@@ -40,7 +40,7 @@ _log = logging.getLogger(__name__)
 TOPICS = ("sensor_combined", "sensor_gyro", "sensor_accel", "sensor_gyro_fifo", "sensor_accel_fifo", "vehicle_imu",
           "vehicle_status", "vehicle_gps_position", "sensor_gps")
 #: the autopilot's own IMU health (sources/autopilot_health.py), read beside the IMU topics, not counted as them
-HEALTH_TOPICS = ("vehicle_imu_status", "sensors_status_imu")
+HEALTH_TOPICS = ("vehicle_imu_status", "sensors_status_imu", "sensor_preflight")
 #: PX4 gyro device-id parameters (calibration slots) and the IMU instance each names
 GYRO_ID_PARAMS = {"CAL_GYRO0_ID": 0, "CAL_GYRO1_ID": 1, "CAL_GYRO2_ID": 2, "CAL_GYRO3_ID": 3}
 ARMING_STATE_ARMED = 2  #: vehicle_status.arming_state of an armed vehicle

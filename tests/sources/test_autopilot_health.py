@@ -250,3 +250,29 @@ def test_analyze_refusing_a_log_still_names_the_imu_its_autopilot_flags(tmp_path
     err = capsys.readouterr().err
     assert "autopilot: IMU1: autopilot: gyro unhealthy (SYS_STATUS) 12.0-30.5 s; clip count rose by 140" in err
     assert "no still stretch" in err and "IMU0: autopilot" not in err
+
+
+def test_ulog_preflight_inconsistency_matches_pyulog(shared_data):
+    from pyulog import ULog
+
+    path = shared_data / "px4" / "pyulog_sample.ulg"
+    view = load(path).meta["autopilot"]
+    d = next(d.data for d in ULog(str(path), ["sensor_preflight"]).data_list if d.name == "sensor_preflight")
+    assert view.gyro_inconsistency_max == pytest.approx(float(np.abs(d["gyro_inconsistency_rad_s"]).max()))
+    assert view.imus == [] and view.fields == ["sensor_preflight"]
+
+
+@pytest.mark.skipif(not (REALLOGS / "flightreview").is_dir(), reason="fetched logs absent")
+def test_ulog_gyro_clipping_rise_matches_pyulog():
+    """PX4's EKF-failure log: both IMUs clip (accel), the second's gyro too; each rise as pyulog's values give it."""
+    from pyulog import ULog
+
+    path = REALLOGS / "flightreview" / "crates_converter_tests_fixtures_ekf_failure.ulg"
+    view = load(path).meta["autopilot"]
+    for d in ULog(str(path), ["vehicle_imu_status"]).data_list:
+        r = view.imu(d.multi_id)
+        for rec, which in ((r.clip, "accel_clipping"), (r.gyro_clip, "gyro_clipping")):
+            total = sum(d.data[f"{which}[{k}]"].astype(float) for k in range(3))
+            assert rec.rise == float(np.sum(np.clip(np.diff(total), 0, None)))  # no reboot in this log
+    assert [r.flagged() for r in view.imus] == [True, True]
+    assert view.imu(1).gyro_clip.rise > 0 and view.imu(0).gyro_clip.rise == 0
