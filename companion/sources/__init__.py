@@ -214,6 +214,7 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
     acc: dict = {}
     counts: dict = {}
     bad = 0
+    health = _ap.LinkHealth()  # the autopilot's SYS_STATUS and VIBRATION, as they come
     end = clock() + float(duration)
     try:
         while True:
@@ -228,6 +229,7 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
                 bad += 1
                 continue
             counts[name] = counts.get(name, 0) + 1
+            _ap.on_link_message(health, msg, acc)
             s = imu_sample_from_message(msg, scales)
             if s is None:
                 continue
@@ -246,7 +248,8 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
     streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
     totals = {"frames": int(sum(counts.values())), "bad_bytes": 0, "bad_frames": bad,
               "imu_messages": int(sum(len(v) for v in acc.values()))}
-    return LoadResult(str(spec), streams, totals, counts)
+    view = health.view(sorted({s.key.instance for s in streams if s.is_imu}))
+    return LoadResult(str(spec), streams, totals, counts, {"autopilot": view} if view is not None else {})
 
 
 def load(spec, config=None, *, duration: float | None = None, baud: int | None = None,

@@ -364,3 +364,14 @@ class LinkHealth:
                          np.array(self.vib_t), np.array(self.vib, dtype=float).reshape(-1, 6), instances)
         view.fields = sorted(set(view.fields))
         return view
+
+
+def on_link_message(health: LinkHealth, msg, acc: dict) -> None:
+    """``inspect`` on a live link: a HEARTBEAT, SYS_STATUS or VIBRATION to ``health``; SYS_STATUS on the clock of
+    the latest IMU sample received (``acc``: key -> rows, time first)."""
+    name = msg.get_type()
+    if name == "HEARTBEAT":
+        health.on_heartbeat(msg.get_srcSystem(), msg.autopilot)
+    elif name in ("SYS_STATUS", "VIBRATION"):
+        t = max((rows[-1][0] for rows in acc.values() if rows), default=0.0)
+        health.on_message(msg, msg.get_srcSystem(), t)

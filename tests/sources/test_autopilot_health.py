@@ -276,3 +276,55 @@ def test_ulog_gyro_clipping_rise_matches_pyulog():
             assert rec.rise == float(np.sum(np.clip(np.diff(total), 0, None)))  # no reboot in this log
     assert [r.flagged() for r in view.imus] == [True, True]
     assert view.imu(1).gyro_clip.rise > 0 and view.imu(0).gyro_clip.rise == 0
+
+
+@pytest.mark.network
+def test_inspect_live_link_shows_the_autopilots_sys_status(tmp_path, capsys):
+    """A PX4 vehicle on UDP whose SYS_STATUS marks the second gyro unhealthy from its 50th IMU message on:
+    ``inspect`` on the link names IMU1 with that reason, in the text and the JSON."""
+    import socket
+    import threading
+    import time
+
+    from pymavlink.dialects.v20 import ardupilotmega as dialect
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    stop = threading.Event()
+    sensors = 1 | 2 | (1 << 17) | (1 << 18)
+
+    def sender():
+        mav = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        k = 0
+        t_end = time.monotonic() + 120.0  # until the test stops it; bounded
+        while not stop.is_set() and time.monotonic() < t_end:
+            msgs = [mav.raw_imu_encode(1_000_000 + k * 10_000, 0, 0, -1000, 1, 2, 3, 0, 0, 0, i, 4000) for i in (0, 1)]
+            if k % 10 == 0:
+                msgs.append(mav.heartbeat_encode(2, 12, 0, 0, 3))
+                msgs.append(mav.sys_status_encode(sensors, sensors, sensors & ~(1 << 17) if k >= 50 else sensors,
+                                                  0, 0, 0, 0, 0, 0, 0, 0, 0, 0))
+            for m in msgs:
+                sock.sendto(m.pack(mav), ("127.0.0.1", port))
+                mav.seq = (mav.seq + 1) % 256
+            k += 1
+            time.sleep(0.01)
+        sock.close()
+
+    th = threading.Thread(target=sender, daemon=True)
+    th.start()
+    out = tmp_path / "live.json"
+    try:
+        rc = main(["inspect", f"udpin:127.0.0.1:{port}", "--duration", "2", "--json", str(out)])
+    finally:
+        stop.set()
+        th.join(5)
+    assert rc == 0
+    text = capsys.readouterr().out
+    line = next(x for x in text.splitlines() if x.startswith("autopilot: IMU1"))
+    assert line.startswith("autopilot: IMU1 (sys1): gyro unhealthy (SYS_STATUS) ")
+    doc = json.loads(out.read_text())
+    assert doc["autopilot"]["format"] == "live"
+    assert [i["flagged"] for i in doc["autopilot"]["imus"]] == [False, True]
