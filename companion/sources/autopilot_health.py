@@ -236,6 +236,11 @@ def link_view(fmt: str, sysid: int, ardupilot: bool, status_t: np.ndarray, statu
     (``vib``: vx vy vz c0 c1 c2), on message time. ``instances``: the system's IMU instances (the ones an
     ArduPilot all-gyro bit applies to)."""
     view = view or AutopilotView(fmt)
+    # a SYS_STATUS without any IMU bit present comes from another component of the system (a companion computer,
+    # a gimbal): it says nothing about the IMUs and must not end an unhealthy interval
+    imu_bits = SENSOR_GYRO | SENSOR_ACCEL | SENSOR_GYRO2 | SENSOR_ACCEL2
+    keep = (status["present"] & imu_bits) != 0
+    status, status_t = status[keep], np.asarray(status_t)[keep]
     if status.shape[0]:
         view.fields.append("SYS_STATUS")
         pairs = ((SENSOR_GYRO, "gyro", None), (SENSOR_ACCEL, "accel", None), (SENSOR_GYRO2, "gyro", 1),

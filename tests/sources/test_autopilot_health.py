@@ -328,3 +328,24 @@ def test_inspect_live_link_shows_the_autopilots_sys_status(tmp_path, capsys):
     doc = json.loads(out.read_text())
     assert doc["autopilot"]["format"] == "live"
     assert [i["flagged"] for i in doc["autopilot"]["imus"]] == [False, True]
+
+
+def test_another_components_sys_status_does_not_end_an_unhealthy_interval(tmp_path):
+    """A companion computer (compid 191) of the same system sends SYS_STATUS without IMU bits between the
+    autopilot's: the autopilot's interval stays one."""
+    from companion.mavlink.tlog_writer import TlogWriter
+
+    path = tmp_path / "cc.tlog"
+    with TlogWriter(path) as w, TlogWriter(tmp_path / "unused.tlog", compid=191) as other:
+        mav, cc = w.mav, other.mav
+        for k in range(1000):
+            t = k * 0.02
+            if k % 25 == 0:
+                w.write(mav.heartbeat_encode(2, 12, 0, 0, 3), 1.7e9 + t)
+                w.write(mav.sys_status_encode(3, 3, 2 if 5.0 <= t < 8.0 else 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),
+                        1.7e9 + t)
+                w.write_raw(cc.sys_status_encode(1 << 5, 1 << 5, 1 << 5, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(cc),
+                            1.7e9 + t + 0.01)
+            w.write(mav.raw_imu_encode(int(t * 1e6), 0, 0, 1000, 1, -1, 0, 0, 0, 0, 0, 0), 1.7e9 + t)
+    r = load(path).meta["autopilot"].imu(0)
+    assert r.reasons() == ["gyro unhealthy (SYS_STATUS) 5.0-8.0 s"]
