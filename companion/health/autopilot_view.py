@@ -231,6 +231,13 @@ def unhealthy(t: np.ndarray, healthy: np.ndarray, name: str, sensor: str) -> Unh
     return Unhealthy(name, sensor, bad_intervals(t, healthy), [int(boot[a]) for a, _ in runs])
 
 
+def finite_max(v) -> float | None:
+    """The largest finite value (None when there is none: a damaged field decodes to NaN or inf)."""
+    a = np.asarray(v, dtype=float)
+    a = a[np.isfinite(a)]
+    return float(a.max()) if a.shape[0] else None
+
+
 def vector_max(rows: np.ndarray) -> list[float] | None:
     """Per-column maximum of finite values (None when a column has none)."""
     a = np.asarray(rows, dtype=float)

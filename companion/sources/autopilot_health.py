@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from companion.health.autopilot_view import (ERR_SUBSYSTEMS, AutopilotEvent, AutopilotImu, AutopilotView, count_rise,
-                                              unhealthy, vector_max)
+                                              finite_max, unhealthy, vector_max)
 
 #: (record attribute, the DataFlash columns that carry it, newest name first)
 _DF_COUNTS = (("gyro_errors", ("EG", "ErrG")), ("accel_errors", ("EA", "ErrA")))
@@ -181,7 +181,7 @@ def from_ulog(ulog) -> AutopilotView:
         for attr, f in (("gyro_vibration_max", "gyro_vibration_metric"),
                         ("accel_vibration_max", "accel_vibration_metric")):
             if f in d.data and d.data[f].shape[0]:
-                setattr(r, attr, float(np.nanmax(d.data[f].astype(np.float64))))
+                setattr(r, attr, finite_max(d.data[f]))
                 r.fields.append(f"vehicle_imu_status.{f}")
         tf = "temperature_gyro" if "temperature_gyro" in d.data else ("temperature" if "temperature" in d.data else None)
         if tf:
@@ -195,8 +195,8 @@ def from_ulog(ulog) -> AutopilotView:
         if d.name == "sensors_status_imu" and "timestamp" in d.data:
             _ulog_voter(d, view, by_dev)
         inc = d.data.get("gyro_inconsistency_rad_s") if d.name == "sensor_preflight" else None
-        if inc is not None and inc.shape[0] and np.isfinite(inc.astype(np.float64)).any():
-            view.gyro_inconsistency_max = float(np.nanmax(np.abs(inc.astype(np.float64))))
+        if inc is not None and finite_max(inc) is not None:
+            view.gyro_inconsistency_max = finite_max(np.abs(inc.astype(np.float64)))
             view.fields.append("sensor_preflight")
     view.fields = sorted(set(view.fields))
     return view
@@ -223,7 +223,7 @@ def _ulog_voter(d, view: AutopilotView, by_dev: dict[int, int]) -> None:
             r.unhealthy.append(unhealthy(t, d.data[ah] != 0, "sensors_status_imu.accel_healthy", "accel"))
         inc = d.data.get(f"gyro_inconsistency_rad_s[{k}]")
         if inc is not None and inc.shape[0]:
-            r.gyro_inconsistency_max = float(np.nanmax(np.abs(inc.astype(np.float64))))
+            r.gyro_inconsistency_max = finite_max(np.abs(inc.astype(np.float64)))
             r.fields.append("sensors_status_imu.gyro_inconsistency_rad_s")
 
 
