@@ -1,6 +1,6 @@
 """The configuration schema: every key of the YAML configuration, its default and its type, in one place.
 
-``config/default.yaml`` documents exactly these defaults (a test keeps them equal). ``PipelineConfig`` and
+``companion/examples/default_config.yaml`` documents exactly these defaults (a test keeps them equal). ``PipelineConfig`` and
 ``LinkConfig`` take their defaults from here; ``DetectorConfig`` (numerical core, which may not import this
 module) holds its own and :data:`HEALTH` is read from it; the estimators' keyword defaults are kept equal
 to :data:`ESTIMATOR` by a test. :func:`load` reads a configuration file and checks it against the schema: an
@@ -138,7 +138,7 @@ SCHEMA = {
 
 def defaults(schema: dict = SCHEMA, documented: bool = True) -> dict:
     """The default configuration as a plain dict (``documented``: without ``run.estimator``, which the
-    top-level ``estimator`` section stands for and config/default.yaml does not repeat)."""
+    top-level ``estimator`` section stands for and companion/examples/default_config.yaml does not repeat)."""
     out = {}
     for k, v in schema.items():
         if documented and schema is SCHEMA["run"] and k == "estimator":

@@ -1,4 +1,4 @@
-"""One configuration schema (companion/config.py): config/default.yaml states exactly its defaults, the
+"""One configuration schema (companion/config.py): companion/examples/default_config.yaml states exactly its defaults, the
 dataclasses built from its sections have the same defaults, and an unknown key or a wrong type is one error
 line naming the key."""
 
@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_default_yaml_equals_the_schema_defaults():
-    assert config.load(ROOT / "config" / "default.yaml") == config.defaults()
+    assert config.load(ROOT / "companion" / "examples" / "default_config.yaml") == config.defaults()
 
 
 def _fields(obj) -> dict:

@@ -35,13 +35,17 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
     summary["notes"] += [n for n in sel.notes if sel.intervals]
     dead = dead_gyros(streams)
+    ap = autopilot_entry(res, streams, dead, sel)
     if not sel.intervals:
-        # a dead gyro is said first: it is the reason to look at this log, whatever the armed state says
-        first = "; ".join(dead) + "; " if dead else ""
+        # a dead gyro, and an IMU its autopilot flags, are said first: the reason to look at this log
+        said = dead + [f"autopilot: {c['line']}" for c in (ap or {}).get("cross_check", []) if c["autopilot_flagged"]]
+        first = "; ".join(said) + "; " if said else ""
         raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
     if dead and warn is not None:
         for d in dead:
             warn(d)
+    if ap is not None:
+        summary["autopilot"] = ap
     total = sum(s.samples for s in streams) * len(axes)
     bar = progress(len(streams) * len(axes), total) if progress is not None else None
     entries = []
@@ -59,11 +63,26 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                 continue
             e = analyze_stream(s, axes, taus, bar, online=online, ranges=ranges, filters=stream_filters(s, res.meta))
             e["source"] = str(spec)
+            if ap is not None:
+                e["autopilot"] = next((c for c in ap["cross_check"] if c["instance"] == s.key.instance), None)
             entries.append(e)
     finally:
         if bar is not None:
             bar.close()
     return entries, summary
+
+
+def autopilot_entry(res, streams, dead: list[str], sel) -> dict | None:
+    """The autopilot's own view of its IMUs beside our findings (dead gyros, a gyro that changed alone)."""
+    from companion.sources.autopilot_health import check_report
+
+    ours: dict[int, list[str]] = {}
+    for s in streams:
+        found = [d for d in dead if d.startswith(s.key.label())]
+        if sel.excluded_s(s.key.instance) > 0:
+            found.append(f"gyro changed alone while the vehicle was still ({sel.excluded_s(s.key.instance):.0f} s)")
+        ours[s.key.instance] = found
+    return check_report(res.meta.get("autopilot"), ours, sorted(ours))
 
 
 def dead_gyros(streams) -> list[str]:

@@ -146,6 +146,8 @@ def run(args) -> int:
         print(f"{summary['source']}: {summary['selection']['description']}")
         for n in summary["notes"]:
             print(f"note: {n}")
+        for line in (summary.get("autopilot") or {}).get("lines", []):
+            print(f"autopilot: {line}")
     report["warnings"] = [f"{st['message']}[{st['instance']}]: {w}" for st in report["streams"] for w in st["warnings"]]
     print(format_table(report))
     if args.report:  # run's fault detectors over each log: the flagged IMUs' evidence (cli.analyze_report)

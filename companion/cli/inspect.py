@@ -11,7 +11,9 @@ List the IMU streams of a source: per stream the MAVLink message, instance, sysi
 samples, detected rate, duration, gaps, and whether it is an IMU at all (a SCALED_IMU2/3 with all accel
 and gyro zero only carries a compass); plus the frame totals (valid frames, bad bytes, bad frames).
 Sample times come from the messages' own timestamps; nothing is resampled or dropped silently
-(duplicates, backward steps and reboots are counted, see docs/ingestion.md).
+(duplicates, backward steps and reboots are counted, see docs/ingestion.md). Where the log carries them, the
+autopilot's own IMU health follows, one line per IMU (error and clip counts, health flags, vibration; DataFlash
+IMU/VIBE/ERR, ULog vehicle_imu_status/sensors_status_imu, tlog SYS_STATUS/VIBRATION; docs/health.md).
 
 SOURCE is a .tlog file (armed state from the vehicle autopilot's HEARTBEATs), an ArduPilot DataFlash .bin
 log (every IMU, batch-sampler bursts ISB_GYRO/ISB_ACCEL, parameters and armed state), a PX4 .ulg
@@ -38,7 +40,8 @@ def register(subparsers) -> None:
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", metavar="SOURCE", help=".tlog, .bin, .ulg, .csv (each optionally .gz), or a connection string")
-    p.add_argument("--json", metavar="OUT", help="also write {streams: [...], frames, bad_bytes, bad_frames} to OUT")
+    p.add_argument("--json", metavar="OUT", help="also write {streams: [...], frames, bad_bytes, bad_frames} to OUT (and autopilot: "
+                                            "the autopilot's own IMU health, where the log has it)")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="seconds to listen on a live connection (required for links)")
     p.add_argument("--baud", type=int, default=None, help="serial baud rate (default 115200)")

@@ -24,6 +24,7 @@ COMMANDS = (
     "run",
     "sim_autopilot",
     "fleet",
+    "example",
 )
 
 EPILOG = """\

@@ -34,7 +34,7 @@ written to a .tlog only. The options are those of `companion sim-autopilot`; tim
 
 EPILOG = """\
 examples:
-  companion simulate tlogs/sample_model.yaml --duration 1200 --out tlogs/sample.tlog --seed 1
+  companion simulate companion/examples/sample_model.yaml --duration 1200 --out tlogs/sample.tlog --seed 1
   companion simulate model.yaml --duration 7200 --out sim.csv.gz --seed 3
   companion simulate model.yaml --duration 600 --out hr.tlog --message HIGHRES_IMU
   two IMUs, a flight, IMU1's gyro X frozen in flight; then replay it through the health monitor:

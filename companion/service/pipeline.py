@@ -33,6 +33,7 @@ from companion.health.faults import FAULT, FaultEvent
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
 from companion.service.allan_check import bias_extra_var
+from companion.service.autopilot_watch import AUTOPILOT_MESSAGES, LinkHealth, on_message as autopilot_message
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
 from companion.service.evidence_log import EvidenceLog
@@ -81,6 +82,7 @@ class Pipeline:
         self.params: dict[str, float] = {}
         self.params_format: str | None = None
         self.evidence = EvidenceLog()  # the data around every alarm (service.evidence_log)
+        self.autopilot_view, self.autopilot_link = None, LinkHealth()  # the autopilot's own IMU view: a log's, the link's
 
     # ------------------------------------------------------------------ input
     def raise_if_failed(self) -> None:
@@ -131,6 +133,8 @@ class Pipeline:
         if mtype == "PARAM_VALUE":
             self.on_param(msg.get_srcSystem(), msg.param_id, msg.param_value)
             return False
+        if mtype in AUTOPILOT_MESSAGES:
+            return autopilot_message(self, msg)
         if mtype not in IMU_MESSAGES:
             return False
         if self._decode is None:
@@ -147,6 +151,7 @@ class Pipeline:
             return
         if self.sysid is not None and sysid != self.sysid:
             return
+        self.autopilot_link.on_heartbeat(sysid, autopilot)
         armed = bool(base_mode & 128)
         if armed != self.armed:
             self.log(f"vehicle {'armed' if armed else 'disarmed'}")

@@ -28,6 +28,7 @@ def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: F
     data = tlog.read_file(path)
     index = tlog.scan(data)
     scales = scales or ScaleTable()
+    _autopilot_view(pipeline, index, scales)
     # events: frame number, source (-1: HEARTBEAT, else index into ``streams``), row in that source
     order_parts, srcs, rows = [], [], []
     hb = np.flatnonzero(index.msgid == M.HEARTBEAT.msgid)
@@ -206,6 +207,7 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
     from companion.sources import load
 
     res = load(path, time_unit=time_unit)  # time_unit: of a CSV's time column
+    pipeline.autopilot_view = res.meta.get("autopilot")  # the autopilot's own IMU health, for the summary
     best: dict = {}
     for s in res.imu_streams():
         if not np.all(np.isfinite(s.gyro[:1])) or s.key.message.startswith("ISB_"):
@@ -282,3 +284,17 @@ def replay_vehicle(sim, pipeline, duration_s: float, lsb: float | None = None, c
         if on_chunk is not None and on_chunk(float(blk.t[-1])):
             break
     return fed
+
+
+def _autopilot_view(pipeline, index, scales) -> None:
+    """The tlog's SYS_STATUS and VIBRATION (the autopilot's own IMU health), for the summary."""
+    from companion.sources.autopilot_health import from_tlog, safe_view
+
+    keys = []
+    for msgid, layout in M.IMU_BY_ID.items():
+        sel = np.flatnonzero(index.msgid == msgid)
+        if sel.size:
+            rec = index.payloads(sel, layout.full_len).view(layout.dtype).reshape(-1)
+            keys += [raw.key for raw, _ in split_by_imu(layout, rec, index.sysid[sel], index.compid[sel], scales)
+                     if raw.is_imu]
+    pipeline.autopilot_view = safe_view("tlog", from_tlog, index, keys)

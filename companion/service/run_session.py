@@ -193,7 +193,9 @@ def summary_lines(pipeline) -> list[str]:
             out.append(f"  {ax}: " + (text or f"no estimate yet ({r['still_s']:.0f} s of still data at this rate)"))
     for t, text in pipeline.transitions:
         out.append(f"  at {t:.0f} s: {text}")
-    return out
+    from companion.service.autopilot_watch import summary_lines as autopilot_lines
+
+    return out + autopilot_lines(pipeline)
 
 
 def _load_yaml_or_json(path: str) -> dict:

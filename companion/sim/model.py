@@ -136,7 +136,7 @@ def load_model(path) -> NoiseModel:
     except OSError as exc:
         raise CompanionError(f"cannot read model {p}: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
-        raise not_text(p, exc, "a noise model is a YAML file (e.g. tlogs/sample_model.yaml)") from None
+        raise not_text(p, exc, "a noise model is a YAML file (e.g. companion/examples/sample_model.yaml)") from None
     try:
         data = yaml.load(text, Loader=_LineLoader)
     except yaml.MarkedYAMLError as exc:

@@ -23,6 +23,7 @@ import numpy as np
 
 from companion.errors import CompanionError
 from companion.samples import ImuStream
+from companion.sources import autopilot_health as _ap
 from companion.sources import timestamps as _timing
 from companion.sources.kind import decide, kind_of
 from companion.sources.decode import (COMPASS_ONLY_CAN, TIME_RESOLUTION, RawStream, ScaleTable,
@@ -118,6 +119,7 @@ def load_tlog(path, config=None, split_periods: float = _timing.SPLIT_PERIODS) -
     meta = {"identity": tlog.identity(index), "params": tlog.param_values(index)}
     # the armed state of the systems whose IMUs are analysed (their autopilots' HEARTBEATs, on the IMU clock)
     meta.update(tlog.armed_state(index, [s.key for s in streams if s.is_imu and s.samples]))
+    meta["autopilot"] = _ap.safe_view("tlog", _ap.from_tlog, index, [s.key for s in streams if s.is_imu and s.samples])
     return LoadResult(str(path), streams, totals, dict(index.counts), meta)
 
 
@@ -149,6 +151,7 @@ def load_dataflash(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadRe
     meta["format"] = "dataflash"
     meta["identity"] = log_identity(log, meta)
     meta["isb_bursts"] = bursts
+    meta["autopilot"] = _ap.safe_view("dataflash", _ap.from_dataflash, log)
     meta["imu_extras"] = {k.instance: {n: int(np.nansum(v)) if n.endswith("errors") else None
                                        for n, v in e.items()} for k, e in extras.items()}
     meta["notes"] = []
@@ -181,6 +184,7 @@ def load_ulog(path, split_periods: float = _timing.SPLIT_PERIODS) -> LoadResult:
     meta = ul.metadata(u)
     meta["format"] = "ulog"
     meta["identity"] = ul.identity(u, meta)
+    meta["autopilot"] = _ap.safe_view("ulog", _ap.from_ulog, u)
     name = Path(str(path)).name
     notes = []
     if getattr(u, "companion_truncated", 0):
@@ -210,6 +214,7 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
     acc: dict = {}
     counts: dict = {}
     bad = 0
+    health = _ap.LinkHealth()  # the autopilot's SYS_STATUS and VIBRATION, as they come
     end = clock() + float(duration)
     try:
         while True:
@@ -224,6 +229,7 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
                 bad += 1
                 continue
             counts[name] = counts.get(name, 0) + 1
+            _ap.on_link_message(health, msg, acc)
             s = imu_sample_from_message(msg, scales)
             if s is None:
                 continue
@@ -242,7 +248,8 @@ def load_live(spec: str, duration: float, config=None, baud=None, split_periods:
     streams = sorted((build_stream(r, split_periods) for r in raws), key=lambda s: s.key)
     totals = {"frames": int(sum(counts.values())), "bad_bytes": 0, "bad_frames": bad,
               "imu_messages": int(sum(len(v) for v in acc.values()))}
-    return LoadResult(str(spec), streams, totals, counts)
+    view = health.view(sorted({s.key.instance for s in streams if s.is_imu}))
+    return LoadResult(str(spec), streams, totals, counts, {"autopilot": view} if view is not None else {})
 
 
 def load(spec, config=None, *, duration: float | None = None, baud: int | None = None,

@@ -31,6 +31,9 @@ def summary(res) -> dict:
         })
     out = {"streams": streams}
     out.update({k: int(res.totals.get(k, 0)) for k in TOTAL_KEYS})
+    view = (getattr(res, "meta", None) or {}).get("autopilot")
+    if view is not None and (view.fields or view.error):  # the autopilot's own IMU health, where the log has it
+        out["autopilot"] = view.to_dict()
     return out
 
 
@@ -51,6 +54,9 @@ def render(res) -> str:
     lines.append(f"frames {doc['frames']}, bad bytes {doc['bad_bytes']}, bad frames {doc['bad_frames']}")
     lines += log_lines(res)
     from companion.analysis.notes import notes
+    from companion.health.autopilot_view import view_lines
+
+    lines += view_lines((getattr(res, "meta", None) or {}).get("autopilot"))
 
     lines += [f"note: {n}" for n in notes(res)]
     return "\n".join(lines)

@@ -39,6 +39,8 @@ _log = logging.getLogger(__name__)
 
 TOPICS = ("sensor_combined", "sensor_gyro", "sensor_accel", "sensor_gyro_fifo", "sensor_accel_fifo", "vehicle_imu",
           "vehicle_status", "vehicle_gps_position", "sensor_gps")
+#: the autopilot's own IMU health (sources/autopilot_health.py), read beside the IMU topics, not counted as them
+HEALTH_TOPICS = ("vehicle_imu_status", "sensors_status_imu", "sensor_preflight")
 #: PX4 gyro device-id parameters (calibration slots) and the IMU instance each names
 GYRO_ID_PARAMS = {"CAL_GYRO0_ID": 0, "CAL_GYRO1_ID": 1, "CAL_GYRO2_ID": 2, "CAL_GYRO3_ID": 3}
 ARMING_STATE_ARMED = 2  #: vehicle_status.arming_state of an armed vehicle
@@ -103,7 +105,7 @@ def open_ulog(path):
         printed = io.StringIO()
         fh = _GuardedFile(data)
         with contextlib.redirect_stdout(printed):
-            u = ULog(fh, list(TOPICS))
+            u = ULog(fh, list(TOPICS + HEALTH_TOPICS))
         u.companion_truncated = fh.cut
         lines = [ln.strip() for ln in printed.getvalue().splitlines() if ln.strip()]
         u.companion_warnings = lines
@@ -165,6 +167,8 @@ def raw_streams(ulog) -> tuple[list[RawStream], dict]:
     if damaged is None:
         damaged = ulog.companion_damaged = []
     for d in ulog.data_list:
+        if d.name in HEALTH_TOPICS:
+            continue
         label = f"{d.name}[{d.multi_id}]"
         lacking = [f for f in _needed(d) if f not in d.data]
         if lacking:  # a damaged format definition: the topic cannot be read as that topic

@@ -102,12 +102,12 @@ def test_user_errors_exit_2(tmp_path, capsys):
 
 
 def test_sample_tlog_analyses(repo_root):
-    """The README's first command: tlogs/sample.tlog, made from tlogs/sample_model.yaml."""
+    """The README's first command: tlogs/sample.tlog, made from companion/examples/sample_model.yaml."""
     from companion.analysis.stream import analyze_stream
     from companion.sim.model import load_model
     from companion.sources import load
 
-    model = load_model(repo_root / "tlogs" / "sample_model.yaml")
+    model = load_model(repo_root / "companion" / "examples" / "sample_model.yaml")
     (st,) = load(repo_root / "tlogs" / "sample.tlog").imu_streams()
     rep = analyze_stream(st, ["gx", "gz"], "octave")
     for axis in ("gx", "gz"):

@@ -29,7 +29,7 @@ REGEN = os.environ.get("COMPANION_REGEN_GOLDEN") == "1"
 COMMANDS = {
     "inspect_sample.json": ["inspect", "tlogs/sample.tlog", "--json", "{out}"],
     "analyze_sample.json": ["analyze", "tlogs/sample.tlog", "--quiet", "--json", "{out}"],
-    "gap_sample.json": ["gap", "tlogs/sample.tlog", "--model", "tlogs/sample_model.yaml", "--json", "{out}"],
+    "gap_sample.json": ["gap", "tlogs/sample.tlog", "--model", "companion/examples/sample_model.yaml", "--json", "{out}"],
 }
 
 

@@ -70,7 +70,7 @@ def test_directory_and_unknown_source_are_named(tmp_path, capsys):
     (["run", "--source", "tlogs/sample.tlog", "--report-p", "3"], "--report-p"),  # --report-period
     (["analyze", "tlogs/sample.tlog", "--qui"], "--qui"),  # --quiet
     (["fleet", "report", "--db", "x.sqlite", "--ht", "r.html"], "--ht"),  # --html
-    (["simulate", "tlogs/sample_model.yaml", "--duration", "10", "--out", "x.csv", "--se", "3"], "--se"),  # --seed
+    (["simulate", "companion/examples/sample_model.yaml", "--duration", "10", "--out", "x.csv", "--se", "3"], "--se"),  # --seed
 ])
 def test_an_abbreviated_option_is_refused_not_guessed(argv, abbrev, capsys):
     """Options by their full names only: a prefix is a usage error (exit 2), never read as the option it

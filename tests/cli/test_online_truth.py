@@ -1,5 +1,5 @@
 """`companion analyze --online` and `companion run` on the shipped sample log, against the truth of its
-model file (tlogs/sample_model.yaml): the reported values within their 95 % intervals as often as such
+model file (companion/examples/sample_model.yaml): the reported values within their 95 % intervals as often as such
 intervals hold the truth (the log is one realisation: a binomial count over its intervals, false failure
 <= 1e-3 for calibrated intervals; coverage over many seeds is tests/estimators/test_online_report.py's), every
 effect absent from the truth reported as a 95 % upper bound, and both commands print the same report."""
@@ -24,7 +24,7 @@ LSB = 1e-3  # RAW_IMU gyro: int16 mrad/s; dithered rounding adds white noise N_q
 
 
 def truth(repo_root, axis):
-    model = load_model(repo_root / "tlogs" / "sample_model.yaml")
+    model = load_model(repo_root / "companion" / "examples" / "sample_model.yaml")
     terms = {t["effect"]: t for t in model.axes[axis]}
     n = math.hypot(terms["white_noise"]["N"], LSB * math.sqrt(1.0 / model.rate_hz / 12.0))
     return {"N": n, "B": terms.get("bias_instability", {}).get("B", 0.0),

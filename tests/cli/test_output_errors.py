@@ -16,7 +16,7 @@ from companion.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = str(ROOT / "tlogs" / "sample.tlog")
-MODEL = str(ROOT / "tlogs" / "sample_model.yaml")
+MODEL = str(ROOT / "companion" / "examples" / "sample_model.yaml")
 
 
 def one_line_error(capsys, argv, *needles):

@@ -58,7 +58,7 @@ def test_simulated_vehicle_flight_armed_period_left_out(tmp_path, repo_root, cap
     """`companion simulate --vehicle --arm-at A --disarm-at D`: the reader's transitions are the file's
     HEARTBEATs as pymavlink decodes them, and analyze leaves out [A, D] with its guard."""
     path = tmp_path / "flight.tlog"
-    assert main(["simulate", str(repo_root / "tlogs" / "sample_model.yaml"), "--duration", "300", "--out", str(path),
+    assert main(["simulate", str(repo_root / "companion" / "examples" / "sample_model.yaml"), "--duration", "300", "--out", str(path),
                  "--vehicle", "--arm-at", "120", "--disarm-at", "200", "--seed", "4"]) == 0
     hb, imu = _pymavlink_read(path)
     flags = [(s, a) for s, *_, a in hb]

@@ -32,7 +32,8 @@ def noisy_log(tmp_path_factory):
     """Two IMUs at rest, IMU1's Y axis noise 6x from 70 s on, 130 s (the sample model, 50 Hz)."""
     d = tmp_path_factory.mktemp("log")
     log = d / "noise.tlog"
-    assert main(["simulate", str(ROOT / "tlogs" / "sample_model.yaml"), "--vehicle", "--imus", "2", "--duration", "130",
+    model = ROOT / "companion" / "examples" / "sample_model.yaml"
+    assert main(["simulate", str(model), "--vehicle", "--imus", "2", "--duration", "130",
                  "--fault", "noise", "--fault-at", str(FAULT_AT), "--fault-imu", "1", "--fault-axis", "gy",
                  "--seed", "5", "--out", str(log)]) == 0
     return log
