@@ -1,6 +1,6 @@
 """The fleet report's interactive part and the evidence of its flagged IMUs, in the evidence schema of
 ``run`` (docs/reports.md): per flagged IMU the trended parameter of every gyro axis per flight with its 95 %
-interval, the trend evidence (-log10 p) after each flight against the flag threshold, and one sentence. The
+interval (SI; the interactive plots in datasheet units), the trend evidence (-log10 p) after each flight against the flag threshold, and one sentence. The
 x axis is the flight's index in time order (``x_label``), not message time; there is no spectrum."""
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from companion import units
 from companion.fleet.trends import EVIDENCE_THRESHOLD, MIN_RISE, imu_trend
 
 GYRO = ("gx", "gy", "gz")
+SI_UNIT = {"N": "rad/s/sqrt(Hz)", "B": "rad/s", "K": "rad/s^1.5"}  # the evidence JSON is SI, as every JSON
 
 
 def _label(e: dict) -> str:
@@ -23,15 +24,15 @@ def _nums(a) -> list:
     return [float(x) if math.isfinite(float(x)) else None for x in np.asarray(a, dtype=float)]
 
 
-def trend_series(e: dict, param: str) -> dict:
-    """Per gyro axis the flight indices, values and 95 % intervals of ``param`` in datasheet units."""
+def trend_series(e: dict, param: str, si: bool = False) -> dict:
+    """Per gyro axis the flight indices, values and 95 % intervals of ``param`` in datasheet units (``si``: SI)."""
     out = {}
     for ax in GYRO:
         s = e["_series"].get((ax, param))
         if s is None or not len(s[1]):
             continue
         idx, v, lo, hi = s
-        f = units.to_datasheet(param, 1.0, ax)
+        f = 1.0 if si else units.to_datasheet(param, 1.0, ax)
         out[ax] = {"x": _nums(idx), "y": _nums(np.asarray(v) * f), "lo": _nums(np.asarray(lo) * f),
                    "hi": _nums(np.asarray(hi) * f)}
     return out
@@ -51,9 +52,9 @@ def evidence_after_each_flight(e: dict, threshold: float, min_rise: float) -> tu
 def evidence_item(e: dict, threshold: float = EVIDENCE_THRESHOLD, min_rise: float = MIN_RISE) -> dict:
     """The evidence of one flagged IMU."""
     p, ax = e["param"], e["axis"]
-    series = trend_series(e, p)
+    series = trend_series(e, p, si=True)
     xs, ev = evidence_after_each_flight(e, threshold, min_rise)
-    unit = units.datasheet_unit(p, "gx")
+    unit = SI_UNIT[p]
     text = f"{e['vehicle']} IMU{e['imu']} gyro {ax[1].upper()} {p} rising {e['trend']:.2f}x over {e['flights']} flights"
     sentence = (f"{_label(e)}: {p} of axis {ax[1].upper()} rose {e['trend']:.2f}x from the first flight to the last "
                 f"(weighted fit on the per-flight 95 % intervals); the evidence -log10(p) reached {e['evidence']:.1f}, "
