@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from companion.errors import CompanionError
+from companion.errors import EXIT_FAULTS, EXIT_USAGE, CompanionError
 
 #: Log parameters copied into the source summary (low-pass filters, fast sampling, batch logging).
 SUMMARY_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_FAST_SAMPLE", "INS_LOG_BAT_OPT", "INS_LOG_BAT_MASK",
@@ -35,10 +35,12 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
     summary["notes"] += [n for n in sel.notes if sel.intervals]
     dead = dead_gyros(streams)
+    summary["dead_gyros"] = dead  # a gyro fault found: the exit status says it (companion.errors.EXIT_FAULTS)
     if not sel.intervals:
         # a dead gyro is said first: it is the reason to look at this log, whatever the armed state says
         first = "; ".join(dead) + "; " if dead else ""
-        raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
+        raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})",
+                             EXIT_FAULTS if dead else EXIT_USAGE)
     if dead and warn is not None:
         for d in dead:
             warn(d)

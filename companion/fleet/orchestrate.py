@@ -14,13 +14,9 @@ import os
 import signal
 from dataclasses import dataclass
 
-from companion.errors import CompanionError, Terminated
+from companion.errors import EXIT_INTERRUPTED, EXIT_TIME_LIMIT as EXIT_DEADLINE, CompanionError, Terminated
 from companion.samples import AXES
 
-#: exit status of a run stopped by --time-limit (what is recorded stays; the next run resumes)
-EXIT_DEADLINE = 3
-#: exit status of a run stopped by Ctrl-C, as a shell reports SIGINT
-EXIT_INTERRUPTED = 130
 #: unreadable or failed logs listed one per line; the rest are counted (the HTML report lists them all)
 LISTED = 10
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from companion.errors import CompanionError, not_text
+from companion.errors import CompanionError, NoUsableData, not_text
 from companion.service.run_options import RunHooks, RunOptions
 
 if TYPE_CHECKING:
@@ -150,7 +150,7 @@ def run(opts: RunOptions, hooks: RunHooks) -> RunResult:
             hooks.log(f"replayed {totals['frames']} frames ({totals['imu_samples']} IMU samples, "
                       f"{totals['bad_frames']} bad frames), {sink.sent} NAMED_VALUE_FLOAT, {len(sink.texts)} STATUSTEXT")
             if not pipeline.channels:
-                raise CompanionError(f"{opts.source}: no IMU data to replay")
+                raise NoUsableData(f"{opts.source}: no IMU data to replay")
             result = RunResult(pipeline)
         else:
             from companion.service.live import run_live
