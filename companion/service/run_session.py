@@ -97,6 +97,10 @@ def replay(opts: RunOptions, hooks: RunHooks, writer=None):
     reporter = Reporter(sink, opts.report_period)
     pipeline = Pipeline(opts.pipeline, reporter, opts.baseline, hooks.log, opts.scales)
     restore(pipeline, state, opts.relearn, hooks.warn, hooks.log)
+    if state is not None:
+        from companion.service.state_match import check_state_matches
+
+        check_state_matches(pipeline, src, state, opts.time_unit)
     fp = None
     if state is not None:
         from companion.service.state import fingerprint
