@@ -35,12 +35,13 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
     summary["notes"] += [n for n in sel.notes if sel.intervals]
     dead = dead_gyros(streams)
-    summary["dead_gyros"] = dead  # a gyro fault found: the exit status says it (companion.errors.EXIT_FAULTS)
+    # a gyro fault among the axes asked for: the exit status says it (companion.errors.EXIT_FAULTS)
+    summary["dead_gyros"] = dead_gyros(streams, axes)
     if not sel.intervals:
         # a dead gyro is said first: it is the reason to look at this log, whatever the armed state says
         first = "; ".join(dead) + "; " if dead else ""
         raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})",
-                             EXIT_FAULTS if dead else EXIT_USAGE)
+                             EXIT_FAULTS if summary["dead_gyros"] else EXIT_USAGE)
     if dead and warn is not None:
         for d in dead:
             warn(d)
@@ -68,12 +69,16 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     return entries, summary
 
 
-def dead_gyros(streams) -> list[str]:
-    """The sentences naming every dead gyro (health.dead) of the IMU streams."""
-    from companion.health.dead import dead_gyro_text
+def dead_gyros(streams, axes=None) -> list[str]:
+    """The sentences naming every dead gyro (health.dead) of the IMU streams; with ``axes``, only the streams
+    with a dead axis among them (a model of gx alone simulates gy, gz as 0: not a fault of an analysis of gx)."""
+    from companion.health.dead import constant_axes, dead_gyro_text
+    from companion.samples import GYRO_AXES
 
     out = []
     for s in streams:
+        if axes is not None and not any(GYRO_AXES[a] in axes for a in constant_axes(s.gyro)):
+            continue
         text = dead_gyro_text(s.key.label(), s.gyro, getattr(s, "gyro_lsb", None))
         if text:
             out.append(text)
