@@ -220,3 +220,24 @@ def test_csv_time_stepping_back_is_a_new_segment_not_interleaved(tmp_path, capsy
     assert s["rate_hz"] == pytest.approx(100.0, rel=1e-6)  # interleaved, the two series would read as 200 Hz
     assert s["samples"] == 6000
 
+
+
+def test_compensate_covariance_lost_validity_is_status_6(tmp_path, capsys, monkeypatch):
+    """A filter whose covariance factor lost validity (forced here on the real result of STF): the results are
+    written, a warning names the method, and the status is 6, apart from faults (4) and bad input (2)."""
+    import companion.compensation.compare_methods as cm
+
+    real = cm.compensate
+
+    def lost(*args, **kwargs):
+        result = real(*args, **kwargs)
+        result.methods["stf"].factor_valid = False
+        return result
+
+    monkeypatch.setattr(cm, "compensate", lost)
+    p = write_csv(tmp_path / "a.csv", np.arange(3000) / 100.0)
+    out = tmp_path / "c.csv"
+    rc = main(["compensate", p, "--axis", "gx", "--method", "stf", "--out", str(out), "--quiet"])
+    cap = capsys.readouterr()
+    assert rc == 6, cap
+    assert "covariance factor lost validity in stf (exit status 6)" in cap.err and out.exists()
