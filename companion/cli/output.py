@@ -67,6 +67,8 @@ def _probe(p: str, option: str) -> None:
     import os
 
     existed = os.path.exists(p)
+    if existed and not os.path.isfile(p):  # a FIFO would block until read, a device is the user's choice
+        return
     try:
         with open(p, "a" if existed else "x"):
             pass
