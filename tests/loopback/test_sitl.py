@@ -127,7 +127,8 @@ def test_sim_autopilot_against_run_direct(tmp_path):
     out = (tmp_path / "run.out").read_text()
     # the same messages replayed from the recording as fast as possible: the same estimates
     live = out[out.index("IMU0 (RAW_IMU"):]
-    live = "".join(line for line in live.splitlines(True) if not line.startswith("link"))  # live-link health lines
+    # without the live-link health lines and the exit status line (stderr, in the same file)
+    live = "".join(line for line in live.splitlines(True) if not line.startswith(("link", "companion run:")))
     rep = subprocess.run([sys.executable, "-m", "companion", "run", "--source", str(tmp_path / "rx.tlog"),
                           "--baseline-s", "120", "--quiet"], cwd=tmp_path, env=env(), capture_output=True,
                          text=True, timeout=120)
