@@ -125,7 +125,7 @@ def run(args) -> int:
     warn_ignored_options(args, sources, "analyze")
     report = {"source": str(sources[0]) if len(sources) == 1 else ", ".join(map(str, sources)),
               "sources": [], "streams": []}
-    failed, codes = [], []
+    failed, codes, dead = [], [], []
     for spec in sources:
         try:
             entries, summary = analyze_source(spec, args, axes, progress_enabled=not args.quiet)
@@ -135,6 +135,7 @@ def run(args) -> int:
             failed.append(str(exc))  # the other logs are still analysed; the exit status says it
             codes.append(exc.exit_code)
             continue
+        dead += summary.pop("dead_gyros", [])  # for the exit status; the notes say it in the report
         report["sources"].append(summary)
         report["streams"].extend(entries)
     if not report["streams"]:
@@ -160,7 +161,6 @@ def run(args) -> int:
             raise CompanionError(f"{args.kalibr} not written: {'; '.join(blockers)} (--force writes it anyway)")
         write_text(args.kalibr, kalibr_yaml(report), "Kalibr YAML")
         print(f"wrote {args.kalibr}")
-    dead = [d for summary in report["sources"] for d in summary.get("dead_gyros", ())]
     if failed:  # a gyro fault found in any source outranks the sources that could not be read
         raise CompanionError(f"{len(failed)} of {len(sources)} sources not analysed: {'; '.join(failed)}",
                              EXIT_FAULTS if dead or EXIT_FAULTS in codes else EXIT_USAGE)
