@@ -13,9 +13,11 @@ message's (RAW_IMU, SCALED_IMU*: ``lsb`` given): a gyro quieter than 1 mrad/s re
 still stretch (0 or its bias), which a log's moving parts make look rare (public tlogs at 1-2 Hz: 20-79 equal
 samples at rest); there only a whole log of one value is named (dead or below resolution, health.dead).
 
-Saturated: at least ``PLATEAU_RUNS`` runs of ``RUN`` or more samples exactly at the axis' largest |value|,
-which is far from 0 (>= ``MIN_LEVEL``), the plateau statistic of health/saturation.py over the whole log: the
-peak of healthy motion with noise on top is neither flat for 5 samples nor at one exact level again and again.
+Saturated: a sample at or beyond the gyro's range limit (``abs_limit``: what ``run`` takes, its
+``gyro_limit``, 32.767 rad/s by default, the int16 mrad/s full scale), or at least ``PLATEAU_RUNS`` runs of
+``RUN`` or more samples exactly at the axis' largest |value|, which is far from 0 (>= ``MIN_LEVEL``), the
+plateau statistic of health/saturation.py over the whole log: the peak of healthy motion with noise on top is
+neither flat for 5 samples nor at one exact level again and again.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ STUCK_MIN_S = 1.0  #: shortest frozen stretch reported (s)
 STUCK_MIN_RUN = 20  #: and in samples
 MAX_P0 = 0.9  #: a gyro repeating more of its samples than this is quieter than its step: no stuck verdict
 PLATEAU_RUNS = 3  #: separate flat runs at the extreme level that make a clip level
+RANGE_LIMIT = 32.767  #: rad/s: the default range limit (run's gyro_limit default, int16 mrad/s full scale)
 
 
 @dataclass
@@ -70,13 +73,14 @@ def stuck_axis(x: np.ndarray, rate_hz: float) -> tuple[int, int] | None:
     return int(starts[i]), run
 
 
-def saturated_axis(x: np.ndarray) -> tuple[float, int] | None:
-    """(level, number of flat runs at it) when ``x`` clips (see the module), or None."""
-    if x.shape[0] < MIN_SAMPLES:
-        return None
+def saturated_axis(x: np.ndarray, abs_limit: float = RANGE_LIMIT) -> tuple[float, int] | None:
+    """(level, number of flat runs at it; 0 when it reached ``abs_limit``) when ``x`` clips (see the module),
+    or None."""
     a = np.abs(x)
-    level = float(a.max())
-    if not level >= MIN_LEVEL:
+    level = float(a.max()) if a.shape[0] else 0.0
+    if level >= abs_limit:
+        return level, 0
+    if x.shape[0] < MIN_SAMPLES or not level >= MIN_LEVEL:
         return None
     _, lengths = _runs(a == level)
     flat = int(np.count_nonzero(lengths >= RUN))
@@ -84,7 +88,7 @@ def saturated_axis(x: np.ndarray) -> tuple[float, int] | None:
 
 
 def gyro_faults(gyro: np.ndarray, rate_hz: float, t: np.ndarray | None = None, lsb: float | None = None,
-                label: str = "") -> list[AxisFault]:
+                label: str = "", abs_limit: float = RANGE_LIMIT) -> list[AxisFault]:
     """The dead, saturated and stuck axes of an (n, 3) gyro array in rad/s (one fault per axis, in that
     order of precedence). ``lsb``: the step of an integer message (no stuck verdict there, see the module)."""
     from companion.health.dead import dead_gyro_text
@@ -102,10 +106,14 @@ def gyro_faults(gyro: np.ndarray, rate_hz: float, t: np.ndarray | None = None, l
             text = dead_gyro_text(label or "IMU", g[:, [a]], lsb).replace(": X ", f": {name} ")
             out.append(AxisFault(a, "dead", text))
             continue
-        sat = saturated_axis(x)
+        sat = saturated_axis(x, abs_limit)
         if sat is not None:
-            out.append(AxisFault(a, "saturated", f"gyro {name} saturated: flat at +-{sat[0]:.4g} rad/s "
-                                                 f"({np.degrees(sat[0]):.0f} deg/s) in {sat[1]} runs"))
+            level, runs = sat
+            how = (f"in {runs} flat runs" if runs else
+                   f"at or beyond the range limit {abs_limit:.4g} rad/s in {int(np.count_nonzero(np.abs(x) >= abs_limit))} "
+                   "sample(s)")
+            out.append(AxisFault(a, "saturated", f"gyro {name} saturated: |rate| {level:.4g} rad/s "
+                                                 f"({np.degrees(level):.0f} deg/s) {how}"))
             continue
         st = stuck_axis(x, rate_hz) if not lsb else None
         if st is not None:

@@ -52,12 +52,12 @@ def test_frozen_stretch_is_found_where_it_was_put():
 
 def test_clipped_motion_is_saturated_and_unclipped_is_not():
     for seed in range(10):
-        t, g = healthy(seed, motion=80.0)  # 40-80 rad/s peaks: every axis beyond a 2000 deg/s range
-        clipped = np.clip(g, -34.9, 34.9)
-        kinds = {f.axis: f.kind for f in gyro_faults(clipped, RATE, t)}
-        over = [a for a in range(3) if np.abs(g[:, a]).max() > 34.9 + 0.1]
-        assert over and all(kinds.get(a) == "saturated" for a in over), (seed, kinds, over)
-        assert saturated_axis(g[:, 0]) is None  # the same motion unclipped
+        t, g = healthy(seed, motion=40.0)  # 20-40 rad/s peaks; clipped at 15 rad/s, below the range limit
+        clipped = np.clip(g, -15.0, 15.0)
+        faults = gyro_faults(clipped, RATE, t)
+        assert [(f.axis, f.kind) for f in faults] == [(a, "saturated") for a in range(3)], seed
+        assert all("in 180 flat runs" in f.text for f in faults), faults  # 300 s at 0.3 Hz: 90 cycles, 2 peaks each
+        assert saturated_axis(g[:, 0] * 0.5) is None  # the same motion unclipped, within the range
 
 
 def test_dead_axis_named_with_both_causes_on_an_integer_message():
@@ -66,3 +66,19 @@ def test_dead_axis_named_with_both_causes_on_an_integer_message():
     f = gyro_faults(g, RATE, t, lsb=1e-3, label="RAW_IMU[0]")
     assert [(x.axis, x.kind) for x in f] == [(1, "dead")]
     assert f[0].text.startswith("RAW_IMU[0]: gyro dead or below resolution: Y exactly 0 in all 30000 samples")
+
+
+def test_a_sample_at_the_range_limit_is_saturated_as_run_says():
+    """A crash's one sample beyond the range (a public log: 35.3 rad/s on gyro Y at 50 Hz) is what `run` calls
+    saturated (its gyro_limit); the offline test takes the same limit."""
+    from companion.health.log_faults import RANGE_LIMIT
+    from companion.service.pipeline_config import PipelineConfig
+
+    assert RANGE_LIMIT == PipelineConfig().gyro_limit
+    t, g = healthy(2, motion=5.0)
+    g[12_000, 1] = 35.3
+    f = gyro_faults(g, RATE, t)
+    assert [(x.axis, x.kind) for x in f] == [(1, "saturated")]
+    assert "beyond the range limit 32.77 rad/s in 1 sample(s)" in f[0].text
+    g[12_000, 1] = 30.0  # a fast turn within the range
+    assert gyro_faults(g, RATE, t) == []
