@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from companion.errors import CompanionError
+from companion.errors import EXIT_FAULTS, EXIT_USAGE, CompanionError
 
 #: Log parameters copied into the source summary (low-pass filters, fast sampling, batch logging).
 SUMMARY_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_FAST_SAMPLE", "INS_LOG_BAT_OPT", "INS_LOG_BAT_MASK",
@@ -35,12 +35,15 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
     summary["notes"] += [n for n in sel.notes if sel.intervals]
     dead = dead_gyros(streams)
+    # a gyro fault among the axes asked for: the exit status says it (companion.errors.EXIT_FAULTS)
+    summary["dead_gyros"] = dead_gyros(streams, axes)
     ap = autopilot_entry(res, streams, dead, sel)
     if not sel.intervals:
         # a dead gyro, and an IMU its autopilot flags, are said first: the reason to look at this log
         said = dead + [f"autopilot: {c['line']}" for c in (ap or {}).get("cross_check", []) if c["autopilot_flagged"]]
         first = "; ".join(said) + "; " if said else ""
-        raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
+        raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})",
+                             EXIT_FAULTS if summary["dead_gyros"] else EXIT_USAGE)
     if dead and warn is not None:
         for d in dead:
             warn(d)
@@ -85,12 +88,16 @@ def autopilot_entry(res, streams, dead: list[str], sel) -> dict | None:
     return check_report(res.meta.get("autopilot"), ours, sorted(ours))
 
 
-def dead_gyros(streams) -> list[str]:
-    """The sentences naming every dead gyro (health.dead) of the IMU streams."""
-    from companion.health.dead import dead_gyro_text
+def dead_gyros(streams, axes=None) -> list[str]:
+    """The sentences naming every dead gyro (health.dead) of the IMU streams; with ``axes``, only the streams
+    with a dead axis among them (a model of gx alone simulates gy, gz as 0: not a fault of an analysis of gx)."""
+    from companion.health.dead import constant_axes, dead_gyro_text
+    from companion.samples import GYRO_AXES
 
     out = []
     for s in streams:
+        if axes is not None and not any(GYRO_AXES[a] in axes for a in constant_axes(s.gyro)):
+            continue
         text = dead_gyro_text(s.key.label(), s.gyro, getattr(s, "gyro_lsb", None))
         if text:
             out.append(text)

@@ -10,7 +10,7 @@ import sys
 from companion.cli.analyze_report import add_argument as add_report_argument
 from companion.cli.output import to_json, write_text
 from companion.cli.progress import Progress
-from companion.errors import CompanionError
+from companion.errors import EXIT_FAULTS, EXIT_NO_DATA, EXIT_USAGE, CompanionError
 from companion.samples import AXES
 
 DESCRIPTION = """\
@@ -128,7 +128,7 @@ def run(args) -> int:
     warn_ignored_options(args, sources, "analyze")
     report = {"source": str(sources[0]) if len(sources) == 1 else ", ".join(map(str, sources)),
               "sources": [], "streams": []}
-    failed = []
+    failed, codes, dead = [], [], []
     for spec in sources:
         try:
             entries, summary = analyze_source(spec, args, axes, progress_enabled=not args.quiet)
@@ -136,11 +136,13 @@ def run(args) -> int:
             if len(sources) == 1:
                 raise
             failed.append(str(exc))  # the other logs are still analysed; the exit status says it
+            codes.append(exc.exit_code)
             continue
+        dead += summary.pop("dead_gyros", [])  # for the exit status; the notes say it in the report
         report["sources"].append(summary)
         report["streams"].extend(entries)
     if not report["streams"]:
-        raise CompanionError("; ".join(failed) if failed else "no IMU stream analysed")
+        raise CompanionError("; ".join(failed) if failed else "no IMU stream analysed", _all_failed_code(codes))
     report["failed_sources"] = failed
     for summary in report["sources"]:
         print(f"{summary['source']}: {summary['selection']['description']}")
@@ -169,6 +171,21 @@ def run(args) -> int:
             raise CompanionError(f"{args.kalibr} not written: {'; '.join(blockers)} (--force writes it anyway)")
         write_text(args.kalibr, kalibr_yaml(report), "Kalibr YAML")
         print(f"wrote {args.kalibr}")
-    if failed:
-        raise CompanionError(f"{len(failed)} of {len(sources)} sources not analysed: {'; '.join(failed)}")
+    if failed:  # a gyro fault found in any source outranks the sources that could not be read
+        raise CompanionError(f"{len(failed)} of {len(sources)} sources not analysed: {'; '.join(failed)}",
+                             EXIT_FAULTS if dead or EXIT_FAULTS in codes else EXIT_USAGE)
+    if dead:  # said above as a warning; the exit status lets a script gate on it (README "Exit status")
+        print(f"companion analyze: gyro faults found: {len(dead)} dead gyro stream(s) (exit status {EXIT_FAULTS})",
+              file=sys.stderr)
+        return EXIT_FAULTS
     return 0
+
+
+def _all_failed_code(codes) -> int:
+    """Every source failed: a dead gyro among them is a fault found; none with usable data, no usable data;
+    else the usage/input error."""
+    if EXIT_FAULTS in codes:
+        return EXIT_FAULTS
+    if codes and all(c == EXIT_NO_DATA for c in codes):
+        return EXIT_NO_DATA
+    return EXIT_USAGE

@@ -8,7 +8,7 @@ import sys
 
 from companion.cli.output import to_json, write_text
 from companion.cli.progress import Progress
-from companion.errors import CompanionError
+from companion.errors import EXIT_NUMERICS, CompanionError
 from companion.samples import AXES
 from companion.units import rate_display
 
@@ -85,6 +85,13 @@ def run(args) -> int:
     for opt, path in (("--json", args.json), ("--out", args.out)):
         if path:
             check_output_path(path, opt)
+    if args.out and not args.out.lower().endswith((".csv", ".csv.gz")):
+        # CSV text under a log's name (c.tlog) would be refused, or misread, by every tool that opens it
+        raise CompanionError(f"--out {args.out}: writes CSV text; give a .csv or .csv.gz file name")
+    if args.max_samples is not None and args.max_samples < 1:
+        raise CompanionError(f"--max-samples must be >= 1, got {args.max_samples}")
+    if args.stream < 0:
+        raise CompanionError(f"--stream must be >= 0 (an index into the IMU streams), got {args.stream}")
     if args.plot:
         check_plot_path(args.plot)
     axis = args.axis.strip().lower()
@@ -124,6 +131,7 @@ def run(args) -> int:
         print(f"wrote {args.plot}")
     bad = [m.name for m in result.methods.values() if not m.factor_valid]
     if bad:
-        print(f"companion: warning: covariance factor lost validity in {', '.join(bad)}", file=sys.stderr)
-        return 1
+        print(f"companion: warning: covariance factor lost validity in {', '.join(bad)} (exit status "
+              f"{EXIT_NUMERICS})", file=sys.stderr)
+        return EXIT_NUMERICS
     return 0

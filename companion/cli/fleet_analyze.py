@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from companion.errors import EXIT_FAULTS, EXIT_INTERRUPTED, EXIT_NO_DATA, EXIT_TERMINATED, EXIT_TIME_LIMIT
+
 ANALYZE_DESCRIPTION = """\
 Analyse every log named by LOGS (files, folders searched recursively, glob patterns) with the code of
 `companion analyze` (the same segment choice, fit and 95 % intervals; gyro axes by default) in parallel
@@ -65,11 +67,17 @@ def run_analyze(args) -> int:
     opts.check()
     check_output_path(args.db, "--db")
     outcome = analyze_fleet(opts, say=lambda line: print(line, file=sys.stderr))
+    code = outcome.exit_code()
     if outcome.stats is not None:
         for line in outcome.failure_lines():
             print(line, file=sys.stderr)
         print(describe(outcome.stats))
-        if outcome.exit_code():
-            return outcome.exit_code()
+        if code in (EXIT_INTERRUPTED, EXIT_TERMINATED, EXIT_TIME_LIMIT):
+            return code
     print(f"{args.db}: {outcome.counts['ok']} log(s) analysed, {outcome.counts['failed']} failed")
-    return 0
+    if code == EXIT_FAULTS:
+        print(f"companion fleet analyze: a gyro dead, stuck or saturated in {args.db} (fleet report ranks it; "
+              f"exit status {code})", file=sys.stderr)
+    elif code == EXIT_NO_DATA:
+        print(f"companion fleet analyze: no log analysed in {args.db} (exit status {code})", file=sys.stderr)
+    return code

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
-from companion.errors import CompanionError
+from companion.errors import EXIT_FAULTS, CompanionError, NoUsableData
 
 REPORT_DESCRIPTION = """\
 Per IMU (vehicle, MAVLink system, message, instance) its coefficients across flights (oldest first) and a
@@ -59,6 +60,10 @@ def run_report(args) -> int:
         for who, note, flagged in identity_notes(entries):  # trends over logs that may not be one vehicle's
             print(f"note: {who}{note}" + (" (a flagged IMU among them)" if flagged else ""))
         _write_reports(args, store, entries)
+    flagged = sum(e["flagged"] for e in entries)
+    if flagged:  # a script or CI job gates on it (README "Exit status")
+        print(f"companion fleet report: {flagged} flagged IMU(s) (exit status {EXIT_FAULTS})", file=sys.stderr)
+        return EXIT_FAULTS
     return 0
 
 
@@ -89,4 +94,4 @@ def _report_nothing(args, store) -> int:
     for n, reason in failure_reasons(store.failures()):
         print(f"{n} log(s) failed: {reason}")
     _write_reports(args, store, [])
-    raise CompanionError(f"{args.db}: no IMU to rank: {nothing_to_rank(store.counts())}")
+    raise NoUsableData(f"{args.db}: no IMU to rank: {nothing_to_rank(store.counts())}")

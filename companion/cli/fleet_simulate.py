@@ -52,10 +52,13 @@ def register(sub) -> None:
 
 
 def run_simulate(args) -> int:
-    from companion.fleet.synthetic_fleet import check_fleet_options, degrading_imus, simulate_fleet
+    from companion.fleet.synthetic_fleet import (check_fleet_options, check_fleet_size, degrading_imus, fleet_bytes,
+                                                 simulate_fleet)
 
     check_fleet_options(args.vehicles, args.flights, args.imus, args.degrading, args.rise, args.duration, args.rate,
                         args.seed, args.message, args.format)
+    check_fleet_size(args.out_dir, fleet_bytes(args.vehicles, args.flights, args.imus, args.duration, args.rate,
+                                               args.message, args.format))
     tty = sys.stderr.isatty()
 
     def progress(done, total):

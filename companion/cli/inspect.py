@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from companion.errors import CompanionError
+import sys
+
+from companion.errors import EXIT_FAULTS, NoUsableData
 
 DESCRIPTION = """\
 List the IMU streams of a source: per stream the MAVLink message, instance, sysid, compid, number of
@@ -32,8 +34,8 @@ examples:
   companion inspect /dev/ttyACM0 --baud 921600 --duration 5
   companion inspect flight.tlog --config my.yaml     # per-stream gyro_scale/accel_scale (streams: section)
 
-exit status: 0 when at least one IMU stream was found, 2 on bad input or when no stream is an IMU
-(the table is still printed)."""
+exit status: 0 when at least one IMU stream was found, 4 when a gyro is dead, 5 when no stream is an
+IMU (the table is still printed), 2 on bad input (README "Exit status")."""
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("inspect", help="list the IMU streams of a log (.tlog, .bin, .ulg, .csv) or live link",
@@ -67,5 +69,12 @@ def run(args) -> int:
     if args.json:
         write_summary(args.json, res)
     if not res.imu_streams():
-        raise CompanionError(f"{res.source}: no IMU data" + (" (compass-only streams only)" if res.streams else ""))
+        raise NoUsableData(f"{res.source}: no IMU data" + (" (compass-only streams only)" if res.streams else ""))
+    from companion.analysis.source import dead_gyros
+
+    dead = dead_gyros(res.imu_streams())  # named in the notes above; the exit status lets a script gate on it
+    if dead:
+        print(f"companion inspect: gyro faults found: {len(dead)} dead gyro stream(s) (exit status {EXIT_FAULTS})",
+              file=sys.stderr)
+        return EXIT_FAULTS
     return 0

@@ -58,6 +58,29 @@ def check_output_path(path, option: str) -> None:
             raise CompanionError(f"{option} {p}: not writable")
     elif not os.access(parent, os.W_OK | os.X_OK):
         raise CompanionError(f"{option} {p}: directory {parent} is not writable")
+    _probe(p, option)
+
+
+def _probe(p: str, option: str) -> None:
+    """Open the file for writing once (created and removed again when it was not there): os.access says yes
+    to root everywhere, also in /proc or on a read-only mount, where the write would fail after the work."""
+    import os
+
+    existed = os.path.exists(p)
+    if existed and not os.path.isfile(p):  # a FIFO would block until read, a device is the user's choice
+        return
+    try:
+        with open(p, "a" if existed else "x"):
+            pass
+    except FileExistsError:  # made by someone else meanwhile: theirs, not ours to remove
+        return
+    except OSError as exc:
+        raise CompanionError(f"{option} {p}: cannot write ({exc.strerror or exc})") from None
+    if not existed:
+        try:
+            os.remove(p)
+        except OSError:
+            pass
 
 
 def check_plot_path(path, option: str = "--plot") -> None:

@@ -69,9 +69,10 @@ def register(subparsers) -> None:
     p.add_argument("--baseline-force", action="store_true",
                    help="use --baseline even when it was measured on another stream (message, rate, sensor LSB, "
                         "units); without it a mismatch is an error")
-    p.add_argument("--state", metavar="FILE", help="state file (default: run.state_file, else "
-                   "$XDG_STATE_HOME/companion/run_state.json on a live link, none for a replay)")
-    p.add_argument("--no-state", action="store_true", help="do not read or write a state file")
+    st = p.add_mutually_exclusive_group()  # both given: which one was meant cannot be guessed
+    st.add_argument("--state", metavar="FILE", help="state file (default: run.state_file, else "
+                    "$XDG_STATE_HOME/companion/run_state.json on a live link, none for a replay)")
+    st.add_argument("--no-state", action="store_true", help="do not read or write a state file")
     p.add_argument("--relearn", action="store_true", help="ignore the baseline kept in the state file and learn a new one")
     p.add_argument("--sysid", type=int, help="system id of the vehicle (default: the first one sending IMU data)")
     p.add_argument("--rate", type=float, metavar="HZ", help="IMU message rate to ask the autopilot for (default 100)")
@@ -142,7 +143,12 @@ def _run(args, stop) -> int:
         web.finish(result.pipeline, opts.source, lambda: stop["flag"], opts.is_replay)
     finally:
         web.close()
-    return 0
+    from companion.service.outcome import run_status
+
+    code, reason = run_status(result.pipeline.summary())
+    if code:  # the exit status says it (README "Exit status"); the line says why
+        print(f"companion run: {reason} (exit status {code})", file=sys.stderr)
+    return code
 
 
 def _check_outputs(args, extra, state_path) -> None:

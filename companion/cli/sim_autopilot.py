@@ -109,6 +109,15 @@ def run(args) -> int:
         v = getattr(args, name)
         if v is not None and not v > 0:
             raise CompanionError(f"--{name.replace('_', '-')} must be > 0")
+    if not 1 <= args.sysid <= 255:
+        raise CompanionError(f"--sysid must be 1-255 (the MAVLink system id it sends as), got {args.sysid}")
+    bad_ports = [p for p in args.flow_port if not 1 <= p <= 65535]
+    if bad_ports:
+        raise CompanionError(f"--flow-port {bad_ports[0]}: a UDP port is 1-65535")
+    if args.record:
+        from companion.cli.output import check_output_path
+
+        check_output_path(args.record, "--record")
     if args.model is None and args.preset is None:
         raise CompanionError("give --model MODEL.yaml or --preset NAME")
     model = load_model(args.model) if args.model is not None else None
@@ -126,7 +135,11 @@ def run(args) -> int:
         setup_signing(conn, load_signing_key(args.signing_key))
     if not args.quiet:
         print(describe(sim), flush=True)
-    record = open(args.record, "w") if args.record else None
+    try:
+        record = open(args.record, "w") if args.record else None
+    except OSError as exc:
+        conn.close()
+        raise CompanionError(f"--record {args.record}: cannot write ({exc.strerror or exc})") from None
     stop = {"flag": False}
     old = {s: signal.signal(s, lambda *a: stop.__setitem__("flag", True)) for s in (signal.SIGINT, signal.SIGTERM)}
     autopilot = SimAutopilot(sim, conn, opts, lambda line: print(line, flush=True), record)

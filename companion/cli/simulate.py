@@ -134,6 +134,10 @@ def _check_noise_run(args, model, n: int) -> None:
 
 
 def run(args) -> int:
+    if not 1 <= args.sysid <= 255:
+        raise CompanionError(f"--sysid must be 1-255 (the MAVLink system id of the tlog), got {args.sysid}")
+    if args.seed < 0:
+        raise CompanionError(f"--seed must be >= 0, got {args.seed}")
     model = _model(args)
     if not (args.duration > 0 and math.isfinite(args.duration)):
         raise CompanionError("--duration must be a positive number of seconds")

@@ -156,6 +156,8 @@ def build_simulator(args, model, rate_hz: float | None = None):
         args.imus = 1
     if not 1 <= args.imus <= 3:
         raise CompanionError(f"--imus must be 1, 2 or 3, got {args.imus}")
+    if args.seed < 0:
+        raise CompanionError(f"--seed must be >= 0, got {args.seed}")
     schedule = _schedule(args, V)
     fault = _fault(args, V)
     degrade = _degradation(args, model, V)

@@ -68,13 +68,15 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
             else:
                 identity_note = (f"{flights} logs with no board id in folder {folder}, which holds the logs of "
                                  f"{len(boards)} boards: they may come from any of them")
+        fault = fault_summary(rows, flights)
         last_n = {}
         for (axis, p), (idx, v, lo, hi) in series.items():
             if p == "N" and len(v):
                 last_n[axis] = float(v[-1])
         entries.append({
             "vehicle": vehicle, "sysid": int(sysid), "compid": int(compid), "message": message, "imu": int(imu),
-            "flights": flights, "flagged": tr.flagged, "evidence": round(float(tr.evidence), 3),
+            "flights": flights, "flagged": tr.flagged or fault is not None, "fault": fault,
+            "evidence": round(float(tr.evidence), 3),
             "axis": tr.axis, "param": tr.param, "trend": float(w.ratio) if w else None,
             "t": float(w.t) if w else None, "dispersion": float(w.phi) if w else None,
             "tests": len(tr.tests), "note": tr.note,
@@ -83,6 +85,24 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
             "_series": series, "_tests": tr.tests, "_folder": folder})
     entries.sort(key=lambda e: (not e["flagged"], -e["evidence"], e["vehicle"], e["sysid"], e["message"], e["imu"]))
     return entries
+
+
+def fault_summary(rows: list[dict], flights: int) -> str | None:
+    """The dead, stuck or saturated axes of an IMU's flights in words (None when there are none): which kinds,
+    in how many of its flights, and the latest flight's sentences."""
+    from companion.fleet.task import FAULT_STATUSES
+
+    bad = [r for r in rows if r["status"] in FAULT_STATUSES]
+    if not bad:
+        return None
+    hashes = list(dict.fromkeys(r["hash"] for r in bad))
+    kinds: dict = {}
+    for r in bad:
+        kinds.setdefault(r["status"], set()).add(r["axis"])
+    what = ", ".join(f"{k} {'/'.join(sorted(kinds[k]))}" for k in FAULT_STATUSES if k in kinds)
+    last = next((r["note"] for r in bad if r["hash"] == hashes[-1] and r.get("note")), None)
+    return (f"gyro {what} in {len(hashes)} of {flights} flight{'s' if flights > 1 else ''}"
+            + (f" (last flight: {last})" if last else ""))
 
 
 def public(entry: dict) -> dict:
@@ -110,7 +130,8 @@ def ranking_lines(entries: list[dict], top: int) -> list[str]:
         trend = f"{e['trend']:.2f}x" if e["trend"] is not None else "-"
         lines.append(f"{i:>4} {e['vehicle']:<{wv}} {e['sysid']:>3} {str(e['imu']) + ' ' + e['message']:<16} "
                      f"{e['flights']:>7} {'YES' if e['flagged'] else 'no':>4} {e['evidence']:>8.1f} {worst:<6} {trend:>6}"
-                     + (f"  ({e['note']})" if e["note"] and not e["axis"] else ""))
+                     + (f"  ({e['note']})" if e["note"] and not e["axis"] else "")
+                     + (f"  FAULT: {e['fault']}" if e.get("fault") else ""))
     if len(shown) < len(entries):
         lines.append(f"... {len(entries) - len(shown)} more (--top 0 for all)")
     return lines
@@ -199,7 +220,7 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
            "<h1>Gyro trends across flights</h1>",
            f"<p id='summary'>{len(entries)} IMUs, {counts['ok']} logs analysed, {counts['failed']} failed; "
            f"<span class='flag'>{len(flagged)} flagged</span> (evidence &ge; {threshold:g} and a fitted rise "
-           f"&ge; {min_rise:g}x). Database <code>{esc(store.path)}</code>, generated "
+           f"&ge; {min_rise:g}x, or a gyro dead, stuck or saturated). Database <code>{esc(store.path)}</code>, generated "
            f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.</p>",
            _nothing_ranked(fails, entries, counts),
            _notes_html(entries),
@@ -211,6 +232,8 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
            "<th>trend</th><th>dispersion</th></tr>"]
     for i, e in enumerate(entries, 1):
         worst = f"{e['axis']} {e['param']}" if e["axis"] else esc(e["note"] or "-")
+        if e.get("fault"):
+            worst = f"<span class='flag'>{esc(e['fault'])}</span>" + ("; " + worst if e["axis"] else "")
         trend = f"{e['trend']:.2f}x" if e["trend"] is not None else "-"
         disp = f"{e['dispersion']:.2f}" if e["dispersion"] is not None else "-"
         out.append(f"<tr class='{'flag' if e['flagged'] else ''}'><td>{i}</td><td class='l'>"
@@ -238,6 +261,8 @@ def report_html(store, entries: list[dict], threshold: float, min_rise: float, m
         detail = (f"evidence {e['evidence']:.1f}, worst {e['axis']} {e['param']}, trend {e['trend']:.2f}x over "
                   f"{e['flights']} flights" if e["axis"] else esc(e["note"]))
         note = f"<p class='note'>note: {esc(e['identity_note'])}</p>" if e.get("identity_note") else ""
+        if e.get("fault"):
+            note = f"<p class='flag'>FAULT: {esc(e['fault'])}</p>" + note
         out.append(f"<section id='imu{i}'><h3>{i}. {head}</h3><p>{detail}</p>{note}"
                    f"<img alt='N per flight of {esc(e['vehicle'])} IMU{e['imu']}' src='data:image/png;base64,{b64}'>"
                    "</section>")

@@ -14,13 +14,10 @@ import os
 import signal
 from dataclasses import dataclass
 
-from companion.errors import CompanionError, Terminated
+from companion.errors import EXIT_FAULTS, EXIT_INTERRUPTED, EXIT_NO_DATA, CompanionError, Terminated
+from companion.errors import EXIT_TIME_LIMIT as EXIT_DEADLINE
 from companion.samples import AXES
 
-#: exit status of a run stopped by --time-limit (what is recorded stays; the next run resumes)
-EXIT_DEADLINE = 3
-#: exit status of a run stopped by Ctrl-C, as a shell reports SIGINT
-EXIT_INTERRUPTED = 130
 #: unreadable or failed logs listed one per line; the rest are counted (the HTML report lists them all)
 LISTED = 10
 
@@ -101,11 +98,19 @@ class AnalyzeOutcome:
 
     stats: object | None  # companion.fleet.dask_runner.RunStats
     counts: dict[str, int]
+    faults: bool = False  #: the database holds a gyro found dead, stuck or saturated
 
     def exit_code(self) -> int:
+        """Stopped early (130, 143, 3), else a faulty gyro in the database (4), else no log analysed at all (5),
+        else 0 (README "Exit status")."""
         stopped = self.stats.stopped if self.stats is not None else ""
-        return {"interrupted": EXIT_INTERRUPTED, "terminated": Terminated.exit_code,
+        code = {"interrupted": EXIT_INTERRUPTED, "terminated": Terminated.exit_code,
                 "deadline": EXIT_DEADLINE}.get(stopped, 0)
+        if code:
+            return code
+        if self.faults:
+            return EXIT_FAULTS
+        return EXIT_NO_DATA if not self.counts.get("ok") else 0
 
     def failure_lines(self) -> list[str]:
         if self.stats is None:
@@ -161,7 +166,7 @@ def analyze_fleet(opts: AnalyzeOptions, say) -> AnalyzeOutcome:
             if stats is not None:
                 progress.close()
                 stats.skipped, stats.duplicates = todo.skipped, todo.duplicates
-            return AnalyzeOutcome(stats, store.counts())
+            return AnalyzeOutcome(stats, store.counts(), store.has_faults())
     finally:
         try:
             if held.client is not None:

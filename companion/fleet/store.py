@@ -270,13 +270,18 @@ class FleetStore:
         cur = self.con.execute(
             f"WITH split AS ({self._SPLIT}) "
             f"SELECT {vehicle} AS vehicle, r.vehicle AS folder, r.sysid, r.compid, r.message, r.imu, r.axis, "
-            "r.status, r.hash, r.still_s, r.rate_hz, r.temp_min, r.temp_max, "
+            "r.status, r.note, r.hash, r.still_s, r.rate_hz, r.temp_min, r.temp_max, "
             + ", ".join(f"r.{p}, r.{p}_lo, r.{p}_hi" for p in PARAMS)
             + ", l.start_time, l.start_source, l.board_id, l.path FROM results r JOIN logs l ON l.hash = r.hash WHERE l.status = 'ok' "
             "ORDER BY 1, r.sysid, r.compid, r.message, r.imu, l.start_time, l.path, r.axis")
         names = [d[0] for d in cur.description]
         for row in cur:
             yield dict(zip(names, row))
+
+    def has_faults(self) -> bool:
+        """Whether an analysed log holds an axis found dead, stuck or saturated (fleet.task.FAULT_STATUSES)."""
+        return self.con.execute("SELECT 1 FROM results WHERE status IN ('dead', 'stuck', 'saturated') "
+                                "LIMIT 1").fetchone() is not None
 
     def failures(self) -> list[tuple[str, str]]:
         return self.con.execute("SELECT path, error FROM logs WHERE status = 'failed' ORDER BY path").fetchall()

@@ -235,6 +235,41 @@ def check_fleet_options(vehicles: int, flights: int, imus: int, degrading: int, 
         raise CompanionError("--format bin writes at most 3 IMUs (ArduPilot's IMU instances 0-2)")
 
 
+#: bytes a log takes per IMU sample (measured: `fleet simulate` of 1 vehicle x 1 flight, 60 s at 100 Hz, 3 IMUs:
+#: RAW_IMU/SCALED_IMU2/3 tlog 824 kB, HIGHRES_IMU tlog 1.48 MB, DataFlash 901 kB), rounded up
+BYTES_PER_SAMPLE = {("tlog", "ardupilot"): 47, ("tlog", "HIGHRES_IMU"): 83, ("bin", "ardupilot"): 51}
+#: the most a fleet may take on disk, whatever is free: a typo (--flights 1000 for 100) must not fill a disk
+MAX_FLEET_BYTES = 200e9
+
+
+def fleet_bytes(vehicles: int, flights: int, imus: int, duration_s: float, rate_hz: float, message: str,
+                fmt: str) -> float:
+    """About how many bytes the fleet's logs take (within a few per cent)."""
+    per = BYTES_PER_SAMPLE.get((fmt, message), max(BYTES_PER_SAMPLE.values()))
+    return float(vehicles) * flights * imus * round(duration_s * rate_hz) * per
+
+
+def check_fleet_size(out_dir, est_bytes: float) -> None:
+    """Refuse, before the first log, a fleet larger than :data:`MAX_FLEET_BYTES` or than the free space where
+    it goes (the nearest existing folder of ``out_dir``)."""
+    import shutil
+
+    size = f"about {est_bytes / 1e9:.3g} GB"
+    if est_bytes > MAX_FLEET_BYTES:
+        raise CompanionError(f"the fleet would take {size} (limit {MAX_FLEET_BYTES / 1e9:g} GB); fewer --vehicles, "
+                             "--flights, --imus, or a shorter --duration / lower --rate")
+    where = os.path.abspath(os.fspath(out_dir))
+    while not os.path.isdir(where) and os.path.dirname(where) != where:
+        where = os.path.dirname(where)
+    try:
+        free = shutil.disk_usage(where).free
+    except OSError:
+        return
+    if est_bytes > free:
+        raise CompanionError(f"the fleet would take {size}, {where} has {free / 1e9:.3g} GB free; fewer "
+                             "--vehicles or --flights, or another OUT_DIR")
+
+
 def degrading_imus(truth: dict) -> list[str]:
     """``"vehicle_000 IMU1"`` for every degrading IMU of a fleet's truth."""
     return [f"{v['name']} IMU{i['imu']}" for v in truth["vehicles"] for i in v["imus"] if i["degrading"]]

@@ -86,6 +86,34 @@ def _row(entry: dict, stream, axis: str, vehicle: str, ranges) -> dict:
     return row
 
 
+#: result statuses of an axis found dead, stuck or saturated (companion.health.log_faults): flagged in the ranking
+FAULT_STATUSES = ("dead", "stuck", "saturated")
+
+
+def fault_rows(stream, axes, vehicle: str) -> dict:
+    """{axis: row} for the gyro axes of ``stream`` (among ``axes``) that are dead, stuck or saturated: status
+    the fault's kind, note its sentence, no coefficients."""
+    from companion.health.log_faults import gyro_faults
+
+    if stream.gyro is None or stream.samples < 1:
+        return {}
+    out = {}
+    for f in gyro_faults(stream.gyro, float(stream.rate_hz), stream.t, getattr(stream, "gyro_lsb", None),
+                         stream.key.label()):
+        axis = GYRO_AXES[f.axis]
+        if axis not in axes:
+            continue
+        row = {"vehicle": vehicle, "sysid": int(stream.key.sysid), "compid": int(stream.key.compid),
+               "imu": int(stream.key.instance), "message": stream.key.message, "axis": axis, "status": f.kind,
+               "note": f.text[:300], "rate_hz": float(stream.rate_hz) if math.isfinite(stream.rate_hz) else None,
+               "samples": int(stream.samples), "still_s": 0.0, "temp_min": None, "temp_max": None,
+               "model_error": None, "chi2": None, "dof": None, "extra": None}
+        for p in COLUMN_PARAMS.values():
+            row[p] = row[p + "_lo"] = row[p + "_hi"] = None
+        out[axis] = row
+    return out
+
+
 def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=None) -> dict:
     """Analyse one log file (see the module docstring). Never raises (but KeyboardInterrupt)."""
     from companion.fleet.discover import log_format
@@ -114,6 +142,8 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
             v = vehicle if s.key.sysid == sysid else vehicle_name(s.key.sysid, boards.get(s.key.sysid), path,
                                                                    vehicle_from)
             duration = max(duration, float(s.timing.duration_s))
+            faulty = fault_rows(s, axes, v)  # a dead, stuck or saturated axis: a flagged IMU, not a failed log
+            rows += faulty.values()
             ranges = sel.ranges(s)
             if not ranges:  # no still data in this stream: nothing to analyse (said in the log's error)
                 continue
@@ -125,17 +155,13 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
             absent = [a for a in axes if entry["axes"][a]["status"] == "absent"]
             if len(absent) == len(axes):
                 lacking.append(s.key.label())
-            rows += [_row(entry, s, a, v, ranges) for a in axes if a not in absent]
+            rows += [_row(entry, s, a, v, ranges) for a in axes if a not in absent and a not in faulty]
         out["log"] = {"sysid": sysid, "vehicle": vehicle, "board_id": board,
                       "imu_ids": {int(k): int(v) for k, v in ident.get("imu_ids", {}).items()},
                       "start_time": ident.get("start_time"), "duration_s": duration, "streams": len(streams)}
         out["rows"] = rows
-        from companion.analysis.source import dead_gyros
-
-        dead = dead_gyros(streams)
-        if dead:  # recorded as a dead gyro, whatever else the log lacks
-            out["error"] = "; ".join(dead)[:300]
-            out["dead_gyro"] = True
+        if any(r["status"] in FAULT_STATUSES for r in rows):  # ranked as a flagged IMU, whatever else it lacks
+            out["status"] = "ok"
         elif not rows and still:
             out["error"] = (f"no stream carries the axes {','.join(axes)} (only {', '.join(lacking)})")
         elif not rows:

@@ -175,6 +175,10 @@ def prepare(opts: GapLogOptions) -> LogGap:
     else:
         source_model = opts.model
     cutoff = opts.cutoff if opts.cutoff is not None else log_cutoff(st, meta)
+    if opts.cutoff is not None and not opts.cutoff < float(st.rate_hz) / 2:  # checked before the fits
+        raise CompanionError(f"--cutoff {opts.cutoff:g} Hz: at or above the Nyquist frequency of {st.key.label()} "
+                             f"({float(st.rate_hz):.4g} Hz data: at most {float(st.rate_hz) / 2:.4g} Hz); give the "
+                             "filter's cut-off below it, or leave --cutoff out")
     integrated = meta.get("format") == "ulog" and st.key.message == "sensor_combined"
     return LogGap(opts=opts, model=model, sheet=sheet, axes=axes, stream=st, ranges=m.ranges, selection=m.selection,
                   source_model=source_model, cutoff_hz=cutoff, integrated=integrated)

@@ -86,6 +86,8 @@ def _configs(args, config: dict):
     except (ValueError, TypeError) as exc:
         raise CompanionError(f"config: {exc}") from None
     if args.sysid is not None:
+        if not 0 <= args.sysid <= 255:  # a MAVLink system id is one byte; 999 would match nothing, silently
+            raise CompanionError(f"--sysid must be 0-255 (a MAVLink system id), got {args.sysid}")
         pcfg.sysid = args.sysid
     if getattr(args, "baseline_force", False):
         pcfg.baseline_force = True

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from companion.errors import CompanionError, not_text
+from companion.errors import CompanionError, NoUsableData, not_text
 from companion.service.run_options import RunHooks, RunOptions
 
 if TYPE_CHECKING:
@@ -97,6 +97,10 @@ def replay(opts: RunOptions, hooks: RunHooks, writer=None):
     reporter = Reporter(sink, opts.report_period)
     pipeline = Pipeline(opts.pipeline, reporter, opts.baseline, hooks.log, opts.scales)
     restore(pipeline, state, opts.relearn, hooks.warn, hooks.log)
+    if state is not None:
+        from companion.service.state_match import check_state_matches
+
+        check_state_matches(pipeline, src, state, opts.time_unit)
     hooks.started(pipeline)
     fp = None
     if state is not None:
@@ -151,7 +155,7 @@ def run(opts: RunOptions, hooks: RunHooks) -> RunResult:
             hooks.log(f"replayed {totals['frames']} frames ({totals['imu_samples']} IMU samples, "
                       f"{totals['bad_frames']} bad frames), {sink.sent} NAMED_VALUE_FLOAT, {len(sink.texts)} STATUSTEXT")
             if not pipeline.channels:
-                raise CompanionError(f"{opts.source}: no IMU data to replay")
+                raise NoUsableData(f"{opts.source}: no IMU data to replay")
             result = RunResult(pipeline)
         else:
             from companion.service.live import run_live

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from companion.errors import CompanionError
+from companion.errors import CompanionError, NoUsableData
 from companion.samples import ImuStream
 from companion.sources import autopilot_health as _ap
 from companion.sources import timestamps as _timing
@@ -96,11 +96,11 @@ def _check_has_imu(res: LoadResult, require_imu: bool) -> LoadResult:
     if require_imu and not res.imu_streams():
         if res.streams:
             what = ", ".join(s.key.label() for s in res.streams)
-            raise CompanionError(f"{res.source}: no IMU data (only compass-only streams: {what})")
+            raise NoUsableData(f"{res.source}: no IMU data (only compass-only streams: {what})")
         fmt = (res.meta or {}).get("format")
         wanted = {"dataflash": "IMU, IMU2, IMU3, ISBH/ISBD", "ulog": "sensor_combined, sensor_gyro, vehicle_imu",
                   "csv": "gyro rows"}.get(fmt, "RAW_IMU, SCALED_IMU*, HIGHRES_IMU")
-        raise CompanionError(f"{res.source}: no IMU messages ({wanted}) in {res.totals.get('frames', 0)} valid "
+        raise NoUsableData(f"{res.source}: no IMU messages ({wanted}) in {res.totals.get('frames', 0)} valid "
                              f"{'messages' if fmt in ('dataflash', 'ulog') else 'frames'}")
     return res
 

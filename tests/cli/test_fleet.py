@@ -83,7 +83,7 @@ def test_dask_two_workers_interrupt_resume_report(tmp_path):
     # report: the degrading IMUs first and flagged, no healthy one flagged
     out_json, out_html = tmp_path / "r.json", tmp_path / "r.html"
     r = _cli("fleet", "report", "--db", db, "--json", str(out_json), "--html", str(out_html))
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 4, r.stderr  # flagged IMUs: the exit status of faults found
     imus = json.loads(out_json.read_text())["imus"]
     assert len(imus) == 6
     sick = _sick(truth)
@@ -106,8 +106,9 @@ def test_degrading_imus_ranked_first_over_seeds(tmp_path, seed, capsys):
     db = str(tmp_path / "f.sqlite")
     assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--axes", "gx", "--quiet"]) == 0
     out = tmp_path / "r.json"
-    assert main(["fleet", "report", "--db", db, "--json", str(out)]) == 0
+    rc = main(["fleet", "report", "--db", db, "--json", str(out)])
     imus = json.loads(out.read_text())["imus"]
+    assert rc == (4 if any(e["flagged"] for e in imus) else 0)  # flagged IMUs: faults found
     sick = _sick(json.loads((logs / "fleet_truth.json").read_text()))
     assert {(e["vehicle"], e["imu"]) for e in imus[:3]} == sick
     assert [e["flagged"] for e in imus] == [True] * 3 + [False] * 3
@@ -207,7 +208,7 @@ def test_dataflash_fleet_board_ids_and_ranking(tmp_path, capsys):
     assert all(r[2] == "log" and r[3] == r[0] for r in rows)
     assert sorted(round(r[1], 1) for r in rows) == sorted(round(e["start_time"], 1) for e in by_path.values())
     out = tmp_path / "r.json"
-    assert main(["fleet", "report", "--db", db, "--json", str(out)]) == 0
+    assert main(["fleet", "report", "--db", db, "--json", str(out)]) == 4  # degrading IMUs flagged
     imus = json.loads(out.read_text())["imus"]
     assert {(e["vehicle"], e["imu"]) for e in imus[:2]} == _sick(truth)
 
@@ -327,9 +328,10 @@ def test_a_folder_of_several_boards_is_ranked_per_board(tmp_path, capsys):
                  "--quiet", "--vehicle", "dir"]) == 0
     capsys.readouterr()
     out, html_out = tmp_path / "r.json", tmp_path / "r.html"
-    assert main(["fleet", "report", "--db", db, "--json", str(out), "--html", str(html_out)]) == 0
+    rc = main(["fleet", "report", "--db", db, "--json", str(out), "--html", str(html_out)])
     printed = capsys.readouterr().out
     imus = json.loads(out.read_text())["imus"]
+    assert rc == (4 if any(e["flagged"] for e in imus) else 0)  # flagged IMUs: faults found
     boards = {v["board_id"] for v in truth["vehicles"]}
     assert {e["vehicle"] for e in imus} == {f"hangar/{b}" for b in boards}
     assert [(e["vehicle"], e["flagged"]) for e in imus if e["flagged"]] == [
@@ -377,7 +379,7 @@ def test_a_failed_logs_path_is_printed_once(tmp_path, capsys):
     bad = logs / "a.tlog"
     bad.write_text("not a telemetry log\n")
     db = str(tmp_path / "f.sqlite")
-    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 0
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 5  # no log analysed
     lines = [x for x in capsys.readouterr().err.splitlines() if x.startswith("failed:")]
     assert len(lines) == 1 and lines[0].count("a.tlog") == 1 and "no IMU messages" in lines[0], lines
     con = sqlite3.connect(db)

@@ -85,10 +85,10 @@ def test_every_log_failed_still_writes_the_report_saying_why(tmp_path, capsys):
     (logs / "a.tlog").write_text("not a telemetry log\n")
     (logs / "b.csv").write_text("time_s,gx\n0,0\n")
     db = str(tmp_path / "f.sqlite")
-    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 0
+    assert main(["fleet", "analyze", str(logs), "--db", db, "--workers", "0", "--quiet"]) == 5  # no log analysed
     capsys.readouterr()
     out, page = tmp_path / "r.json", tmp_path / "r.html"
-    assert main(["fleet", "report", "--db", db, "--html", str(page), "--json", str(out)]) == 2
+    assert main(["fleet", "report", "--db", db, "--html", str(page), "--json", str(out)]) == 5  # no usable data
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "all 2 log(s) failed" in err[0]
     text = page.read_text()

@@ -74,10 +74,10 @@ def test_mutated_logs_through_the_cli(tmp_path, capsys):
                 rc = exc.code
             out, err = capsys.readouterr()
             assert "Traceback" not in out + err
-            if rc == 0:
+            if rc in (0, 4):  # 4: a damaged record made a gyro axis constant (dead), said in a note
                 assert "source:" in out
-            else:
-                assert rc == 2 and len(err.strip().splitlines()) == 1 and err.startswith("companion: error:")
+            else:  # 2: not readable; 5: read, no IMU data in it
+                assert rc in (2, 5) and len(err.strip().splitlines()) == 1 and err.startswith("companion: error:")
 
 
 def test_shared_logs_mutated(shared_data, tmp_path):

@@ -21,7 +21,8 @@ def test_inspect_json_exact_keys(tmp_path, capsys):
     path = tmp_path / "a.tlog"
     write_imu_tlog(path, 2.0 + np.arange(n) / 200.0, np.full((n, 3), 0.01), np.full((n, 3), 0.3))
     out = tmp_path / "o.json"
-    assert main(["inspect", str(path), "--json", str(out)]) == 0
+    # a gyro constant at 0.01 rad/s is dead (health.dead): the table and JSON, then exit status 4 (faults found)
+    assert main(["inspect", str(path), "--json", str(out)]) == 4
     text = capsys.readouterr().out
     assert "RAW_IMU" in text and "200.000" in text
     doc = json.loads(out.read_text())
@@ -52,7 +53,7 @@ def test_inspect_no_imu_and_bad_inputs(tmp_path, capsys):
     with TlogWriter(path) as w:
         for k in range(5):
             w.write(w.mav.heartbeat_encode(2, 3, 0, 0, 3), t_unix=1.7e9 + k)
-    assert main(["inspect", str(path)]) == 2
+    assert main(["inspect", str(path)]) == 5  # read, but no usable data
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no IMU" in err
     for bad in [str(tmp_path / "none.tlog"), "udpfoo:1:2", str(tmp_path)]:
@@ -65,7 +66,7 @@ def test_inspect_compass_only_reports_then_fails(tmp_path, capsys):
     path = tmp_path / "c.tlog"
     n = 50
     write_imu_tlog(path, np.arange(n) / 10.0, np.zeros((n, 3)), np.zeros((n, 3)), message="SCALED_IMU2")
-    assert main(["inspect", str(path)]) == 2
+    assert main(["inspect", str(path)]) == 5  # no usable data
     cap = capsys.readouterr()
     assert "SCALED_IMU2" in cap.out and "compass-only" in cap.out  # partial data reported
     assert "no IMU" in cap.err
@@ -128,7 +129,7 @@ def test_inspect_live_udp_loopback(tmp_path, capsys):
         stop.set()
         th.join(5)
     assert time.monotonic() - t0 < 120  # --duration 1.5 bounds it; generous for a busy machine
-    assert rc == 0
+    assert rc == 4  # the sender's gyro X and Y are constant (1, 2 mrad/s): dead, a fault found
     doc = json.loads(out.read_text())
     s = doc["streams"][0]
     assert s["message"] == "RAW_IMU" and s["samples"] > 20

@@ -46,10 +46,11 @@ def test_constant_axes():
 def test_inspect_and_analyze_name_the_dead_gyro_before_the_armed_state(tmp_path):
     p = dead_log(tmp_path / "dead.bin")
     r = companion("inspect", str(p), "--json", str(tmp_path / "i.json"))
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 4, r.stderr  # the table, and the exit status of a gyro fault found
     assert "IMU[1]" in r.stdout and "gyro dead: X, Y, Z exactly 0" in r.stdout
+    assert r.stderr.strip().splitlines()[-1].endswith("(exit status 4)"), r.stderr
     r = companion("analyze", str(p), "--quiet")
-    assert r.returncode != 0
+    assert r.returncode == 4  # no still data to analyse, but the dead gyro is the finding
     err = r.stderr.strip().splitlines()[-1]
     assert "gyro dead: X, Y, Z exactly 0" in err
     assert err.index("gyro dead") < err.index("armed"), err  # named first
@@ -60,7 +61,7 @@ def test_analyze_with_still_data_warns_about_the_dead_gyro(tmp_path):
     p = dead_log(tmp_path / "dead_still.bin", armed_throughout=False)
     out = tmp_path / "a.json"
     r = companion("analyze", str(p), "--json", str(out), "--quiet")
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 4, r.stderr  # analysed, and a gyro fault found
     assert "gyro dead" in r.stderr
     assert any("gyro dead" in n for n in json.loads(out.read_text())["sources"][0]["notes"])
 
@@ -69,15 +70,24 @@ def test_fleet_records_a_dead_gyro_not_no_still_data(tmp_path):
     logs = tmp_path / "logs"
     logs.mkdir()
     dead_log(logs / "dead.bin")
-    r = companion("fleet", "analyze", str(logs), "--db", str(tmp_path / "f.sqlite"), "--workers", "1")
-    text = r.stdout + r.stderr
-    assert "gyro dead" in text and "no still data" not in text, text
+    db = str(tmp_path / "f.sqlite")
+    r = companion("fleet", "analyze", str(logs), "--db", db, "--workers", "1")
+    assert r.returncode == 4, r.stderr  # not a failed log: a flagged IMU
+    assert "1 log(s) analysed, 0 failed" in r.stdout and "no still data" not in r.stdout + r.stderr
+    out = tmp_path / "r.json"
+    r = companion("fleet", "report", "--db", db, "--json", str(out), "--html", str(tmp_path / "r.html"))
+    assert r.returncode == 4, r.stderr
+    imus = json.loads(out.read_text())["imus"]
+    assert [(e["imu"], e["flagged"]) for e in imus] == [(1, True)]
+    assert imus[0]["fault"].startswith("gyro dead gx/gy/gz in 1 of 1 flight") and "gyro dead" in imus[0]["fault"]
+    assert "FAULT: gyro dead" in (tmp_path / "r.html").read_text()
 
 
 def test_run_names_the_dead_gyro(tmp_path):
     p = dead_log(tmp_path / "dead_run.bin")
     r = companion("run", "--source", str(p), "--no-state", "--quiet")
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 4, r.stderr  # a gyro fault found (README "Exit status")
+    assert "companion run: gyro faults or degradation found: IMU1 (exit status 4)" in r.stderr
     # a float log (DataFlash) never reads exactly 0.0 from a live gyro: dead, not "stuck"
     assert "IMU1 gyro X reads exactly 0: dead" in r.stdout and "IMU0 gyro" not in r.stdout.split("at ")[-1]
     assert "stuck" not in r.stdout

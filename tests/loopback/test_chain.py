@@ -19,6 +19,7 @@ from tests.support.chain import (FAULT_WORDS, MODEL, Listener, imu_times, low_ra
 from tests.support.readiness import READY, wait_for_text
 
 from tests.support.loopback import free_udp_port, read_record, start, stop
+from tests.support.run_status import expected_run_status
 
 pytestmark = [pytest.mark.network,
               pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")]
@@ -34,7 +35,9 @@ def test_reports_reach_a_gcs_behind_mavproxy_through_gcs_output(tmp_path):
                                "--record", "rx.jsonl", "--quiet"])
         sim.wait(240)  # bounded by its --wall-limit
         assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
-        assert stop(run) == 0, (tmp_path / "run.out").read_text()
+        rc = stop(run)  # SIGTERM: the summary, then the status it gives
+        said = (tmp_path / "run.out").read_text()
+        assert rc == expected_run_status(said), said
         names, texts = sent_by_companion(tmp_path / "run.tlog")
         assert {"IMU0GX_N", "IMU0G_HLTH", "IMU0G_FLT"} <= names, names
         assert any("stuck" in t for t in texts), texts  # an alarm was sent
@@ -72,7 +75,9 @@ def test_mavproxy_default_stream_rates_beside_the_companion_raise_no_alarm(tmp_p
                                "--refuse-interval", "--wall-limit", "80", "--record", "rx.jsonl"])
         sim.wait(300)  # bounded by its --wall-limit
         assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
-        assert stop(chain.run) == 0, (tmp_path / "run.out").read_text()
+        rc = stop(chain.run)  # SIGTERM: the summary, then the status it gives
+        said = (tmp_path / "run.out").read_text()
+        assert rc == expected_run_status(said), said
     finally:
         chain.close()
     out = (tmp_path / "run.out").read_text()
@@ -152,7 +157,9 @@ def test_reports_reach_a_gcs_through_mavlink_router_on_the_companion_computer(tm
         procs.append(sim)
         sim.wait(240)  # bounded by its --wall-limit
         assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
-        assert stop(run) == 0, (tmp_path / "run.out").read_text()
+        rc = stop(run)  # SIGTERM: the summary, then the status it gives
+        said = (tmp_path / "run.out").read_text()
+        assert rc == expected_run_status(said), said
         names, texts = sent_by_companion(tmp_path / "run.tlog")
         assert {"IMU0GX_N", "IMU0G_HLTH", "IMU0G_FLT"} <= names, names
         assert any("stuck" in t for t in texts) and any("baseline learned" in t for t in texts), texts

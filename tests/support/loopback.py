@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from tests.support.readiness import READY, wait_for_text  # noqa: F401 (re-exported for the loopback tests)
+from tests.support.run_status import expected_run_status
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -112,7 +113,9 @@ def sim_against_run(tmp_path, model_text, sim_args, duration, speedup, run_args=
                     tmp_path, "sim.out")
         sim.wait(wall + 2 * slack_s)
         assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
-        assert stop(run) == 0, (tmp_path / "run.out").read_text()
+        rc = stop(run)  # SIGTERM: the summary, then the status it gives
+        said = (tmp_path / "run.out").read_text()
+        assert rc == expected_run_status(said), said
     finally:
         for p in (sim, run):
             if p is not None:

@@ -1,0 +1,61 @@
+"""A restored run state checked against the log it is about to take in: the same IMUs, each with the same
+message and rate. Restored into another vehicle's (or another setup's) log, a state would report an IMU the
+log does not have ("IMU2 healthy; 0 samples") and pool a 250 Hz stream's estimates with a 400 Hz one's; so a
+difference is refused, named, with the way out (a new --state file, or --no-state)."""
+
+from __future__ import annotations
+
+import math
+
+from companion.errors import CompanionError
+
+#: relative rate difference taken for another rate (the rate tracker's figures of one stream agree far closer)
+RATE_TOLERANCE = 0.05
+
+
+def replayed_streams(res) -> list:
+    """The IMU streams a replay feeds (service.replay.replay_log's choice): per instance the stream with the most
+    samples, no batch-sampler bursts (ISB_*), none whose first gyro value is missing."""
+    import numpy as np
+
+    best: dict = {}
+    for s in res.imu_streams():
+        if not np.all(np.isfinite(s.gyro[:1])) or s.key.message.startswith("ISB_"):
+            continue
+        cur = best.get(s.key.instance)
+        if cur is None or s.samples > cur.samples:
+            best[s.key.instance] = s
+    return [best[k] for k in sorted(best)]
+
+
+def differences(channels: dict, streams) -> list[str]:
+    """What differs between the restored channels ({imu: Channel}) and the source's streams, in words."""
+    have = {s.key.instance: s for s in streams}
+    out = []
+    if set(have) != set(channels):
+        out.append(f"IMUs: the state has {_imus(channels)}, the source {_imus(have)}")
+    for imu in sorted(set(have) & set(channels)):
+        ch, s = channels[imu], have[imu]
+        if ch.message != s.key.message:
+            out.append(f"IMU{imu}: message {ch.message} in the state, {s.key.message} in the source")
+        rate, was = float(s.rate_hz), ch.rate_hz
+        if was and math.isfinite(rate) and rate > 0 and abs(rate - was) > RATE_TOLERANCE * was:
+            out.append(f"IMU{imu}: {was:.4g} Hz in the state, {rate:.4g} Hz in the source")
+    return out
+
+
+def check_state_matches(pipeline, src, state, time_unit=None) -> None:
+    """Refuse (one line) a restored state whose IMUs, messages or rates are not the log's ``src``."""
+    if not pipeline.channels:
+        return
+    from companion.sources import load
+
+    res = load(src, time_unit=time_unit)
+    diff = differences(pipeline.channels, replayed_streams(res))
+    if diff:
+        raise CompanionError(f"{src}: does not match the state file {state}: {'; '.join(diff)}; give a new --state "
+                             "file for this setup, or --no-state")
+
+
+def _imus(keys) -> str:
+    return ", ".join(f"IMU{k}" for k in sorted(keys)) or "none"
