@@ -13,12 +13,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-ABS_GYRO_STD = 0.05  #: rad/s: no gyro at rest is this noisy, so a log that is all flight is never still
-ABS_ACCEL_STD = 0.5  #: m/s^2: the accelerometer's counterpart of ABS_GYRO_STD
+#: rad/s: no gyro at rest is this noisy (a MEMS gyro at 1-8 kHz unfiltered: 2-10 mrad/s), so a log that is all
+#: flight, a boat on the water or a vehicle held in the hand is never still
+ABS_GYRO_STD = 0.03
+ABS_ACCEL_STD = 0.3  #: m/s^2: the accelerometer's counterpart of ABS_GYRO_STD
 ACC_MEAN_STEP = 0.02  #: m/s^2: about a 0.1 deg tilt between windows is motion
 GYRO_MEAN_OFFSET = 0.005  #: rad/s: a 0.3 deg/s turn away from the level at rest is motion
 FLOOR_QUIETEST = 5  #: the floor is at most twice the 5th quietest window's spread (see noise_floor)
 MEAN_SIGMAS = 5.0  #: a mean moves by more than this many standard errors (plus the offsets above) to count
+MIN_PAIRS = 10  #: neighbouring quiet windows needed to read the scatter of the means from the data
 
 
 @dataclass
@@ -103,7 +106,7 @@ def _gyro_level_test(mean, std, cnt, good, mv, floor0, floor, sd_lim, lsb) -> tu
     reads one code at rest): never still, and never part of the level at rest the means are tested against
     (a gyro frozen at a rate for most of a log would otherwise set that level). An axis that never varies is
     dead throughout: ``health.dead`` names it, it says nothing of motion."""
-    se = floor / np.sqrt(np.maximum(cnt, 1))[:, None]
+    se = _mean_error(mean, cnt, good & ~mv, floor)
     varies = (floor0 > 0) & (np.full(floor0.shape, not lsb) | (floor0 >= 0.5 * (lsb or 0.0)))
     frozen = good & np.any((std == 0) & varies, axis=1)
     base = good & ~mv & ~frozen
@@ -116,13 +119,35 @@ def _gyro_level_test(mean, std, cnt, good, mv, floor0, floor, sd_lim, lsb) -> tu
     return moved, evidence
 
 
-def _accel_step_test(mean, cnt, good, floor) -> np.ndarray:
-    """Windows whose accelerometer mean steps from the previous (or to the next) window by more than
-    ``MEAN_SIGMAS`` standard errors + ``ACC_MEAN_STEP``: a slow tilt."""
+def _mean_error(mean, cnt, quiet, floor) -> np.ndarray:
+    """Per window and axis, the standard error of the window mean at rest: ``floor`` / sqrt(count) for white noise,
+    or the scatter of the steps between neighbouring quiet windows where that is larger.
+
+    Real sensors at rest are not white at the window's scale (a 1 s mean of an MPU-6000 on a rover's bench
+    wanders by 3-7 mrad/s where its white noise allows 1; a 1 Hz telemetry stream samples a filtered signal): the
+    white-noise error then calls every other window a turn or a tilt and cuts a quiet log into pieces shorter than
+    the shortest still stretch. The steps' scatter is read robustly (1.4826 x their median absolute value, / sqrt 2
+    for a difference of two means) over the pairs of neighbouring windows whose spread is at rest, so a few tilts
+    or a drift do not widen it; with fewer than ``MIN_PAIRS`` such pairs the white-noise error stands."""
     se = floor / np.sqrt(np.maximum(cnt, 1))[:, None]
+    pair = quiet[1:] & quiet[:-1]
+    if pair.sum() < MIN_PAIRS:
+        return se
+    step = np.abs(np.diff(mean, axis=0))[pair]
+    emp = 1.4826 * np.median(step, axis=0) / np.sqrt(2.0)
+    # the scatter of an n-sample mean: scaled to each window's count from the pairs' typical count
+    n_ref = float(np.median(cnt[1:][pair]))
+    return np.maximum(se, emp[None, :] * np.sqrt(n_ref / np.maximum(cnt, 1))[:, None])
+
+
+def _accel_step_test(mean, cnt, good, floor, loud) -> np.ndarray:
+    """Windows whose accelerometer mean steps from the previous (or to the next) window by more than
+    ``MEAN_SIGMAS`` standard errors (:func:`_mean_error`) + ``ACC_MEAN_STEP``: a slow tilt. A step next to a window
+    already moving by its spread (``loud``) is that window's: its quiet neighbour is not marked for it."""
+    se = _mean_error(mean, cnt, good & ~loud, floor)
     step = np.abs(np.diff(mean, axis=0))
     lim = MEAN_SIGMAS * np.sqrt(se[1:] ** 2 + se[:-1] ** 2) + ACC_MEAN_STEP
-    jump = np.any(step > lim, axis=1) & good[1:] & good[:-1]
+    jump = np.any(step > lim, axis=1) & good[1:] & good[:-1] & ~loud[1:] & ~loud[:-1]
     mv = np.zeros(mean.shape[0], dtype=bool)
     mv[1:] |= jump
     mv[:-1] |= jump
@@ -153,7 +178,7 @@ def moving_windows(stream, t0: float, window_s: float, nb: int, threshold: float
             sd_lim = np.minimum(threshold * floor, abs_std)
             mv = np.any(std > sd_lim, axis=1)
             if kind == "accel":
-                mv |= _accel_step_test(mean, cnt, good, floor)
+                mv |= _accel_step_test(mean, cnt, good, floor, mv)
                 out.accel |= mv & good
             else:
                 moved, out.evidence = _gyro_level_test(mean, std, cnt, good, mv, floor0, floor, sd_lim, lsb)
