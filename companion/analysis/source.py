@@ -54,8 +54,9 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                                             "vehicle was still (the note on IMU instance "
                                             f"{s.key.instance} above)")
                 else:
-                    summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples, no still stretch "
-                                            "of at least 16 samples in it (too short for any Allan estimate)")
+                    summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples at "
+                                            f"{s.rate_hz:.3g} Hz, none of its gap-free pieces inside the still "
+                                            "stretches holds 16 samples (too short for any Allan estimate)")
                 continue
             e = analyze_stream(s, axes, taus, bar, online=online, ranges=ranges, filters=stream_filters(s, res.meta))
             e["source"] = str(spec)
@@ -63,6 +64,11 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     finally:
         if bar is not None:
             bar.close()
+    if not entries:
+        # every stream was left out: each one's reason, and the option that analyses them anyway
+        reasons = [n for n in summary["notes"] if ": not analysed: " in n]
+        raise CompanionError(f"{spec}: no IMU stream analysed: {'; '.join(reasons)} ({sel.describe()}); --all "
+                             "analyses every stream over the whole record (or the --start/--end window)")
     return entries, summary
 
 

@@ -380,9 +380,32 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
     _account(sel, imus, motion.has, out, armed, grid)
     sel.short_s = kept.short_s
     if not kept.intervals and not use_all:
-        sel.notes.append(f"no still stretch of at least {min_segment_s:g} s: the vehicle moved or was armed "
-                         "throughout (use --start/--end or --all if you know better)")
+        sel.notes.append(_refusal(sel, still, armed, motion.has, grid, start is not None or end is not None))
     return sel
+
+
+def _refusal(sel: StillSelection, still: np.ndarray, armed: np.ndarray, has: np.ndarray, grid: _Grid,
+             windowed: bool) -> str:
+    """Why no still stretch was kept, and the option that works: ``--all`` analyses the record (or the
+    --start/--end window) as it is; --min-still where the still stretches are only short; --start/--end where a
+    disarmed, still part is elsewhere in the record."""
+    longest = max((grid.interval(a, b)[1] - grid.interval(a, b)[0] for a, b in _runs(still)), default=0.0)
+    armed_all = bool(np.all(armed[has])) if has.any() else False
+    where = "the --start/--end window" if windowed else "the record"
+    if armed_all:
+        why = f"the vehicle was armed throughout {where} ({sel.armed_s:.0f} s)"
+    elif longest > 0:
+        why = (f"the longest still stretch of {where} is {longest:.0f} s ({sel.moving_s:.0f} s of flight/motion"
+               + (f", {sel.armed_s:.0f} s armed" if sel.armed_s >= 0.5 else "") + ")")
+    else:
+        why = (f"the vehicle moved or was armed throughout {where} ({sel.moving_s:.0f} s of flight/motion"
+               + (f", {sel.armed_s:.0f} s armed" if sel.armed_s >= 0.5 else "") + ")")
+    fixes = ["--all analyses " + ("that window" if windowed else "the whole record") + " as it is"]
+    if longest > 0 and not armed_all:
+        fixes.insert(0, f"--min-still {max(1, int(longest))} keeps the shorter stretches")
+    if not windowed and not armed_all:
+        fixes.append("--start/--end --all a part you know was still")
+    return f"no still stretch of at least {sel.min_segment_s:g} s: {why}; " + "; ".join(fixes)
 
 
 def _covered(stream, intervals) -> float:
