@@ -137,7 +137,9 @@ def run(args) -> int:
         report["sources"].append(summary)
         report["streams"].extend(entries)
     if not report["streams"]:
-        raise CompanionError("; ".join(failed) if failed else "no IMU stream analysed")
+        from companion.analysis.source import nothing_analysed
+
+        raise CompanionError("; ".join(failed) if failed else nothing_analysed(report["sources"]))
     report["failed_sources"] = failed
     for summary in report["sources"]:
         print(f"{summary['source']}: {summary['selection']['description']}")

@@ -14,12 +14,14 @@ is slower than 16 Hz, so that a window holds 16 of its samples):
    quietest window's for a log that is mostly flight, and at least half an LSB for quantised formats); a
    window moves when, in any IMU,
 
-   - an axis' standard deviation exceeds ``threshold`` x its floor (3x: the spread of a 50-sample
-     standard deviation is about 10 %), or exceeds an absolute limit (gyro 0.05 rad/s, accel 0.5 m/s^2:
-     no MEMS sensor at rest is that noisy, so a log that is all flight is never called still), or
+   - an axis' standard deviation exceeds ``threshold`` x its floor (4x: the spread of a 16-sample standard
+     deviation is about 18 %, and the floor is a low percentile), or exceeds an absolute limit (gyro 0.03
+     rad/s, accel 0.3 m/s^2: no MEMS sensor at rest is that noisy, so a log that is all flight, a boat or a
+     vehicle in the hand is never called still), or
    - the accelerometer mean moves from the previous window by more than 5 x its standard error + 0.02
      m/s^2 (a slow tilt of ~0.1 deg), or the gyro mean leaves the median of the still windows by more than
-     5 x its standard error + 0.005 rad/s (a slow turn);
+     5 x its standard error + 0.005 rad/s (a slow turn); the standard error is the white-noise one or the
+     scatter of the steps between neighbouring quiet windows where larger (still_windows._mean_error);
 
    moving windows are widened by ``guard_s``. Where two or more IMU instances carry gyros, one instance's
    gyro alone (every accelerometer still, another gyro still that would have seen the same excursion: at

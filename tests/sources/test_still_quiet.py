@@ -121,3 +121,33 @@ def test_the_real_bench_tlog_is_used_where_the_independent_rule_finds_rest(share
     for inst, iv in used_intervals(sel, res.imu_streams()).items():
         assert length(intersect(iv, ref.still)) >= 0.8 * ref.still_s, (inst, iv, ref.still)
         assert length(intersect(iv, ref.moving)) == 0.0, (inst, iv, ref.moving)
+
+
+def test_no_stream_analysed_names_each_streams_reason_and_all_where_it_works(tmp_path):
+    """A 1 Hz log handled every 32 s: its still stretches (10-13 s between the guards) hold fewer than the 16
+    samples of a stream any Allan estimate needs. The refusal names each stream and --all, which analyses the
+    record (one gap-free piece of 80 samples)."""
+    import subprocess
+    import sys
+
+    from companion.sim.dataflash_writer import write_imu_log
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 80.0, 1.0)
+    g = rng.normal(0, 0.002, (t.size, 3))
+    a = G + rng.normal(0, 0.01, (t.size, 3))
+    for c in (20.0, 52.0):
+        k = (t >= c) & (t < c + 3.0)
+        a[k] += rng.normal(0, 2.0, (int(k.sum()), 3))
+        g[k] += rng.normal(0, 0.5, (int(k.sum()), 3))
+    p = tmp_path / "slow.bin"
+    write_imu_log(p, t, np.stack([g, g + 1e-3]), np.stack([a, a]))
+    cmd = [sys.executable, "-m", "companion", "analyze", str(p)]
+    out = subprocess.run(cmd, capture_output=True, text=True)
+    assert out.returncode != 0
+    err = out.stderr.strip()
+    assert err.startswith("companion: error: no IMU stream analysed") and err.count("not analysed") == 2, err
+    assert "IMU[0]" in err and "IMU[1]" in err and "--all analyses it" in err, err
+    assert "Traceback" not in out.stderr
+    ok = subprocess.run(cmd + ["--all"], capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
