@@ -184,7 +184,9 @@ def _read_columns(path: Path):
                 text = rest + block
                 cut = text.rfind(b"\n") + 1 if block else len(text)
                 rest = text[cut:]
-                if cut and text[:cut].strip():
+                # a block of whole rows is never blank but for a few trailing blank lines (tested without
+                # copying a full block)
+                if cut and (cut > 256 or text[:cut].strip()):
                     arr = _parse(text[:cut], usecols)
                     if arr.shape[1] != len(COLUMNS):
                         return None

@@ -64,6 +64,11 @@ def bin_stats(b: np.ndarray, v: np.ndarray, nb: int):
     mean = np.full((nb, v.shape[1]), np.nan)
     std = np.full((nb, v.shape[1]), np.nan)
     ok = cnt >= 2
+    # samples in time order (the usual case): each bin is one run of rows, its extremes one reduceat per axis
+    ordered = b.shape[0] > 0 and bool(np.all(b[1:] >= b[:-1]))
+    if ordered:
+        starts = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])
+        bins = b[starts]
     for j in range(v.shape[1]):
         x = v[:, j]
         ref = float(np.nanmedian(x)) if x.shape[0] else 0.0
@@ -76,8 +81,12 @@ def bin_stats(b: np.ndarray, v: np.ndarray, nb: int):
         # every window of the axis at rest would then be called motion
         lo_v = np.full(nb, np.inf)
         hi_v = np.full(nb, -np.inf)
-        np.minimum.at(lo_v, b, x)
-        np.maximum.at(hi_v, b, x)
+        if ordered:
+            lo_v[bins] = np.minimum.reduceat(x, starts)
+            hi_v[bins] = np.maximum.reduceat(x, starts)
+        else:
+            np.minimum.at(lo_v, b, x)
+            np.maximum.at(hi_v, b, x)
         var = np.where(hi_v > lo_v, var, np.where(ok, 0.0, np.nan))
         mean[:, j] = mu + ref
         std[:, j] = np.sqrt(np.maximum(var, 0))
