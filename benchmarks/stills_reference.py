@@ -4,10 +4,10 @@ The rule is deliberately simple and shares no code with :mod:`companion.sources.
 
 * the log's time is cut into blocks of ``BLOCK_S`` seconds, longer where the slowest IMU stream would hold fewer
   than ``BLOCK_SAMPLES`` samples in one (a 1 Hz stream: 8 s blocks);
-* per block and IMU stream: the largest per-axis standard deviation of the gyro and of the accelerometer, and
-  the gyro's block mean; the stream's quiet level is the median of its quietest fifth of blocks (at least half
-  the format's LSB);
-* a block is **still** when, in every IMU stream that has 3+ samples in it, both spreads are within ``K_STILL``
+* per block, IMU stream and axis: the standard deviation of the gyro and of the accelerometer, and the gyro's
+  block mean; an axis' quiet level is the median of its quietest fifth of blocks (at least half the format's
+  LSB);
+* a block is **still** when, in every IMU stream that has 3+ samples in it, every axis' spread is within ``K_STILL``
   x the quiet level (and below 0.03 rad/s and 0.3 m/s^2: a boat or a hand is never at rest) and no gyro axis' mean is more than ``TURN_RAD_S`` from its median over the still blocks;
   it is **moving** when an accelerometer's spread exceeds ``K_MOVING`` x its level or 0.5 m/s^2, or the gyros of two
   IMU instances (the only one, where there is one) exceed it or 0.05 rad/s, or their mean is that far off (between
@@ -86,26 +86,28 @@ def _runs(mask) -> list[tuple[int, int]]:
 
 
 def _block_stats(t, v, edges):
-    """Per block: sample count, largest per-axis std and per-axis mean of ``v`` (n, 3)."""
+    """Per block: sample count, per-axis std and per-axis mean of ``v`` (n, 3)."""
     idx = np.searchsorted(t, edges)
     nb = edges.shape[0] - 1
     cnt = np.diff(idx)
-    sd = np.full(nb, np.nan)
+    sd = np.full((nb, 3), np.nan)
     mean = np.full((nb, 3), np.nan)
     for k in range(nb):
         if cnt[k] >= 3:
             x = v[idx[k]:idx[k + 1]]
-            sd[k] = float(np.max(np.std(x, axis=0, ddof=1)))
+            sd[k] = np.std(x, axis=0, ddof=1)
             mean[k] = x.mean(axis=0)
     return cnt, sd, mean
 
 
-def _level(sd, lsb) -> float:
-    c = np.sort(sd[np.isfinite(sd)])
-    if c.size == 0:
-        return np.inf
-    q = c[: max(1, c.size // 5)]
-    return max(float(np.median(q)), 0.5 * (lsb or 0.0), 1e-9)
+def _level(sd, lsb) -> np.ndarray:
+    """Per axis, the median spread of the quietest fifth of blocks (at least half an LSB)."""
+    out = np.full(sd.shape[1], np.inf)
+    for j in range(sd.shape[1]):
+        c = np.sort(sd[np.isfinite(sd[:, j]), j])
+        if c.size:
+            out[j] = max(float(np.median(c[: max(1, c.size // 5)])), 0.5 * (lsb or 0.0), 1e-9)
+    return out
 
 
 def armed_spans(transitions, t_end: float) -> list[tuple[float, float]]:
@@ -149,9 +151,10 @@ def reference(streams, meta: dict) -> Reference:
         seen |= ok
         lg, la = _level(gsd, s.gyro_lsb), _level(asd, s.accel_lsb)
         with np.errstate(invalid="ignore"):
-            quiet = (gsd <= min(K_STILL * lg, REST_GYRO)) & (asd <= min(K_STILL * la, REST_ACCEL))
-            gloud = gsd > min(K_MOVING * lg, LOUD_GYRO)
-            aloud = asd > min(K_MOVING * la, LOUD_ACCEL)
+            quiet = (np.all(gsd <= np.minimum(K_STILL * lg, REST_GYRO), axis=1)
+                     & np.all(asd <= np.minimum(K_STILL * la, REST_ACCEL), axis=1))
+            gloud = np.any(gsd > np.minimum(K_MOVING * lg, LOUD_GYRO), axis=1)
+            aloud = np.any(asd > np.minimum(K_MOVING * la, LOUD_ACCEL), axis=1)
         base = ok & quiet
         ref = np.nanmedian(gmean[base], axis=0) if base.any() else np.nanmedian(gmean[ok], axis=0)
         with np.errstate(invalid="ignore"):

@@ -39,6 +39,7 @@ index ranges of any stream (:meth:`StillSelection.ranges`), which the pooled All
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -189,6 +190,7 @@ class _InstanceGyro:
     moving: np.ndarray
     has: np.ndarray
     evidence: GyroEvidence | None = None
+    level: np.ndarray | None = None  # its mean left its level on some axis (about the vertical or not)
 
 
 @dataclass
@@ -207,6 +209,7 @@ class _Kept:
 
     intervals: list[tuple[float, float]]
     short_s: float
+    longest_short_s: float = 0.0  # the longest still run left out as too short
 
 
 def _span(imus, start: float | None, end: float | None) -> _Span:
@@ -240,6 +243,7 @@ def _window_motion(imus, grid: _Grid, threshold: float, use_gyro: bool, use_all:
         g = motion.gyros.setdefault(s.key.instance, _InstanceGyro(np.zeros(grid.nb, dtype=bool),
                                                                   np.zeros(grid.nb, dtype=bool)))
         g.moving |= sm.gyro
+        g.level = sm.level.copy() if g.level is None else g.level | sm.level
         g.has |= sm.has
         if sm.evidence is not None:
             g.evidence = sm.evidence if g.evidence is None else g.evidence.merged(sm.evidence)
@@ -259,6 +263,13 @@ def _gyro_motion(motion: _Motion) -> dict[int, np.ndarray]:
     noisier than its twin does not see a small rotation the quiet one does."""
     if not motion.gyros:
         return {}
+    if len(motion.gyros) >= 2:
+        # a twin can tell: a mean that leaves its level about a horizontal axis, which the accelerometer shows
+        # as no tilt, is that gyro's own change where another gyro stays (alone, below); one gyro's drift about
+        # a horizontal axis is not motion (see still_windows._gyro_level_test) and stays in its analysis
+        for g in motion.gyros.values():
+            if g.level is not None:
+                g.moving = g.moving | (g.level & g.has)
     gm = np.array([g.moving for g in motion.gyros.values()])
     alone = (gm.sum(axis=0) == 1) & ~motion.moving
     seen = np.zeros(motion.moving.shape[0], dtype=bool)
@@ -294,7 +305,7 @@ def _kept_runs(still: np.ndarray, grid: _Grid, min_segment_s: float, use_all: bo
                out: np.ndarray | None = None, trim_s: float = 0.0) -> _Kept:
     """Still runs of at least ``min_segment_s`` (every run with ``use_all``; a record still throughout is
     kept however short), ``trim_s`` taken off each end next to a window that is ``out``."""
-    keep, short = [], 0.0
+    keep, short, longest = [], 0.0, 0.0
     for a, b in _runs(still):
         t0, t1 = grid.interval(a, b)
         if b == grid.nb:  # the last window includes the last sample
@@ -308,7 +319,8 @@ def _kept_runs(still: np.ndarray, grid: _Grid, min_segment_s: float, use_all: bo
             keep.append((t0, t1))
         else:
             short += t1 - t0
-    return _Kept(keep, short)
+            longest = max(longest, t1 - t0)
+    return _Kept(keep, short, longest)
 
 
 def _exclude_lone_gyros(sel: StillSelection, lone: dict[int, np.ndarray], motion: _Motion, still: np.ndarray,
@@ -382,29 +394,27 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
     _account(sel, imus, motion.has, out, armed, grid)
     sel.short_s = kept.short_s
     if not kept.intervals and not use_all:
-        sel.notes.append(_refusal(sel, still, armed, motion.has, grid, start is not None or end is not None))
+        sel.notes.append(_refusal(sel, kept.longest_short_s, armed, motion.has, start is not None or end is not None))
     return sel
 
 
-def _refusal(sel: StillSelection, still: np.ndarray, armed: np.ndarray, has: np.ndarray, grid: _Grid,
-             windowed: bool) -> str:
+def _refusal(sel: StillSelection, longest: float, armed: np.ndarray, has: np.ndarray, windowed: bool) -> str:
     """Why no still stretch was kept, and the option that works: ``--all`` analyses the record (or the
-    --start/--end window) as it is; --min-still where the still stretches are only short; --start/--end where a
-    disarmed, still part is elsewhere in the record."""
-    longest = max((grid.interval(a, b)[1] - grid.interval(a, b)[0] for a, b in _runs(still)), default=0.0)
+    --start/--end window) as it is; --min-still where the still stretches are only short (``longest``: the longest
+    of them); --start/--end where a disarmed, still part is elsewhere in the record."""
     armed_all = bool(np.all(armed[has])) if has.any() else False
     where = "the --start/--end window" if windowed else "the record"
     if armed_all:
         why = f"the vehicle was armed throughout {where} ({sel.armed_s:.0f} s)"
-    elif longest > 0:
-        why = (f"the longest still stretch of {where} is {longest:.0f} s ({sel.moving_s:.0f} s of flight/motion"
+    elif longest >= 1:
+        why = (f"the longest still stretch of {where} is {math.floor(longest * 10) / 10:g} s ({sel.moving_s:.0f} s of flight/motion"
                + (f", {sel.armed_s:.0f} s armed" if sel.armed_s >= 0.5 else "") + ")")
     else:
         why = (f"the vehicle moved or was armed throughout {where} ({sel.moving_s:.0f} s of flight/motion"
                + (f", {sel.armed_s:.0f} s armed" if sel.armed_s >= 0.5 else "") + ")")
     fixes = ["--all analyses " + ("that window" if windowed else "the whole record") + " as it is"]
-    if longest > 0 and not armed_all:
-        fixes.insert(0, f"--min-still {max(1, int(longest))} keeps the shorter stretches")
+    if longest >= 1 and not armed_all:
+        fixes.insert(0, f"--min-still {math.floor(longest * 10) / 10:g} keeps the longest of them")
     if not windowed and not armed_all:
         fixes.append("--start/--end --all a part you know was still")
     return f"no still stretch of at least {sel.min_segment_s:g} s: {why}; " + "; ".join(fixes)

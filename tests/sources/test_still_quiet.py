@@ -151,3 +151,21 @@ def test_no_stream_analysed_names_each_streams_reason_and_all_where_it_works(tmp
     assert "Traceback" not in out.stderr
     ok = subprocess.run(cmd + ["--all"], capture_output=True, text=True)
     assert ok.returncode == 0, ok.stderr
+
+
+def test_one_gyro_drifting_about_a_horizontal_axis_is_not_a_turn_but_a_yaw_is():
+    """One IMU at rest, gravity along z: its gyro bias drifts 20 mrad/s about y over 300 s (the accelerometer does
+    not tilt, so nothing turned) -- kept; the same size of rate about z (a yaw the accelerometer cannot see) for
+    60 s -- motion."""
+    rate = 50.0
+    rng = np.random.default_rng(11)
+    t = np.arange(0.0, 400.0, 1.0 / rate)
+    g = rng.normal(0, 0.002, (t.size, 3))
+    a = G + rng.normal(0, 0.01, (t.size, 3))
+    g[:, 1] += 0.02 * np.clip((t - 50.0) / 300.0, 0.0, 1.0)
+    sel = select_still([_stream(0, t, g, a)], {})
+    assert sel.still_s >= 0.95 * 400.0, (sel.describe(), sel.intervals)
+    yaw = (t >= 200.0) & (t < 260.0)
+    g[yaw, 2] += 0.02
+    sel = select_still([_stream(0, t, g, a)], {})
+    assert _inside(sel.intervals, 203.0, 257.0) == 0.0, sel.intervals
