@@ -3,7 +3,7 @@
 Allan analysis of a flight log must use only the stretches where the vehicle stood still: a flight (or a
 hand carrying the vehicle) puts real rotation into the gyro and turns N into junk. :func:`select_still`
 decides on a common time grid of ``window_s`` windows (default 1 s; longer when even the fastest IMU stream
-is slower than 16 Hz, so that a window holds 16 of its samples):
+is slower than 8 Hz, so that a window holds 8 of its samples):
 
 1. **armed state** from the log (DataFlash ``EV``/``ARM``, ULog ``vehicle_status``, a tlog's vehicle
    HEARTBEATs, :func:`companion.sources.tlog.armed_state`): every armed window,
@@ -45,6 +45,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.sources.still_windows import GyroEvidence, moving_windows
+
+
+#: samples of the fastest IMU stream a window holds at least (its spread then scatters by ~27 %, well inside the
+#: 4x threshold over a low-percentile floor; fewer samples per window keep a slow log's still stretches longer)
+WINDOW_SAMPLES = 8.0
 
 
 @dataclass
@@ -221,11 +226,11 @@ def _span(imus, start: float | None, end: float | None) -> _Span:
 
 
 def _grid(imus, span: _Span, window_s: float | None) -> _Grid:
-    """Windows of 1 s, longer when even the fastest IMU stream is slower than 16 Hz (a window must hold 16
-    samples of it); decimated per-IMU topics (1-2 Hz) then only count where they have 2 samples."""
+    """Windows of 1 s, longer when even the fastest IMU stream is slower than 8 Hz (a window must hold
+    ``WINDOW_SAMPLES`` samples of it); decimated per-IMU topics (1-2 Hz) then only count where they have 2 samples."""
     if window_s is None:
         rates = [s.rate_hz for s in imus if np.isfinite(s.rate_hz) and s.rate_hz > 0]
-        window_s = max(1.0, 16.0 / max(rates)) if rates else 1.0
+        window_s = max(1.0, WINDOW_SAMPLES / max(rates)) if rates else 1.0
     nb = max(1, int(np.ceil((span.hi - span.lo) / window_s)))
     return _Grid(span.lo, span.hi, window_s, nb)
 

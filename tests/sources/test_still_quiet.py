@@ -124,7 +124,7 @@ def test_the_real_bench_tlog_is_used_where_the_independent_rule_finds_rest(share
 
 
 def test_no_stream_analysed_names_each_streams_reason_and_all_where_it_works(tmp_path):
-    """A 1 Hz log handled every 32 s: its still stretches (10-13 s between the guards) hold fewer than the 16
+    """A 1 Hz log handled every 24 s: its still stretches (10-13 s between the guards) hold fewer than the 16
     samples of a stream any Allan estimate needs. The refusal names each stream and --all, which analyses the
     record (one gap-free piece of 80 samples)."""
     import subprocess
@@ -136,7 +136,7 @@ def test_no_stream_analysed_names_each_streams_reason_and_all_where_it_works(tmp
     t = np.arange(0.0, 80.0, 1.0)
     g = rng.normal(0, 0.002, (t.size, 3))
     a = G + rng.normal(0, 0.01, (t.size, 3))
-    for c in (20.0, 52.0):
+    for c in (18.0, 42.0, 66.0):
         k = (t >= c) & (t < c + 3.0)
         a[k] += rng.normal(0, 2.0, (int(k.sum()), 3))
         g[k] += rng.normal(0, 0.5, (int(k.sum()), 3))
