@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+
+import numpy as np
 import time
 from pathlib import Path
 
@@ -114,6 +116,12 @@ def main() -> int:
     print(f"quiet logs: reference still {ref_s:.0f} s, used by analyze {used_s:.0f} s "
           f"({used_s / ref_s if ref_s else 0:.1%}); logs below {TARGET_USED:.0%} used: {len(below)} of {len(quiet)}"
           + (f" ({', '.join(r['log'] for r in below[:8])}{', ...' if len(below) > 8 else ''})" if below else ""))
+    fr = [min(1.0, r["used"] / r["ref"]) for r in quiet if r["ref"] > 0]
+    logs = [r for r in quiet if r["dur"] < 3600.0]  # without the hours-long bench recordings, which dominate the sum
+    ref_l, used_l = sum(r["ref"] for r in logs), sum(r["used"] for r in logs)
+    print(f"per quiet log: mean {np.mean(fr) if fr else 0:.1%}, median {np.median(fr) if fr else 0:.1%} of its reference "
+          f"still time used; logs under an hour ({len(logs)}): {used_l:.0f} of {ref_l:.0f} s "
+          f"({used_l / ref_l if ref_l else 0:.1%})")
     print(f"quiet logs refused: {len(refused)}" + (f" ({', '.join(r['log'] for r in refused)})" if refused else ""))
     print(f"moving time analysed: {sum(r['taken'] for r in taken):.1f} s in {len(taken)} logs"
           + (" (" + ", ".join(f"{r['log']} {r['taken']:.1f} s" for r in taken[:8]) + ")" if taken else ""))
