@@ -119,9 +119,9 @@ def main() -> int:
     fr = [min(1.0, r["used"] / r["ref"]) for r in quiet if r["ref"] > 0]
     logs = [r for r in quiet if r["dur"] < 3600.0]  # without the hours-long bench recordings, which dominate the sum
     ref_l, used_l = sum(r["ref"] for r in logs), sum(r["used"] for r in logs)
-    print(f"per quiet log: mean {np.mean(fr) if fr else 0:.1%}, median {np.median(fr) if fr else 0:.1%} of its reference "
-          f"still time used; logs under an hour ({len(logs)}): {used_l:.0f} of {ref_l:.0f} s "
-          f"({used_l / ref_l if ref_l else 0:.1%})")
+    mean, median = (np.mean(fr), np.median(fr)) if fr else (0.0, 0.0)
+    print(f"per quiet log: mean {mean:.1%}, median {median:.1%} of its reference still time used; logs under an "
+          f"hour ({len(logs)}): {used_l:.0f} of {ref_l:.0f} s ({used_l / ref_l if ref_l else 0:.1%})")
     print(f"quiet logs refused: {len(refused)}" + (f" ({', '.join(r['log'] for r in refused)})" if refused else ""))
     print(f"moving time analysed: {sum(r['taken'] for r in taken):.1f} s in {len(taken)} logs"
           + (" (" + ", ".join(f"{r['log']} {r['taken']:.1f} s" for r in taken[:8]) + ")" if taken else ""))

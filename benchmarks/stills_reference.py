@@ -8,7 +8,8 @@ The rule is deliberately simple and shares no code with :mod:`companion.sources.
   block mean; an axis' quiet level is the median of its quietest fifth of blocks (at least half the format's
   LSB);
 * a block is **still** when, in every IMU stream that has 3+ samples in it, every axis' spread is within ``K_STILL``
-  x the quiet level (and below 0.03 rad/s and 0.3 m/s^2: a boat or a hand is never at rest) and no gyro axis' mean is more than ``TURN_RAD_S`` from its median over the still blocks;
+  x the quiet level (and below 0.03 rad/s and 0.3 m/s^2: a boat or a hand is never at rest) and no gyro axis'
+  mean is more than ``TURN_RAD_S`` from its median over the still blocks;
   it is **moving** when an accelerometer's spread exceeds ``K_MOVING`` x its level or 0.5 m/s^2, or the gyros of two
   IMU instances (the only one, where there is one) exceed it or 0.05 rad/s, or their mean is that far off (between
   still and moving: undecided, counted in neither);

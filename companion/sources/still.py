@@ -412,7 +412,8 @@ def _refusal(sel: StillSelection, longest: float, armed: np.ndarray, has: np.nda
     if armed_all:
         why = f"the vehicle was armed throughout {where} ({sel.armed_s:.0f} s)"
     elif longest >= 1:
-        why = (f"the longest still stretch of {where} is {math.floor(longest * 10) / 10:g} s ({sel.moving_s:.0f} s of flight/motion"
+        why = (f"the longest still stretch of {where} is {math.floor(longest * 10) / 10:g} s "
+               f"({sel.moving_s:.0f} s of flight/motion"
                + (f", {sel.armed_s:.0f} s armed" if sel.armed_s >= 0.5 else "") + ")")
     else:
         why = (f"the vehicle moved or was armed throughout {where} ({sel.moving_s:.0f} s of flight/motion"

@@ -23,8 +23,8 @@ def _stream(instance, t, gyro, accel, message="RAW_IMU"):
 
 def _bench(seed, rate=1.3, duration=1800.0, events=((600.0, 620.0), (1200.0, 1230.0)), wander=6.0):
     """Two IMUs on a bench at ``rate`` Hz: white noise plus a wander of the means (an AR(1) over about two windows
-    of the selection whose window means scatter ``wander`` x what white noise allows), and ``events`` where the vehicle is turned by
-    hand (0.2 rad/s about z, the accelerometers shaken)."""
+    of the selection whose window means scatter ``wander`` x what white noise allows), and ``events`` where the
+    vehicle is turned by hand (0.2 rad/s about z, the accelerometers shaken)."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, 1.0 / rate)
     move = np.zeros(t.size, dtype=bool)
