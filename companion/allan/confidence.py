@@ -177,9 +177,21 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
     and the terms' shapes (filter, tau_c, frequency) and are remembered. Lags clipped by a short record
     (the longest cluster sizes) are summed with their own counts and not remembered."""
     mix = terms if isinstance(terms, _Mixture) else _Mixture.of(terms)
-    kern, has_q, a = mix.kern, mix.has_q, mix.a
-    if a.size == 0:
+    if mix.a.size == 0:
         return 0.0, 0.0
+    return _sums_of(_pair_plan(mix, m1, m2, M1, M2, tau0, step_div), mix.a)
+
+
+def _sums_of(plan, a) -> tuple[float, float]:
+    """(s2, s1) of :func:`_pair_sums` from a pair's forms and ``mm`` (:func:`_pair_plan`) and magnitudes ``a``."""
+    (G0, Gf, h0, hf), mm = plan
+    return float(mm * (a @ G0 @ a) + a @ Gf @ a), float(mm * (h0 @ a) + hf @ a)
+
+
+def _pair_plan(mix: "_Mixture", m1: int, m2: int, M1: int, M2: int, tau0: float, step_div: int = 32):
+    """The forms (G0, Gf, h0, hf) of one pair for the mixture's shapes and the factor ``mm`` of G0 and h0 (M1 where
+    the lags stay within the record, else 0: see :func:`_pair_sums`)."""
+    kern, has_q = mix.kern, mix.has_q
     tail = _tail(kern, m2, tau0) if m2 <= 16 * m1 else 0  # long-memory tails: only near pairs correlate
     lo0, hi0 = -(2 * m2 + tail), 2 * m1 + tail
     lo, hi = max(lo0, -(M1 - 1)), min(hi0, M2 - 1)
@@ -190,9 +202,7 @@ def _pair_sums(terms, m1: int, m2: int, M1: int, M2: int, tau0: float, step_div:
                                                           inside))
     else:
         forms = _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside)
-    G0, Gf, h0, hf = forms
-    mm = float(M1) if inside else 0.0
-    return float(mm * (a @ G0 @ a) + a @ Gf @ a), float(mm * (h0 @ a) + hf @ a)
+    return forms, (float(M1) if inside else 0.0)
 
 
 #: c_k(l) of one unit term per pair geometry: a fit's iterations change one term's shape (a Gauss-Markov tau_c)
@@ -295,17 +305,40 @@ def oavar_covariance(terms: Iterable[Mapping], m, n: int, rate_hz: float, max_ra
     k = m.shape[0]
     cov = np.zeros((k, k))
     mix = _Mixture.of(terms)
+    plans = _matrix_plan(mix, m, M, tau0, max_ratio) if mix.a.size else None
     for i in range(k):
         for j in range(i, k):
             if m[j] > max_ratio * m[i]:
                 break
-            s2, s1 = _pair_sums(mix, int(m[i]), int(m[j]), int(M[i]), int(M[j]), tau0)
+            s2, s1 = _sums_of(plans[(i, j)], mix.a) if plans is not None else (0.0, 0.0)
             v = 2.0 * s2
             if ramp_sq:
                 v += 4.0 * ramp_sq * tau[i] ** 2 * tau[j] ** 2 * s1
             cov[i, j] = cov[j, i] = v / (4.0 * tau[i] ** 2 * tau[j] ** 2 * M[i] * M[j])
     del ramp
     return cov
+
+
+#: every pair's plan of one covariance matrix, by its cluster sizes, record and the terms' shapes: a fit asks for
+#: the matrix of the same shapes many times with new magnitudes only, and the per-pair look-ups cost more than the
+#: two quadratic forms each pair then needs
+_MATRIX_PLANS = BoundedMemo(512)
+
+
+def _matrix_plan(mix: _Mixture, m: np.ndarray, M: np.ndarray, tau0: float, max_ratio: int) -> dict:
+    """{(i, j): :func:`_pair_plan`} of the pairs :func:`oavar_covariance` sums (j >= i, m_j <= max_ratio m_i)."""
+    key = (tuple(m.tolist()), tuple(M.tolist()), tau0, max_ratio, mix.shapes, mix.has_q)
+
+    def build() -> dict:
+        out = {}
+        for i in range(m.shape[0]):
+            for j in range(i, m.shape[0]):
+                if m[j] > max_ratio * m[i]:
+                    break
+                out[(i, j)] = _pair_plan(mix, int(m[i]), int(m[j]), int(M[i]), int(M[j]), tau0)
+        return out
+
+    return _MATRIX_PLANS.get(key, build)
 
 
 def edf_model(terms: Iterable[Mapping], m, n: int, rate_hz: float) -> np.ndarray:

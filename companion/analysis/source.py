@@ -61,8 +61,12 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                                             "vehicle was still (the note on IMU instance "
                                             f"{s.key.instance} above)")
                 else:
-                    summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples, no still stretch "
-                                            "of at least 16 samples in it (too short for any Allan estimate)")
+                    a, b = s.longest_segment()
+                    fix = ("; --all analyses it over the whole record (its longest gap-free piece holds "
+                           f"{b - a} samples)" if b - a >= 16 and not use_all else "")
+                    summary["notes"].append(f"{s.key.label()}: not analysed: {s.samples} samples at "
+                                            f"{s.rate_hz:.3g} Hz, none of its gap-free pieces inside the still "
+                                            f"stretches holds 16 samples (too short for any Allan estimate){fix}")
                 continue
             e = analyze_stream(s, axes, taus, bar, online=online, ranges=ranges, filters=stream_filters(s, res.meta))
             e["source"] = str(spec)
@@ -73,6 +77,16 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
         if bar is not None:
             bar.close()
     return entries, summary
+
+
+def nothing_analysed(summaries) -> str:
+    """The refusal of a run whose every stream was left out: what the selection kept and each stream's reason
+    (which names --all where that would analyse the stream)."""
+    parts = []
+    for sm in summaries:
+        reasons = [n for n in sm["notes"] if ": not analysed: " in n]
+        parts.append(f"{sm['source']} ({sm['selection']['description']}): " + ("; ".join(reasons) or "no stream"))
+    return "no IMU stream analysed: " + "; ".join(parts)
 
 
 def autopilot_entry(res, streams, dead: list[str], sel) -> dict | None:

@@ -142,7 +142,10 @@ def run(args) -> int:
         report["sources"].append(summary)
         report["streams"].extend(entries)
     if not report["streams"]:
-        raise CompanionError("; ".join(failed) if failed else "no IMU stream analysed", _all_failed_code(codes))
+        from companion.analysis.source import nothing_analysed
+
+        raise CompanionError("; ".join(failed) if failed else nothing_analysed(report["sources"]),
+                             _all_failed_code(codes))
     report["failed_sources"] = failed
     for summary in report["sources"]:
         print(f"{summary['source']}: {summary['selection']['description']}")

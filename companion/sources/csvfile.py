@@ -78,12 +78,14 @@ def read_csv(path, time_unit: str | None = None) -> RawStream:
     if np.any(bad):
         raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {int(np.flatnonzero(bad)[0]) + 1}")
     check_resolution(path, t)
+    step = _median_step(t)  # once: each check below needs it, and it costs a sort-sized pass over the column
     if time_unit is None:
-        check_time_unit(path, t)
+        check_time_unit(path, t, step)
     else:
         t *= TIME_UNITS[time_unit]
-    check_rate(path, t)
-    order, notes = in_time_order(path, t)
+        step = _median_step(t)
+    check_rate(path, t, step)
+    order, notes = in_time_order(path, t, step)
     if order is not None:
         t, gyro, accel = t[order], gyro[order], accel[order]
     return RawStream(CSV_KEY, t, gyro, accel, None, True, None, None, 0.0, notes)
@@ -182,7 +184,9 @@ def _read_columns(path: Path):
                 text = rest + block
                 cut = text.rfind(b"\n") + 1 if block else len(text)
                 rest = text[cut:]
-                if cut and text[:cut].strip():
+                # a block of whole rows is never blank but for a few trailing blank lines (tested without
+                # copying a full block)
+                if cut and (cut > 256 or text[:cut].strip()):
                     arr = _parse(text[:cut], usecols)
                     if arr.shape[1] != len(COLUMNS):
                         return None
@@ -208,7 +212,7 @@ def check_resolution(path, t: np.ndarray) -> None:
                              "samples cannot be timed; write time_s with more digits")
 
 
-def check_time_unit(path, t: np.ndarray) -> None:
+def check_time_unit(path, t: np.ndarray, step: float | None = -1.0) -> None:
     """Refuse a ``time_s`` column whose spacing says it is not in seconds, or may not be.
 
     The unit is decided from the median spacing of the sorted times (robust to gaps and a few bad rows). A
@@ -219,7 +223,7 @@ def check_time_unit(path, t: np.ndarray) -> None:
     its N is 30x too large, so the user chooses with --time-unit."""
     if t.shape[0] < 3:
         return
-    step = _median_step(t)
+    step = _median_step(t) if step == -1.0 else step
     if step is None or step < 1.0:
         return
     integral = _whole_numbers(t)
@@ -234,9 +238,10 @@ def check_time_unit(path, t: np.ndarray) -> None:
                          "--time-unit s, ms or us to say which")
 
 
-def check_rate(path, t: np.ndarray) -> None:
-    """Refuse a sample rate no gyro log has (see ``MIN_RATE_HZ``, ``MAX_RATE_HZ``), with the reason."""
-    step = _median_step(t)
+def check_rate(path, t: np.ndarray, step: float | None = -1.0) -> None:
+    """Refuse a sample rate no gyro log has (see ``MIN_RATE_HZ``, ``MAX_RATE_HZ``), with the reason. ``step``: the
+    column's :func:`_median_step` when known (-1: computed here)."""
+    step = _median_step(t) if step == -1.0 else step
     if step is None:
         return
     rate = 1.0 / step
@@ -265,7 +270,7 @@ def _whole_numbers(t: np.ndarray) -> bool:
                for b in np.array_split(t, max(1, t.shape[0] // WHOLE_BLOCK)))
 
 
-def in_time_order(path, t: np.ndarray) -> tuple[np.ndarray | None, list[str]]:
+def in_time_order(path, t: np.ndarray, step: float | None = -1.0) -> tuple[np.ndarray | None, list[str]]:
     """The order to read the rows in (None: as they are; time in s) and the note on that order.
 
     Rows in time order are kept. Where the time restarts (steps back by more than the reset threshold of
@@ -281,7 +286,7 @@ def in_time_order(path, t: np.ndarray) -> tuple[np.ndarray | None, list[str]]:
         return None, []
     from companion.sources.timestamps import step_rules
 
-    reset_s = step_rules(_median_step(t) or 1.0).reset_s
+    reset_s = step_rules((_median_step(t) if step == -1.0 else step) or 1.0).reset_s
     restarts = np.flatnonzero(d < -reset_s)
     if restarts.shape[0]:
         runs = np.diff(np.r_[0, restarts + 1, t.shape[0]])

@@ -106,13 +106,25 @@ def _dialect_crc_extras() -> dict[int, tuple[int, str, int, int]]:
     return out
 
 
-CRC_INFO = _dialect_crc_extras()
-MAX_MSGID = max(CRC_INFO)
-#: CRC_EXTRA by message id (-1: unknown message, the frame cannot be validated).
-CRC_EXTRA_TABLE = np.full(MAX_MSGID + 1, -1, dtype=np.int32)
-for _mid, (_extra, _name, _base, _full) in CRC_INFO.items():
-    CRC_EXTRA_TABLE[_mid] = _extra
-MSG_NAMES = {mid: info[1] for mid, info in CRC_INFO.items()}
+def _dialect_tables() -> dict:
+    """CRC_INFO, MAX_MSGID, CRC_EXTRA_TABLE (CRC_EXTRA by message id; -1: unknown message, the frame cannot be
+    validated) and MSG_NAMES."""
+    info = _dialect_crc_extras()
+    top = max(info)
+    extra = np.full(top + 1, -1, dtype=np.int32)
+    for mid, (crc_extra, _name, _base, _full) in info.items():
+        extra[mid] = crc_extra
+    return {"CRC_INFO": info, "MAX_MSGID": top, "CRC_EXTRA_TABLE": extra,
+            "MSG_NAMES": {mid: v[1] for mid, v in info.items()}}
+
+
+def __getattr__(name: str):
+    """The dialect's tables, built on first use: importing pymavlink's dialect costs 0.1-0.2 s, which a CSV or
+    DataFlash analysis never needs."""
+    if name in ("CRC_INFO", "MAX_MSGID", "CRC_EXTRA_TABLE", "MSG_NAMES"):
+        globals().update(_dialect_tables())
+        return globals()[name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _make_crc_table() -> np.ndarray:

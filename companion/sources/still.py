@@ -3,7 +3,7 @@
 Allan analysis of a flight log must use only the stretches where the vehicle stood still: a flight (or a
 hand carrying the vehicle) puts real rotation into the gyro and turns N into junk. :func:`select_still`
 decides on a common time grid of ``window_s`` windows (default 1 s; longer when even the fastest IMU stream
-is slower than 16 Hz, so that a window holds 16 of its samples):
+is slower than 8 Hz, so that a window holds 8 of its samples):
 
 1. **armed state** from the log (DataFlash ``EV``/``ARM``, ULog ``vehicle_status``, a tlog's vehicle
    HEARTBEATs, :func:`companion.sources.tlog.armed_state`): every armed window,
@@ -14,12 +14,14 @@ is slower than 16 Hz, so that a window holds 16 of its samples):
    quietest window's for a log that is mostly flight, and at least half an LSB for quantised formats); a
    window moves when, in any IMU,
 
-   - an axis' standard deviation exceeds ``threshold`` x its floor (3x: the spread of a 50-sample
-     standard deviation is about 10 %), or exceeds an absolute limit (gyro 0.05 rad/s, accel 0.5 m/s^2:
-     no MEMS sensor at rest is that noisy, so a log that is all flight is never called still), or
+   - an axis' standard deviation exceeds ``threshold`` x its floor (4x: the spread of a 16-sample standard
+     deviation is about 18 %, and the floor is a low percentile), or exceeds an absolute limit (gyro 0.03
+     rad/s, accel 0.3 m/s^2: no MEMS sensor at rest is that noisy, so a log that is all flight, a boat or a
+     vehicle in the hand is never called still), or
    - the accelerometer mean moves from the previous window by more than 5 x its standard error + 0.02
      m/s^2 (a slow tilt of ~0.1 deg), or the gyro mean leaves the median of the still windows by more than
-     5 x its standard error + 0.005 rad/s (a slow turn);
+     5 x its standard error + 0.005 rad/s (a slow turn); the standard error is the white-noise one or the
+     scatter of the steps between neighbouring quiet windows where larger (still_windows._mean_error);
 
    moving windows are widened by ``guard_s``. Where two or more IMU instances carry gyros, one instance's
    gyro alone (every accelerometer still, another gyro still that would have seen the same excursion: at
@@ -37,11 +39,17 @@ index ranges of any stream (:meth:`StillSelection.ranges`), which the pooled All
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from companion.sources.still_windows import GyroEvidence, moving_windows
+
+
+#: samples of the fastest IMU stream a window holds at least (its spread then scatters by ~27 %, well inside the
+#: 4x threshold over a low-percentile floor; fewer samples per window keep a slow log's still stretches longer)
+WINDOW_SAMPLES = 8.0
 
 
 @dataclass
@@ -187,6 +195,7 @@ class _InstanceGyro:
     moving: np.ndarray
     has: np.ndarray
     evidence: GyroEvidence | None = None
+    level: np.ndarray | None = None  # its mean left its level on some axis (about the vertical or not)
 
 
 @dataclass
@@ -205,6 +214,7 @@ class _Kept:
 
     intervals: list[tuple[float, float]]
     short_s: float
+    longest_short_s: float = 0.0  # the longest still run left out as too short
 
 
 def _span(imus, start: float | None, end: float | None) -> _Span:
@@ -216,11 +226,11 @@ def _span(imus, start: float | None, end: float | None) -> _Span:
 
 
 def _grid(imus, span: _Span, window_s: float | None) -> _Grid:
-    """Windows of 1 s, longer when even the fastest IMU stream is slower than 16 Hz (a window must hold 16
-    samples of it); decimated per-IMU topics (1-2 Hz) then only count where they have 2 samples."""
+    """Windows of 1 s, longer when even the fastest IMU stream is slower than 8 Hz (a window must hold
+    ``WINDOW_SAMPLES`` samples of it); decimated per-IMU topics (1-2 Hz) then only count where they have 2 samples."""
     if window_s is None:
         rates = [s.rate_hz for s in imus if np.isfinite(s.rate_hz) and s.rate_hz > 0]
-        window_s = max(1.0, 16.0 / max(rates)) if rates else 1.0
+        window_s = max(1.0, WINDOW_SAMPLES / max(rates)) if rates else 1.0
     nb = max(1, int(np.ceil((span.hi - span.lo) / window_s)))
     return _Grid(span.lo, span.hi, window_s, nb)
 
@@ -238,6 +248,7 @@ def _window_motion(imus, grid: _Grid, threshold: float, use_gyro: bool, use_all:
         g = motion.gyros.setdefault(s.key.instance, _InstanceGyro(np.zeros(grid.nb, dtype=bool),
                                                                   np.zeros(grid.nb, dtype=bool)))
         g.moving |= sm.gyro
+        g.level = sm.level.copy() if g.level is None else g.level | sm.level
         g.has |= sm.has
         if sm.evidence is not None:
             g.evidence = sm.evidence if g.evidence is None else g.evidence.merged(sm.evidence)
@@ -257,6 +268,13 @@ def _gyro_motion(motion: _Motion) -> dict[int, np.ndarray]:
     noisier than its twin does not see a small rotation the quiet one does."""
     if not motion.gyros:
         return {}
+    if len(motion.gyros) >= 2:
+        # a twin can tell: a mean that leaves its level about a horizontal axis, which the accelerometer shows
+        # as no tilt, is that gyro's own change where another gyro stays (alone, below); one gyro's drift about
+        # a horizontal axis is not motion (see still_windows._gyro_level_test) and stays in its analysis
+        for g in motion.gyros.values():
+            if g.level is not None:
+                g.moving = g.moving | (g.level & g.has)
     gm = np.array([g.moving for g in motion.gyros.values()])
     alone = (gm.sum(axis=0) == 1) & ~motion.moving
     seen = np.zeros(motion.moving.shape[0], dtype=bool)
@@ -288,19 +306,26 @@ def _method(use_all: bool, meta: dict) -> str:
     return "motion (no armed state in this source)"
 
 
-def _kept_runs(still: np.ndarray, grid: _Grid, min_segment_s: float, use_all: bool) -> _Kept:
+def _kept_runs(still: np.ndarray, grid: _Grid, min_segment_s: float, use_all: bool,
+               out: np.ndarray | None = None, trim_s: float = 0.0) -> _Kept:
     """Still runs of at least ``min_segment_s`` (every run with ``use_all``; a record still throughout is
-    kept however short)."""
-    keep, short = [], 0.0
+    kept however short), ``trim_s`` taken off each end next to a window that is ``out``."""
+    keep, short, longest = [], 0.0, 0.0
     for a, b in _runs(still):
         t0, t1 = grid.interval(a, b)
         if b == grid.nb:  # the last window includes the last sample
             t1 = float(np.nextafter(grid.hi, np.inf))
+        if trim_s > 0 and out is not None:
+            t0 += trim_s if a > 0 and out[a - 1] else 0.0
+            t1 -= trim_s if b < grid.nb and out[b] else 0.0
+            if t1 <= t0:
+                continue
         if use_all or t1 - t0 >= min_segment_s or (a == 0 and b == grid.nb):
             keep.append((t0, t1))
         else:
             short += t1 - t0
-    return _Kept(keep, short)
+            longest = max(longest, t1 - t0)
+    return _Kept(keep, short, longest)
 
 
 def _exclude_lone_gyros(sel: StillSelection, lone: dict[int, np.ndarray], motion: _Motion, still: np.ndarray,
@@ -340,7 +365,7 @@ def _account(sel: StillSelection, imus, has: np.ndarray, out: np.ndarray, armed:
 
 def select_still(streams, meta: dict | None = None, *, start: float | None = None, end: float | None = None,
                  use_all: bool = False, window_s: float | None = None, guard_s: float = 3.0,
-                 min_segment_s: float = 10.0, threshold: float = 3.0, use_gyro: bool = True) -> StillSelection:
+                 min_segment_s: float = 10.0, threshold: float = 4.0, use_gyro: bool = True) -> StillSelection:
     """Still intervals of a log from its IMU ``streams`` (all of them) and its ``meta`` (armed state).
 
     ``streams``: :class:`companion.samples.ImuStream` list (non-IMU streams are ignored); ``meta``:
@@ -362,19 +387,43 @@ def select_still(streams, meta: dict | None = None, *, start: float | None = Non
     motion = _window_motion(imus, grid, threshold, use_gyro, use_all)
     lone = _gyro_motion(motion)
     armed = np.zeros(grid.nb, dtype=bool) if use_all else _armed_windows(meta, span.t_hi, grid, guard_s)
-    guard = int(np.ceil(guard_s / grid.window_s))
+    # the guard in whole windows, the rest of it trimmed off the still runs' ends next to motion: a 12 s window
+    # of a 1.3 Hz log is not widened by 12 s for a 3 s guard
+    guard = int(np.floor(guard_s / grid.window_s + 1e-9))
     out = (_dilate(motion.moving, guard) | armed) & motion.has
     still = motion.has & ~out
-    kept = _kept_runs(still, grid, min_segment_s, use_all)
+    kept = _kept_runs(still, grid, min_segment_s, use_all, out, guard_s - guard * grid.window_s)
     sel = StillSelection(kept.intervals, _method(use_all, meta), total_s=span.t_hi - span.t_lo,
                          min_segment_s=min_segment_s, outside_s=span.outside_s)
     _exclude_lone_gyros(sel, lone, motion, still, grid, guard)
     _account(sel, imus, motion.has, out, armed, grid)
     sel.short_s = kept.short_s
     if not kept.intervals and not use_all:
-        sel.notes.append(f"no still stretch of at least {min_segment_s:g} s: the vehicle moved or was armed "
-                         "throughout (use --start/--end or --all if you know better)")
+        sel.notes.append(_refusal(sel, kept.longest_short_s, armed, motion.has, start is not None or end is not None))
     return sel
+
+
+def _refusal(sel: StillSelection, longest: float, armed: np.ndarray, has: np.ndarray, windowed: bool) -> str:
+    """Why no still stretch was kept, and the option that works: ``--all`` analyses the record (or the
+    --start/--end window) as it is; --min-still where the still stretches are only short (``longest``: the longest
+    of them); --start/--end where a disarmed, still part is elsewhere in the record."""
+    armed_all = bool(np.all(armed[has])) if has.any() else False
+    where = "the --start/--end window" if windowed else "the record"
+    if armed_all:
+        why = f"the vehicle was armed throughout {where} ({sel.armed_s:.0f} s)"
+    elif longest >= 1:
+        why = (f"the longest still stretch of {where} is {math.floor(longest * 10) / 10:g} s "
+               f"({sel.moving_s:.0f} s of flight/motion"
+               + (f", {sel.armed_s:.0f} s armed" if sel.armed_s >= 0.5 else "") + ")")
+    else:
+        why = (f"the vehicle moved or was armed throughout {where} ({sel.moving_s:.0f} s of flight/motion"
+               + (f", {sel.armed_s:.0f} s armed" if sel.armed_s >= 0.5 else "") + ")")
+    fixes = ["--all analyses " + ("that window" if windowed else "the whole record") + " as it is"]
+    if longest >= 1 and not armed_all:
+        fixes.insert(0, f"--min-still {math.floor(longest * 10) / 10:g} keeps the longest of them")
+    if not windowed and not armed_all:
+        fixes.append("--start/--end --all a part you know was still")
+    return f"no still stretch of at least {sel.min_segment_s:g} s: {why}; " + "; ".join(fixes)
 
 
 def _covered(stream, intervals) -> float:
