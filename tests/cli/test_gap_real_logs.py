@@ -17,11 +17,20 @@ def test_verdict_names_the_contradicted_term_in_plain_words():
            {"effect": "bias_instability", "param": "B", "model": 1.84e-4, "fitted": 1.9e-4, "lr": 1.0,
             "verdict": "consistent"}]
     line = datasheet_verdict(rec, "ADIS16405", "gy", [{"effect": "lowpass", "cutoff_hz": 35.0}])
-    assert line.startswith("ADIS16405 datasheet contradicted on gy: measured white_noise N 2.5 deg/sqrt(h) is "
-                           "25 % above the datasheet's 2 deg/sqrt(h)")
+    assert line.startswith("ADIS16405 datasheet contradicted on gy: white_noise N above the datasheet: 2.5 vs 2 "
+                           "deg/sqrt(h), x1.25")
     assert "bias_instability B agrees with the datasheet" in line and "lowpass 35 Hz" in line
     rec[0]["verdict"] = "consistent"
     assert "no datasheet term is contradicted" in datasheet_verdict(rec, "ADIS16405", "gy")
+    # the analysis' white level of the same data decides for N: above / below where the datasheet's value lies
+    # outside its interval, whatever the workflow's own verdict
+    n_sheet = 5.818e-4
+    above = datasheet_verdict(rec, "ADIS16405", "gy", white={"N": 10 * n_sheet, "ci95": [8 * n_sheet, 12 * n_sheet]})
+    assert "white_noise N above the datasheet: 20 vs 2 deg/sqrt(h), x10" in above
+    below = datasheet_verdict(rec, "ADIS16405", "gy", white={"N": 0.5 * n_sheet, "ci95": [0.4 * n_sheet, 0.6 * n_sheet]})
+    assert "white_noise N below the datasheet: 1 vs 2 deg/sqrt(h), x0.5" in below
+    inside = datasheet_verdict(rec, "ADIS16405", "gy", white={"N": 1.1 * n_sheet, "ci95": [0.9 * n_sheet, 1.3 * n_sheet]})
+    assert "no datasheet term is contradicted" in inside and "white_noise N agrees" in inside
 
 
 def test_still_segments_pooled_and_named(tmp_path, capsys):
