@@ -466,4 +466,6 @@ def main():
 
 
 if __name__ == "__main__":
-    sys.exit(results.run(main))
+    # one tier run alone keeps its own section of RESULTS.md beside the full run's
+    _only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv[1:-1] else None
+    sys.exit(results.run(main, name=f"bench_gap {_only}" if _only else None))

@@ -189,6 +189,8 @@ def main(argv=None) -> int:
     ap.add_argument("--window", action="append", default=[], metavar="LOG:START:END",
                     help="also analyse LOG's window START-END s with --all (repeatable)")
     ap.add_argument("--timeout", type=float, default=600.0)
+    ap.add_argument("--still-only", action="store_true", help="no whole-record (--all) analysis of a log refused "
+                    "for want of a still stretch")
     args = results.parse_args(ap, {"dirs": [str(SHARED_DATA)]}, argv)
     logs = logs_in(args.dirs)
     jobs = [(p, None) for p in logs]
@@ -203,7 +205,7 @@ def main(argv=None) -> int:
     refused = 0
     for log, win in jobs:
         doc, err = analyze(log, win, args.timeout)
-        if doc is None and win is None and "no still stretch" in err:
+        if doc is None and win is None and "no still stretch" in err and not args.still_only:
             win = "all"  # the whole record, as the refusal suggests
             doc, err = analyze(log, win, args.timeout)
         name = log.name + (" [--all]" if win == "all" else f" [{win[0]:g}-{win[1]:g} s, --all]" if win else "")

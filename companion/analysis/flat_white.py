@@ -25,7 +25,7 @@ import numpy as np
 MIN_EDF = 100.0
 MIN_SPAN = 2.0
 #: the fitted N is kept when it lies within this fraction of the plateau's level and its interval covers it
-KEEP_WITHIN = 0.02
+KEEP_WITHIN = 0.03
 
 
 @dataclass
@@ -101,8 +101,7 @@ def filter_shape(terms: list, bounds: list, tau) -> np.ndarray:
 def flat_white_level(terms: list, bounds: list, tau, avar, edf, notes: list, record: dict):
     """N from the widest plateau of the curve (the fitted filter's roll-off divided out, :func:`filter_shape`,
     at cluster times where it leaves at least MIN_FILTER_SHARE of the white AVAR) where the fit's N misses it
-    (more than KEEP_WITHIN off and its interval not covering the level, or below or above every point of it)
-    or where N was left as a bound: the white-noise term gets the level and its interval, ``record`` (the
+    (more than KEEP_WITHIN off, or its interval not covering the level) or where N was left as a bound: the white-noise term gets the level and its interval, ``record`` (the
     entry's ``fit.white_refit``) the plateau's cluster times and the N it replaces. Returns (terms, bounds)."""
     shape = filter_shape(terms, bounds, tau)
     avar = np.asarray(avar, dtype=float) / shape
@@ -111,12 +110,10 @@ def flat_white_level(terms: list, bounds: list, tau, avar, edf, notes: list, rec
     p = widest(plateaus(tau, avar, edf))
     if p is None:
         return terms, bounds
-    pts = np.sqrt(avar[p.i:p.j + 1] * np.asarray(tau, dtype=float)[p.i:p.j + 1])
     wn = next((t for t in terms if t["effect"] == "white_noise"), None)
     if wn is not None:
         lo, hi = wn.get("ci95", {}).get("N", [wn["N"], wn["N"]])
-        inside = pts.min() <= wn["N"] <= pts.max()
-        if inside and (abs(wn["N"] / p.level - 1.0) <= KEEP_WITHIN or lo <= p.level <= hi):
+        if abs(wn["N"] / p.level - 1.0) <= KEEP_WITHIN and lo <= p.level <= hi:
             return terms, bounds
         before = float(wn["N"])
     else:

@@ -193,9 +193,10 @@ def _context(lg: LogGap) -> log_text.LogContext:
 def measured_white(lg: LogGap, axis: str, lsb) -> tuple[dict | None, float | None, int]:
     """The analysis of the same still data (:func:`companion.analysis.stream.axis_entry`, what ``companion
     analyze`` reports): its white level {"N", "ci95", "bound"} (None where the analysis has no N), and the
-    low-pass the gap's filter candidate takes (cut-off, order): --cutoff when given, else the analysis' filter
-    (the log's parameter, or the data's own roll-off where the log names none or the data disagree with it),
-    else the log's parameter."""
+    low-pass the gap's filter candidate takes (cut-off, order): --cutoff when given; where the log names a
+    filter, the analysis' (the log's parameter, or the data's own roll-off where the data disagree with it);
+    where it names none, None (the workflow fits the cut-off beside the other candidates, a vibration line near
+    the logger's Nyquist frequency among them)."""
     from companion.analysis.stream import axis_entry
 
     cutoffs = {"gyro": lg.cutoff_hz, "accel": lg.cutoff_hz} if lg.cutoff_hz else {}
@@ -206,12 +207,12 @@ def measured_white(lg: LogGap, axis: str, lsb) -> tuple[dict | None, float | Non
         white = {"N": None, "bound": float(b["N"])} if b else None
         return white, lg.cutoff_hz, 2
     white = {"N": float(wn["N"]), "ci95": list(wn.get("ci95", {}).get("N", [wn["N"], wn["N"]]))}
-    if lg.opts.cutoff is None and wn.get("filter_hz"):
+    if lg.opts.cutoff is None and lg.cutoff_hz and wn.get("filter_hz"):
         return white, float(wn["filter_hz"]), int(wn.get("filter_order", 2))
     return white, lg.cutoff_hz, 2
 
 
-def _data_rolloff(r: GapResult, cutoff: float, order: int, param: float | None) -> None:
+def _data_rolloff(r: GapResult, cutoff: float, order: int, param: float) -> None:
     """Say where the filter candidate's cut-off came from when it is the analysis' fit of the data's own
     roll-off rather than the log's parameter."""
     src = "the data's roll-off, as companion analyze fits it"
@@ -220,8 +221,7 @@ def _data_rolloff(r: GapResult, cutoff: float, order: int, param: float | None) 
             a["source"] = src
             a["explanation"] = a["explanation"].replace("(the log's parameter)", f"({src})")
     r.notes.append(f"low-pass filter candidate at {cutoff:.3g} Hz, order {order}: the data's own roll-off as the "
-                   "analysis fits it" + (f" (the log's {param:.3g} Hz set aside: the data disagree with it)"
-                                         if param else " (the log names no filter)"))
+                   f"analysis fits it (the log's {param:.3g} Hz set aside: the data disagree with it)")
 
 
 def run_axis(lg: LogGap, axis: str) -> AxisGap:
