@@ -19,7 +19,7 @@ filter's corner passes the flatness rule while it reads a few per cent low: each
 its level with the reported filter's roll-off divided out. Prints one row per region (log, stream, axis, tau span, level, N and interval, pass/fail) and
 per log the fraction of regions meeting the target.
 
-    python -m benchmarks.bench_white_level [DIR ...] [--window LOG:START:END ...] [--quick]
+    python -m benchmarks.bench_white_level [DIR or LOG ...] [--window LOG:START:END ...] [--quick]
 
 ``--quick`` reads only the shared data (the run recorded in RESULTS.md adds /work/reallogs).
 """
@@ -154,7 +154,9 @@ def logs_in(dirs) -> list[Path]:
     out = []
     for d in dirs:
         d = Path(d)
-        if d.is_dir():
+        if d.is_file():
+            out.append(d)
+        elif d.is_dir():
             out += sorted(p for p in d.rglob("*") if p.is_file() and p.suffix.lower() in EXTS)
     return out
 
