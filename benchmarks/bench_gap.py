@@ -275,6 +275,19 @@ def two_effect_tier(seeds, seed0=400_000, only=None):
     print(f"{'all':30} {_pct(tot[0], tot[2])} {_pct(tot[1], tot[2])}")
 
 
+#: the share of cluster times at which the model after must lie inside the measurement's 95 % band
+BAND_SHARE = 0.90
+
+
+def in_band(r) -> float:
+    """The share of the cluster times where the model after's AVAR lies inside the measurement's 95 % band."""
+    from companion.gap.compare import model_avar
+
+    m = r.measured
+    s = model_avar(r.terms_after, m.tau, m.rate_hz)
+    return float(np.mean((s >= m.lo) & (s <= m.hi)))
+
+
 HARD_CASES = [("quantization",), ("ramp",), ("gauss_markov",), ("sinusoid",), ("random_walk",),
               ("gauss_markov", "sinusoid"), ("ramp", "gauss_markov")]
 
@@ -282,17 +295,19 @@ HARD_CASES = [("quantization",), ("ramp",), ("gauss_markov",), ("sinusoid",), ("
 def hard_tier(draws, seed0=600_000, cases=None):
     """The hard tier: the model handed over is mis-sized (each term x0.7-1.4) and one or two effects hide
     in the data (a hidden random walk is taken out of the model). Right = exactly the hidden set named and
-    the gap after within the noise floor (G <= 2). The oracle knows the truth: each hidden form added to
+    the gap after within the noise floor (G <= 2); "& band": the right set and >= BAND_SHARE of the cluster times
+with the model after inside the measurement's 95 % band (issue 49's target: in >= 95 % of draws). The oracle knows the truth: each hidden form added to
     the (free) model with the other hidden terms present, detected at the workflow's level."""
     print(f"\n== hard tier: mis-sized model (x0.7-1.4) + one or two hidden effects, {draws} draws per case, "
           f"seeds {seed0}+ ==")
-    print(f"{'hidden':28} {'right set':>15} {'& G<=2':>15} {'oracle':>15}  G after median  named instead (counts)")
-    tot = [0, 0, 0, 0]
+    print(f"{'hidden':28} {'right set':>15} {'& G<=2':>15} {'& band':>15} {'oracle':>15}  G after median  "
+          "in band min  named instead (counts)")
+    tot = [0, 0, 0, 0, 0]
     for c_i, case in enumerate(HARD_CASES):
         if cases is not None and c_i not in cases:
             continue
-        c = [0, 0, 0]
-        g_after = []
+        c = [0, 0, 0, 0]
+        g_after, shares = [], []
         wrong: dict[str, int] = {}
         for s in range(draws):
             seed = seed0 + 1000 * c_i + s
@@ -306,6 +321,9 @@ def hard_tier(draws, seed0=600_000, cases=None):
             ok = sorted(names) == sorted(case)
             c[0] += ok
             c[1] += ok and r.gap_after <= NOISE_FLOOR_G
+            share = in_band(r)
+            shares.append(share)
+            c[3] += ok and share >= BAND_SHARE
             g_after.append(r.gap_after)
             c[2] += all(oracle(meas, base, h, free_model=True, others=[x for x in hidden if x is not h])[0]
                         for h in hidden)
@@ -313,13 +331,16 @@ def hard_tier(draws, seed0=600_000, cases=None):
                 key = ("+".join(names) or "(nothing)") + ("" if ok else "") + \
                     (f" G {r.gap_after:.2f}" if ok else "")
                 wrong[key] = wrong.get(key, 0) + 1
-        for j in range(3):
+        for j in range(4):
             tot[j] += c[j]
-        tot[3] += draws
+        tot[4] += draws
         w = ", ".join(f"{k} {v}" for k, v in sorted(wrong.items(), key=lambda kv: -kv[1])) or "-"
-        print(f"{' + '.join(case):28} {_pct(c[0], draws)} {_pct(c[1], draws)} {_pct(c[2], draws)}  "
-              f"{np.median(g_after):6.2f}          {w}  [{_lap():.0f} s]", flush=True)
-    print(f"{'all':28} {_pct(tot[0], tot[3])} {_pct(tot[1], tot[3])} {_pct(tot[2], tot[3])}")
+        print(f"{' + '.join(case):28} {_pct(c[0], draws)} {_pct(c[1], draws)} {_pct(c[3], draws)} "
+              f"{_pct(c[2], draws)}  {np.median(g_after):6.2f}          {100 * min(shares):5.1f} %    {w}  "
+              f"[{_lap():.0f} s]", flush=True)
+    print(f"{'all':28} {_pct(tot[0], tot[4])} {_pct(tot[1], tot[4])} {_pct(tot[3], tot[4])} {_pct(tot[2], tot[4])}")
+    print(f"(& band: the right set named and >= {100 * BAND_SHARE:.0f} % of the cluster times' model after inside "
+          "the measurement's 95 % band; target >= 95 % of draws)")
 
 
 def ramp_rw_tier(draws, seed0=700_000):
@@ -445,4 +466,6 @@ def main():
 
 
 if __name__ == "__main__":
-    sys.exit(results.run(main))
+    # one tier run alone keeps its own section of RESULTS.md beside the full run's
+    _only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv[1:-1] else None
+    sys.exit(results.run(main, name=f"bench_gap {_only}" if _only else None))

@@ -5,7 +5,8 @@ contribution.
 Steps of :func:`analyze_axis`: the usable pieces (:func:`_usable_pieces`), the octave points the fit sees
 (:func:`_fit_points`), the fit (:func:`_fit`), the upper bounds of the terms it left out (:func:`_bounds`), the
 Allan curve at the requested cluster times with EDF from the fitted model (:func:`_curve`), the rules on N
-shared with the online report (:func:`_white_rules`), selected terms not told from 0 as bounds
+shared with the online report (:func:`_white_rules`), N from the curve's flat white region where the fit
+misses it (:func:`companion.analysis.flat_white.flat_white_level`), selected terms not told from 0 as bounds
 (:func:`_unsure_as_bounds`), and the entry (:func:`_entry`).
 """
 
@@ -20,6 +21,7 @@ from companion.allan.confidence import adev_ci, edf_model, edf_simple, forget_ro
 from companion.allan.lsb import lsb_report
 from companion.allan.pooled import pooled_cluster_sizes, pooled_edf, pooled_oavar
 from companion.allan.terms import LINEAR_PARAM
+from companion.analysis.flat_white import flat_white_level
 from companion.analysis.sufficiency import FIT_MIN_RATE_HZ, fast_enough
 from companion.analysis.taus import parse_taus
 
@@ -199,7 +201,8 @@ def _fit_entry(fit, fp: _FitPoints, notes, refit) -> dict:
     entry = {"chi2": fit.chi2, "dof": fit.dof, "criterion": fit.criterion, "score": fit.score,
              "model_error": fit.model_error, "tau_min": float(fp.tau[k][0]) if k.any() else None,
              "filter": fit.filter,
-             # the local white-noise refit's region and N before/after (None: N from the global fit)
+             # the region N was taken from instead of the global fit and N before/after (None: N from the
+             # global fit); rule "flat": the curve's flat white region, else the local white-noise refit
              "white_refit": refit or None,
              "points": int(k.sum()), "notes": notes, "segments": len(fp.pieces)}
     entry["notes"] += fp.notes
@@ -241,6 +244,7 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     notes = list(fit.notes)
     refit: dict = {}
     terms, bounds = _white_rules(fit, fp, rate_hz, edf0, bounds, notes, refit)
+    terms, bounds = flat_white_level(terms, bounds, curve["tau"], np.square(curve["adev"]), curve["edf"], notes, refit)
     terms, bounds, unsure = _unsure_as_bounds(terms, bounds, notes)
     out.update(tau=curve["tau"], adev=curve["adev"], adev_lo=curve["adev_lo"], adev_hi=curve["adev_hi"],
                terms=terms, bounds=bounds, edf=curve["edf"],

@@ -44,9 +44,7 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
         else:
             col = stream.axis(axis)
             samp = stream_sampling(stream)
-            wf = {"filter_hz": float(fc), "sample_hz": rate if samp == "point" else None} if fc else None
-            entry["axes"][axis] = analyze_axis(None, rate, taus, lsb=lsb, segments=[col[a:b] for a, b in ranges],
-                                               white_filter=wf, sampling=samp)
+            entry["axes"][axis] = axis_entry(stream, axis, ranges, filters, taus, lsb=lsb)
             if online and entry["axes"][axis]["status"] == "ok":
                 from companion.estimators import make_estimator
 
@@ -63,6 +61,21 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
         if progress:
             progress.step(f"{stream.key.message}[{stream.key.instance}] {axis}")
     return entry
+
+
+def axis_entry(stream, axis: str, ranges, filters=None, taus="octave", lsb=None) -> dict:
+    """The analysis of one axis of ``stream`` over the index ``ranges`` (pooled), with the low-pass cut-off
+    of ``filters`` modelled as the log's signal path has it (:func:`stream_sampling`): the one estimate
+    ``analyze``, ``gap`` and the Kalibr file report. ``lsb``: the output step (None: the stream's)."""
+    rate = float(stream.rate_hz)
+    if lsb is None:
+        lsb = stream.gyro_lsb if axis in GYRO_AXES else stream.accel_lsb
+    fc = (filters or {}).get("gyro" if axis in GYRO_AXES else "accel")
+    samp = stream_sampling(stream)
+    wf = {"filter_hz": float(fc), "sample_hz": rate if samp == "point" else None} if fc else None
+    col = stream.axis(axis)
+    return analyze_axis(None, rate, taus, lsb=lsb, segments=[col[a:b] for a, b in ranges], white_filter=wf,
+                        sampling=samp)
 
 
 def stream_sampling(stream) -> str:

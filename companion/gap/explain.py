@@ -8,6 +8,8 @@ walk as the long-correlation limit of a Markov process, exponentially correlated
 
 from __future__ import annotations
 
+import math
+
 from companion.units import datasheet_unit, to_datasheet
 
 #: what each effect looks like on the Allan curve (IEEE 952 Annex C)
@@ -164,20 +166,38 @@ def explain_lowpass(cutoff_hz: float, order: int, rate_hz: float, aliasing_gain:
             "property of the sensing element.")
 
 
-def datasheet_verdict(recalibrated, name: str, axis: str, added=()) -> str:
-    """First line of a report against a datasheet model: which datasheet term the measurement contradicts
-    and by how much, in plain words (``recalibrated``: the workflow's per-term entries, each with the model
-    value, the value fitted at the final state, the corrected LR and the verdict)."""
+def _measured_side(value: float, ci, model: float) -> str | None:
+    """"above" / "below" where ``model`` lies outside the measured interval ``ci``, else None."""
+    lo, hi = ci
+    if lo > model:
+        return "above"
+    if hi < model:
+        return "below"
+    return None
+
+
+def datasheet_verdict(recalibrated, name: str, axis: str, added=(), white=None) -> str:
+    """First line of a report against a datasheet model: each datasheet term the measurement contradicts,
+    "above" or "below" with the ratio ("white_noise N above the datasheet: 10.2 vs 0.212 deg/sqrt(h), x48"),
+    then those it agrees with. ``recalibrated``: the workflow's per-term entries (model value, value fitted at
+    the final state, its interval, the verdict). ``white``: the analysis' white level of the same data
+    ({"N", "ci95"}, SI): the measured N is that one, and it contradicts the datasheet where the datasheet's N
+    lies outside its interval."""
     parts, off = [], []
     for e in recalibrated:
         p, model, fitted = e["param"], e["model"], e["fitted"]
+        ci = e.get("ci95") or [fitted, fitted]
+        side = None if e["verdict"] == "consistent" else ("above" if fitted > model else "below")
+        if e["effect"] == "white_noise" and white and white.get("N"):
+            fitted, ci = white["N"], white.get("ci95") or [white["N"], white["N"]]
+            side = _measured_side(fitted, ci, model)
         u = datasheet_unit(p, axis)
         dm, df = to_datasheet(p, model, axis), to_datasheet(p, fitted, axis)
-        pct = 100.0 * (fitted / model - 1.0) if model > 0 else float("inf")
-        word = "above" if pct > 0 else "below"
-        text = (f"measured {e['effect']} {p} {df:.3g} {u} is {abs(pct):.0f} % {word} the datasheet's {dm:.3g} {u}")
-        if e["verdict"] != "consistent":
-            off.append((e.get("lr", 0.0), text + f" (LR {e.get('lr', float('nan')):.0f})"))
+        if side is not None:
+            ratio = fitted / model if model > 0 else math.inf
+            r = f"x{ratio:.3g}" if ratio >= 1 else f"x{ratio:.2g} (1/{1 / ratio:.3g})" if ratio > 0 else "x0"
+            off.append((abs(math.log(ratio)) if 0 < ratio < math.inf else math.inf,
+                        f"{e['effect']} {p} {side} the datasheet: {df:.3g} vs {dm:.3g} {u}, {r}"))
         else:
             parts.append(f"{e['effect']} {p} agrees with the datasheet within the noise ({df:.3g} vs {dm:.3g} {u})")
     if off:

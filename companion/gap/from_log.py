@@ -194,14 +194,54 @@ def _context(lg: LogGap) -> log_text.LogContext:
         sheet=lg.sheet)
 
 
+def measured_white(lg: LogGap, axis: str, lsb) -> tuple[dict | None, float | None, int]:
+    """The analysis of the same still data (:func:`companion.analysis.stream.axis_entry`, what ``companion
+    analyze`` reports): its white level {"N", "ci95", "bound"} (None where the analysis has no N), and the
+    low-pass the gap's filter candidate takes (cut-off, order): --cutoff when given; where the log names a
+    filter, the analysis' (the log's parameter, or the data's own roll-off where the data disagree with it);
+    where it names none, None (the workflow fits the cut-off beside the other candidates, a vibration line near
+    the logger's Nyquist frequency among them)."""
+    from companion.analysis.stream import axis_entry
+
+    cutoffs = {"gyro": lg.cutoff_hz, "accel": lg.cutoff_hz} if lg.cutoff_hz else {}
+    e = axis_entry(lg.stream, axis, lg.ranges, cutoffs, lsb=lsb)
+    wn = next((t for t in e.get("terms", []) if t["effect"] == "white_noise"), None)
+    if wn is None:
+        b = next((t for t in e.get("bounds", []) if t["effect"] == "white_noise"), None)
+        white = {"N": None, "bound": float(b["N"])} if b else None
+        return white, lg.cutoff_hz, 2
+    white = {"N": float(wn["N"]), "ci95": list(wn.get("ci95", {}).get("N", [wn["N"], wn["N"]]))}
+    if lg.opts.cutoff is None and lg.cutoff_hz and wn.get("filter_hz"):
+        return white, float(wn["filter_hz"]), int(wn.get("filter_order", 2))
+    return white, lg.cutoff_hz, 2
+
+
+def _data_rolloff(r: GapResult, cutoff: float, order: int, param: float) -> None:
+    """Say where the filter candidate's cut-off came from when it is the analysis' fit of the data's own
+    roll-off rather than the log's parameter."""
+    src = "the data's roll-off, as companion analyze fits it"
+    for a in r.added:
+        if a.get("effect") == "lowpass":
+            a["source"] = src
+            a["explanation"] = a["explanation"].replace("(the log's parameter)", f"({src})")
+    r.notes.append(f"low-pass filter candidate at {cutoff:.3g} Hz, order {order}: the data's own roll-off as the "
+                   f"analysis fits it (the log's {param:.3g} Hz set aside: the data disagree with it)")
+
+
 def run_axis(lg: LogGap, axis: str) -> AxisGap:
-    """The workflow on one axis of the log's still segments, pooled."""
+    """The workflow on one axis of the log's still segments, pooled, with the analysis' white level of the same
+    data (:func:`measured_white`) as the model's N and the datasheet verdict's."""
     st, opts = lg.stream, lg.opts
     segs, tsegs = log_text.still_segments(st.axis(axis), getattr(st, "temperature", None), lg.ranges,
                                           opts.measured, axis)
     lsb = opts.lsb if opts.lsb is not None else (st.gyro_lsb if axis in GYRO_AXES else st.accel_lsb)
-    r = run_gap(None, lg.rate_hz, lg.model.axes[axis], axis=axis, lsb=lsb, seed=opts.seed, cutoff_hz=lg.cutoff_hz,
-                segments=segs, temperature=tsegs or None, integrated=lg.integrated)
+    white, cutoff, order = measured_white(lg, axis, lsb)
+    r = run_gap(None, lg.rate_hz, lg.model.axes[axis], axis=axis, lsb=lsb, seed=opts.seed, cutoff_hz=cutoff,
+                filter_order=order, segments=segs, temperature=tsegs or None, integrated=lg.integrated,
+                white=white if white and white.get("N") else None)
+    r.white = white
+    if cutoff and cutoff != lg.cutoff_hz:
+        _data_rolloff(r, cutoff, order, lg.cutoff_hz)
     ctx = _context(lg)
     text = log_text.axis_text(r, ctx)
     # the sensor's terms only: the log's rate rounding, filter and temperature coupling are derived from

@@ -44,6 +44,9 @@ class GapResult:
     resolved_tau_max: float | None = None
     #: when a gap remains: G's spread for the model after on this record's layout (companion.gap.null)
     gap_after_null: dict | None = None
+    #: the analysis' white level of the same data ({"N", "ci95"} or {"N": None, "bound"}, SI), when the
+    #: caller computed it (``companion gap`` on a log): the N the datasheet verdict reports
+    white: dict | None = None
 
     def to_dict(self) -> dict:
         m = self.measured
@@ -56,6 +59,7 @@ class GapResult:
             "gap_after_resolved": self.gap_after_resolved,
             "resolved_tau_max": self.resolved_tau_max,
             "gap_after_null": self.gap_after_null,
+            "white": self.white,
             "gap_sim_before": self.gap_sim_before,
             "gap_sim_after": self.gap_sim_after,
             "sim_check_before": self.sim_check_before,

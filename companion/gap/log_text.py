@@ -127,7 +127,7 @@ def axis_text(r: GapResult, ctx: LogContext) -> str:
     """The report of one axis with the lines about the log; with a datasheet, its verdict first."""
     text = format_report(r, ctx.source, ctx.label)
     if ctx.sheet is not None:
-        text = datasheet_verdict(r.recalibrated, ctx.sheet["name"], r.axis, r.added) + "\n" + text
+        text = datasheet_verdict(r.recalibrated, ctx.sheet["name"], r.axis, r.added, white=r.white) + "\n" + text
     text += f"\nmodel: {ctx.source_model}"
     text += f"\nstill data used: {ctx.selection_text}; {ctx.label}: {len(ctx.ranges_s)} segment(s), " + \
         ", ".join(f"{t0:.1f}-{t1:.1f} s" for t0, t1 in ctx.ranges_s)

@@ -90,9 +90,10 @@ def explanations(meas: Measured, state: Fit, held, recalibratable, combine_top: 
             f = with_cutoff(meas, f, fixed, e, lowpass)
             if f.terms[-1][MAGNITUDE[e]] > 0:
                 out.append(make_explanation(meas, state, held, e, (j,), f, sigma))
-    if any(t["effect"] == "white_noise" and t.get("cutoff_hz") for t in terms):
-        # the low-pass filter is already in the model: a Gauss-Markov term at the filter's time scale would
-        # describe the same roll-off twice
+    if any(t["effect"] == "white_noise" and t.get("cutoff_hz") for t in terms) or (lowpass and lowpass[0]):
+        # the low-pass filter is already in the model, or the log names one (its cut-off is known): a
+        # Gauss-Markov term at the filter's time scale would describe the same roll-off twice, or describe a
+        # named filter as a bias process
         out = [x for x in out if not (x.effect == "gauss_markov" and
                                       x.added_term()["tau_c"] * meas.rate_hz < FILTER_LIKE_SAMPLES)]
     out.sort(key=lambda x: -x.score)

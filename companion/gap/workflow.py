@@ -24,7 +24,8 @@
    effect from the state with that term held.
 7. ``filter_again``: a fitted filter taken over a short Gauss-Markov term is weighed again in the final state.
 8. ``verdicts``: per model term its verdict, per added effect its entry (:mod:`companion.gap.verdicts`); the
-   model after, G after (:mod:`companion.gap.gap_result`), its simulation; the noise floor: the model fits within
+   model after with every term refitted together (:func:`refit_base`; N held at the analysis' white level
+   when the caller gives it), G after (:mod:`companion.gap.gap_result`), its simulation; the noise floor: the model fits within
    the noise when G <= NOISE_FLOOR_G = 2 and nothing is added or recalibrated.
 9. ``remaining_gap``: G over the cluster times the record resolves, a long-tau term named from too short a
    record, and how often the model after leaves a gap as large on this record's layout
@@ -38,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.gap import explain, selection, ramp_or_walk
+from companion.gap.band_fit import better_in_band
 from companion.gap.arbitration import LineVeto, spectral_line, thermal_arbitration
 from companion.gap.backward import drop_unneeded, filter_or_gauss_markov, hold_test, refit
 from companion.gap.candidates import MAGNITUDE, SHAPE, Fit, refine_shapes
@@ -94,6 +96,9 @@ class GapOptions:
     filter_order: int = 2
     lowpass: bool = True  #: the filter among the candidates (False: data known to be unfiltered)
     integrated: bool = False  #: each value is the mean of the filtered rate over its interval
+    #: the analysis' white level of the same data ({"N", "ci95": [lo, hi]}, SI): the one N the report and the
+    #: model after carry (None: the workflow's own fit)
+    white: dict | None = None
 
 
 @dataclass
@@ -116,6 +121,7 @@ class GapInput:
     seed: int
     simulate: bool
     max_iter: int
+    white: dict | None = None
 
 
 @dataclass
@@ -159,7 +165,7 @@ def _prepare(y, rate_hz: float, terms, segments, temperature, opts: GapOptions) 
     return GapInput(meas=meas, rate_hz=rate_hz, axis=opts.axis, terms0=[dict(t) for t in terms], y=y, y_all=y_all,
                     y_segs=y_segs, t_smooth=t_smooth, t_series=np.concatenate(t_smooth) if t_smooth else None,
                     thermal=thermal, lowpass=lp, cutoff_hz=opts.cutoff_hz, lsb=opts.lsb, seed=opts.seed,
-                    simulate=opts.simulate, max_iter=opts.max_iter)
+                    simulate=opts.simulate, max_iter=opts.max_iter, white=opts.white)
 
 
 def _compare(inp: GapInput, st: GapState, res: GapResult) -> None:
@@ -351,8 +357,8 @@ def _verdicts(inp: GapInput, st: GapState, res: GapResult) -> None:
             res.notes.append("the model does not fit, but no candidate effect and no recalibration explains the "
                              "gap significantly; see the disagreement table")
     else:
-        res.terms_after = final
-        res.gap_after = gap_metric(meas, model_avar(final, meas.tau, inp.rate_hz))
+        res.terms_after = refit_base(inp, st, final, res.notes)
+        res.gap_after = gap_metric(meas, model_avar(res.terms_after, meas.tau, inp.rate_hz))
     res.regions_after = disagreements(meas, model_avar(res.terms_after, meas.tau, inp.rate_hz))
     if not inp.simulate:
         return
@@ -362,6 +368,47 @@ def _verdicts(inp: GapInput, st: GapState, res: GapResult) -> None:
     else:
         res.sim_avar_after, res.gap_sim_after, res.sim_check_after = sim_checks(res.terms_after, meas, inp.seed + 1,
                                                                                 inp.t_series)
+
+
+def refit_base(inp: GapInput, st: GapState, final: list, notes: list) -> list:
+    """The model after with every term refitted to the data at once (the verdicts above keep the tests that
+    named each change): a model term held at a value the steps found consistent, or an added effect fitted
+    before a later one, can leave the sum outside the measurement's band where the model handed over was
+    mis-sized. The white level of the analysis (``inp.white``), when given, is the model's N: the model's
+    white-noise term is held at it (the rate rounding's white share taken out in quadrature), so that the
+    report, the model after and ``analyze`` carry one N. Terms with no free parameter stay fixed. The
+    magnitudes are the maximum-likelihood ones, or the band's (:mod:`companion.gap.band_fit`) where those put
+    the model inside the measurement's 95 % band at more cluster times."""
+    from companion.gap.candidates import fit_terms
+
+    terms = [dict(t) for t in final]
+    fixed = [i for i in st.fixed if i < len(terms)]
+    j = next((i for i, t in enumerate(terms) if t["effect"] == "white_noise" and i not in fixed), None)
+    if inp.white and inp.white.get("N") and j is not None:
+        nq2 = sum(terms[i]["N"] ** 2 for i in fixed if terms[i]["effect"] == "white_noise")
+        terms[j]["N"] = float(np.sqrt(max(inp.white["N"] ** 2 - nq2, 0.0)))
+        fixed = sorted(set(fixed) | {j})
+    before = st.base.dev if st.base is not None else np.inf
+    f = fit_terms(inp.meas, terms, fixed, intervals=False)
+    band = better_in_band(inp.meas, terms, fixed, f.s)
+    if band is not None:
+        f.terms = band[0]
+    n0 = len(inp.terms0)
+    out = [t for i, t in enumerate(f.terms) if i in fixed or i < n0 or t[MAGNITUDE[t["effect"]]] > 0]
+    mags = [(t["effect"], MAGNITUDE[t["effect"]], t[MAGNITUDE[t["effect"]]], u[MAGNITUDE[t["effect"]]])
+            for t, u in zip(f.terms, terms)]
+    moved = [f"{e} {p}" for e, p, new, old in mags if abs(new - old) > 1e-3 * max(old, 1e-300)]
+    if moved or j in fixed:
+        notes.append("the model after: every term refitted to the data together"
+                     + (f" ({', '.join(moved)} moved" + ("" if band is not None else
+                                                            f"; deviance {f.dev:.1f} against {before:.1f} with the "
+                                                            "values the steps left") + ")" if moved else "")
+                     + ("; magnitudes by the band's weights (EDF/2 per point), which put the model inside the "
+                        "measurement's 95 % band at more cluster times than the likelihood with its 5 % model "
+                        "floor" if band is not None else "")
+                     + ("; white_noise N held at the analysis' white level of the same data (companion analyze)"
+                        if inp.white and j in fixed else ""))
+    return out
 
 
 def _remaining_gap(inp: GapInput, st: GapState, res: GapResult) -> None:
@@ -396,7 +443,8 @@ STEPS = (_compare, _rate_rounding, _forward, _drop_unneeded, _undo_recalibration
 
 def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None, seed: int = 0,
             simulate: bool = True, max_iter: int = MAX_ITER, cutoff_hz: float | None = None, filter_order: int = 2,
-            lowpass: bool = True, segments=None, temperature=None, integrated: bool = False) -> GapResult:
+            lowpass: bool = True, segments=None, temperature=None, integrated: bool = False,
+            white: dict | None = None) -> GapResult:
     """Run the whole workflow on rate samples ``y`` (SI) against the model ``terms`` of one axis.
 
     ``segments``: several still segments of one record (rate arrays); the Allan variance is then pooled
@@ -406,9 +454,11 @@ def run_gap(y, rate_hz: float, terms, axis: str = "gx", lsb: float | None = None
     log's parameters (the filter candidate then uses it; None: fitted); ``lowpass`` False leaves the filter
     out of the candidates (data known to be unfiltered); ``integrated``: each logged value is the mean of
     the filtered rate over its interval (PX4 sensor_combined), not a point sample. ``simulate`` False skips
-    the checks by simulation (the analytic curves only)."""
+    the checks by simulation (the analytic curves only). ``white``: the analysis' white level of the same data
+    ({"N", "ci95"}, SI; :func:`companion.analysis.stream.axis_entry`), which the model after and the
+    datasheet verdict then carry."""
     opts = GapOptions(axis=axis, lsb=lsb, seed=seed, simulate=simulate, max_iter=max_iter, cutoff_hz=cutoff_hz,
-                      filter_order=filter_order, lowpass=lowpass, integrated=integrated)
+                      filter_order=filter_order, lowpass=lowpass, integrated=integrated, white=white)
     inp = _prepare(y, rate_hz, terms, segments, temperature, opts)
     res = GapResult(axis=axis, measured=inp.meas, terms_before=inp.terms0, terms_after=inp.terms0,
                     gap_before=float("nan"), gap_after=float("nan"))

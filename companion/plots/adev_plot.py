@@ -67,7 +67,8 @@ def misfit_text(r: dict, axis: str) -> str | None:
     if not ref or wn is None:
         return text + " (the line is the fitted model; N from the global fit)"
     lo, hi = ref["tau"]
-    text += (f"; N from a local refit of {lo:.3g}-{hi:.3g} s (shaded), the global fit gave "
+    how = "the flat white region" if ref.get("rule") == "flat" else "a local refit of"
+    text += (f"; N from {how} {lo:.3g}-{hi:.3g} s (shaded), the global fit gave "
              f"{100 * (ref['N_global'] / ref['N'] - 1):+.1f} %")
     tau, adev = np.asarray(r["tau"], dtype=float), np.asarray(r["adev"], dtype=float)
     short = (tau < lo * (1 - 1e-9)) & np.isfinite(adev) & (adev > 0)
