@@ -208,7 +208,8 @@ class ImuFaults:
 
     def event_of(self, kind: str, axis: str) -> FaultEvent:
         """The FAULT event of an active per-axis fault as its detector said it: value, words, severity."""
-        crit = kind in ("stuck", "dead") and self.axes[axis].stuck.critical
+        # held by the sample-level test (health/frozen_watch.py): a value held while the vehicle moves
+        crit = kind in ("stuck", "dead") and (self.axes[axis].stuck.critical or (kind, axis) in self.external)
         return FaultEvent(self.imu, axis, kind, FAULT, self.value_of(kind, axis), self.detail_of(kind, axis), crit)
 
     def detail_of(self, kind: str, axis: str) -> str:
@@ -216,6 +217,8 @@ class ImuFaults:
         timing's rate or jitter)."""
         if kind == "rate":
             return self.timing.detail
+        if kind == "dead" and (kind, axis) in self.external:
+            return "moving"
         return self.axes[axis].stuck.detail if kind == "dead" and axis in self.axes else ""
 
     def restart(self) -> None:

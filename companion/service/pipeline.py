@@ -30,11 +30,13 @@ import numpy as np
 from companion.health.baseline import Baseline
 from companion.health.degradation import DEGRADING, LEARNING
 from companion.health.faults import FAULT, FaultEvent
+from companion.health.frozen_watch import FrozenWatch
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
 from companion.service.allan_check import bias_extra_var
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
+from companion.service.frozen_hook import watch_rows
 from companion.service.pipeline_config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
 from companion.service.imu_summary import fault_texts, final_terms, send_final, summary_rows, too_slow_note
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
@@ -62,6 +64,7 @@ class Pipeline:
         self.armed = False
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
+        self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
@@ -173,6 +176,7 @@ class Pipeline:
         if ch is None:
             return 0
         ch.see(rows[:, 1:4])
+        watch_rows(self, ch, rows)
         before = ch.cutter.counts["samples"]
         for ev in ch.cutter.cut(rows):
             kind = ev[0]
@@ -228,6 +232,7 @@ class Pipeline:
             ch = self.channels[key.instance] = Channel(key.instance, key.message, self.cfg, gyro_lsb=lsb)
             self.log(f"IMU{key.instance}: {key.message} from {key.label()}")
             self._apply_filters(ch)
+            self._set_state(ch)  # health and fault code sent from the first second, whatever comes later
         elif ch.message != key.message:
             self.ignored["other_message"] += n
             return None

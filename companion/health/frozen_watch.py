@@ -1,0 +1,205 @@
+"""A gyro axis that holds one value while the vehicle visibly moves: dead (exactly 0) or frozen, at any rate.
+
+The block tests (health/stuck.py) need several samples per 1-s block; a telemetry stream at 1-4 Hz (a
+ground station's tlog, a busy radio link) gives one to four. This test works sample by sample instead,
+on pairs of consecutive samples of one IMU, whatever the rate:
+
+* a pair is *equal* on an axis when both samples read exactly the same value;
+* it is *motion* on that axis when the vehicle's rotation visibly changed between the two instants:
+  another IMU's same axis moved by at least ``TWIN_STEP`` (0.05 rad/s = 50 steps of RAW_IMU's 1 mrad/s)
+  between its samples nearest to them, or, when all three axes of this gyro are equal, the accelerometer
+  turned by at least ``ACCEL_TURN`` (0.1 rad) or changed by at least ``ACCEL_STEP`` (2 m/s^2).
+
+A live gyro reads a new value when its rotation changes by 50 of its steps (its noise in motion is several
+steps too): on the real tlogs of benchmarks/bench_telemetry_rates.py (1-4 Hz copters, hexacopter, ROV,
+SITL; 8 healthy IMU streams, 5 of them with a twin) not one equal pair was motion, among some 2000 pairs
+where the twin moved. An axis is named after ``NEED`` (6) motion pairs within one run of equal values:
+"dead" when the value is exactly 0, "stuck" otherwise; it clears after ``CLEAR`` (3) pairs in a row that
+change. How many samples that takes depends on how often the vehicle moves, not on the rate: a copter
+flying at 1 Hz gives a motion pair every 3 samples or so (about 20 samples), a vehicle at rest none (an
+int16 gyro quieter than its 1 mrad/s step reads 0 at rest: that is resolution, not a fault, and this test
+never says it).
+
+Pure numpy; the caller (service/frozen_hook.py) hands it each IMU's samples in message-time order.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from companion.health.faults import FAULT, OK, FaultEvent
+
+AXES = ("gx", "gy", "gz")
+TWIN_STEP = 0.05  # rad/s: a twin axis moving this much between two instants is motion on that axis
+ACCEL_TURN = 0.1  # rad: the accelerometer turning this much between two samples is motion
+ACCEL_STEP = 2.0  # m/s^2: or changing this much
+NEED = 6  # motion pairs within one run of equal values that name the axis
+CLEAR = 3  # pairs in a row that change, which clear it
+HISTORY_S = 30.0  # seconds of samples kept per IMU (the twins' look-up, the pending pairs)
+WAIT_S = 5.0  # a pair waits for the other IMUs' samples up to this long, then is judged with what there is
+
+
+@dataclass
+class AxisRun:
+    """The run of equal values of one axis: its motion pairs so far, the changes in a row, the state."""
+
+    motion: int = 0
+    changes: int = 0
+    state: int = OK
+    value: float = math.nan
+    kind: str = "dead"  # what it was named: "dead" (exactly 0) or "stuck"
+
+
+@dataclass
+class ImuTrack:
+    """Recent samples of one IMU: times, gyro and accel; the index of the first pair not yet judged."""
+
+    t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    g: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    a: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    next_pair: int = 1  # the pair (k - 1, k) is judged next
+    runs: list = field(default_factory=lambda: [AxisRun() for _ in AXES])
+    equal_pairs: int = 0
+    motion_pairs: int = 0  # equal pairs that were motion (all axes counted)
+    zero_still: int = 0  # pairs reading 0 on an axis without motion (the resolution note)
+
+
+class FrozenWatch:
+    """Every IMU of one vehicle: :meth:`add` samples, get FaultEvents (kind ``dead`` or ``stuck``)."""
+
+    def __init__(self):
+        self.imus: dict[int, ImuTrack] = {}
+
+    def add(self, imu: int, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> list[FaultEvent]:
+        """Samples of ``imu`` (increasing times; rows out of order are left out); the events of every pair
+        that can now be judged (this IMU's and the others' that waited for these samples)."""
+        tr = self.imus.setdefault(imu, ImuTrack())
+        t = np.asarray(t, dtype=float).reshape(-1)
+        if t.size == 0:
+            return []
+        last = tr.t[-1] if tr.t.size else -math.inf
+        if t[0] < last - 1.0:  # a reboot: the time starts again
+            tr.t, tr.g, tr.a, tr.next_pair = np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), 1
+            last = -math.inf
+        keep = t > np.maximum.accumulate(np.r_[last, t[:-1]])
+        tr.t = np.r_[tr.t, t[keep]]
+        tr.g = np.vstack([tr.g, np.asarray(gyro, dtype=float).reshape(-1, 3)[keep]])
+        tr.a = np.vstack([tr.a, np.asarray(accel, dtype=float).reshape(-1, 3)[keep]])
+        out = []
+        for i in sorted(self.imus):
+            out += self._judge(i)
+        self._trim(tr)
+        return out
+
+    def _horizon(self, imu: int) -> float:
+        """The time up to which the other IMUs' samples are in (those still sending)."""
+        me = self.imus[imu].t[-1]
+        others = [tr.t[-1] for i, tr in self.imus.items() if i != imu and tr.t.size and tr.t[-1] > me - WAIT_S]
+        return min(others) if others else math.inf
+
+    def _judge(self, imu: int) -> list[FaultEvent]:
+        tr = self.imus[imu]
+        n = tr.t.size
+        if n < 2 or tr.next_pair >= n:
+            return []
+        horizon = self._horizon(imu)
+        end = n
+        if math.isfinite(horizon):  # pairs the others' samples do not reach yet wait (up to WAIT_S)
+            end = int(np.searchsorted(tr.t, max(horizon, tr.t[-1] - WAIT_S), side="right"))
+        k = np.arange(max(tr.next_pair, 1), end)
+        if k.size == 0:
+            return []
+        tr.next_pair = int(k[-1]) + 1
+        equal = tr.g[k] == tr.g[k - 1]
+        motion = self._twin_motion(imu, tr.t[k - 1], tr.t[k])
+        turn = accel_motion(tr.a[k - 1], tr.a[k]) & np.all(equal, axis=1)
+        motion |= turn[:, None]
+        tr.equal_pairs += int(equal.sum())
+        tr.motion_pairs += int((equal & motion).sum())
+        tr.zero_still += int((equal & ~motion & (tr.g[k] == 0.0)).sum())
+        events = []
+        for j, ax in enumerate(AXES):
+            run = tr.runs[j]
+            for state, value in step_axis(run, equal[:, j], motion[:, j], tr.g[k, j]):
+                if state == FAULT:
+                    run.kind = "dead" if value == 0.0 else "stuck"
+                events.append(FaultEvent(imu, ax, run.kind, state, value, detail="moving", critical=True))
+        return events
+
+    def _twin_motion(self, imu: int, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+        """(n, 3): another IMU's axis moved by TWIN_STEP between its samples nearest ``t0`` and ``t1``
+        (each within half the pair's interval)."""
+        out = np.zeros((t0.size, 3), dtype=bool)
+        tol = 0.5 * (t1 - t0)
+        for i, o in self.imus.items():
+            if i == imu or o.t.size < 2:
+                continue
+            j0, ok0 = nearest(o.t, t0, tol)
+            j1, ok1 = nearest(o.t, t1, tol)
+            ok = ok0 & ok1 & (j1 > j0)
+            out |= ok[:, None] & (np.abs(o.g[j1] - o.g[j0]) >= TWIN_STEP)
+        return out
+
+    def _trim(self, tr: ImuTrack) -> None:
+        if tr.t.size and tr.t[0] < tr.t[-1] - 2 * HISTORY_S:
+            cut = int(np.searchsorted(tr.t, tr.t[-1] - HISTORY_S))
+            cut = min(cut, tr.next_pair - 1)
+            if cut > 0:
+                tr.t, tr.g, tr.a = tr.t[cut:], tr.g[cut:], tr.a[cut:]
+                tr.next_pair -= cut
+
+    def active(self, imu: int) -> list[tuple[str, str]]:
+        """(kind, axis) of the axes this test holds as dead or stuck."""
+        tr = self.imus.get(imu)
+        if tr is None:
+            return []
+        return [(r.kind, ax) for ax, r in zip(AXES, tr.runs) if r.state == FAULT]
+
+
+def nearest(t: np.ndarray, q: np.ndarray, tol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the sample of increasing ``t`` nearest each of ``q``, and whether it lies within ``tol``."""
+    j = np.clip(np.searchsorted(t, q), 1, t.size - 1)
+    j = np.where(np.abs(t[j - 1] - q) <= np.abs(t[j] - q), j - 1, j)
+    return j, np.abs(t[j] - q) <= tol
+
+
+def accel_motion(a0: np.ndarray, a1: np.ndarray) -> np.ndarray:
+    """(n,): the accelerometer turned by ACCEL_TURN or changed by ACCEL_STEP between the two samples
+    (an accelerometer reading 0, a compass-only instance, shows nothing)."""
+    n0, n1 = np.linalg.norm(a0, axis=1), np.linalg.norm(a1, axis=1)
+    valid = (n0 > 0) & (n1 > 0) & np.all(np.isfinite(a0) & np.isfinite(a1), axis=1)
+    cos = np.sum(a0 * a1, axis=1) / np.where(valid, n0 * n1, 1.0)
+    turn = np.arccos(np.clip(cos, -1.0, 1.0)) >= ACCEL_TURN
+    step = np.linalg.norm(a1 - a0, axis=1) >= ACCEL_STEP
+    return valid & (turn | step)
+
+
+def step_axis(run: AxisRun, equal: np.ndarray, motion: np.ndarray, value: np.ndarray) -> list[tuple[int, float]]:
+    """Advance one axis' run over judged pairs; its state changes in order, as (state, value)."""
+    moving = motion & equal
+    if run.state == OK and not moving.any():  # the usual case, at any rate: nothing to count one by one
+        if not equal.all():
+            run.motion = 0
+            run.changes = int(equal.size - 1 - np.flatnonzero(equal)[-1]) if equal.any() else run.changes + equal.size
+        run.value = float(value[-1])
+        return []
+    out = []
+    for e, m, v in zip(equal.tolist(), moving.tolist(), value.tolist()):
+        if e:
+            if run.value != v:
+                run.motion = 0
+            run.value, run.changes = v, 0
+            run.motion += int(m)
+            if run.state == OK and run.motion >= NEED:
+                run.state = FAULT
+                out.append((FAULT, v))
+        else:
+            run.motion, run.value = 0, v
+            run.changes += 1
+            if run.state == FAULT and run.changes >= CLEAR:
+                run.state = OK
+                out.append((OK, v))
+    return out
