@@ -73,9 +73,10 @@ class FrozenWatch:
     def __init__(self):
         self.imus: dict[int, ImuTrack] = {}
 
-    def add(self, imu: int, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> list[FaultEvent]:
-        """Samples of ``imu`` (increasing times; rows out of order are left out); the events of every pair
-        that can now be judged (this IMU's and the others' that waited for these samples)."""
+    def add(self, imu: int, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> list[tuple[float, FaultEvent]]:
+        """Samples of ``imu`` (increasing times; rows out of order are left out); the events, each with the
+        message time of the sample that decided it, of every pair that can now be judged (this IMU's and the
+        others' that waited for these samples): the same however the samples are split into calls."""
         tr = self.imus.setdefault(imu, ImuTrack())
         t = np.asarray(t, dtype=float).reshape(-1)
         if t.size == 0:
@@ -100,16 +101,18 @@ class FrozenWatch:
         others = [tr.t[-1] for i, tr in self.imus.items() if i != imu and tr.t.size and tr.t[-1] > me - WAIT_S]
         return min(others) if others else math.inf
 
-    def _judge(self, imu: int) -> list[FaultEvent]:
+    def _judge(self, imu: int) -> list[tuple[float, FaultEvent]]:
         tr = self.imus[imu]
         n = tr.t.size
         if n < 2 or tr.next_pair >= n:
             return []
         horizon = self._horizon(imu)
         end = n
-        if math.isfinite(horizon):  # pairs the others' samples do not reach yet wait (up to WAIT_S)
-            end = int(np.searchsorted(tr.t, max(horizon, tr.t[-1] - WAIT_S), side="right"))
         k = np.arange(max(tr.next_pair, 1), end)
+        if math.isfinite(horizon):  # pairs whose twin look-up the others' samples do not cover yet wait (WAIT_S)
+            reach = tr.t[k] + 0.5 * (tr.t[k] - tr.t[k - 1])
+            wait = np.flatnonzero((reach > horizon) & (tr.t[k] > tr.t[-1] - WAIT_S))
+            k = k[:wait[0]] if wait.size else k
         if k.size == 0:
             return []
         tr.next_pair = int(k[-1]) + 1
@@ -123,10 +126,11 @@ class FrozenWatch:
         events = []
         for j, ax in enumerate(AXES):
             run = tr.runs[j]
-            for state, value in step_axis(run, equal[:, j], motion[:, j], tr.g[k, j]):
+            for i, state, value in step_axis(run, equal[:, j], motion[:, j], tr.g[k, j]):
                 if state == FAULT:
                     run.kind = "dead" if value == 0.0 else "stuck"
-                events.append(FaultEvent(imu, ax, run.kind, state, value, detail="moving", critical=True))
+                events.append((float(tr.t[k[i]]), FaultEvent(imu, ax, run.kind, state, value, detail="moving",
+                                                              critical=True)))
         return events
 
     def _twin_motion(self, imu: int, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
@@ -177,8 +181,9 @@ def accel_motion(a0: np.ndarray, a1: np.ndarray) -> np.ndarray:
     return valid & (turn | step)
 
 
-def step_axis(run: AxisRun, equal: np.ndarray, motion: np.ndarray, value: np.ndarray) -> list[tuple[int, float]]:
-    """Advance one axis' run over judged pairs; its state changes in order, as (state, value)."""
+def step_axis(run: AxisRun, equal: np.ndarray, motion: np.ndarray,
+              value: np.ndarray) -> list[tuple[int, int, float]]:
+    """Advance one axis' run over judged pairs; its state changes in order, as (pair, state, value)."""
     moving = motion & equal
     if run.state == OK and not moving.any():  # the usual case, at any rate: nothing to count one by one
         if not equal.all():
@@ -187,7 +192,7 @@ def step_axis(run: AxisRun, equal: np.ndarray, motion: np.ndarray, value: np.nda
         run.value = float(value[-1])
         return []
     out = []
-    for e, m, v in zip(equal.tolist(), moving.tolist(), value.tolist()):
+    for i, (e, m, v) in enumerate(zip(equal.tolist(), moving.tolist(), value.tolist())):
         if e:
             if run.value != v:
                 run.motion = 0
@@ -195,11 +200,11 @@ def step_axis(run: AxisRun, equal: np.ndarray, motion: np.ndarray, value: np.nda
             run.motion += int(m)
             if run.state == OK and run.motion >= NEED:
                 run.state = FAULT
-                out.append((FAULT, v))
+                out.append((i, FAULT, v))
         else:
             run.motion, run.value = 0, v
             run.changes += 1
             if run.state == FAULT and run.changes >= CLEAR:
                 run.state = OK
-                out.append((OK, v))
+                out.append((i, OK, v))
     return out

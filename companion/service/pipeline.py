@@ -36,7 +36,7 @@ from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTI
 from companion.service.allan_check import bias_extra_var
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
-from companion.service.frozen_hook import watch_rows
+from companion.service.frozen_hook import say_frozen, watch_rows
 from companion.service.pipeline_config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
 from companion.service.imu_summary import fault_texts, final_terms, send_final, summary_rows, too_slow_note
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
@@ -64,7 +64,7 @@ class Pipeline:
         self.armed = False
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
-        self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
+        self.frozen, self.frozen_events = FrozenWatch(), []  # dead or frozen axes at any rate (service.frozen_hook)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
@@ -304,6 +304,7 @@ class Pipeline:
         self._set_state(ch)
 
     def _close_block(self, ch: Channel, data: np.ndarray, rate_event: str | None) -> None:
+        say_frozen(self)
         if self._off_rate(ch, data, rate_event):
             return
         st = ch.stats(data)
