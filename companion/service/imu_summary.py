@@ -121,6 +121,7 @@ def too_slow_note(ch) -> str | None:
     if per_block >= MIN_NOISE_SAMPLES:
         return None
     return (f"IMU{ch.imu}: at {ch.rate_hz:.1f} Hz a {ch.cfg.block_s:g}-s block holds {per_block} samples, "
-            f"fewer than the {MIN_NOISE_SAMPLES} the noise, bias, spikes and stuck-at-rest tests need: only a dead "
-            "gyro, a gyro frozen in flight, a disagreement with another IMU and the Allan terms are watched "
-            "(stream it at 4 Hz or more)")
+            f"fewer than the {MIN_NOISE_SAMPLES} the noise, bias, spikes and stuck-at-rest tests need: watched are a "
+            "gyro that holds one value (0: dead) while the vehicle moves, sample by sample, a reading at the "
+            "message's range, a disagreement with another IMU and the Allan terms, whose Q and N are aliased "
+            f"below {2.0 * ch.rate_hz:.2g} Hz of noise bandwidth (stream it at 4 Hz or more)")
