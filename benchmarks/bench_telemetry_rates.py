@@ -36,14 +36,15 @@ from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
 from companion.service.pipeline import Pipeline
 from companion.service.pipeline_config import PipelineConfig
-from companion.sim.vehicle import IMU_MESSAGES, Schedule, VehicleSimulator, WarmUp
+from companion.sim.vehicle import IMU_MESSAGES, Flight, Handling, Schedule, VehicleSimulator, WarmUp
 
 MODEL = {"rate_hz": 50.0, "axes": {
     **{a: [{"effect": "white_noise", "N": 6.2e-5}, {"effect": "bias_instability", "B": 1e-4},
            {"effect": "random_walk", "K": 2e-5}] for a in ("gx", "gy", "gz")},
     **{a: [{"effect": "white_noise", "N": 2e-3}] for a in ("ax", "ay", "az")}}}
 LSB_G, LSB_A = 1e-3, 9.80665e-3
-NAMED = re.compile(r"^IMU(\d) gyro [XYZ] (reads 0 while moving: dead|reads exactly 0: dead|stuck)")
+NAMED = re.compile(r"^IMU(\d) gyro [XYZ] (reads 0 while moving: dead|reads exactly 0: dead|reads 0: dead or below "
+                   r"resolution|stuck)")
 
 
 class Sink:
@@ -71,16 +72,16 @@ def sim_run(seed: int, rate: float, hours: float, imus: int, dead: bool, watch_o
     many IMU-hours: the whole pipeline costs ~0.1 s of CPU per simulated second); returns the pipeline (or the
     watch's events) and, for a dead run, the onset and the IMU."""
     dur = hours * 3600.0
-    sch = Schedule.random(dur, seed=seed, flights_per_hour=3, handlings_per_hour=2, flight_s=(300.0, 900.0))
+    if dead:  # a handling, then one flight over most of the run: the gyro dies in the air
+        sch = Schedule(flights=[Flight(200.0, dur - 100.0)], handlings=[Handling(100.0, 20.0)])
+    else:
+        sch = Schedule.random(dur, seed=seed, flights_per_hour=3, handlings_per_hour=2, flight_s=(300.0, 900.0))
     sim = VehicleSimulator(MODEL, imus=imus, seed=seed, schedule=sch, warmup=WarmUp())
     rng = np.random.default_rng(seed + 1000)
     onset, bad = None, None
     if dead:
-        fl = [f for f in sch.flights if f.disarm_at - f.arm_at > 240]
-        if not fl:
-            return {}
-        f = fl[len(fl) // 2]
-        onset = sim.t_start + f.arm_at + rng.uniform(60, f.disarm_at - f.arm_at - 180)
+        f = sch.flights[0]
+        onset = sim.t_start + f.arm_at + rng.uniform(60.0, f.disarm_at - f.arm_at - 180.0)
         bad = int(rng.integers(imus))
     p = Pipeline(PipelineConfig(), Reporter(Sink(), 1.0))
     watch, events = FrozenWatch(), []
@@ -177,9 +178,15 @@ def watch_only(rates, seeds: int, hours: float, imus: int) -> bool:
 
 
 def real_logs() -> list[Path]:
-    shared = results.SHARED_DATA / "tlogs" / "ardusub_2023-04-18.tlog"
+    name = Path("tlogs") / "ardusub_2023-04-18.tlog"
+    shared = [results.SHARED_DATA / name, Path("/work/shared/data") / name]
     more = sorted(glob.glob("/work/reallogs/ardusub/*.tlog")) + sorted(glob.glob("/work/reallogs/tlogs_extra/*.tlog"))
-    return [p for p in [shared] + [Path(m) for m in more] if p.exists()]
+    out, sizes = [], set()
+    for p in shared + [Path(m) for m in more]:
+        if p.exists() and p.stat().st_size not in sizes:  # the shared ArduSub tlog is also in reallogs/ardusub
+            sizes.add(p.stat().st_size)
+            out.append(p)
+    return out
 
 
 def replay(path) -> Pipeline:
@@ -224,14 +231,14 @@ def real(logs) -> bool:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rates", type=float, nargs="+", default=[1.0, 2.0, 4.0, 10.0])
-    ap.add_argument("--seeds", type=int, default=5, help="healthy and dead runs per rate")
-    ap.add_argument("--hours", type=float, default=2.0, help="hours per simulated run")
+    ap.add_argument("--seeds", type=int, default=1, help="healthy and dead runs per rate through the pipeline")
+    ap.add_argument("--hours", type=float, default=0.35, help="hours per simulated run through the pipeline")
     ap.add_argument("--imus", type=int, default=3)
-    ap.add_argument("--watch-hours", type=float, default=9.0, help="hours per healthy run of the dead/frozen "
+    ap.add_argument("--watch-hours", type=float, default=3.0, help="hours per healthy run of the dead/frozen "
                     "test alone (3 runs per rate)")
     ap.add_argument("--no-real", action="store_true", help="skip the real tlogs")
     ap.add_argument("--no-sim", action="store_true", help="skip the simulated runs")
-    args = results.parse_args(ap, {"seeds": 1, "hours": 1.0, "watch_hours": 3.0})
+    args = results.parse_args(ap, {"seeds": 1, "hours": 0.35, "watch_hours": 0.5})
     ok = True
     if not args.no_sim:
         print(f"simulated telemetry: {args.imus} IMUs, {args.seeds} healthy + {args.seeds} dead runs of "
@@ -247,4 +254,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(results.run(main))
+    import sys
+
+    part = " real" if "--no-sim" in sys.argv else " sim" if "--no-real" in sys.argv else ""
+    raise SystemExit(results.run(main, "bench_telemetry_rates" + part))

@@ -4,8 +4,8 @@ mid-flight), for the dead-gyro figures of bench_telemetry_rates.py.
 The frames are found by the project's walker (companion.sources.tlog.scan); in each selected frame the
 xgyro, ygyro, zgyro bytes are set to 0 and the frame's CRC is recomputed (CRC-16/MCRF4XX with the
 message's CRC_EXTRA, companion.sources.messages.crc_x25_rows); every other byte is copied as it was.
-Message time is the frame's own (time_boot_ms / time_usec), so "from the middle on" is the middle of the
-IMU's own samples.
+"From the middle on" is from the middle one of the message's frames in file order; that frame's message
+time (time_boot_ms / time_usec) is the onset the benchmark measures delays from.
 
     python -m benchmarks.tlog_zero_gyro IN.tlog OUT.tlog --message RAW_IMU [--from-s T]
 """
@@ -23,8 +23,9 @@ from companion.sources import tlog
 
 def zero_gyro(src, dst, message: str, from_frac: float = 0.5, from_s: float | None = None) -> dict:
     """Copy ``src`` to ``dst`` with the gyro of ``message`` (sysid of its first frame) set to 0 in every
-    frame at or after ``from_s`` of message time (default: the time half-way through its frames, by
-    count ``from_frac``). Returns {"t0": the first zeroed time (s), "frames": frames zeroed, "total": frames}."""
+    frame at or after ``from_s`` of message time (default: every frame from the one ``from_frac`` of the
+    way through its frames, in file order). Returns {"t0": the first zeroed frame's time (s), "frames":
+    frames zeroed, "total": frames}."""
     data = tlog.read_file(Path(src))
     idx = tlog.scan(data)
     lay = M.IMU_LAYOUTS[message]
@@ -35,8 +36,12 @@ def zero_gyro(src, dst, message: str, from_frac: float = 0.5, from_s: float | No
     rec = idx.payloads(sel, lay.full_len).view(lay.dtype).reshape(-1)
     tname = lay.dtype.names[0]
     t = rec[tname].astype(np.float64) * (1e-6 if tname == "time_usec" else 1e-3)
-    t0 = float(np.sort(t)[int(from_frac * (t.size - 1))]) if from_s is None else float(from_s)
-    hit = sel[t >= t0]
+    if from_s is None:  # from the middle frame on, in file order (a log with a reboot restarts its time)
+        k0 = int(from_frac * (t.size - 1))
+        t0, hit = float(t[k0]), sel[k0:]
+    else:
+        t0 = float(from_s)
+        hit = sel[t >= t0]
     buf = idx.buf.copy()
     offs = [lay.dtype.fields[f][1] for f in ("xgyro", "ygyro", "zgyro")]
     for f in hit.tolist():
