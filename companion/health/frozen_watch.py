@@ -64,7 +64,10 @@ class ImuTrack:
     runs: list = field(default_factory=lambda: [AxisRun() for _ in AXES])
     equal_pairs: int = 0
     motion_pairs: int = 0  # equal pairs that were motion (all axes counted)
-    zero_still: int = 0  # pairs reading 0 on an axis without motion (the resolution note)
+    #: per axis: pairs reading 0 twice without motion, and pairs that changed while motion showed (a gyro
+    #: reading 0 at rest but alive in motion is below the message's resolution: the summary's note)
+    zero_still: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
+    alive_moving: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
 
 
 class FrozenWatch:
@@ -118,11 +121,12 @@ class FrozenWatch:
         tr.next_pair = int(k[-1]) + 1
         equal = tr.g[k] == tr.g[k - 1]
         motion = self._twin_motion(imu, tr.t[k - 1], tr.t[k])
-        turn = accel_motion(tr.a[k - 1], tr.a[k]) & np.all(equal, axis=1)
-        motion |= turn[:, None]
+        turn = accel_motion(tr.a[k - 1], tr.a[k])
+        tr.alive_moving += ((motion | turn[:, None]) & ~equal).sum(axis=0)
+        motion |= (turn & np.all(equal, axis=1))[:, None]
         tr.equal_pairs += int(equal.sum())
         tr.motion_pairs += int((equal & motion).sum())
-        tr.zero_still += int((equal & ~motion & (tr.g[k] == 0.0)).sum())
+        tr.zero_still += (equal & ~motion & (tr.g[k] == 0.0)).sum(axis=0)
         events = []
         for j, ax in enumerate(AXES):
             run = tr.runs[j]
@@ -154,6 +158,15 @@ class FrozenWatch:
             if cut > 0:
                 tr.t, tr.g, tr.a = tr.t[cut:], tr.g[cut:], tr.a[cut:]
                 tr.next_pair -= cut
+
+    def below_resolution(self, imu: int, min_pairs: int = 20) -> list[str]:
+        """The axes that read 0 at rest (``min_pairs`` pairs or more) and changed while the vehicle moved
+        (``min_pairs`` too), and are not held dead: alive, quieter than the message's step at rest."""
+        tr = self.imus.get(imu)
+        if tr is None:
+            return []
+        return [ax for j, ax in enumerate(AXES) if tr.zero_still[j] >= min_pairs
+                and tr.alive_moving[j] >= min_pairs and tr.runs[j].state == OK]
 
     def active(self, imu: int) -> list[tuple[str, str]]:
         """(kind, axis) of the axes this test holds as dead or stuck."""

@@ -19,7 +19,7 @@ LSB = 1e-3
 MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
 
 
-def telemetry(rate: float, seconds: float, seed: int, imus: int = 2, armed_at: float = 20.0):
+def telemetry(rate: float, seconds: float, seed: int, imus: int = 2, armed_at: float = 20.0, rest_noise: float = 2e-3):
     """(t, gyro per IMU, accel per IMU): a vehicle at rest, flying from ``armed_at`` (body rates of +-0.5
     rad/s changing from sample to sample, the accelerometer turning with the attitude), sampled at ``rate``
     with +-20 % jitter and 3 % of the messages lost, gyro in 1 mrad/s steps."""
@@ -31,7 +31,7 @@ def telemetry(rate: float, seconds: float, seed: int, imus: int = 2, armed_at: f
     w = np.where(fly, rng.uniform(-0.5, 0.5, (t.size, 3)), 0.0)
     tilt = np.where(fly, rng.uniform(-0.3, 0.3, (t.size, 2)), 0.02)
     acc = np.column_stack([9.81 * np.sin(tilt[:, 0]), 9.81 * np.sin(tilt[:, 1]), -9.81 * np.cos(tilt[:, 0])])
-    g = [np.round((w + rng.normal(0, 2e-3, w.shape) + np.where(fly, rng.normal(0, 0.02, w.shape), 0)) / LSB) * LSB
+    g = [np.round((w + rng.normal(0, rest_noise, w.shape) + np.where(fly, rng.normal(0, 0.02, w.shape), 0)) / LSB) * LSB
          for _ in range(imus)]
     a = [acc + rng.normal(0, 0.05, acc.shape) for _ in range(imus)]
     return t, g, a
@@ -98,3 +98,19 @@ def test_a_healthy_pair_at_1hz_raises_nothing():
     p, _ = run(t, g, a)
     assert [x for x in p.transitions if "cleared" not in x[1]] == []
     assert all(ch.rate_hz for ch in p.channels.values())
+
+
+def test_a_gyro_below_resolution_at_rest_is_told_apart_from_a_dead_one():
+    """SITL-like: every gyro reads exactly 0 at rest (noise far below 1 mrad/s), then flies: no fault, and
+    the summary says the gyro is alive, below RAW_IMU's step, and to ask for HIGHRES_IMU."""
+    t, g, a = telemetry(2.0, 200.0, seed=8, imus=2, armed_at=100.0, rest_noise=1e-5)
+    assert np.all(g[0][t < 100.0] == 0.0)
+    p, _ = run(t, g, a, armed_at=100.0)
+    # at rest the block test says what it can ("dead or below resolution", a WARNING); nothing says dead
+    # once it moved, and its warnings clear then
+    said = [text for _, text in p.transitions]
+    assert not [x for x in said if "while moving" in x or "stuck" in x], said
+    assert all(("IMU0" in x or "IMU1" in x) and "dead or below resolution" in x for x in said if "cleared" not in x)
+    assert not [row["faults"] for row in p.summary() if row["faults"]]
+    notes = [n for row in p.summary() for n in row["notes"] if "HIGHRES_IMU" in n and "alive" in n]
+    assert len(notes) == 2 and "gyro X, Y, Z read exactly 0 at rest" in notes[0]
