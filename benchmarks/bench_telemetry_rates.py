@@ -213,8 +213,10 @@ def real(logs) -> bool:
                 z = Path(d) / "z.tlog"
                 info = zero_gyro(path, z, s.key.message)
                 pz = replay(z)
-                _, delay = judge(pz, info["t0"], s.key.instance)
-                fz = [x for x in judge(pz, info["t0"], s.key.instance)[0]]
+                # the onset on the replay's time axis (a log with a reboot has its later sessions shifted)
+                zs = [x for x in load(str(z)).streams if x.key == s.key][0]
+                onset = float(zs.t[zs.t.size - info["frames"]]) if zs.t.size == info["total"] else info["t0"]
+                fz, delay = judge(pz, onset, s.key.instance)
                 target = max(60.0, 60.0 / s.rate_hz)
                 named.append(f"{s.key.message} " + ("not named" if delay is None else f"{delay:.1f} s")
                              + (f" (+{len(fz)} false)" if fz else ""))

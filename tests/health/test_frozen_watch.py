@@ -35,7 +35,7 @@ def feed(watch, t, g, a, chunk: int = 1):
 
 @pytest.mark.parametrize("rate", [1.0, 2.0, 4.0, 10.0])
 def test_a_gyro_zeroed_in_flight_is_named_after_need_motion_pairs(rate):
-    t, g, a = flight(rate, 200.0, seed=int(rate))
+    t, g, a = flight(rate, 120.0, seed=int(rate))
     k0 = t.size // 2
     g[1][k0:] = 0.0
     events = feed(FrozenWatch(), t, g, a)
@@ -56,10 +56,10 @@ def test_one_imu_alone_is_named_by_its_accelerometer_and_a_frozen_value_is_stuck
     assert all(te == pytest.approx(t[k0 + NEED]) for te, _ in events)
 
 
-@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize("seed", range(8))
 def test_live_gyros_in_flight_never_named(seed):
-    t, g, a = flight([1.0, 2.0, 4.0, 10.0][seed % 4], 600.0, seed=100 + seed, imus=3)
-    assert feed(FrozenWatch(), t, g, a) == []
+    t, g, a = flight([1.0, 2.0, 4.0, 10.0][seed % 4], 300.0, seed=100 + seed, imus=3)
+    assert feed(FrozenWatch(), t, g, a, chunk=4) == []
 
 
 def test_zero_at_rest_is_resolution_not_dead_and_motion_then_names_it():
@@ -71,7 +71,7 @@ def test_zero_at_rest_is_resolution_not_dead_and_motion_then_names_it():
     g0, g1 = np.zeros((n, 3)), np.zeros((n, 3))
     w = FrozenWatch()
     assert feed(w, t, [g0, g1], [acc, acc]) == []
-    assert w.imus[0].zero_still > 0.9 * 3 * (n - 1)
+    assert w.imus[0].zero_still.sum() > 0.9 * 3 * (n - 1)
     # now the vehicle moves: IMU1 follows, IMU0 stays at 0
     t2 = t + n
     g1m = np.round(np.random.default_rng(1).uniform(-0.5, 0.5, (n, 3)) / LSB) * LSB
