@@ -38,6 +38,17 @@ ACCEL_TURN = 0.1  # rad: the accelerometer turning this much between two samples
 ACCEL_STEP = 2.0  # m/s^2: or changing this much
 NEED = 6  # motion pairs within one run of equal values that name the axis
 CLEAR = 3  # pairs in a row that change, which clear it
+#: at rest (no twin moving, the accelerometer within CALM_TURN and CALM_STEP between the two samples) a gyro
+#: that resolves its own noise changes value in a share p of the pairs, learned over CALM_LEARN calm pairs;
+#: where p >= CALM_P an axis holding one value for L calm pairs with (1 - (p - CALM_MARGIN))^L < CALM_ALPHA
+#: is named too (a single IMU that died while its vehicle rests); a gyro quieter than its step never is
+CALM_TURN = 0.02  # rad
+CALM_STEP = 0.3  # m/s^2
+CALM_LEARN = 100
+CALM_STREAK = 5  # equal pairs in a row beyond which calm pairs are not learned (a dead run would lower p)
+CALM_P = 0.8
+CALM_MARGIN = 0.25
+CALM_ALPHA = 1e-12
 HISTORY_S = 30.0  # seconds of samples kept per IMU (the twins' look-up, the pending pairs)
 WAIT_S = 5.0  # a pair waits for the other IMUs' samples up to this long, then is judged with what there is
 
@@ -46,11 +57,14 @@ WAIT_S = 5.0  # a pair waits for the other IMUs' samples up to this long, then i
 class AxisRun:
     """The run of equal values of one axis: its motion pairs so far, the changes in a row, the state."""
 
-    motion: int = 0
+    motion: float = 0.0  # evidence of the run so far: 1 names it (NEED motion pairs, or calm pairs, see CALM_P)
     changes: int = 0
     state: int = OK
     value: float = math.nan
     kind: str = "dead"  # what it was named: "dead" (exactly 0) or "stuck"
+    streak: int = 0  # equal pairs in a row up to the last judged pair
+    moved: int = 0  # motion pairs in the run (named "while moving" when the motion alone names it)
+    detail: str = "moving"  # the words of the naming: "moving", or "float" ("reads exactly 0") at rest
 
 
 @dataclass
@@ -68,6 +82,18 @@ class ImuTrack:
     #: reading 0 at rest but alive in motion is below the message's resolution: the summary's note)
     zero_still: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
     alive_moving: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
+    calm: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))  # calm pairs while healthy
+    calm_changed: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))  # ... that changed
+
+    def calm_weight(self) -> np.ndarray:
+        """Per axis the evidence of one calm equal pair (0 where the rest share p is unknown or low)."""
+        w = np.zeros(3)
+        for j in range(3):
+            if self.calm[j] >= CALM_LEARN:
+                p = self.calm_changed[j] / self.calm[j]
+                if p >= CALM_P:
+                    w[j] = math.log(1.0 - (p - CALM_MARGIN)) / math.log(CALM_ALPHA)
+        return w
 
 
 class FrozenWatch:
@@ -123,19 +149,37 @@ class FrozenWatch:
         motion = self._twin_motion(imu, tr.t[k - 1], tr.t[k])
         turn = accel_motion(tr.a[k - 1], tr.a[k])
         tr.alive_moving += ((motion | turn[:, None]) & ~equal).sum(axis=0)
+        calm = accel_calm(tr.a[k - 1], tr.a[k]) & ~np.any(motion, axis=1)
         motion |= (turn & np.all(equal, axis=1))[:, None]
+        weight = np.where(motion & equal, 1.0 / NEED, 0.0) + np.where(calm[:, None] & equal, tr.calm_weight(), 0.0)
+        learn = calm[:, None] & (self._streaks(tr, equal) <= CALM_STREAK)
+        tr.calm += learn.sum(axis=0)
+        tr.calm_changed += (learn & ~equal).sum(axis=0)
         tr.equal_pairs += int(equal.sum())
         tr.motion_pairs += int((equal & motion).sum())
         tr.zero_still += (equal & ~motion & (tr.g[k] == 0.0)).sum(axis=0)
         events = []
         for j, ax in enumerate(AXES):
             run = tr.runs[j]
-            for i, state, value in step_axis(run, equal[:, j], motion[:, j], tr.g[k, j]):
+            for i, state, value in step_axis(run, equal[:, j], weight[:, j], tr.g[k, j], motion[:, j]):
                 if state == FAULT:
                     run.kind = "dead" if value == 0.0 else "stuck"
-                events.append((float(tr.t[k[i]]), FaultEvent(imu, ax, run.kind, state, value, detail="moving",
+                    run.detail = "moving" if run.moved >= NEED else "float"
+                events.append((float(tr.t[k[i]]), FaultEvent(imu, ax, run.kind, state, value, detail=run.detail,
                                                               critical=True)))
         return events
+
+    @staticmethod
+    def _streaks(tr: ImuTrack, equal: np.ndarray) -> np.ndarray:
+        """(n, 3): equal pairs in a row ending at each pair (0 at a change), carried over from the last call."""
+        n = equal.shape[0]
+        i = np.arange(n)[:, None]
+        last = np.maximum.accumulate(np.where(~equal, i, -1), axis=0)
+        carry = np.array([r.streak for r in tr.runs])[None, :]
+        streak = np.where(last < 0, i + 1 + carry, i - last)
+        for j, r in enumerate(tr.runs):
+            r.streak = int(streak[-1, j])
+        return streak
 
     def _twin_motion(self, imu: int, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
         """(n, 3): another IMU's axis moved by TWIN_STEP between its samples nearest ``t0`` and ``t1``
@@ -168,6 +212,10 @@ class FrozenWatch:
         return [ax for j, ax in enumerate(AXES) if tr.zero_still[j] >= min_pairs
                 and tr.alive_moving[j] >= min_pairs and tr.runs[j].state == OK]
 
+    def detail(self, imu: int, axis: str) -> str:
+        """The words of an axis this test holds: "moving" or "float" (named at rest)."""
+        return self.imus[imu].runs[AXES.index(axis)].detail
+
     def active(self, imu: int) -> list[tuple[str, str]]:
         """(kind, axis) of the axes this test holds as dead or stuck."""
         tr = self.imus.get(imu)
@@ -194,28 +242,41 @@ def accel_motion(a0: np.ndarray, a1: np.ndarray) -> np.ndarray:
     return valid & (turn | step)
 
 
-def step_axis(run: AxisRun, equal: np.ndarray, motion: np.ndarray,
-              value: np.ndarray) -> list[tuple[int, int, float]]:
-    """Advance one axis' run over judged pairs; its state changes in order, as (pair, state, value)."""
-    moving = motion & equal
+def accel_calm(a0: np.ndarray, a1: np.ndarray) -> np.ndarray:
+    """(n,): the accelerometer turned by less than CALM_TURN and changed by less than CALM_STEP."""
+    n0, n1 = np.linalg.norm(a0, axis=1), np.linalg.norm(a1, axis=1)
+    valid = (n0 > 0) & (n1 > 0) & np.all(np.isfinite(a0) & np.isfinite(a1), axis=1)
+    cos = np.sum(a0 * a1, axis=1) / np.where(valid, n0 * n1, 1.0)
+    turn = np.arccos(np.clip(cos, -1.0, 1.0))
+    return valid & (turn < CALM_TURN) & (np.linalg.norm(a1 - a0, axis=1) < CALM_STEP)
+
+
+def step_axis(run: AxisRun, equal: np.ndarray, weight: np.ndarray, value: np.ndarray,
+              motion: np.ndarray | None = None) -> list[tuple[int, int, float]]:
+    """Advance one axis' run over judged pairs (``weight``: each equal pair's evidence); its state changes in
+    order, as (pair, state, value)."""
+    moving = (weight > 0) & equal
+    motion = np.zeros_like(equal) if motion is None else motion & equal
     if run.state == OK and not moving.any():  # the usual case, at any rate: nothing to count one by one
         if not equal.all():
-            run.motion = 0
+            run.motion, run.moved = 0.0, 0
             run.changes = int(equal.size - 1 - np.flatnonzero(equal)[-1]) if equal.any() else run.changes + equal.size
         run.value = float(value[-1])
         return []
     out = []
-    for i, (e, m, v) in enumerate(zip(equal.tolist(), moving.tolist(), value.tolist())):
+    for i, (e, m, v, mv) in enumerate(zip(equal.tolist(), np.where(moving, weight, 0.0).tolist(), value.tolist(),
+                                          motion.tolist())):
         if e:
             if run.value != v:
-                run.motion = 0
+                run.motion, run.moved = 0.0, 0
             run.value, run.changes = v, 0
-            run.motion += int(m)
-            if run.state == OK and run.motion >= NEED:
+            run.motion += m
+            run.moved += int(mv)
+            if run.state == OK and run.motion >= 1.0 - 1e-9:
                 run.state = FAULT
                 out.append((i, FAULT, v))
         else:
-            run.motion, run.value = 0, v
+            run.motion, run.moved, run.value = 0.0, 0, v
             run.changes += 1
             if run.state == FAULT and run.changes >= CLEAR:
                 run.state = OK

@@ -74,6 +74,7 @@ class ImuFaults:
         self.axes = {ax: AxisFaults(abs_limit, self.limits, coded_lsb) for ax in AXES}
         self.timing = TimingDetector(stamp_res)
         self.external: dict[tuple[str, str], int] = {}  # (kind, axis) -> state, e.g. ("disagree", "gx")
+        self.external_detail: dict[str, str] = {}  # axis -> the words of an external "dead" (frozen_hook)
         self.quiet_blocks = 0
         self.accel_ref = math.nan  # pooled accel second-difference variance of still blocks ((m/s^2)^2)
         self._accel = [0.0, 0]  # its sum and block count while it is learned
@@ -218,7 +219,7 @@ class ImuFaults:
         if kind == "rate":
             return self.timing.detail
         if kind == "dead" and (kind, axis) in self.external:
-            return "moving"
+            return self.external_detail.get(axis, "moving")
         return self.axes[axis].stuck.detail if kind == "dead" and axis in self.axes else ""
 
     def restart(self) -> None:

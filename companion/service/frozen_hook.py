@@ -30,6 +30,7 @@ def say_frozen(pipeline) -> None:
             continue
         own = (ev.kind, ev.axis) in target.faults.active() and (ev.kind, ev.axis) not in target.faults.external
         target.faults.set_external(ev.kind, ev.axis, ev.state)
+        target.faults.external_detail[ev.axis] = ev.detail
         if ev.state == FAULT and own:  # the block tests said it already
             pipeline._set_state(target)
             continue
@@ -39,4 +40,5 @@ def say_frozen(pipeline) -> None:
         for kind, ax in pipeline.frozen.active(imu):
             if other.faults.external.get((kind, ax)) != FAULT:
                 other.faults.set_external(kind, ax, FAULT)
+                other.faults.external_detail[ax] = pipeline.frozen.detail(imu, ax)
                 pipeline._set_state(other)

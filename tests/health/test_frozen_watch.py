@@ -99,3 +99,31 @@ def test_same_events_however_the_samples_are_split(chunk):
     assert sorted((te, ev.imu, ev.axis, ev.kind, ev.state) for te, ev in one) == \
         sorted((te, ev.imu, ev.axis, ev.kind, ev.state) for te, ev in many)
     assert len(one) == 6
+
+
+def rest(n: int, noise_lsb: float, seed: int):
+    """One IMU at rest at 2 Hz: gyro noise of ``noise_lsb`` steps around a small bias, accel still."""
+    rng = np.random.default_rng(seed)
+    t = 1.0 + np.arange(n) / 2.0
+    g = np.round((0.0004 + rng.normal(0, noise_lsb * LSB, (n, 3))) / LSB) * LSB
+    a = np.tile([0.1, -0.05, -9.81], (n, 1)) + rng.normal(0, 0.01, (n, 3))
+    return t, g, a
+
+
+def test_a_gyro_that_resolves_its_noise_at_rest_is_named_when_it_dies_at_rest():
+    """A single IMU at rest whose gyro changes value in most pairs (noise of 3 steps: p ~ 0.9): zeroed,
+    it is named after L calm pairs, L from the learned p (about 20 at p = 0.9), without any motion."""
+    t, g, a = rest(600, 3.0, seed=1)
+    g[300:] = 0.0
+    events = feed(FrozenWatch(), t, [g], [a])
+    assert {(ev.kind, ev.detail) for _, ev in events} == {("dead", "float")}
+    first = min(te for te, _ in events)
+    assert t[300] < first <= t[300 + 40]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_quiet_gyro_at_rest_is_never_named(seed):
+    """Noise of 0.3-1 steps (a gyro that repeats its code at rest by nature): p < 0.8, the calm rule stays
+    off whatever its runs of equal values."""
+    t, g, a = rest(3000, [0.3, 0.5, 1.0][seed % 3], seed=10 + seed)
+    assert feed(FrozenWatch(), t, [g], [a], chunk=7) == []
