@@ -99,9 +99,11 @@ def sim_run(seed: int, rate: float, hours: float, imus: int, dead: bool, watch_o
                     g[blk.t[j] >= onset] = 0.0
                 a = np.round(blk.accel[i][j] / LSB_A) * LSB_A
                 if watch_only:
-                    events += watch.add(i, blk.t[j], g, a)
+                    watch.add(i, blk.t[j], g, a)
                 else:
                     p.on_samples(keys[i], blk.t[j], g, a)
+            if watch_only:
+                events += watch.judge()
     return {"pipeline": p, "events": events, "onset": onset, "bad": bad, "dur": dur}
 
 

@@ -4,9 +4,10 @@ and whether or not its blocks are held back (a rate being learned, blocks off th
 held on the IMU's fault code as an external fault (``ImuFaults.set_external``), as a disagreement is, and
 said once (STATUSTEXT, run log) unless the block tests already say the same.
 
-Its events are said at the next block close of any IMU (:func:`say_frozen`), with the message time of the
-sample that decided them: a replay feeds the samples between two block closes in any order
-(service/replay.py), and what is sent must not depend on that order."""
+The samples are judged at every block close of any IMU (:func:`say_frozen`; once a block, not once a sample,
+for a live link at 400 Hz) and the events said with the message time of the sample that decided them: a
+replay feeds the samples between two block closes in any order (service/replay.py), and what is sent must
+not depend on that order."""
 
 from __future__ import annotations
 
@@ -16,15 +17,14 @@ from companion.health.faults import FAULT
 
 
 def watch_rows(pipeline, ch, rows: np.ndarray) -> None:
-    """Hand one IMU's rows ``(t, gx, gy, gz, ax, ay, az, ...)`` to the watch; its events wait for
+    """Hand one IMU's rows ``(t, gx, gy, gz, ax, ay, az, ...)`` to the watch; they are judged at
     :func:`say_frozen`."""
-    pipeline.frozen_events += pipeline.frozen.add(ch.imu, rows[:, 0], rows[:, 1:4], rows[:, 4:7])
+    pipeline.frozen.add(ch.imu, rows[:, 0], rows[:, 1:4], rows[:, 4:7])
 
 
 def say_frozen(pipeline) -> None:
     """At a block close: the watch's events so far on the IMUs' fault codes, the log and STATUSTEXT."""
-    events, pipeline.frozen_events = pipeline.frozen_events, []
-    for t, ev in sorted(events, key=lambda te: te[0]):
+    for t, ev in pipeline.frozen.judge():
         target = pipeline.channels.get(ev.imu)
         if target is None:
             continue

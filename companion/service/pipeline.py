@@ -64,7 +64,7 @@ class Pipeline:
         self.armed = False
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
-        self.frozen, self.frozen_events = FrozenWatch(), []  # dead or frozen axes at any rate (service.frozen_hook)
+        self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)

@@ -29,7 +29,8 @@ def feed(watch, t, g, a, chunk: int = 1):
     events = []
     for k in range(0, t.size, chunk):
         for i in range(len(g)):
-            events += watch.add(i, t[k:k + chunk], g[i][k:k + chunk], a[i][k:k + chunk])
+            watch.add(i, t[k:k + chunk], g[i][k:k + chunk], a[i][k:k + chunk])
+        events += watch.judge()
     return events
 
 
