@@ -74,6 +74,7 @@ class ImuFaults:
         self.axes = {ax: AxisFaults(abs_limit, self.limits, coded_lsb) for ax in AXES}
         self.timing = TimingDetector(stamp_res)
         self.external: dict[tuple[str, str], int] = {}  # (kind, axis) -> state, e.g. ("disagree", "gx")
+        self.external_detail: dict[str, str] = {}  # axis -> the words of an external "dead" (frozen_hook)
         self.quiet_blocks = 0
         self.accel_ref = math.nan  # pooled accel second-difference variance of still blocks ((m/s^2)^2)
         self._accel = [0.0, 0]  # its sum and block count while it is learned
@@ -208,7 +209,8 @@ class ImuFaults:
 
     def event_of(self, kind: str, axis: str) -> FaultEvent:
         """The FAULT event of an active per-axis fault as its detector said it: value, words, severity."""
-        crit = kind in ("stuck", "dead") and self.axes[axis].stuck.critical
+        # held by the sample-level test (health/frozen_watch.py): a value held while the vehicle moves
+        crit = kind in ("stuck", "dead") and (self.axes[axis].stuck.critical or (kind, axis) in self.external)
         return FaultEvent(self.imu, axis, kind, FAULT, self.value_of(kind, axis), self.detail_of(kind, axis), crit)
 
     def detail_of(self, kind: str, axis: str) -> str:
@@ -216,6 +218,8 @@ class ImuFaults:
         timing's rate or jitter)."""
         if kind == "rate":
             return self.timing.detail
+        if kind == "dead" and (kind, axis) in self.external:
+            return self.external_detail.get(axis, "moving")
         return self.axes[axis].stuck.detail if kind == "dead" and axis in self.axes else ""
 
     def restart(self) -> None:

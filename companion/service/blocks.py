@@ -10,8 +10,11 @@ a repeated one is a duplicate and one slightly behind goes backwards (both dropp
 interval longer than ``gap_s`` (and, once the rate is known, than GAP_PERIODS periods) is a gap (the partial
 block is dropped). A block closes at the first sample with ``t - t0 >= block_s - period / 2``.
 
-The rate is 1 / :func:`companion.sources.timestamps.period_of` of the last 64 intervals, taken at the first
-block close with 8 intervals and re-taken at every close; a change of more than 20 % is reported.
+The rate is 1 / :func:`companion.sources.timestamps.period_of` of the last RATE_WINDOW intervals, taken at the
+first block close with 8 intervals and re-taken at every close; a change of more than 20 % is reported. Every
+forward interval enters the window, gaps too: period_of starts from their median, so an occasional long gap
+or a burst moves it little, and a stream whose every interval is longer than ``gap_s`` (a 1 Hz telemetry
+stream, intervals of 0.5 to 2 s) still gets its rate, after which its gap rule is GAP_PERIODS periods.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ MIN_INTERVALS = 8  # intervals before the rate is taken
 #: telemetry stream at 2 Hz, a PX4 log's vehicle_imu) half the intervals are a little over 0.5 s,
 #: and with ``gap_s`` alone each would be a gap that drops the block: the stream would never fill one
 GAP_PERIODS = 2.5
+RATE_WINDOW = 64  # intervals whose robust period is the stream's rate
 
 
 class BlockCutter:
@@ -40,7 +44,7 @@ class BlockCutter:
         # the period is unknown until the first blocks: the configured thresholds stand in for it
         self.rules = step_rules(0.0, time_res, reset_s=reset_s, gap_s=gap_s)
         self.last_t: float | None = None
-        self.dts: deque = deque(maxlen=64)
+        self.dts: deque = deque(maxlen=RATE_WINDOW)
         self.rate_hz: float | None = None
         self.prev_rate_hz: float | None = None  # the rate before the last change
         self._parts: list = []
@@ -89,6 +93,7 @@ class BlockCutter:
                     continue
                 elif kind != OK:  # a gap (a live gap also splits: the same here)
                     self.counts["gaps"] += 1
+                    self.dts.append(float(t[i] - self.last_t))  # the window's median sees it (RATE_WINDOW)
                     self.drop()
                     yield ("gap", float(t[i]))
                 else:

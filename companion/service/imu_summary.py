@@ -16,7 +16,8 @@ def summary_rows(pipeline) -> list[dict]:
     """One row per IMU, sorted by instance."""
     out = []
     for imu, ch in sorted(pipeline.channels.items()):
-        notes = (too_slow_note(ch), all_zero_note(ch), transient_note(ch), rate_note(pipeline, ch))
+        notes = (too_slow_note(ch), all_zero_note(ch), transient_note(ch), rate_note(pipeline, ch),
+                 below_resolution_note(pipeline, ch))
         row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
                "other_rates": ch.kept_rates(), "health": STATE_NAMES[pipeline.health(ch)], "counts": ch.counts,
                "axes": {}, "faults": fault_texts(pipeline, ch), "notes": [n for n in notes if n]}
@@ -121,6 +122,22 @@ def too_slow_note(ch) -> str | None:
     if per_block >= MIN_NOISE_SAMPLES:
         return None
     return (f"IMU{ch.imu}: at {ch.rate_hz:.1f} Hz a {ch.cfg.block_s:g}-s block holds {per_block} samples, "
-            f"fewer than the {MIN_NOISE_SAMPLES} the noise, bias, spikes and stuck-at-rest tests need: only a dead "
-            "gyro, a gyro frozen in flight, a disagreement with another IMU and the Allan terms are watched "
-            "(stream it at 4 Hz or more)")
+            f"fewer than the {MIN_NOISE_SAMPLES} the noise, bias, spikes and stuck-at-rest tests need: watched are a "
+            "gyro that holds one value (0: dead) while the vehicle moves, sample by sample, a reading at the "
+            "message's range, a disagreement with another IMU and the Allan terms, whose Q and N are aliased "
+            f"below {2.0 * ch.rate_hz:.2g} Hz of noise bandwidth (stream it at 4 Hz or more)")
+
+
+def below_resolution_note(pipeline, ch) -> str | None:
+    """A note for an integer-coded gyro whose axes read 0 at rest but changed while the vehicle moved
+    (health/frozen_watch.py): alive, its noise at rest below the message's step; else None."""
+    if ch.message not in INT16_MESSAGES:
+        return None
+    axes = pipeline.frozen.below_resolution(ch.imu)
+    if not axes:
+        return None
+    names = ", ".join(ax[1].upper() for ax in axes)
+    step = (ch.gyro_lsb or 1e-3) * 1e3
+    return (f"IMU{ch.imu}: gyro {names} read exactly 0 at rest and changed while the vehicle moved: alive, its noise "
+            f"at rest below {ch.message}'s {step:.3g} mrad/s step (not dead); ask for HIGHRES_IMU (float rad/s) "
+            "to measure it at rest")

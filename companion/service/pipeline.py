@@ -30,6 +30,7 @@ import numpy as np
 from companion.health.baseline import Baseline
 from companion.health.degradation import DEGRADING, LEARNING
 from companion.health.faults import FAULT, FaultEvent
+from companion.health.frozen_watch import FrozenWatch
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
 from companion.service.allan_check import bias_extra_var
@@ -37,6 +38,8 @@ from companion.service.autopilot_watch import AUTOPILOT_MESSAGES, LinkHealth, on
 from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
 from companion.service.evidence_log import EvidenceLog
+from companion.service.fault_followups import announce_restored, confirm_bias
+from companion.service.frozen_hook import say_frozen, watch_rows
 from companion.service.pipeline_config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
 from companion.service.imu_summary import fault_texts, final_terms, send_final, summary_rows, too_slow_note
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
@@ -45,7 +48,6 @@ from companion.service.imu_group import ImuGroup
 from companion.units import datasheet_unit, to_datasheet
 
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")  # the messages decoded as IMU data
-CONFIRM_BLOCKS = 3  # still blocks after a bias jump is flagged before its size is confirmed
 
 
 class Pipeline:
@@ -64,6 +66,7 @@ class Pipeline:
         self.armed = False
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
+        self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
@@ -180,6 +183,7 @@ class Pipeline:
         if ch is None:
             return 0
         ch.see(rows[:, 1:4])
+        watch_rows(self, ch, rows)
         before = ch.cutter.counts["samples"]
         for ev in ch.cutter.cut(rows):
             kind = ev[0]
@@ -236,6 +240,7 @@ class Pipeline:
             ch = self.channels[key.instance] = Channel(key.instance, key.message, self.cfg, gyro_lsb=lsb)
             self.log(f"IMU{key.instance}: {key.message} from {key.label()}")
             self._apply_filters(ch)
+            self._set_state(ch)  # health and fault code sent from the first second, whatever comes later
         elif ch.message != key.message:
             self.ignored["other_message"] += n
             return None
@@ -307,6 +312,7 @@ class Pipeline:
         self._set_state(ch)
 
     def _close_block(self, ch: Channel, data: np.ndarray, rate_event: str | None) -> None:
+        say_frozen(self)
         if self._off_rate(ch, data, rate_event):
             return
         st = ch.stats(data)
@@ -316,7 +322,7 @@ class Pipeline:
             self._forget_rest(ch, t_end)
         self._report(ch.on_block(data, st, still), t_end)
         if ch.imu in self._restored:
-            self._announce_restored(ch, t_end)
+            announce_restored(self, ch, t_end)
         self._report(self.group.compare(ch.imu, self.channels, self.armed), t_end)
         if rate_event == "first":
             if self.baseline_fixed and self._has_baseline(ch):
@@ -333,7 +339,7 @@ class Pipeline:
         pending, pending_stats = ch.settle(data, st, still)
         if pending is not None:
             self._report(ch.on_quiet(pending_stats, bias_extra_var(self.baseline, ch.imu, self.cfg.block_s), pending), float(pending[-1, 0]))
-            self._confirm_bias(ch, float(pending[-1, 0]))
+            confirm_bias(self, ch, float(pending[-1, 0]))
             if ch.feed(pending):
                 self._learn_done(ch, float(pending[-1, 0]))
 
@@ -404,33 +410,6 @@ class Pipeline:
             if ev.kind != "disagree" and len(self.channels) == 2 and self.group.active():
                 # another fault may tell which of the two disagrees
                 self._report(self.group.name(self.channels, self.armed), t)
-
-    def _announce_restored(self, ch: Channel, t: float) -> None:
-        """The faults a restored state holds as active were said in the run that saved it, not in this one:
-        those its detectors still hold after this run's first block are said again (STATUSTEXT and log, as
-        when found), so that the next flight's ground station hears of a gyro that died in the last one. Only
-        what describes the sensor (SENSOR_FAULTS): a saturation was the last run's motion, a bias fault is
-        judged within a run."""
-        for kind, ax in self._restored.pop(ch.imu):
-            if ch.faults.axes[ax].states().get(kind) != FAULT:
-                continue
-            ev = ch.faults.event_of(kind, ax)
-            self.log(f"IMU{ch.imu}: {ev.text()} (active when the state was saved)")
-            self._report([ev], t)
-
-    def _confirm_bias(self, ch: Channel, t: float) -> None:
-        """A bias jump is flagged on the block that holds the step, often part-way (a 1 deg/s step half a
-        block in is first sized 0.5 deg/s): after CONFIRM_BLOCKS more still blocks its size is known
-        (health.bias: their median offset); when that differs by more than 10 % from what was said, say it
-        again with the confirmed size."""
-        for ax, af in ch.faults.axes.items():
-            b = af.bias
-            said = self._bias_said.get((ch.imu, ax))
-            if b.state != FAULT or said is None or len(b.post) != CONFIRM_BLOCKS or not math.isfinite(b.value):
-                continue
-            self._bias_said.pop((ch.imu, ax), None)
-            if abs(b.value - said) > 0.1 * abs(b.value):
-                self._report([FaultEvent(ch.imu, ax, "bias_jump", FAULT, b.value)], t)
 
     def _set_state(self, ch: Channel, health: int | None = None) -> None:
         self.reporter.set_health(ch.imu, self.health(ch) if health is None else health)
