@@ -12,6 +12,8 @@ and no ground condition (the motors' state is unknown).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 WINDOW_S = 0.5
@@ -47,14 +49,15 @@ def _quiet(t: np.ndarray, gyro: np.ndarray, edges: np.ndarray) -> np.ndarray:
         s = np.bincount(idx[ok], weights=gyro[ok, j], minlength=nb)
         mean[:, j] = np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan)
     half = max(1, int(round(QUIET_SPAN_S / WINDOW_S / 2)))
-    quiet = np.zeros(nb, dtype=bool)
-    for k in range(nb):
-        blk = mean[max(0, k - half):k + half + 1]
-        blk = blk[np.all(np.isfinite(blk), axis=1)]
-        if blk.shape[0] < half + 1 or cnt[k] == 0:
-            continue
-        med = np.median(blk, axis=0)
-        quiet[k] = bool(np.all(np.abs(blk - med) <= QUIET_RAD_S) and np.all(np.abs(med) <= TURN_RAD_S))
+    pad = np.full((half, 3), np.nan)
+    win = np.lib.stride_tricks.sliding_window_view(np.vstack([pad, mean, pad]), 2 * half + 1, axis=0)
+    # win: (nb, 3, 2 half + 1), the window means around each window
+    enough = np.sum(np.all(np.isfinite(win), axis=1), axis=1) >= half + 1
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN spans: not quiet anyway
+        med = np.nanmedian(win, axis=2)
+        spread = np.nanmax(np.abs(win - med[:, :, None]), axis=2)
+    quiet = enough & (cnt > 0) & np.all(spread <= QUIET_RAD_S, axis=1) & np.all(np.abs(med) <= TURN_RAD_S, axis=1)
     return quiet
 
 
