@@ -36,12 +36,18 @@ MIN_SECONDS = 30.0
 #: with the filters known (equalized), the fit starts at this many samples, or where the cascade's shape
 #: reaches SHAPE_MIN (below, the model of the filters carries too much of the point)
 EQUALIZED_TAU0 = 4
+#: a calibrated difference this small against the signal is no pair of IMUs but two copies of one
+COPY_RATIO = 1e-9
 SHAPE_MIN = 0.6
 ONE_IMU = ("one IMU: in motion its noise cannot be separated from the motion; a second IMU, logging while "
            "disarmed (ArduPilot LOG_DISARMED=1) or ground time (armed, motors running, not moving) would give "
            "figures")
 OWN_NOISE = ("the IMU's own noise in this condition: motion and vibration common to the IMUs cancel in their "
              "differences")
+
+
+class _Copies(Exception):
+    """Two streams that are copies of one IMU (their calibrated difference is all but zero)."""
 
 
 @dataclass
@@ -66,6 +72,9 @@ def _pair_curves(pieces, rate, tracks, i, j, equalized):
     removed and, with ``equalized`` (the filters' cascade), the cascade's shape divided out."""
     fl = (None, None) if equalized else (tracks[i].filter_hz, tracks[j].filter_hz)
     cal, res = fit_pair(pieces[i], pieces[j], rate, fl)
+    r, b = np.vstack(res), np.vstack(pieces[j])
+    if np.all(np.var(r, axis=0) <= COPY_RATIO * np.var(b, axis=0)):
+        raise _Copies(f"{tracks[i].label or i} and {tracks[j].label or j}")
     curves = []
     for k in range(3):
         tau, avar, edf, m = pair_points(res, rate, k)
@@ -192,7 +201,11 @@ def redundant_noise(tracks: list[ImuTrack], intervals, *, still_n=None, min_seco
     pieces, equalized, tau_min = _equalized(al, tracks)
     n = int(round(al.seconds * al.rate_hz))
     pairs = list(combinations(range(len(tracks)), 2))
-    curves = [_pair_curves(pieces, al.rate_hz, tracks, i, j, equalized) for i, j in pairs]
+    try:
+        curves = [_pair_curves(pieces, al.rate_hz, tracks, i, j, equalized) for i, j in pairs]
+    except _Copies as exc:
+        note = f"{exc}: copies of one IMU (their difference is all but zero), no pair of IMUs: no figure"
+        return RedundancyResult([_empty("none", al.seconds, [note]) for _ in tracks], [], al.seconds)
     pair_out = _pair_entries(al, tracks, pairs, curves, n, tau_min)
     if len(tracks) == 3:
         per = _three(al, tracks, pairs, curves, n, tau_min, pair_out)

@@ -116,3 +116,11 @@ def test_too_short_a_condition_gives_no_figure():
     t, g, _ = flight(0, [1.0 * DEG, 1.0 * DEG], seconds=20.0)
     res = redundant_noise([ImuTrack(t, g[i], RATE) for i in range(2)], [(t[0], t[-1])])
     assert all(p["method"] == "none" and "no figure" in p["notes"][0] for p in res.per_imu)
+
+
+def test_two_copies_of_one_imu_give_no_figure():
+    """The same IMU logged twice (a combined and a per-IMU topic) would claim a noise of 0: refused, said so."""
+    t, g, _ = flight(0, [1.0 * DEG])
+    res = redundant_noise([ImuTrack(t, g[0], RATE, label="a"), ImuTrack(t, g[0] * 1.0001, RATE, label="b")],
+                          [(t[0], t[-1])])
+    assert all(p["method"] == "none" and "copies of one IMU" in p["notes"][0] for p in res.per_imu)
