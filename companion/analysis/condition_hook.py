@@ -45,7 +45,9 @@ def entries_without_still(spec, streams, meta: dict, summary: dict, taus, reason
 
     cond, notes = condition_reports(streams, meta, _filters(meta))
     if not _has_figures(cond):
-        extra = "; ".join(notes)
+        why = sorted({f"{c}: {n}" for per in cond.values() for c in CONDITIONS
+                      for n in (per.get(c) or {}).get("notes", [])[:1]})
+        extra = "; ".join(notes + why)
         raise CompanionError(reason + (f"; {extra}" if extra else ""))
     summary["notes"] += notes
     summary["notes"].append("no still data: the ground and flight conditions only")

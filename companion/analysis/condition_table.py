@@ -30,7 +30,7 @@ def condition_lines(st: dict) -> list[str]:
     lines = []
     for c in ("ground", "flight"):
         d = st.get(c)
-        if not d or (not d.get("axes") and d.get("method") == "none" and not d.get("seconds")):
+        if not d or (not d.get("axes") and not d.get("intervals_s")):  # no such condition in the log
             continue
         lines.append(f"  {c}: {d.get('seconds', 0.0):.0f} s, {d.get('method', '')}")
         for n in d.get("notes", []):

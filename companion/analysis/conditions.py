@@ -1,7 +1,7 @@
 """The conditions of a log besides still: *ground* (armed, not moving: motors running on the ground) and
 *flight* (armed and moving), from the log's armed state and the gyro's slow level (numpy only).
 
-Motion: the gyro of one IMU stream averaged over WINDOW_S windows; a window is *quiet* when those averages,
+Motion: the gyro of one IMU stream averaged over WINDOW_S windows (2.5 sample periods for a slower stream); a window is *quiet* when those averages,
 over the QUIET_SPAN_S around it, stay within QUIET_RAD_S of their median on every axis and the median is
 below TURN_RAD_S (a vehicle on the ground with its motors running shows vibration, which averages out,
 and no rotation; in the air the attitude control moves it by more). Ground = armed and quiet, flight =
@@ -38,7 +38,7 @@ def armed_windows(transitions, t_end: float) -> list[tuple[float, float]]:
     return out
 
 
-def _quiet(t: np.ndarray, gyro: np.ndarray, edges: np.ndarray) -> np.ndarray:
+def _quiet(t: np.ndarray, gyro: np.ndarray, edges: np.ndarray, half: int) -> np.ndarray:
     """Per window [edges[k], edges[k+1]): quiet (see the module docstring); a window without samples is not."""
     nb = edges.shape[0] - 1
     idx = np.searchsorted(edges, t, side="right") - 1
@@ -48,7 +48,6 @@ def _quiet(t: np.ndarray, gyro: np.ndarray, edges: np.ndarray) -> np.ndarray:
     for j in range(3):
         s = np.bincount(idx[ok], weights=gyro[ok, j], minlength=nb)
         mean[:, j] = np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan)
-    half = max(1, int(round(QUIET_SPAN_S / WINDOW_S / 2)))
     pad = np.full((half, 3), np.nan)
     win = np.lib.stride_tricks.sliding_window_view(np.vstack([pad, mean, pad]), 2 * half + 1, axis=0)
     # win: (nb, 3, 2 half + 1), the window means around each window
@@ -84,10 +83,13 @@ def condition_intervals(t: np.ndarray, gyro: np.ndarray, transitions, has_armed_
     t = np.asarray(t, dtype=float)
     if t.shape[0] < 2:
         return {"flight": [], "ground": [], "method": "no data"}
-    edges = np.arange(float(np.nanmin(t)), float(np.nanmax(t)) + WINDOW_S, WINDOW_S)
+    dt = np.diff(t)
+    step = float(np.median(dt[dt > 0])) if np.any(dt > 0) else 1.0
+    window = max(WINDOW_S, 2.5 * step)  # a slow stream (1-4 Hz telemetry): a few samples per window
+    edges = np.arange(float(np.nanmin(t)), float(np.nanmax(t)) + window, window)
     if edges.shape[0] < 2:
         return {"flight": [], "ground": [], "method": "no data"}
-    quiet = _quiet(t, np.asarray(gyro, dtype=float), edges)
+    quiet = _quiet(t, np.asarray(gyro, dtype=float), edges, max(1, int(round(QUIET_SPAN_S / window / 2))))
     mid = (edges[:-1] + edges[1:]) / 2.0
     has = np.bincount(np.clip(np.searchsorted(edges, t, side="right") - 1, 0, mid.shape[0] - 1),
                       minlength=mid.shape[0]) > 0

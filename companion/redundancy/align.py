@@ -15,7 +15,7 @@ import numpy as np
 #: a step between two samples longer than this many nominal periods is a gap (no interpolation across it)
 GAP_PERIODS = 2.5
 #: pieces shorter than this many grid samples carry no Allan point of use and are dropped
-MIN_PIECE = 64
+MIN_PIECE = 32
 
 
 @dataclass
