@@ -68,3 +68,7 @@ def test_an_armed_throughout_log_is_analysed_in_flight(tmp_path):
             width = hi - lo
             assert lo - width <= n_true[i] <= hi + width
         assert set(e["ground"]) >= {"axes", "seconds", "method"}
+    from companion.analysis.report_table import format_table
+
+    table = format_table({"streams": entries, "sources": [summary]})
+    assert table.count("flight: ") == 3 and "three-cornered hat" in table
