@@ -39,9 +39,10 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
         # a dead gyro is said first: it is the reason to look at this log, whatever the armed state says
         first = "; ".join(dead) + "; " if dead else ""
         reason = f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})"
+        if dead:  # a dead gyro stays the error: the reason to look at this log
+            raise CompanionError(reason)
         from companion.analysis.condition_hook import entries_without_still  # ground and flight instead
 
-        summary["notes"] += dead
         return entries_without_still(spec, streams, res.meta, summary, taus, reason), summary
     if dead and warn is not None:
         for d in dead:
