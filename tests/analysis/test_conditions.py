@@ -72,3 +72,26 @@ def test_an_armed_throughout_log_is_analysed_in_flight(tmp_path):
 
     table = format_table({"streams": entries, "sources": [summary]})
     assert table.count("flight: ") == 3 and "three-cornered hat" in table
+
+
+def test_one_imu_armed_on_the_ground_gets_a_ground_figure(tmp_path):
+    """One IMU, armed throughout and not moving (motors running on the ground): its Allan analysis over the
+    ground stretch, N of the white noise written (std 1e-3 rad/s at 100 Hz: N = 1e-4) within its interval's
+    reach, and the note that the vibration is in it."""
+    from companion.analysis.source import analyze_source
+    from companion.sim.dataflash_writer import write_imu_log
+
+    rng = np.random.default_rng(8)
+    t = 1.0 + np.arange(20000) / 100.0
+    g = rng.normal(0.0, 1e-3, (1, t.shape[0], 3))
+    a = rng.normal(0.0, 0.01, (1, t.shape[0], 3)) + [0.0, 0.0, -9.8]
+    path = tmp_path / "ground.bin"
+    write_imu_log(path, t, g, a, armed=[(0.5, True)])
+    entries, summary = analyze_source(str(path), ["gx", "gy", "gz"])
+    gr = entries[0]["ground"]
+    assert gr["method"] == "one IMU" and "vibration" in gr["notes"][0] and gr["seconds"] > 150
+    for r in gr["axes"].values():
+        wn = [x for x in r["terms"] if x["effect"] == "white_noise"][0]
+        lo, hi = wn["ci95"]["N"]
+        assert lo - (hi - lo) <= 1e-4 <= hi + (hi - lo)
+    assert entries[0]["flight"]["method"] == "none"
