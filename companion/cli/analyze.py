@@ -23,7 +23,8 @@ Only the still parts are analysed: the log's armed state (DataFlash EV/ARM, ULog
 vehicle autopilot's HEARTBEATs in a tlog) and a
 motion detector over the accelerometers and gyros of every IMU pick the still segments, and the Allan
 variance is pooled over them (no cluster crosses a gap); the report says what was used and what was left
-out. --start/--end restrict the time, --all skips the selection. A low-pass filter of the logged data
+out. Each stream also gets ground (armed, not moving) and flight figures: each IMU's own noise from the
+vehicle's redundant IMUs (docs/inflight.md), so a log armed throughout is analysed, not refused. --start/--end restrict the time, --all skips the selection. A low-pass filter of the logged data
 (INS_GYRO_FILTER, older INS_MPU6K_FILTER, IMU_GYRO_CUTOFF, or a roll-off the data show; the data set a
 log's cut-off aside when it lies outside their 99 % interval, or for a first-order roll-off, the shape of a
 short Gauss-Markov process, which the note then names) is modelled in the white-noise term, so N
