@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from companion.errors import EXIT_FAULTS, EXIT_USAGE, CompanionError
+from companion.errors import EXIT_FAULTS, CompanionError
 
 #: Log parameters copied into the source summary (low-pass filters, fast sampling, batch logging).
 SUMMARY_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_FAST_SAMPLE", "INS_LOG_BAT_OPT", "INS_LOG_BAT_MASK",
@@ -42,8 +42,14 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
         # a dead gyro, and an IMU its autopilot flags, are said first: the reason to look at this log
         said = dead + [f"autopilot: {c['line']}" for c in (ap or {}).get("cross_check", []) if c["autopilot_flagged"]]
         first = "; ".join(said) + "; " if said else ""
-        raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})",
-                             EXIT_FAULTS if summary["dead_gyros"] else EXIT_USAGE)
+        reason = f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})"
+        if summary["dead_gyros"]:  # a dead gyro stays the error: the reason to look at this log
+            raise CompanionError(reason, EXIT_FAULTS)
+        from companion.analysis.condition_hook import entries_without_still  # ground and flight instead
+
+        if ap is not None:
+            summary["autopilot"] = ap
+        return entries_without_still(spec, streams, res.meta, summary, taus, reason), summary
     if dead and warn is not None:
         for d in dead:
             warn(d)
@@ -76,6 +82,9 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     finally:
         if bar is not None:
             bar.close()
+    from companion.analysis.condition_hook import add_conditions  # each stream's ground and flight figures
+
+    add_conditions(entries, streams, res.meta, summary)
     return entries, summary
 
 

@@ -24,7 +24,8 @@ Only the still parts are analysed: the log's armed state (DataFlash EV/ARM, ULog
 vehicle autopilot's HEARTBEATs in a tlog) and a
 motion detector over the accelerometers and gyros of every IMU pick the still segments, and the Allan
 variance is pooled over them (no cluster crosses a gap); the report says what was used and what was left
-out. --start/--end restrict the time, --all skips the selection. A low-pass filter of the logged data
+out. Each stream also gets ground (armed, not moving) and flight figures: each IMU's own noise from the
+vehicle's redundant IMUs (docs/inflight.md), so a log armed throughout is analysed, not refused. --start/--end restrict the time, --all skips the selection. A low-pass filter of the logged data
 (INS_GYRO_FILTER, older INS_MPU6K_FILTER, IMU_GYRO_CUTOFF, or a roll-off the data show; the data set a
 log's cut-off aside when it lies outside their 99 % interval, or for a first-order roll-off, the shape of a
 short Gauss-Markov process, which the note then names) is modelled in the white-noise term, so N
@@ -166,8 +167,11 @@ def run(args) -> int:
     if args.plot:
         from companion.plots.adev_plot import plot_report
 
-        for path in plot_report(report, args.plot):
+        still = {**report, "streams": [st for st in report["streams"] if st["axes"]]}  # ground/flight only: none
+        for path in plot_report(still, args.plot) if still["streams"] else []:
             print(f"wrote {path}")
+        if not still["streams"]:
+            print(f"{args.plot} not written: no still data to plot (the ground and flight figures are in the table)")
     if args.kalibr:
         blockers = kalibr_blockers(report)
         if blockers and not args.force:
