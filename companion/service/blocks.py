@@ -33,6 +33,9 @@ MIN_INTERVALS = 8  # intervals before the rate is taken
 #: and with ``gap_s`` alone each would be a gap that drops the block: the stream would never fill one
 GAP_PERIODS = 2.5
 RATE_WINDOW = 64  # intervals whose robust period is the stream's rate
+#: below this a stream is not watched: a block of samples spans minutes, a dead gyro would be named after many
+#: minutes, and such a rate is more often a time column in the wrong unit than a real IMU stream
+MIN_WATCH_RATE_HZ = 0.5
 
 
 class BlockCutter:
@@ -47,6 +50,7 @@ class BlockCutter:
         self.dts: deque = deque(maxlen=RATE_WINDOW)
         self.rate_hz: float | None = None
         self.prev_rate_hz: float | None = None  # the rate before the last change
+        self.too_slow_hz: float | None = None  # the rate learned when it is below MIN_WATCH_RATE_HZ
         self._parts: list = []
         self._t0: float | None = None
         self.counts = {"samples": 0, "duplicates": 0, "backwards": 0, "resets": 0, "gaps": 0, "rate_changes": 0}
@@ -166,6 +170,10 @@ class BlockCutter:
             return None
         rate = 1.0 / period_of(self.dts, self.time_res)
         if self.rate_hz is None:
+            if rate < MIN_WATCH_RATE_HZ:  # said in the summary (service.imu_summary.too_slow_note)
+                self.too_slow_hz = rate
+                return None
+            self.too_slow_hz = None
             self.rate_hz = rate
             return "first"
         if abs(rate / self.rate_hz - 1.0) > RATE_CHANGE:

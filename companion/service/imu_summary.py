@@ -8,6 +8,7 @@ import math
 
 from companion.health.degradation import STATE_NAMES
 from companion.health.faults import FAULT, MIN_NOISE_SAMPLES, FaultEvent
+from companion.service.blocks import MIN_WATCH_RATE_HZ
 from companion.service.channel import INT16_MESSAGES
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 
@@ -117,7 +118,12 @@ def transient_note(ch) -> str | None:
 def too_slow_note(ch) -> str | None:
     """What a stream too slow for the per-IMU fault tests is watched for, in words; None when it is not."""
     if not ch.rate_hz:
-        return None
+        slow = ch.cutter.too_slow_hz
+        if slow is None:
+            return None
+        hint = " (is the CSV's time column in ms or us? --time-unit)" if ch.message == "CSV" else ""
+        return (f"IMU{ch.imu}: its samples come {1.0 / slow:.3g} s apart ({slow:.2g} Hz), below the "
+                f"{MIN_WATCH_RATE_HZ:g} Hz companion watches: not judged{hint}")
     per_block = int(math.floor(ch.cfg.block_s * ch.rate_hz + 0.5)) + 1
     if per_block >= MIN_NOISE_SAMPLES:
         return None
