@@ -94,7 +94,8 @@ def test_dask_two_workers_interrupt_resume_report(tmp_path):
         assert isinstance(e["sysid"], int) and isinstance(e["evidence"], float) and e["axis"] in ("gx", "gy", "gz")
     page = out_html.read_text()
     assert page.count("data:image/png;base64,") == 6 and "FLAGGED" in page
-    assert "src='http" not in page and "<script" not in page and "<link" not in page  # self-contained
+    # self-contained: the plotting script is inline, nothing is loaded from elsewhere
+    assert "src=" not in page.replace("src=\"data:", "").replace("src='data:", "") and "<link" not in page
 
 
 @pytest.mark.parametrize("seed", [21, pytest.param(22, marks=pytest.mark.soak), pytest.param(23, marks=pytest.mark.soak)])
