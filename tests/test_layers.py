@@ -24,6 +24,7 @@ LAYERS = {
     "companion.compensation": CORE,
     "companion.health": CORE,
     "companion.analysis": CORE,
+    "companion.redundancy": CORE,  # in-flight noise per IMU from redundant IMUs
     "companion.analysis.source": ADAPTER,  # loads a source (sources.load) before the analysis
     "companion.gap.from_log": ADAPTER,  # loads a log (sources.load) and a model file before the gap workflow
     "companion.sources": ADAPTER,

@@ -10,11 +10,13 @@ How an IMU's logged gyro sample is made when :class:`Realism` is given to
    sees: the slow part of the output (body rate through the IMU's mounting, biases, warm-up,
    temperature bias, the model's non-white terms; made at the logged rate and linearly interpolated),
    the model's ``white_noise`` drawn at the sensor rate (std N sqrt(fs), so its two-sided PSD stays N^2),
-   times ``imu_noise_gain[i]``, and the frame's vibration times ``imu_vibration_gain[i]`` (per axis).
+   times ``imu_noise_gain[i]``, and the frame's vibration times ``imu_vibration_gain[i]`` (per axis); with
+   ``vibration_mounted`` the vibration also goes through the IMU's mounting (scale/misalignment), as the body
+   rotation does (vibration is body rotation).
 2. Rounded to the sensor LSB ``gyro_lsb`` rad/s (0: not), as the chip's int16 output would be.
 3. Low-pass filtered as the autopilot does (ArduPilot INS_GYRO_FILTER, PX4 IMU_GYRO_CUTOFF): a
    Butterworth of order ``lpf_order`` at ``gyro_lpf_hz`` (bilinear, pre-warped: ArduPilot's
-   LowPassFilter2p for order 2), run with :func:`scipy.signal.lfilter` with its state carried from block to
+   LowPassFilter2p for order 2; ``imu_lpf_hz`` gives each IMU its own cut-off), run with :func:`scipy.signal.lfilter` with its state carried from block to
    block (no per-sample loop); 0 or None: no filter.
 4. Decimated to the logged rate at the IMU's own sampling times ``t + skew_s[i] + jitter`` (jitter normal,
    std ``jitter_s``, clipped at 3 std): ``decimation="latest"`` takes the newest filtered sample (what
@@ -141,12 +143,21 @@ class Realism:
     temp_slope: float = 0.0
     bias_gm_sigma: float = 0.0
     bias_gm_tau_s: float = 100.0
+    imu_lpf_hz: tuple | None = None
+    vibration_mounted: bool = False
 
     def __post_init__(self):
         fs = _num("sensor_rate_hz", self.sensor_rate_hz, lo=1.0, hi=32000.0)
         lp = self.gyro_lpf_hz
         if lp is not None and lp != 0:
             _num("gyro_lpf_hz", lp, lo=0.0, hi=0.45 * fs, lo_open=True)
+        if self.imu_lpf_hz is not None:
+            if not isinstance(self.imu_lpf_hz, (list, tuple)) or len(self.imu_lpf_hz) != 3:
+                raise _err("imu_lpf_hz needs 3 cut-offs (one per IMU)")
+            object.__setattr__(self, "imu_lpf_hz", tuple(_num("imu_lpf_hz", x, lo=0.0, hi=0.45 * fs, lo_open=True)
+                                                         for x in self.imu_lpf_hz))
+        if not isinstance(self.vibration_mounted, bool):
+            raise _err("vibration_mounted must be true or false")
         if self.lpf_order not in (1, 2, 3, 4):
             raise _err(f"lpf_order must be 1-4, got {self.lpf_order!r}")
         if self.decimation not in DECIMATIONS:
@@ -195,13 +206,15 @@ class Realism:
                       for k, v in d.items()})
 
     # ------------------------------------------------------------------ the filter
-    def filter_ba(self):
-        """(b, a) of the gyro low-pass at the sensor rate, or None without a filter."""
-        if not self.gyro_lpf_hz:
+    def filter_ba(self, imu: int | None = None):
+        """(b, a) of the gyro low-pass at the sensor rate (IMU ``imu``'s own where ``imu_lpf_hz`` gives one),
+        or None without a filter."""
+        fc = self.imu_lpf_hz[imu] if (imu is not None and self.imu_lpf_hz) else self.gyro_lpf_hz
+        if not fc:
             return None
         from scipy import signal  # here, not at the top: a simulator without a filter starts 1-2 s sooner
 
-        return signal.butter(self.lpf_order, self.gyro_lpf_hz, fs=self.sensor_rate_hz)
+        return signal.butter(self.lpf_order, fc, fs=self.sensor_rate_hz)
 
 
 # ---------------------------------------------------------------------------------------------- sensor stage
@@ -221,6 +234,8 @@ class SensorStage:
         self.r, self.imus = realism, imus
         self.fs = realism.sensor_rate_hz
         self.ba = realism.filter_ba()
+        self.ba_imu = [realism.filter_ba(i) for i in range(imus)]
+        self.mounts = None  # per-IMU 3x3 gyro mounting, applied to the vibration when realism.vibration_mounted
         self.zi = None  # (imus, 3, order) lfilter state
         self.zi_white = None
         margin = max(abs(x) for x in realism.skew_s) + 3 * realism.jitter_s + 2.0 / self.fs
@@ -294,14 +309,17 @@ class SensorStage:
                 for j in range(3):
                     x[:, j] = np.interp(ts, t, slow[i, :, j])
                 w = rngs[i].standard_normal((c1 - c0, 3)) * (white_std[i] * r.imu_noise_gain[i])
-                x += w + vib * np.asarray(wg)
+                vi = vib * np.asarray(wg)
+                if r.vibration_mounted and self.mounts is not None:  # vibration is body rotation: same mounting
+                    vi = vi @ self.mounts[i].T
+                x += w + vi
                 if r.gyro_lsb > 0:
                     x = np.round(x / r.gyro_lsb) * r.gyro_lsb
                 y = self._filter(x, i, white=False)
                 if white_of is not None and white_of[0] == i:
                     ax = white_of[1]
-                    own = w[:, [ax]] + (vib[:, [ax]] * wg[ax] if len(white_of) > 2 and white_of[2] else 0.0)
-                    yw = self._filter(own, 0, white=True)[:, 0]
+                    own = w[:, [ax]] + (vi[:, [ax]] if len(white_of) > 2 and white_of[2] else 0.0)
+                    yw = self._filter(own, 0, white=True, imu=i)[:, 0]
                 if sel[i].any():
                     kk = k_pick[i][sel[i]] - c0
                     if r.decimation == "latest":
@@ -345,12 +363,13 @@ class SensorStage:
             ps, pc = self.acc.get(key, (np.zeros(y.shape[1]), 0))
             self.acc[key] = (ps + y.sum(axis=0), pc + y.shape[0])
 
-    def _filter(self, x, i, white):
-        if self.ba is None:
+    def _filter(self, x, i, white, imu=None):
+        ba = self.ba_imu[i if imu is None else imu]
+        if ba is None:
             return x
         from scipy import signal
 
-        b, a = self.ba
+        b, a = ba
         store = "zi_white" if white else "zi"
         zi_all = getattr(self, store)
         if zi_all is None:

@@ -189,6 +189,7 @@ class VehicleSimulator:
         self._rng_sensor = [np.random.default_rng(x) for x in r_ch[3:]]
         self.temp_slope = rng_r.normal(0.0, realism.temp_slope, (MAX_IMUS, 3))  # rad/s per K (truth)
         self._stage = SensorStage(realism, self.imus, self.t_start, rng_timing)
+        self._stage.mounts = self.gyro_matrix
 
     def _reset_stream(self) -> None:
         """Nothing taken yet: the position, the noise state carried between blocks, the current block."""
