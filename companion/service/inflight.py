@@ -10,11 +10,13 @@ body see the same rotation, so per pair (:class:`PairTrack`):
    picks up of it on its own does not: that is part of the figure, "the IMU's own noise in flight");
 3. the calibrated difference feeds octave Allan accumulators (:mod:`companion.estimators.octave_bank`),
    one per condition and axis with a ``memory_s`` memory, and while learning one without forgetting;
-4. every ``check_s`` its white level N^2 is read at the first octave above ``tau_min_s``
-   (:func:`companion.estimators.cornered_hat.white_level`).
+4. every ``check_s`` its white level N^2 = AVAR(tau) tau is read at the first octave at or above the offline
+   method's shortest cluster time (:func:`companion.redundancy.fit_points.tau_min_for`: above the low-pass
+   filter's roll-off), the rounding of int16 messages removed
+   (:func:`companion.redundancy.hat.quantization_avar`), 1-sigma from its EDF.
 
-Three IMUs: each IMU's N from the three-cornered hat (:func:`companion.estimators.cornered_hat.hat`; an
-unresolved share is a 95 % upper bound). Two IMUs: the pair figure, an upper bound of each IMU's. One IMU:
+Three IMUs: each IMU's N from the three-cornered hat with the offline method's variance
+(:func:`companion.redundancy.hat.hat_share`; a share below two of its sigmas is a 95 % upper bound). Two IMUs: the pair figure, an upper bound of each IMU's. One IMU:
 nothing (its noise cannot be separated from motion). Conditions: ``ground`` (armed, the body not turning)
 and ``flight`` (armed and turning), from the HEARTBEAT armed bit and the gyro's half-second means; each has
 its own estimators, baseline and test.
@@ -33,7 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.estimators.cornered_hat import hat, white_level
+from companion.redundancy.fit_points import tau_min_for
+from companion.redundancy.hat import hat_share, quantization_avar
 from companion.estimators.octave_bank import OctaveBankEstimator
 from companion.estimators.pair_calibration import PairCalibration
 from companion.health.degradation import DEGRADING, HEALTHY, DetectorConfig, ParamDetector
@@ -47,6 +50,7 @@ INFLIGHT_TEST = DetectorConfig(z=3.0, ratio_on=1.25, ratio_off=1.12, hold_on=4, 
 SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
 MIN_ALIGNED = 10
 VERSION = 1
+Z95 = 1.96
 
 
 @dataclass
@@ -55,7 +59,6 @@ class InflightConfig:
     memory_s: float = 60.0  # memory of the current figure
     baseline_s: float = 240.0  # armed data per condition learned as the baseline
     check_s: float = 5.0
-    tau_min_s: float = 0.1  # the white level is read at the first octave at or above this (and 4 samples)
     min_edf: float = 20.0
     turning: float = 0.03  # rad/s: a half-second mean body rate above this is flight, not ground
     ground_hold_s: float = 10.0  # not turning for this long before flight becomes ground again
@@ -99,6 +102,8 @@ class PairTrack:
         self.cal = PairCalibration(cfg.calib_memory_s)
         self.t_done = -math.inf
         self.rate_hz: float | None = None
+        self.filter_hz: float | None = None  # the lower of the two IMUs' known gyro low-pass cut-offs
+        self.lsb: tuple = ()  # the two IMUs' sample rounding (rad/s; int16 messages)
         self.cur: dict[str, list[OctaveBankEstimator]] = {}
         self.learn: dict[str, list[OctaveBankEstimator] | None] = {}
         self.seconds = {c: 0.0 for c in CONDITIONS}
@@ -133,13 +138,22 @@ class PairTrack:
                 est.update(e[:, a])
         self.seconds[cond] += t.shape[0] / self.rate_hz
 
-    def level(self, cond: str, a: int, learned: bool = False) -> tuple[float, float]:
-        """(N^2, 1-sigma) of axis ``a``'s difference now (``learned``: over the learning data)."""
+    def level(self, cond: str, a: int, learned: bool = False) -> tuple[float, float, float]:
+        """(N^2, 1-sigma, EDF) of axis ``a``'s difference now (``learned``: over the learning data): the
+        Allan variance at the first octave at or above :func:`tau_min_for` with ``min_edf``, times tau,
+        without the rounding of the two IMUs' samples."""
         banks = (self.learn if learned else self.cur).get(cond)
         if not banks or self.rate_hz is None:
-            return math.nan, math.nan
+            return math.nan, math.nan, 0.0
         tau, avar, edf = banks[a].avar()
-        return white_level(tau, avar, edf, max(self.cfg.tau_min_s, 4.0 / self.rate_hz), self.cfg.min_edf)
+        ok = np.flatnonzero((tau >= tau_min_for(self.rate_hz, self.filter_hz) * (1 - 1e-9))
+                            & (edf >= self.cfg.min_edf) & np.isfinite(avar))
+        if ok.size == 0:
+            return math.nan, math.nan, 0.0
+        k = int(ok[0])
+        q = sum(float(quantization_avar(lsb, tau[k], self.rate_hz)) for lsb in self.lsb)
+        v = float(max(avar[k] - q, 0.0) * tau[k])
+        return v, v * math.sqrt(2.0 / float(edf[k])), float(edf[k])
 
     def learned_s(self, cond: str) -> float:
         banks = self.learn.get(cond)
@@ -233,6 +247,9 @@ class InflightNoise:
                 pair = self.pairs[key] = PairTrack(self.cfg)
             if min(channels[key[0]].recent[-1][0][-1], channels[key[1]].recent[-1][0][-1]) < pair.t_done - 5.0:
                 pair.t_done = -math.inf  # a reboot: time starts again
+            fc = [c.filters.get("gyro") for c in (channels[key[0]], channels[key[1]])]
+            pair.filter_hz = min((f for f in fc if f), default=None)
+            pair.lsb = tuple(c.gyro_lsb for c in (channels[key[0]], channels[key[1]]) if c.gyro_lsb)
             got = aligned(channels[key[0]], channels[key[1]], pair.t_done)
             if got is None:
                 continue
@@ -247,20 +264,28 @@ class InflightNoise:
 
     # ------------------------------------------------------------------ figures and test
     def _figures(self, cond: str, learned: bool = False) -> dict:
-        """{who: {axis: (N, 1-sigma, bound)}} of one condition from the current (or learning) accumulators."""
+        """{who: {axis: (N, 1-sigma, bound)}} of one condition from the current (or learning) accumulators:
+        three IMUs per IMU (the hat), two IMUs the pair (i, j) (its figure bounds each IMU)."""
         levels = {k: [p.level(cond, a, learned) for a in range(3)] for k, p in self.pairs.items()}
         imus = sorted({i for k in levels for i in k})
         out: dict = {}
         if len(imus) == 3 and len(levels) == 3:
             for a, ax in enumerate(AXES):
-                for i, sh in hat({k: (v[a][0], v[a][1] ** 2) for k, v in levels.items()}).items():
-                    n, s = _n(sh.value, sh.std)
-                    out.setdefault(i, {})[ax] = (n, s, sh.bound)
+                edf = min(v[a][2] for v in levels.values())
+                if not edf > 0:
+                    continue
+                for i in imus:
+                    j, k = (x for x in imus if x != i)
+                    lv = [levels[tuple(sorted(p))][a][0] for p in ((i, j), (i, k), (j, k))]
+                    v, _, s = (float(x) for x in hat_share(*lv, edf))
+                    bound = not v >= 2.0 * s
+                    n, sn = _n(max(v, 0.0) + Z95 * s if bound else v, s)
+                    out.setdefault(i, {})[ax] = (n, sn, bound)
         elif len(imus) == 2 and len(levels) == 1:
             (k, v), = levels.items()
             for a, ax in enumerate(AXES):
                 if math.isfinite(v[a][0]):
-                    n, s = _n(*v[a])
+                    n, s = _n(*v[a][:2])
                     out.setdefault(k, {})[ax] = (n, s, False)
         return out
 
@@ -268,7 +293,7 @@ class InflightNoise:
         """{(i, j): {axis: (N, 1-sigma)}} of the pairs' differences."""
         out = {}
         for k, p in self.pairs.items():
-            axes = {ax: _n(*p.level(cond, a, learned)) for a, ax in enumerate(AXES)}
+            axes = {ax: _n(*p.level(cond, a, learned)[:2]) for a, ax in enumerate(AXES)}
             out[k] = {ax: v for ax, v in axes.items() if math.isfinite(v[0]) and v[0] > 0}
         return out
 
