@@ -32,6 +32,11 @@ class InflightReport:
 
     def on_block(self, ch, t: float) -> None:
         p = self.p
+        if p.armed and len(p.channels) == 1 and "one" not in self.said:
+            from companion.redundancy.redundant import ONE_IMU
+
+            self.said.add("one")
+            p.log(f"IMU{ch.imu} armed: {ONE_IMU}")
         due = self.noise.next_check
         verdicts = self.noise.on_block(ch.imu, p.channels, p.armed, t)
         if due is not None and self.noise.next_check != due:  # a check ran
@@ -61,6 +66,25 @@ class InflightReport:
                         rep.set_value(inflight_name(imu, ax, cond), to_datasheet("N", n, ax))
                         sig = -1.0 if (bound or len(imus) > 1) else to_datasheet("N", s, ax)
                         rep.set_value(inflight_name(imu, ax, cond, sigma=True), sig)
+
+    def summary_lines(self, imu: int) -> list[str]:
+        """The summary's lines of one IMU: its own noise in each armed condition (deg/sqrt(h))."""
+        out = []
+        for cond in CONDITIONS:
+            figs = self.noise.figures[cond]
+            who = imu if imu in figs else next((w for w in figs if isinstance(w, tuple) and imu in w), None)
+            if who is None:
+                continue
+            secs = max(p.seconds[cond] for k, p in self.noise.pairs.items() if imu in k)
+            pair = isinstance(who, tuple)
+            parts = []
+            for ax, (n, s, bound) in figs[who].items():
+                v = to_datasheet("N", n, ax)
+                parts.append(f"{ax} N < {v:.3g}" if bound or pair else f"{ax} N {v:.3g} +- {to_datasheet('N', s, ax):.2g}")
+            how = (f"the pair IMU{who[0]}-IMU{who[1]}'s figure bounds each" if pair else "three-cornered hat")
+            out.append(f"  {cond} (own noise from the IMU differences, {how}; {secs:.0f} s): "
+                       + "; ".join(parts) + " deg/sqrt(h)")
+        return out
 
     def degrading(self, imu: int) -> bool:
         return self.noise.degrading(imu)
