@@ -56,7 +56,7 @@ Z95 = 1.96
 @dataclass
 class InflightConfig:
     calib_memory_s: float = 60.0  # memory of the relative calibration
-    memory_s: float = 60.0  # memory of the current figure
+    memory_s: float = 30.0  # memory of the current figure
     baseline_s: float = 240.0  # armed data per condition learned as the baseline
     check_s: float = 5.0
     min_edf: float = 20.0

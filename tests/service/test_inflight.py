@@ -70,7 +70,7 @@ def healthy(seed):
 def test_inflight_n_per_imu_matches_the_model(seed):
     p, _ = healthy(seed)
     learned = p.inflight.noise.baseline["flight"]["imus"]  # 240 s of flight, no forgetting
-    now = p.inflight.noise.figures["flight"]  # the last 60 s memory
+    now = p.inflight.noise.figures["flight"]  # the last 30 s memory
     assert sorted(learned) == sorted(now) == [0, 1, 2]
     for imu in range(3):
         for ax in ("gx", "gy", "gz"):
