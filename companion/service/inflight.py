@@ -16,16 +16,20 @@ body see the same rotation, so per pair (:class:`PairTrack`):
    (:func:`companion.redundancy.hat.quantization_avar`), 1-sigma from its EDF.
 
 Three IMUs: each IMU's N from the three-cornered hat with the offline method's variance
-(:func:`companion.redundancy.hat.hat_share`; a share below two of its sigmas is a 95 % upper bound). Two IMUs: the pair figure, an upper bound of each IMU's. One IMU:
-nothing (its noise cannot be separated from motion). Conditions: ``ground`` (armed, the body not turning)
+(:func:`companion.redundancy.hat.hat_share`; a share below two of its sigmas is a 95 % upper bound). Two
+IMUs: the pair figure, an upper bound of each IMU's. One IMU: nothing (its noise cannot be separated from
+motion). Conditions: ``ground`` (armed, the body not turning)
 and ``flight`` (armed and turning), from the HEARTBEAT armed bit and the gyro's half-second means; each has
 its own estimators, baseline and test.
 
-The baseline (per condition, IMU and axis; two IMUs: per pair) is learned from the first ``baseline_s`` of
-that condition's data and kept in the state file; then every check runs the at-rest degradation test
-(:class:`companion.health.degradation.HealthDetector`, the same log-ratio statistic and hysteresis) with its
-own thresholds :data:`INFLIGHT_TEST` (in flight the vibration, hence the figure, moves with throttle and
-manoeuvres more than a gyro's noise at rest: a larger ratio and more checks).
+The baseline (per condition: the hat figures and each pair's figure) is learned from the first
+``baseline_s`` of that condition's data and kept in the state file; then every check tests each pair's figure
+against its baseline both ways with the at-rest statistic and hysteresis
+(:class:`companion.health.degradation.ParamDetector`, thresholds :data:`INFLIGHT_TEST`) and names the IMU
+whose pairs changed while the others' did not (:meth:`InflightNoise._test`). The online calibration differs
+from the offline one (:mod:`companion.redundancy.calibration`, a batch fit with instrumental variables and
+cross-filtering) in being recursive, scipy-free and fitted on 0.1-s means; the Allan points, the hat and the
+cluster time are the offline method's.
 """
 
 from __future__ import annotations
@@ -43,9 +47,9 @@ from companion.health.degradation import DEGRADING, HEALTHY, DetectorConfig, Par
 from companion.health.faults import AXES
 
 CONDITIONS = ("ground", "flight")
-#: the degradation test in flight: the at-rest statistic (health.degradation) with a larger alarm ratio and
-#: longer holds, chosen with benchmarks/bench_inflight_live.py (0 false alarms on the simulated flights and
-#: the real logs, a doubled noise named within 120 s)
+#: the degradation test in flight: the at-rest statistic (health.degradation) on each pair's figure, with
+#: thresholds chosen with benchmarks/bench_inflight_live.py (0 false alarms on the simulated flights and the
+#: real logs, a doubled noise named within 120 s); a check every check_s = 5 s
 INFLIGHT_TEST = DetectorConfig(z=3.0, ratio_on=1.25, ratio_off=1.12, hold_on=4, hold_off=6, params=("N",))
 SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
 MIN_ALIGNED = 10
@@ -364,12 +368,6 @@ class InflightNoise:
     def degrading(self, imu: int) -> bool:
         """The in-flight (or ground) test names this IMU on some axis."""
         return any(i == imu for _, i, _ in self.named)
-
-    def learning(self, cond: str) -> float:
-        """Seconds of ``cond`` data still to learn before its baseline exists (0: learned)."""
-        if self.baseline[cond] or not self.pairs:
-            return 0.0
-        return max(0.0, self.cfg.baseline_s - min(p.learned_s(cond) for p in self.pairs.values()))
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict:
