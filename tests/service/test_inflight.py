@@ -66,7 +66,7 @@ def healthy(seed):
     return _fly(seed)
 
 
-@pytest.mark.parametrize("seed", [11, 12])
+@pytest.mark.parametrize("seed", [11, pytest.param(12, marks=pytest.mark.soak)])
 def test_inflight_n_per_imu_matches_the_model(seed):
     p, _ = healthy(seed)
     learned = p.inflight.noise.baseline["flight"]["imus"]  # 240 s of flight, no forgetting
@@ -84,7 +84,7 @@ def test_inflight_n_per_imu_matches_the_model(seed):
     assert "IMU1GYFNS" in p.reporter.values
 
 
-@pytest.mark.parametrize("seed", [11, 12])
+@pytest.mark.parametrize("seed", [11, pytest.param(12, marks=pytest.mark.soak)])
 def test_healthy_flight_names_nobody(seed):
     p, _ = healthy(seed)
     assert p.inflight.noise.baseline["flight"], "the in-flight baseline was learned"
@@ -92,7 +92,7 @@ def test_healthy_flight_names_nobody(seed):
     assert not any(p.inflight.degrading(i) for i in range(3))
 
 
-@pytest.mark.parametrize("seed,imu,axis", [(21, 1, "gy"), (22, 2, "gx")])
+@pytest.mark.parametrize("seed,imu,axis", [(21, 1, "gy"), pytest.param(22, 2, "gx", marks=pytest.mark.soak)])
 def test_doubled_noise_named_within_120_s_others_silent(seed, imu, axis):
     at = 450.0
     p, sink = _fly(seed, Fault("noise", at=at, size=2.0, imu=imu, axis=axis))
@@ -106,7 +106,7 @@ def test_doubled_noise_named_within_120_s_others_silent(seed, imu, axis):
 
 
 def test_two_imus_pair_figure_bounds_each():
-    p, _ = _fly(31, imus=2, duration=500.0)
+    p, _ = _fly(31, imus=2, duration=400.0)
     (who, axes), = p.inflight.noise.figures["flight"].items()
     assert who == (0, 1)
     for ax, (n, s, _) in axes.items():  # the pair's N = sqrt(N0^2 + N1^2)
