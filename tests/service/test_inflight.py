@@ -107,7 +107,8 @@ def test_doubled_noise_named_within_120_s_others_silent(seed, imu, axis):
 
 def test_two_imus_pair_figure_bounds_each():
     p, _ = _fly(31, imus=2, duration=400.0)
-    (who, axes), = p.inflight.noise.figures["flight"].items()
+    assert list(p.inflight.noise.figures["flight"]) == [(0, 1)]
+    (who, axes), = p.inflight.noise.baseline["flight"]["imus"].items()  # 240 s of flight, no forgetting
     assert who == (0, 1)
     for ax, (n, s, _) in axes.items():  # the pair's N = sqrt(N0^2 + N1^2)
         assert abs(n / (math.sqrt(2) * N_TRUE) - 1.0) < 0.10
