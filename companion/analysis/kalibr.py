@@ -80,5 +80,7 @@ def kalibr_blockers(report: dict) -> list[str]:
     """Why a Kalibr file would be wrong (warnings of the stream it would be written from)."""
     if not report["streams"]:
         return ["no stream analysed"]
+    if not any(s.get("axes") for s in report["streams"]):  # a log armed throughout: ground and flight only
+        return ["no still data (Kalibr's noise model is the still noise; the in-flight figures include vibration)"]
     st = max(report["streams"], key=lambda s: s["samples"])
     return [f"{st['message']}[{st['instance']}]: {w}" for w in st.get("warnings", [])]

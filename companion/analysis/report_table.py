@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from companion import units
 from companion.allan.terms import PARAMS
+from companion.analysis.condition_table import condition_lines
 from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.units import fmt_interval
 from companion.units import fmt_value as _fmt
@@ -83,6 +84,7 @@ def format_table(report: dict) -> str:
                              + "; ".join(other))
                 if r.get("online") is not None:
                     lines.append("  " + _online_row(r, a))
+        lines += condition_lines(st)  # the ground and flight figures (companion.analysis.inflight)
     return "\n".join(lines)
 
 

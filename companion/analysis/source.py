@@ -38,7 +38,12 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     if not sel.intervals:
         # a dead gyro is said first: it is the reason to look at this log, whatever the armed state says
         first = "; ".join(dead) + "; " if dead else ""
-        raise CompanionError(f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})")
+        reason = f"{spec}: {first}{sel.notes[0] if sel.notes else 'no still data'} ({sel.describe()})"
+        if dead:  # a dead gyro stays the error: the reason to look at this log
+            raise CompanionError(reason)
+        from companion.analysis.condition_hook import entries_without_still  # ground and flight instead
+
+        return entries_without_still(spec, streams, res.meta, summary, taus, reason), summary
     if dead and warn is not None:
         for d in dead:
             warn(d)
@@ -63,6 +68,9 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
     finally:
         if bar is not None:
             bar.close()
+    from companion.analysis.condition_hook import add_conditions  # each stream's ground and flight figures
+
+    add_conditions(entries, streams, res.meta, summary)
     return entries, summary
 
 

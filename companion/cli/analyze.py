@@ -151,8 +151,11 @@ def run(args) -> int:
     if args.plot:
         from companion.plots.adev_plot import plot_report
 
-        for path in plot_report(report, args.plot):
+        still = {**report, "streams": [st for st in report["streams"] if st["axes"]]}  # ground/flight only: none
+        for path in plot_report(still, args.plot) if still["streams"] else []:
             print(f"wrote {path}")
+        if not still["streams"]:
+            print(f"{args.plot} not written: no still data to plot (the ground and flight figures are in the table)")
     if args.kalibr:
         blockers = kalibr_blockers(report)
         if blockers and not args.force:

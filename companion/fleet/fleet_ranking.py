@@ -24,8 +24,9 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
     """Ranked IMU entries; each carries its ``_series`` and ``_tests`` (for plots; not JSON)."""
     entries = []
     shared = store.shared_folders()
-    key = itemgetter("vehicle", "sysid", "compid", "message", "imu")
-    for (vehicle, sysid, compid, message, imu), group in groupby(store.all_results(), key=key):
+    # an IMU's trend per condition (still, ground, flight: each condition's figures are their own series)
+    key = itemgetter("vehicle", "sysid", "compid", "message", "imu", "condition")
+    for (vehicle, sysid, compid, message, imu, condition), group in groupby(store.all_results(), key=key):
         rows = list(group)  # one IMU at a time: the rows arrive sorted by IMU, then flight time
         if all(r["status"] == "absent" for r in rows):
             continue  # a stream without these axes (an accelerometer batch in an older database): not an IMU here
@@ -74,14 +75,15 @@ def fleet_trends(store, threshold: float = EVIDENCE_THRESHOLD, min_rise: float =
                 last_n[axis] = float(v[-1])
         entries.append({
             "vehicle": vehicle, "sysid": int(sysid), "compid": int(compid), "message": message, "imu": int(imu),
-            "flights": flights, "flagged": tr.flagged, "evidence": round(float(tr.evidence), 3),
+            "condition": condition or "still", "flights": flights, "flagged": tr.flagged, "evidence": round(float(tr.evidence), 3),
             "axis": tr.axis, "param": tr.param, "trend": float(w.ratio) if w else None,
             "t": float(w.t) if w else None, "dispersion": float(w.phi) if w else None,
             "tests": len(tr.tests), "note": tr.note,
             "first_flight": min(times) if times else None, "last_flight": max(times) if times else None,
             "last_N": last_n, "identity_note": identity_note,
             "_series": series, "_tests": tr.tests, "_folder": folder})
-    entries.sort(key=lambda e: (not e["flagged"], -e["evidence"], e["vehicle"], e["sysid"], e["message"], e["imu"]))
+    entries.sort(key=lambda e: (not e["flagged"], -e["evidence"], e["vehicle"], e["sysid"], e["message"], e["imu"],
+                                e["condition"] != "still", e["condition"]))
     return entries
 
 
@@ -108,7 +110,8 @@ def ranking_lines(entries: list[dict], top: int) -> list[str]:
     for i, e in enumerate(shown, 1):
         worst = f"{e['axis']} {e['param']}" if e["axis"] else "-"
         trend = f"{e['trend']:.2f}x" if e["trend"] is not None else "-"
-        lines.append(f"{i:>4} {e['vehicle']:<{wv}} {e['sysid']:>3} {str(e['imu']) + ' ' + e['message']:<16} "
+        imu = str(e["imu"]) + " " + e["message"] + ("" if e.get("condition", "still") == "still" else f" {e['condition']}")
+        lines.append(f"{i:>4} {e['vehicle']:<{wv}} {e['sysid']:>3} {imu:<16} "
                      f"{e['flights']:>7} {'YES' if e['flagged'] else 'no':>4} {e['evidence']:>8.1f} {worst:<6} {trend:>6}"
                      + (f"  ({e['note']})" if e["note"] and not e["axis"] else ""))
     if len(shown) < len(entries):

@@ -12,7 +12,10 @@ Schema (``SCHEMA``; documented with examples in docs/fleet.md):
   axis): ``status``/``note`` of the axis, ``rate_hz``, ``samples``, ``still_s`` (seconds analysed),
   ``temp_min``/``temp_max`` (degC), every linear IEEE 952 term ``Q N B K R`` in SI with its 95 %
   interval ``*_lo``/``*_hi`` (NULL when the fit did not select the term), ``model_error``, ``chi2``,
-  ``dof``, and ``extra`` (JSON: Gauss-Markov / sinusoid terms with their intervals).
+  ``dof``, ``extra`` (JSON: Gauss-Markov / sinusoid terms with their intervals; the 95 % upper bounds of a
+  condition's terms not resolved) and ``condition`` (``still``, ``ground`` or ``flight``: the key holds it;
+  ``still_s`` is then the seconds of that condition). A schema-1 database (no condition) is migrated on
+  opening: its rows are still rows.
 - ``paths``: every path a content was seen under (a copied log is recognised, not re-analysed).
 
 Idempotent: :meth:`FleetStore.record` writes a log and all its rows in one transaction, replacing a
@@ -29,7 +32,11 @@ import time
 
 from companion.errors import CompanionError
 
-SCHEMA_VERSION = 1  #: stored in the database; a database of another version is refused, not misread
+SCHEMA_VERSION = 2  #: stored in the database; a database of another version is refused, not misread
+#: older schemas this one migrates on opening (1: no ``condition`` column; its rows are still data)
+MIGRATES = ("1",)
+#: the conditions a result row is for: still (disarmed, not moving), ground (armed, not moving), flight
+CONDITIONS = ("still", "ground", "flight")
 PARAMS = ("Q", "N", "B", "K", "R")  #: the coefficients stored per axis
 
 SCHEMA = f"""
@@ -81,7 +88,8 @@ CREATE TABLE IF NOT EXISTS results (
     chi2 REAL,
     dof INTEGER,
     extra TEXT,
-    PRIMARY KEY (hash, sysid, compid, message, imu, axis)
+    condition TEXT NOT NULL DEFAULT 'still',
+    PRIMARY KEY (hash, sysid, compid, message, imu, axis, condition)
 );
 CREATE INDEX IF NOT EXISTS results_imu ON results (vehicle, imu, axis);
 """
@@ -89,7 +97,20 @@ CREATE INDEX IF NOT EXISTS results_imu ON results (vehicle, imu, axis);
 RESULT_COLUMNS = (["hash", "vehicle", "sysid", "compid", "imu", "message", "axis", "status", "note", "rate_hz",
                    "samples", "still_s", "temp_min", "temp_max"]
                   + [c for p in PARAMS for c in (p, p + "_lo", p + "_hi")]
-                  + ["model_error", "chi2", "dof", "extra"])
+                  + ["model_error", "chi2", "dof", "extra", "condition"])
+
+
+def _migrate(con, version: str) -> None:
+    """Schema 1 -> 2: the results table rebuilt with ``condition`` (``still`` for every old row) in its key."""
+    old = [c for c in RESULT_COLUMNS if c != "condition"]
+    with con:
+        con.execute("ALTER TABLE results RENAME TO results_v1")
+        con.execute("DROP INDEX IF EXISTS results_imu")
+        con.executescript(SCHEMA)
+        con.execute(f"INSERT INTO results ({', '.join(old)}, condition) SELECT {', '.join(old)}, 'still' "
+                    "FROM results_v1")
+        con.execute("DROP TABLE results_v1")
+        con.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
 
 
 class FleetStore:
@@ -115,6 +136,9 @@ class FleetStore:
                 raise CompanionError(f"{self.path}: not a fleet database (an SQLite database with tables "
                                      f"{', '.join(sorted(tables)[:5])}{', ...' if len(tables) > 5 else ''}); "
                                      "give a new file or one written by fleet analyze")
+            if version is not None and str(version[0]) in MIGRATES:
+                _migrate(self.con, str(version[0]))
+                version = (str(SCHEMA_VERSION),)
             if version is not None and str(version[0]) != str(SCHEMA_VERSION):
                 self.con.close()
                 raise CompanionError(f"{self.path}: fleet database schema {version[0]}, "
@@ -222,7 +246,8 @@ class FleetStore:
         rows = []
         for r in result.get("rows", []):
             vals = [h] + [r.get(c) for c in RESULT_COLUMNS[1:]]
-            vals[-1] = json.dumps(r["extra"]) if r.get("extra") else None
+            vals[-2] = json.dumps(r["extra"]) if r.get("extra") else None
+            vals[-1] = r.get("condition") or "still"
             rows.append(vals)
         if rows:
             self.con.executemany(f"INSERT INTO results VALUES ({', '.join('?' * len(RESULT_COLUMNS))})", rows)
@@ -259,21 +284,24 @@ class FleetStore:
             out.setdefault(v, []).append(b)
         return out
 
-    def all_results(self):
+    def all_results(self, condition: str | None = None):
         """Every analysed axis joined with its log, ordered by IMU then flight time (for the report).
 
         ``vehicle`` is ``folder/board id`` for the logs of a folder that holds several boards
         (:meth:`shared_folders`), ``folder`` the stored vehicle name. A generator: rows stream from SQLite,
-        the report holds one IMU at a time."""
+        the report holds one IMU at a time. ``condition``: only that condition's rows (None: all, ordered by
+        condition after the IMU)."""
         vehicle = ("CASE WHEN l.board_id IS NOT NULL AND r.vehicle = l.vehicle AND r.vehicle IN "
                    "(SELECT vehicle FROM split) THEN r.vehicle || '/' || l.board_id ELSE r.vehicle END")
         cur = self.con.execute(
             f"WITH split AS ({self._SPLIT}) "
             f"SELECT {vehicle} AS vehicle, r.vehicle AS folder, r.sysid, r.compid, r.message, r.imu, r.axis, "
-            "r.status, r.hash, r.still_s, r.rate_hz, r.temp_min, r.temp_max, "
+            "r.status, r.hash, r.still_s, r.rate_hz, r.temp_min, r.temp_max, r.condition, "
             + ", ".join(f"r.{p}, r.{p}_lo, r.{p}_hi" for p in PARAMS)
             + ", l.start_time, l.start_source, l.board_id, l.path FROM results r JOIN logs l ON l.hash = r.hash WHERE l.status = 'ok' "
-            "ORDER BY 1, r.sysid, r.compid, r.message, r.imu, l.start_time, l.path, r.axis")
+            + ("AND r.condition = ? " if condition else "")
+            + "ORDER BY 1, r.sysid, r.compid, r.message, r.imu, r.condition DESC, l.start_time, l.path, r.axis",
+            (condition,) if condition else ())
         names = [d[0] for d in cur.description]
         for row in cur:
             yield dict(zip(names, row))

@@ -13,7 +13,11 @@ Result (see :func:`analyze_log`)::
      "log": {"sysid", "vehicle", "board_id", "imu_ids", "start_time", "duration_s", "streams"},
      "rows": [{"vehicle", "sysid", "compid", "imu", "message", "axis", "status", "note", "rate_hz",
                "samples", "still_s", "temp_min", "temp_max", "Q", "Q_lo", "Q_hi", "N", ..., "R_hi",
-               "model_error", "chi2", "dof", "extra"}, ...]}
+               "model_error", "chi2", "dof", "extra", "condition"}, ...]}
+
+Besides the still rows (``condition`` "still"), each IMU's ground and flight figures from the vehicle's
+redundant IMUs (:mod:`companion.fleet.condition_rows`): a flight log without still data is analysed, not
+failed, when it has either.
 
 A failure (unreadable file, no IMU data, a bug) gives ``status="failed"`` and a one-line ``error``.
 """
@@ -66,7 +70,7 @@ def _row(entry: dict, stream, axis: str, vehicle: str, ranges) -> dict:
            "samples": int(entry["samples"]), "still_s": float(entry["duration_s"]),
            "temp_min": float(temp.min()) if temp is not None and temp.size else None,
            "temp_max": float(temp.max()) if temp is not None and temp.size else None,
-           "model_error": None, "chi2": None, "dof": None, "extra": None}
+           "model_error": None, "chi2": None, "dof": None, "extra": None, "condition": "still"}
     for p in COLUMN_PARAMS.values():
         row[p] = row[p + "_lo"] = row[p + "_hi"] = None
     extra = []
@@ -109,10 +113,13 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         boards = ident.get("board_by_sysid", {})
         board = boards.get(sysid) or ident.get("board_id")
         vehicle = vehicle_name(sysid, board, path, vehicle_from)
-        rows, duration, still, lacking = [], 0.0, False, []
+        rows, duration, still, lacking, entries = [], 0.0, False, [], {}
+
+        def vehicle_of(s):
+            return vehicle if s.key.sysid == sysid else vehicle_name(s.key.sysid, boards.get(s.key.sysid), path,
+                                                                      vehicle_from)
         for s in streams:
-            v = vehicle if s.key.sysid == sysid else vehicle_name(s.key.sysid, boards.get(s.key.sysid), path,
-                                                                   vehicle_from)
+            v = vehicle_of(s)
             duration = max(duration, float(s.timing.duration_s))
             ranges = sel.ranges(s)
             if not ranges:  # no still data in this stream: nothing to analyse (said in the log's error)
@@ -126,6 +133,13 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
             if len(absent) == len(axes):
                 lacking.append(s.key.label())
             rows += [_row(entry, s, a, v, ranges) for a in axes if a not in absent]
+            entries[s.key] = entry
+        from companion.fleet.condition_rows import condition_rows  # ground and flight (redundant IMUs)
+
+        cond_rows = condition_rows(streams, getattr(res, "meta", {}) or {}, entries, vehicle_of,
+                                   [a for a in axes if a in GYRO_AXES])
+        figures = any(r["status"] == "ok" for r in cond_rows)
+        rows += cond_rows
         out["log"] = {"sysid": sysid, "vehicle": vehicle, "board_id": board,
                       "imu_ids": {int(k): int(v) for k, v in ident.get("imu_ids", {}).items()},
                       "start_time": ident.get("start_time"), "duration_s": duration, "streams": len(streams)}
@@ -138,8 +152,8 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
             out["dead_gyro"] = True
         elif not rows and still:
             out["error"] = (f"no stream carries the axes {','.join(axes)} (only {', '.join(lacking)})")
-        elif not rows:
-            out["error"] = f"no still data ({sel.describe()})"
+        elif not rows or not (still or figures):
+            out["error"] = f"no still data ({sel.describe()}) and no ground or flight figure"
         elif not any(r["status"] == "ok" for r in rows):
             notes = sorted({f"{r['status']}" + (f" ({r['note']})" if r.get("note") else "") for r in rows})
             out["error"] = "no axis could be analysed: " + "; ".join(notes)[:300]

@@ -15,7 +15,7 @@ import numpy as np
 #: a step between two samples longer than this many nominal periods is a gap (no interpolation across it)
 GAP_PERIODS = 2.5
 #: pieces shorter than this many grid samples carry no Allan point of use and are dropped
-MIN_PIECE = 64
+MIN_PIECE = 32
 
 
 @dataclass
@@ -58,6 +58,8 @@ def _interp_valid(tq: np.ndarray, tr: ImuTrack):
     """Track ``tr`` linearly interpolated at ``tq``, and where that is valid (both neighbours exist and are
     no further apart than GAP_PERIODS nominal periods)."""
     t = np.asarray(tr.t, dtype=float)
+    if t.shape[0] < 2:
+        return np.full((tq.shape[0], 3), np.nan), np.zeros(tq.shape[0], dtype=bool)
     k = np.searchsorted(t, tq, side="right")
     ok = (k > 0) & (k < t.shape[0])
     kk = np.clip(k, 1, max(t.shape[0] - 1, 1))

@@ -117,6 +117,8 @@ SHIFT_TAPS = 16
 SHIFT_BETA = 6.0
 #: rounds of shift-and-refit (the first-order term left after a shift is far below a sample)
 SHIFT_ROUNDS = 2
+#: an offset below this fraction of a sample is left to the first-order term (no shift)
+MIN_SHIFT = 0.01
 
 
 def fractional_delay(x: np.ndarray, delay: float) -> np.ndarray:
@@ -156,7 +158,7 @@ def _shifted(pa: list, pb: list, shift_s: float, rate: float):
     if shift_s == 0.0:
         return pa, pb
     d = float(np.clip(shift_s * rate, -SHIFT_TAPS / 2, SHIFT_TAPS / 2))
-    keep = [i for i, p in enumerate(pa) if p.shape[0] > 4 * SHIFT_TAPS]
+    keep = [i for i, p in enumerate(pa) if p.shape[0] > 3 * SHIFT_TAPS]
     return _trim([fractional_delay(pa[i], d) for i in keep]), _trim([pb[i] for i in keep])
 
 
@@ -169,6 +171,8 @@ def fit_pair(pa: list, pb: list, rate: float, filters=(None, None)) -> tuple[Pai
     M, bias, dt, c2, resid = _fit_once(pa, pb, rate, crossed)
     shift = 0.0
     for _ in range(SHIFT_ROUNDS):
+        if abs(float(np.median(dt))) * rate < MIN_SHIFT:
+            break  # far below a sample (slow telemetry): the first-order term carries it, no piece is trimmed
         shift += float(np.median(dt))
         sa, sb = _shifted(pa, pb, shift, rate)
         M, bias, dt, c2, resid = _fit_once(sa, sb, rate, crossed)

@@ -97,7 +97,12 @@ def axis_entry(tau, avar, edf, *, rate_hz: float, n: int, tau_min: float, level:
                               "white noise not resolved in the fit")
         out["bounds"].append(b) if b else None
     elif n_ceiling is not None and wn["N"] > n_ceiling:
-        out["notes"].append(f"N above its pair's figure ({n_ceiling:.3g}): the hat's share is unreliable here")
+        # a share above its pair's figure needs a negative share of the other IMU: the pair bounds it
+        terms = [t for t in terms if t["effect"] != "white_noise"]
+        out["bounds"].append({"effect": "white_noise", "N": float(n_ceiling), "std": {},
+                              "ci95": {"N": [0.0, float(n_ceiling)]}, "bound": True,
+                              "reason": "the hat's share came out above its pair's figure (vibration the IMUs do "
+                                        "not share, or too few samples): the pair's figure bounds it"})
     for t in fit.nuisance:
         p = {"bias_instability": "B", "random_walk": "K"}.get(t["effect"])
         if p and "ci95" in t:

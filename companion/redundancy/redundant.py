@@ -28,15 +28,26 @@ from companion.redundancy.align import ImuTrack, align
 from companion.redundancy.calibration import fit_pair
 from companion.redundancy.fit_points import axis_entry, tau_min_for
 from companion.redundancy.hat import hat_share, pair_points, quantization_avar
+from companion.redundancy.shape import avar_shape, equalize, usable
 
 GYRO = ("gx", "gy", "gz")
 #: the fewest seconds of aligned data for any figure
 MIN_SECONDS = 30.0
+#: with the filters known (equalized), the fit starts at this many samples, or where the cascade's shape
+#: reaches SHAPE_MIN (below, the model of the filters carries too much of the point)
+EQUALIZED_TAU0 = 4
+#: a calibrated difference this small against the signal is no pair of IMUs but two copies of one
+COPY_RATIO = 1e-9
+SHAPE_MIN = 0.6
 ONE_IMU = ("one IMU: in motion its noise cannot be separated from the motion; a second IMU, logging while "
            "disarmed (ArduPilot LOG_DISARMED=1) or ground time (armed, motors running, not moving) would give "
            "figures")
 OWN_NOISE = ("the IMU's own noise in this condition: motion and vibration common to the IMUs cancel in their "
              "differences")
+
+
+class _Copies(Exception):
+    """Two streams that are copies of one IMU (their calibrated difference is all but zero)."""
 
 
 @dataclass
@@ -56,15 +67,38 @@ def _empty(method: str, seconds: float, notes) -> dict:
     return {"axes": {}, "seconds": float(seconds), "method": method, "notes": list(notes)}
 
 
-def _pair_curves(al, tracks, i, j):
-    """Calibration and (tau, avar, edf) per axis of pair (i, j), the rounding of both IMUs removed."""
-    cal, res = fit_pair(al.track(i), al.track(j), al.rate_hz, (tracks[i].filter_hz, tracks[j].filter_hz))
+def _pair_curves(pieces, rate, tracks, i, j, equalized):
+    """Calibration and (tau, avar, edf) per axis of pair (i, j) (pieces per track), the rounding of both IMUs
+    removed and, with ``equalized`` (the filters' cascade), the cascade's shape divided out."""
+    fl = (None, None) if equalized else (tracks[i].filter_hz, tracks[j].filter_hz)
+    cal, res = fit_pair(pieces[i], pieces[j], rate, fl)
+    r, b = np.vstack(res), np.vstack(pieces[j])
+    if np.all(np.var(r, axis=0) <= COPY_RATIO * np.var(b, axis=0)):
+        raise _Copies(f"{tracks[i].label or i} and {tracks[j].label or j}")
     curves = []
     for k in range(3):
-        tau, avar, edf, m = pair_points(res, al.rate_hz, k)
-        q = quantization_avar(tracks[i].lsb, tau, al.rate_hz) + quantization_avar(tracks[j].lsb, tau, al.rate_hz)
-        curves.append((tau, avar - q, edf))
+        tau, avar, edf, m = pair_points(res, rate, k)
+        q = quantization_avar(tracks[i].lsb, tau, rate) + quantization_avar(tracks[j].lsb, tau, rate)
+        avar = avar - q
+        if equalized:
+            avar = avar / avar_shape(equalized, rate, m)
+        curves.append((tau, avar, edf))
     return cal, curves
+
+
+def _equalized(al, tracks):
+    """(pieces per track, the cascade's filters or None, tau_min): every track through every IMU's filter when
+    all are known and the rates are one, else the aligned pieces and a cut above the filters' roll-off."""
+    fc = [tr.filter_hz for tr in tracks]
+    pieces = [al.track(i) for i in range(len(tracks))]
+    same_rate = max(tr.rate_hz for tr in tracks) <= 1.01 * min(tr.rate_hz for tr in tracks)
+    if same_rate and usable(fc, al.rate_hz):
+        m = np.arange(1, 257)
+        shp = avar_shape(fc, al.rate_hz, m)
+        first = int(m[np.argmax(shp >= SHAPE_MIN)]) if np.any(shp >= SHAPE_MIN) else 256
+        return equalize(pieces, fc, al.rate_hz), fc, max(EQUALIZED_TAU0, first) / al.rate_hz
+    known = [f for f in fc if f]
+    return pieces, None, tau_min_for(al.rate_hz, min(known) if known else None)
 
 
 def _n_of(entry: dict, upper: bool = False) -> float | None:
@@ -164,11 +198,14 @@ def redundant_noise(tracks: list[ImuTrack], intervals, *, still_n=None, min_seco
     if al.seconds < min_seconds:
         note = f"only {al.seconds:.0f} s with every IMU logged (< {min_seconds:g} s): no figure"
         return RedundancyResult([_empty("none", al.seconds, [note]) for _ in tracks], [], al.seconds)
-    fc = [tr.filter_hz for tr in tracks if tr.filter_hz]
-    tau_min = tau_min_for(al.rate_hz, min(fc) if fc else None)
+    pieces, equalized, tau_min = _equalized(al, tracks)
     n = int(round(al.seconds * al.rate_hz))
     pairs = list(combinations(range(len(tracks)), 2))
-    curves = [_pair_curves(al, tracks, i, j) for i, j in pairs]
+    try:
+        curves = [_pair_curves(pieces, al.rate_hz, tracks, i, j, equalized) for i, j in pairs]
+    except _Copies as exc:
+        note = f"{exc}: copies of one IMU (their difference is all but zero), no pair of IMUs: no figure"
+        return RedundancyResult([_empty("none", al.seconds, [note]) for _ in tracks], [], al.seconds)
     pair_out = _pair_entries(al, tracks, pairs, curves, n, tau_min)
     if len(tracks) == 3:
         per = _three(al, tracks, pairs, curves, n, tau_min, pair_out)

@@ -60,15 +60,13 @@ def draw_flight(seed: int, fmt: str = "log400", imus: int = 3, flight_s: float =
                 still_s: float = 0.0) -> FlightDraw:
     """One random flight (module docstring); ``still_s`` seconds disarmed before arming."""
     from companion.sim.body_motion import Flight, Schedule
-    from companion.sim.model import model_from_dict
     from companion.sim.vehicle import ImuSpread, VehicleSimulator
 
     rng = np.random.default_rng([seed, 4711])
     rate, _, _, lsb = FORMATS[fmt]
     gains = rng.uniform(n_lo, n_hi, 3)
-    model = model_from_dict({"rate_hz": rate, "axes": {a: [{"effect": "white_noise", "N": DEG_SQRT_H},
-                                                           {"effect": "bias_instability", "B": 3e-6}]
-                                                       for a in ("gx", "gy", "gz")}}, "draw")
+    model = {"rate_hz": rate, "axes": {a: [{"effect": "white_noise", "N": DEG_SQRT_H},
+                                           {"effect": "bias_instability", "B": 3e-6}] for a in ("gx", "gy", "gz")}}
     real, fc, skew = _realism(fmt, rng, gains, vibration, max_offset_s)
     arm = 5.0 + still_s
     sched = Schedule(flights=[Flight(arm_at=arm, disarm_at=arm + flight_s + 40.0)])

@@ -276,7 +276,9 @@ def test_several_sources_one_without_still_data(tmp_path, capsys):
     g, a = rng.normal(0, 1e-3, (1, n, 3)), rng.normal(0, 0.01, (1, n, 3)) + [0, 0, -9.8]
     good, armed = tmp_path / "good.bin", tmp_path / "armed.bin"
     write_imu_log(good, t, g, a)
-    write_imu_log(armed, t, g, a, armed=[(0.5, True)])
+    # armed and moving throughout with one IMU: neither still data nor a ground or flight figure
+    moving = g + 0.3 * np.sin(2 * np.pi * 0.5 * t)[None, :, None]
+    write_imu_log(armed, t, moving, a, armed=[(0.5, True)])
     assert main(["analyze", str(good), str(armed), "--axes", "gx"]) == 2
     cap = capsys.readouterr()
     assert "good.bin: 1 still segment" in cap.out and "1 of 2 sources not analysed" in cap.err
