@@ -308,10 +308,11 @@ class InflightNoise:
             self.figures[cond] = self._figures(cond)
             if not self.baseline[cond]:
                 if self.pairs and all(p.learned_s(cond) >= self.cfg.baseline_s for p in self.pairs.values()):
-                    self.baseline[cond] = {"imus": self._figures(cond, learned=True),
-                                           "pairs": self._pair_levels(cond, learned=True)}
-                    for p in self.pairs.values():
-                        p.learn[cond] = None
+                    pairs = self._pair_levels(cond, learned=True)
+                    if any(pairs.values()):  # else (a slow stream: no level resolved yet) learning goes on
+                        self.baseline[cond] = {"imus": self._figures(cond, learned=True), "pairs": pairs}
+                        for p in self.pairs.values():
+                            p.learn[cond] = None
                 continue
             out += self._test(cond)
         return out
