@@ -127,13 +127,64 @@ def cpu(rate_hz: float, data_s: float, inflight: bool) -> float:
     return (time.process_time() - t0) / float(blk.t[-1] - blk.t[0])
 
 
+def real_logs(paths: list[str], baseline_s: float | None) -> None:
+    """Every log under ``paths`` with two or more IMUs of one system replayed as `run --no-state` does;
+    ``baseline_s``: a shorter in-flight baseline, so that the test runs on short real flights."""
+    import functools
+    from pathlib import Path
+
+    import companion.service.inflight as inflight
+    from companion.errors import CompanionError
+    from companion.mavlink.reporter import Reporter
+    from companion.service.pipeline import Pipeline, PipelineConfig
+    from companion.service.replay import replay_log, replay_tlog
+    from companion.sources import load
+
+    if baseline_s:
+        inflight.InflightConfig = functools.partial(inflight.InflightConfig, baseline_s=baseline_s)
+    files = sorted(str(f) for d in paths for f in Path(d).rglob("*")
+                   if f.is_file() and f.suffix.lower() in (".bin", ".ulg", ".tlog", ".log"))
+    multi, tested, verdicts = 0, 0, 0
+    for f in files:
+        try:
+            streams = load(f).streams
+        except (CompanionError, OSError, ValueError):
+            continue
+        per_sys: dict = {}
+        for st in streams:
+            per_sys.setdefault(st.key.sysid, set()).add(st.key.instance)
+        if max((len(v) for v in per_sys.values()), default=0) < 2:
+            continue
+        multi += 1
+        p = Pipeline(PipelineConfig(), Reporter(_Sink(), 1.0))
+        try:
+            (replay_tlog if f.lower().endswith(".tlog") else replay_log)(f, p)
+        except CompanionError:
+            continue
+        nz = p.inflight.noise
+        v = [x for _, x in p.transitions if NAMED.search(x)]
+        verdicts += len(v)
+        tested += any(b for b in nz.baseline.values())
+        flight = max((pr.seconds["flight"] for pr in nz.pairs.values()), default=0.0)
+        print(f"  {Path(f).name}: {flight:.0f} s in flight, figures: "
+              f"{', '.join(c for c in nz.figures if nz.figures[c]) or 'none'}, baseline learned: "
+              f"{', '.join(c for c in nz.baseline if nz.baseline[c]) or 'no'}, verdicts: {v or 0}", flush=True)
+    print(f"REAL LOGS: {len(files)} logs, {multi} with two or more IMUs, {tested} with an in-flight baseline "
+          f"(the test ran), {verdicts} verdicts")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=10, help="flights with a fault per simulator kind")
     ap.add_argument("--fa-hours", type=float, default=30.0, help="healthy flight IMU-hours (target: >= 100)")
     ap.add_argument("--flight-s", type=float, default=900.0, help="length of each healthy flight")
     ap.add_argument("--cpu-s", type=float, default=300.0, help="data seconds of the CPU measurement")
+    ap.add_argument("--real", nargs="+", metavar="DIR", help="only: replay the real logs under DIR (e.g. "
+                    "/work/shared/data /work/reallogs) and count in-flight verdicts")
+    ap.add_argument("--real-baseline-s", type=float, default=None, help="with --real: a shorter in-flight baseline")
     args = results.parse_args(ap, {"seeds": 5, "fa_hours": 10.0, "flight_s": 900.0, "cpu_s": 120.0})
+    if args.real:
+        return real_logs(args.real, args.real_baseline_s)
     print("doubled in-flight noise on one IMU (3 IMUs): delay from the fault to its STATUSTEXT")
     lines = []
     for kind in ("copter", "plain"):
