@@ -1,4 +1,4 @@
-"""`companion run`'s in-flight noise test (companion/service/inflight.py) on simulated flights: how soon a
+"""`companion run`'s in-flight noise test (companion/service/inflight_live.py) on simulated flights: how soon a
 doubled in-flight noise on one IMU is named and that the others stay silent, false alarms over many healthy
 flights, and the CPU cost of 3 IMUs at 400 Hz with the in-flight estimation.
 
@@ -133,7 +133,7 @@ def real_logs(paths: list[str], baseline_s: float | None) -> None:
     import functools
     from pathlib import Path
 
-    import companion.service.inflight as inflight
+    import companion.service.inflight_live as inflight
     from companion.errors import CompanionError
     from companion.mavlink.reporter import Reporter
     from companion.service.pipeline import Pipeline, PipelineConfig

@@ -1,4 +1,4 @@
-"""The pipeline's side of the in-flight noise (:mod:`companion.service.inflight`): feeding it after each
+"""The pipeline's side of the in-flight noise (:mod:`companion.service.inflight_live`): feeding it after each
 block, the NAMED_VALUE_FLOATs of its figures, its STATUSTEXTs and the health they set.
 
 Names (datasheet units, deg/sqrt(h)), per IMU i and gyro axis X, Y, Z:
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from companion.health.degradation import DEGRADING
 from companion.mavlink.reporter import MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING
-from companion.service.inflight import CONDITIONS, InflightNoise
+from companion.service.inflight_live import CONDITIONS, InflightNoise
 from companion.units import to_datasheet
 
 SUFFIX = {"flight": "FN", "ground": "GN"}

@@ -1,4 +1,4 @@
-"""`run`'s in-flight noise (companion/service/inflight.py, estimators/pair_calibration.py) against known truth:
+"""`run`'s in-flight noise (companion/service/inflight_live.py, estimators/pair_calibration.py) against known truth:
 the running relative calibration recovers a drawn scale/misalignment, bias and time offset; on the simulated
 vehicle each IMU's in-flight N comes out at the model's; a doubled noise on one IMU is named within 120 s and
 no other IMU is; the baseline survives the state file and a state file without it still loads."""
