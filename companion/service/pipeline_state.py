@@ -11,6 +11,7 @@ from companion.service.channel import Channel
 from companion.service.imu_group import ImuGroup
 
 STATE_FORMAT = "companion-run-state"  # the "format" key that tells our state file from any other JSON
+#: version 2 adds "inflight" (the in-flight baselines, service.inflight_live); a version-1 file loads without them
 #: the per-axis faults that describe the sensor itself, said again after a restart while they last (a
 #: saturation was the last run's motion, a bias fault is judged within a run)
 SENSOR_FAULTS = ("dead", "stuck", "noise", "spikes", "resolution")
