@@ -11,7 +11,7 @@ from companion.errors import CompanionError
 #: the effect a --degrade-term grows
 DEGRADE_EFFECT = {"N": "white_noise", "B": "bias_instability", "K": "random_walk"}
 #: --fault kinds (companion.sim.vehicle.Fault)
-FAULT_KINDS = ("stuck", "noise", "bias", "spikes", "drift", "saturate")
+FAULT_KINDS = ("stuck", "noise", "bias", "spikes", "drift", "saturate", "flight_noise")
 #: s: the shortest flight, room for take-off, a manoeuvre and landing
 MIN_FLIGHT_S = 4.0
 #: the --help text of the fault sizes, one line per kind
@@ -24,6 +24,7 @@ A fault (--fault KIND --fault-at S) on IMU --fault-imu, gyro axis --fault-axis; 
             --spike-amplitude, default 0.3 rad/s)
   drift     ramp added from the fault time on, rad/s per s (default 1e-4)
   saturate  clip level: the output is limited to +-X rad/s (default 0.5)
+  flight_noise  factor on the own noise; with --preset also on the IMU's vibration pick-up (default 2)
 """
 
 
@@ -52,7 +53,7 @@ def add_vehicle_options(p) -> None:
 def add_fault_options(p, degrade: bool = False) -> None:
     """--fault KIND and its options; with ``degrade`` also the older --degrade-* noise growth."""
     g = p.add_argument_group("fault (one gyro axis of one IMU; see above for --fault-size per kind)")
-    g.add_argument("--fault", choices=FAULT_KINDS, metavar="KIND", help="stuck, noise, bias, spikes, drift or saturate")
+    g.add_argument("--fault", choices=FAULT_KINDS, metavar="KIND", help="stuck, noise, bias, spikes, drift, saturate or flight_noise")
     g.add_argument("--fault-at", type=float, metavar="S", help="time of the fault (required with --fault)")
     g.add_argument("--fault-size", type=float, metavar="X", help="size in the kind's SI unit (rad/s, factor, fraction, rad/s per s)")
     g.add_argument("--fault-imu", type=int, default=0, metavar="I", help="faulty IMU, 0 .. --imus - 1 (default 0)")

@@ -45,6 +45,7 @@ from companion.service.imu_summary import fault_texts, final_terms, send_final, 
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 from companion.service.imu_group import ImuGroup
+from companion.service.inflight_report import InflightReport
 from companion.units import datasheet_unit, to_datasheet
 
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU")  # the messages decoded as IMU data
@@ -67,6 +68,7 @@ class Pipeline:
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
         self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
+        self.inflight = InflightReport(self)  # each IMU's own noise while armed, from the other IMUs
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
         self._bias_said: dict = {}  # (imu, axis) -> the bias jump size said when it was flagged (deg/s)
@@ -324,6 +326,7 @@ class Pipeline:
         if ch.imu in self._restored:
             announce_restored(self, ch, t_end)
         self._report(self.group.compare(ch.imu, self.channels, self.armed), t_end)
+        self.inflight.on_block(ch, t_end)
         if rate_event == "first":
             if self.baseline_fixed and self._has_baseline(ch):
                 self.failed = check_baseline(self.baseline, ch, self.cfg.baseline_force, self.log)
@@ -453,7 +456,8 @@ class Pipeline:
 
     def health(self, ch: Channel) -> int:
         """0 healthy, 1 degrading (any fault, even while the Allan baseline is still being learned), 2 learning."""
-        return ch.health(self._has_baseline(ch))
+        h = ch.health(self._has_baseline(ch))
+        return DEGRADING if self.inflight.degrading(ch.imu) else h
 
     def send_health_now(self, state: int | None = None) -> None:
         """Send every IMU's health at once (e.g. STALE when the link is silent: no message time advances)."""

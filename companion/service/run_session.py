@@ -195,6 +195,7 @@ def summary_lines(pipeline) -> list[str]:
         for ax, d in r["axes"].items():
             text = summary_line(d["terms"], ax, d["baseline"])
             out.append(f"  {ax}: " + (text or f"no estimate yet ({r['still_s']:.0f} s of still data at this rate)"))
+        out += pipeline.inflight.summary_lines(r["imu"])
     for t, text in pipeline.transitions:
         out.append(f"  at {t:.0f} s: {text}")
     from companion.service.autopilot_watch import summary_lines as autopilot_lines

@@ -225,7 +225,8 @@ class SensorStage:
     nominal log times since boot, ``slow`` (imus, n, 3) the slow part at those times, ``white_std``
     (imus, 3) per-sample std of the white noise at the sensor rate, ``phase_env`` (n,) the flight envelope
     (0 disarmed, 0.3 armed on the ground, 1 in the air). Returns (gyro (imus, n, 3), sample times (imus,
-    n)), and, for ``white_of`` = (imu, axis), that axis' filtered white noise alone (for a noise fault)."""
+    n)), and, for ``white_of`` = (imu, axis), that axis' filtered white noise alone (for a noise fault;
+    ``(imu, axis, True)``: with the IMU's vibration pick-up, for a flight_noise fault)."""
 
     CHUNK = 1 << 18  # sensor samples per internal chunk (memory bound at any sensor rate)
 
@@ -316,7 +317,9 @@ class SensorStage:
                     x = np.round(x / r.gyro_lsb) * r.gyro_lsb
                 y = self._filter(x, i, white=False)
                 if white_of is not None and white_of[0] == i:
-                    yw = self._filter(w[:, [white_of[1]]], 0, white=True, imu=i)[:, 0]
+                    ax = white_of[1]
+                    own = w[:, [ax]] + (vi[:, [ax]] if len(white_of) > 2 and white_of[2] else 0.0)
+                    yw = self._filter(own, 0, white=True, imu=i)[:, 0]
                 if sel[i].any():
                     kk = k_pick[i][sel[i]] - c0
                     if r.decimation == "latest":

@@ -339,8 +339,8 @@ class VehicleSimulator:
         if self.degrade is not None:
             self._apply_degradation(slow, accel, s)
         white_of = None
-        if self.fault is not None and self.fault.kind == "noise":
-            white_of = (self.fault.imu, GYRO_AXES.index(self.fault.axis))
+        if self.fault is not None and self.fault.kind in ("noise", "flight_noise"):
+            white_of = (self.fault.imu, GYRO_AXES.index(self.fault.axis), self.fault.kind == "flight_noise")
         gyro, ts_imu, wout = self._stage.run(t, slow, white_std, env, self._rng_vib, self._rng_sensor, white_of)
         self._blk_raw = gyro.copy()
         self._blk_frozen = None
@@ -446,7 +446,7 @@ class VehicleSimulator:
                 self._blk_frozen = _FrozenAt(0, frozen)
             dither = self._rng_fault.normal(0.0, fl.size, n_on) if fl.size > 0 else 0.0
             y[on] = frozen + dither
-        elif fl.kind == "noise":
+        elif fl.kind in ("noise", "flight_noise"):  # flight_noise: the vibration pick-up is in the part too
             y[on] += (fl.size - 1.0) * white_parts[(fl.imu, fl.axis)][on]
         elif fl.kind == "bias":
             y[on] += fl.size

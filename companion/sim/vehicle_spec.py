@@ -21,7 +21,7 @@ MAX_IMUS = 3  #: an ArduPilot autopilot logs and sends at most three IMUs (RAW_I
 #: MAVLink message of each IMU index in a tlog or on the link (ArduPilot's convention)
 IMU_MESSAGES = ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
 
-FAULT_KINDS = ("stuck", "noise", "bias", "spikes", "drift", "saturate")  #: the injectable gyro faults
+FAULT_KINDS = ("stuck", "noise", "bias", "spikes", "drift", "saturate", "flight_noise")  #: the injectable gyro faults
 #: what ``Fault.size`` means for each kind (SI)
 FAULT_SIZE_UNITS = {
     "stuck": "std in rad/s of a dither added to the frozen value (0: exactly frozen)",
@@ -30,10 +30,11 @@ FAULT_SIZE_UNITS = {
     "spikes": "fraction of samples (0-1] hit by a +-amplitude outlier",
     "drift": "ramp in rad/s per s added from the fault on (signed)",
     "saturate": "clip level in rad/s: the output is limited to +-size",
+    "flight_noise": "factor on the axis' own noise: its white noise and its pick-up of the frame's vibration",
 }
 #: each kind's size when none is given (``Fault(size=None)``, ``--fault`` without ``--fault-size``)
 FAULT_DEFAULT_SIZE = {"stuck": 0.0, "noise": 6.0, "bias": math.radians(1.0), "spikes": 0.005,
-                      "drift": 1e-4, "saturate": 0.5}
+                      "drift": 1e-4, "saturate": 0.5, "flight_noise": 2.0}
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,9 @@ class Fault:
       outlier of ``+amplitude`` or ``-amplitude`` rad/s (random sign) added to it.
     - ``drift``: ``size * (s - at)`` rad/s is added (a ramp of ``size`` rad/s per s; s = time since start).
     - ``saturate``: the output is clipped to ``[-size, +size]`` rad/s (``size`` > 0).
+    - ``flight_noise``: as ``noise``, and with :class:`companion.sim.realism.Realism` what the IMU picks up
+      of the frame's vibration (its ``imu_vibration_gain``) is multiplied by ``size`` too: the IMU's own
+      output beyond the body's rotation grows in flight (a loosened or damaged mount), not only at rest.
 
     The fault acts on the SI output before any int16 rounding of a MAVLink writer.
     """
@@ -68,7 +72,7 @@ class Fault:
         object.__setattr__(self, "at", _finite("fault time (at)", self.at, lo=0.0))
         size = FAULT_DEFAULT_SIZE[self.kind] if self.size is None else self.size
         name = f"size of a {self.kind} fault ({FAULT_SIZE_UNITS[self.kind]})"
-        if self.kind in ("stuck", "noise"):
+        if self.kind in ("stuck", "noise", "flight_noise"):
             size = _finite(name, size, lo=0.0)
         elif self.kind == "spikes":
             size = _finite(name, size, lo=0.0, hi=1.0, lo_open=True)
@@ -85,7 +89,8 @@ class Fault:
 
     def describe(self) -> str:
         unit = {"stuck": " rad/s dither", "noise": "x white noise", "bias": " rad/s", "spikes": " of samples",
-                "drift": " rad/s/s", "saturate": " rad/s clip"}[self.kind]
+                "drift": " rad/s/s", "saturate": " rad/s clip",
+                "flight_noise": "x own noise"}[self.kind]
         size = f"{100 * self.size:g} %" if self.kind == "spikes" else f"{self.size:g}{unit}"
         return f"IMU{self.imu} {self.axis} {self.kind} {size} at {self.at:g} s"
 

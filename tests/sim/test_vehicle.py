@@ -111,7 +111,8 @@ def untouched(clean, bad, imu, j):
 
 @pytest.mark.parametrize("kind", FAULT_KINDS)
 def test_every_fault_kind_appears_exactly_as_specified(kind):
-    size = {"stuck": 0.0, "noise": 6.0, "bias": 0.021, "spikes": 0.02, "drift": 3e-4, "saturate": 0.04}[kind]
+    size = {"stuck": 0.0, "noise": 6.0, "bias": 0.021, "spikes": 0.02, "drift": 3e-4, "saturate": 0.04,
+            "flight_noise": 6.0}[kind]
     clean, bad, fault = twin_pair(kind, size)
     j = 1
     s = clean.t - 1.0
@@ -134,7 +135,7 @@ def test_every_fault_kind_appears_exactly_as_specified(kind):
         p, m = 0.02, int(on.sum())
         assert abs(hits.sum() - p * m) < 4 * math.sqrt(m * p * (1 - p))
         assert abs(np.sign(d[hits]).mean()) < 4 / math.sqrt(hits.sum())
-    elif kind == "noise":
+    elif kind in ("noise", "flight_noise"):  # without Realism the own noise is the white noise
         ratio = y[on].std() / y0[on].std()
         m = int(on.sum())
         assert ratio == pytest.approx(6.0, rel=4 * math.sqrt(1.0 / m))  # std of a std ~ 1/sqrt(2m), twice
@@ -337,3 +338,28 @@ def test_tlog_read_back_by_companion_and_pymavlink(tmp_path):
     assert [m.time_boot_ms for m in imu2[:3]] == [1000, 1010, 1020]
     seqs = [m.get_seq() for m in msgs]
     assert all((b - a) % 256 == 1 for a, b in zip(seqs, seqs[1:]))  # sequence continues across blocks
+
+
+def test_flight_noise_fault_grows_the_vibration_pickup_too():
+    """With Realism, ``flight_noise`` adds (size - 1) x the IMU's filtered white noise *and* vibration pick-up:
+    disarmed (no vibration) exactly what ``noise`` adds, in flight much more on IMU0 x (the copter preset's
+    strongest pick-up)."""
+    from companion.sim.preset import load_preset
+
+    P = load_preset("copter")
+    sched = Schedule(flights=(Flight(30.0, 70.0, max_rate=1.0),))
+
+    def run(kind):
+        fault = None if kind is None else Fault(kind, at=2.0, size=2.0, imu=0, axis="gx")
+        sim = VehicleSimulator(P["model"], imus=3, seed=5, rate_hz=50.0, schedule=sched, fault=fault,
+                               realism=P["realism"])
+        return sim.run(80.0)
+
+    clean, white, own = run(None), run("noise"), run("flight_noise")
+    s = clean.t - 1.0
+    rest, flying = (s >= 2.0) & (s < 29.0), (s > 40.0) & (s < 65.0)
+    d_white = white.gyro[0, :, 0] - clean.gyro[0, :, 0]
+    d_own = own.gyro[0, :, 0] - clean.gyro[0, :, 0]
+    np.testing.assert_allclose(d_own[rest], d_white[rest], rtol=0, atol=1e-12)
+    assert d_own[flying].std() > 3.0 * d_white[flying].std()
+    assert np.array_equal(own.gyro[1:], clean.gyro[1:])  # the other IMUs untouched
