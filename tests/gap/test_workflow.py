@@ -130,6 +130,7 @@ def test_low_flicker_draw_keeps_b():
     assert [e["verdict"] for e in r.recalibrated] == ["consistent", "consistent"]
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_b_far_off_still_called_missized():
     """The correction must not blind the test: a model B 5x too small is still named (truth: simulator), with
     the fitted B within 0.7-1.4x the truth, in most draws: 12 consecutive seeds, the detection's power at

@@ -62,6 +62,7 @@ def test_reports_reach_a_gcs_behind_mavproxy_through_gcs_output(tmp_path):
         chain.close()
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_mavproxy_default_stream_rates_beside_the_companion_raise_no_alarm(tmp_path):
     """An autopilot that refuses SET_MESSAGE_INTERVAL, MAVProxy with its default stream-rate behaviour
     (REQUEST_DATA_STREAM of all streams at 4 Hz, again every 15 s of wall clock): the IMU rate falls from
@@ -103,6 +104,7 @@ def test_mavproxy_default_stream_rates_beside_the_companion_raise_no_alarm(tmp_p
     assert any(start_t > learned[0] for start_t, _ in drops), (drops, learned)
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_router_outage_texts_reach_the_gcs_and_health_is_back_to_healthy_at_once(tmp_path):
     """A healthy gyro, the baseline learned (HLTH 0 at the GCS), MAVProxy killed while data flow and
     restarted after two "data stopped" texts (>= 10 s): the GCS (behind --gcs) gets "IMU data stopped"

@@ -121,6 +121,7 @@ def run_loop(tmp_path, via_mavproxy=False, speedup=12.0, duration=900.0, degrade
     return nvf, texts
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_sim_autopilot_against_run_direct(tmp_path):
     nvf, texts = run_loop(tmp_path, duration=660.0, degrade_at=320.0)
     check_loop(tmp_path, nvf, texts, 320.0, 660.0)

@@ -100,6 +100,7 @@ def test_twenty_percent_random_loss(tmp_path):
     check_loss_run(out, sim_out, relay, 0.17, 0.23)
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 @pytest.mark.network
 def test_bursts_of_loss(tmp_path):
     # Gilbert model: bursts of 1/0.08 = 12.5 datagrams on average (125 ms at 100 Hz), 20 % lost overall

@@ -5,6 +5,8 @@ baseline of another sensor stops the pipeline with one line instead of raising i
 
 from __future__ import annotations
 
+import pytest
+
 import math
 
 import numpy as np
@@ -106,6 +108,7 @@ def file_order(duration=150.0):
     return order, src, row, streams, hb_armed
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_replay_as_arrays_equals_one_event_at_a_time():
     order, src, row, streams, hb_armed = file_order()
     results = []

@@ -91,6 +91,7 @@ def test_the_estimates_show_the_fault_while_it_lasts():
     assert gz_n(p)["N"] > 1.15 * N  # fed as usual while active: N follows the noisier gyro
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_spike_burst_is_put_back_too():
     t, g, acc = record(5, 800.0, burst=(400.0, 430.0), spikes=True)
     p = pipeline()
@@ -103,6 +104,7 @@ def test_spike_burst_is_put_back_too():
     assert abs(n["N"] - N) < 4.0 * n["std"]["N"] + 0.02 * N, (n, N)
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_state_saved_during_the_fault_keeps_the_estimators_of_its_onset():
     t, g, acc = record(6, 900.0, burst=(400.0, 460.0))
     p = pipeline()
