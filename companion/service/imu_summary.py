@@ -21,7 +21,10 @@ def summary_rows(pipeline) -> list[dict]:
                  below_resolution_note(pipeline, ch))
         row = {"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "still_s": ch.fed_s,
                "other_rates": ch.kept_rates(), "health": STATE_NAMES[pipeline.health(ch)], "counts": ch.counts,
-               "axes": {}, "faults": fault_texts(pipeline, ch), "notes": [n for n in notes if n]}
+               "axes": {}, "faults": fault_texts(pipeline, ch), "notes": [n for n in notes if n],
+               # a float gyro whose every sample read exactly 0: dead even where the record is too short for the
+               # dead test (an int16 gyro may be a quiet one below its 1 mrad/s step): the exit status says it
+               "all_zero": bool(notes[1]) and ch.message not in INT16_MESSAGES}
         if ch.fast and ch.fed_s > 0:
             ch.flush()
             for ax in ch.axes:
@@ -44,7 +47,7 @@ def fault_texts(pipeline, ch) -> list[str]:
         else:
             ev = ch.faults.event_of(kind, ax)
         out.append(ev.text())
-    return out
+    return list(dict.fromkeys(out))  # one line per fault: two detectors may hold the same one (block, sample)
 
 
 def rate_note(pipeline, ch) -> str | None:

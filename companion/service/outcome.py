@@ -17,7 +17,7 @@ def usable(row: dict) -> bool:
 def run_status(rows: list[dict]) -> tuple[int, str]:
     """(exit status, its one-line reason) of a run whose summary rows (service.imu_summary) are ``rows``:
     any active fault or a degrading IMU first (what the run is for), then no usable IMU, else healthy."""
-    bad = [f"IMU{r['imu']}" for r in rows if r.get("faults") or r.get("health") == "degrading"]
+    bad = [f"IMU{r['imu']}" for r in rows if r.get("faults") or r.get("health") == "degrading" or r.get("all_zero")]
     if bad:
         return EXIT_FAULTS, f"gyro faults or degradation found: {', '.join(bad)}"
     if not rows:

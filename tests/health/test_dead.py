@@ -96,10 +96,11 @@ def test_run_names_the_dead_gyro(tmp_path):
 
 def test_a_record_too_short_to_name_a_dead_gyro_says_it_read_exactly_zero(tmp_path):
     # a public rover log holds 1.5 s of a gyro reading exactly 0 (77 samples): `analyze` says "gyro dead",
-    # `run` said nothing; its summary now notes it, for the dead IMU only
+    # `run` notes it in its summary, for the dead IMU only, and ends with the fault status: a failing gyro
+    # must not end as healthy
     p = dead_log(tmp_path / "short.bin", seconds=1.5)
     r = companion("run", "--source", str(p), "--no-state", "--quiet")
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 4 and "gyro faults or degradation found: IMU1" in r.stderr, r.stderr
     notes = [ln for ln in r.stdout.splitlines() if "read exactly 0 in all" in ln]
     assert len(notes) == 1 and notes[0].strip().startswith("note: IMU1: gyro X, Y, Z read exactly 0 in all 75 samples"), r.stdout
     # long enough, the dead test names it and no note repeats it
@@ -144,3 +145,4 @@ def test_a_float_gyro_reading_exactly_zero_at_10_and_25_hz_is_named_dead():
         p.on_samples(StreamKey(1, 1, "HIGHRES_IMU", 0), t, np.zeros((t.size, 3)), a)
         dead = [(tt, x) for tt, x in p.transitions if "reads exactly 0: dead" in x]
         assert len(dead) == 3 and max(tt for tt, _ in dead) <= within, (rate, p.transitions)
+
