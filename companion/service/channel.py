@@ -69,6 +69,9 @@ RECENT_S = 12.0
 #: reading (a sub-LSB gyro at rest cycles 'stuck'/'cleared', and its Allan terms must follow it), nor a
 #: bias step (the gyro is not as it was).
 TRANSIENT_FAULTS = ("noise", "spikes")
+#: new samples a stream brings between two Allan checks at least (Channel.check_period): 50 at a 5 Hz
+#: stream in the default 10 s, so only slower streams wait longer
+CHECK_MIN_SAMPLES = 50
 
 
 class Channel:
@@ -332,7 +335,7 @@ class Channel:
         self._fed_end_t = float(data[-1, 0])
         self.bank.queue_block(data, data.shape[0] / self.rate_hz, junction)
         if self.next_check_t is None:
-            self.next_check_t = float(data[-1, 0]) + self.cfg.check_s
+            self.next_check_t = float(data[-1, 0]) + self.check_period()
         # not from the data of a transient fault: they will be dropped when it clears
         if self.bank.learn and self.bank.learned_s >= self.cfg.baseline_s and self.bank.held is None:
             self.flush()
@@ -362,6 +365,12 @@ class Channel:
         lower end (health.baseline.check_params)."""
         return check_params(self.report_terms(ax) if terms is None else terms, side="current")
 
+    def check_period(self) -> float:
+        """Message time between Allan checks: ``check_s``, longer where the stream is slow, so that each check
+        has CHECK_MIN_SAMPLES new samples (at 1 Hz a check every 10 s would judge the same data again and
+        again, and the hysteresis would count near-identical checks as separate evidence)."""
+        return max(self.cfg.check_s, CHECK_MIN_SAMPLES / self.rate_hz) if self.rate_hz else self.cfg.check_s
+
     def check_due(self, t: float) -> bool:
         return self.next_check_t is not None and t >= self.next_check_t
 
@@ -369,7 +378,7 @@ class Channel:
         """The Allan check at message time ``t`` (AllanCheck.run): the reported terms per axis (empty before
         ``min_report_s`` of still data), the health transitions, and an error line when the loaded baseline
         is in other units or of another sensor (``strict``: a loaded, not forced baseline)."""
-        self.next_check_t = t + self.cfg.check_s
+        self.next_check_t = t + self.check_period()
         self.flush()
         if self.fed_s < self.cfg.min_report_s:
             return CheckResult({}, [])
