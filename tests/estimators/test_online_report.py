@@ -158,6 +158,7 @@ def test_a_term_too_short_to_resolve_stays_in_the_model_and_n_keeps_the_truth():
 
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_online_bound_of_a_left_out_random_walk_holds():
     """A rate random walk too weak for the selection in 2 h at 50 Hz (the truth of
     tests/cli/test_analyze.py::test_bound_of_a_left_out_random_walk_holds): where the selection leaves K out,

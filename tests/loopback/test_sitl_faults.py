@@ -47,6 +47,7 @@ def health_values(nvf, imu):
     return [(d["t_sim"] - 1.0, d["value"]) for d in nvf if d["name"] == f"IMU{imu}G_HLTH"]
 
 
+@pytest.mark.soak  # kept out of the README's command for its time (python -m benchmarks.soak_checks)
 def test_healthy_three_imu_vehicle_with_handling_warmup_and_a_flight_raises_nothing(tmp_path):
     """Three healthy IMUs (SCALED_IMU2/3 beside RAW_IMU) with a cold-start warm-up drift, picked up and turned
     by hand, then a flight with vibration and manoeuvres up to 1.5 rad/s: every IMU is learned, reported and
