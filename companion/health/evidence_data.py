@@ -191,9 +191,9 @@ def sentence(kind: str, imu: int, axis: str, value: float, detail: str = "", thr
         where = "in flight" if kind == "flight_noise" else "armed on the ground"
         way = "rose" if not v < 1.0 else "fell"
         return (f"{who}: {where}, the noise of its difference with a twin IMU {way} to {v:.2g}x the level learned "
-                f"{where}; the lower 3-sigma bound of the change stayed beyond {h}x for several checks in a row "
-                "while the other IMUs' difference stayed as before: this IMU's own noise or its pick-up of the "
-                "frame's vibration changed.")
+                f"{where}; the lower 3-sigma bound of the change (a fall as its inverse) stayed beyond {h}x for "
+                "several checks in a row while the other IMUs' difference stayed as before: this IMU's own noise "
+                "or its pick-up of the frame's vibration changed.")
     words = {
         "noise": f"{who}: its noise rose to {v:.1f}x the level learned at rest; the CUSUM of the per-block "
                  f"variance test passed {h} nats.",

@@ -76,7 +76,8 @@ def condition_rows(pipeline, imu: int) -> list[dict]:
         row = next((r for r in coefficient_rows(terms.get(ax), ax) if r["param"] == "N"), None)
         out.append(dict(row or {"value": None, "bound": False, "ci95": None, "text": "n/a"}, condition="still",
                         axis=ax, unit=units.datasheet_unit("N", ax),
-                        source="the IMU alone at rest (online Allan fit)" if row else "no figure yet: no check at rest"))
+                        source=("the IMU alone at rest (online Allan fit)" if row
+                                else "no figure yet: no check at rest")))
     noise = pipeline.inflight.noise
     for cond in CONDITIONS:
         figs = noise.figures.get(cond) or {}
@@ -85,8 +86,8 @@ def condition_rows(pipeline, imu: int) -> list[dict]:
         if len(pipeline.channels) < 2:
             why = "no figure: one IMU (its noise cannot be told from the motion)"
         elif who is None:
-            why = ("no figure yet: " + ("not armed on the ground" if cond == "ground" else "not flown")
-                   if secs == 0 else f"no figure yet ({secs:.0f} s of data)")
+            none = "no data armed on the ground" if cond == "ground" else "no data armed and turning"
+            why = "no figure yet: " + (none if secs == 0 else f"{secs:.0f} s of data, no noise level resolved yet")
         for ax in GYRO_AXES:
             fig = figs[who].get(ax) if who is not None else None
             if fig is None:
