@@ -6,7 +6,10 @@ evidence item is in docs/reports.md. Pure numpy/scipy; no I/O.
 A statistic is ``(value, threshold, state)``: for a CUSUM detector the evidence S (nats) for the fault while
 the state is OK (the alarm when S passes the threshold), then the evidence for healthy that clears it; for a
 debounced one the count of bad blocks in a row against the blocks it needs; for the Allan check the
-current/baseline ratio of the worst parameter against ``ratio_on``.
+current/baseline ratio of the worst parameter against ``ratio_on``; for the sample-level frozen watch
+(health/frozen_watch.py) the equal pairs of samples seen while the vehicle moved against the ``NEED`` that
+names the axis; for the in-flight noise test the change of the IMU's pair figures from their baseline
+against ``ratio_on``.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 
 from companion.health import bias as _bias
 from companion.health import disagreement as _dis
+from companion.health import frozen_watch as _frz
 from companion.health import noise as _noise
 from companion.health import resolution as _res
 from companion.health import spikes as _spk
@@ -41,13 +45,20 @@ STAT_NAMES = {
     "rate": ("blocks in a row with the rate or the timing off", "blocks"),
     "disagree": ("CUSUM of the residual against the other IMU (larger of up and down)", "nats"),
     "allan": ("online Allan term over its baseline (worst of N, B, K)", "ratio"),
+    "frozen": ("pairs of consecutive samples with one value while the vehicle moved (calm pairs by their weight)",
+               "pairs"),
+    "flight_noise": ("in flight: lower 3-sigma bound of the change of the noise of the IMU's differences with "
+                     "its twins from their baseline (a fall counted as its inverse; the largest)", "ratio"),
+    "ground_noise": ("armed on the ground: lower 3-sigma bound of the change of the noise of the IMU's "
+                     "differences with its twins from their baseline (a fall counted as its inverse; the largest)",
+                     "ratio"),
 }
 
 
 #: kind -> the bar its statistic passes when the alarm is raised (the allan check's is its ratio_on)
 ALARM_BAR = {"noise": _noise.H_ON, "spikes": _spk.H_ON, "stuck": 1.0, "dead": 1.0,
              "bias_jump": _bias.H_ON, "bias_drift": _bias.DRIFT_TOL / DEG, "resolution": float(_res.HOLD),
-             "rate": float(_tim.HOLD), "disagree": _dis.H_ON}
+             "rate": float(_tim.HOLD), "disagree": _dis.H_ON, "frozen": float(_frz.NEED)}
 
 
 def _cusum(c, h_on: float, h_off: float) -> tuple[float, float, int]:
@@ -120,6 +131,16 @@ def allan_statistics(detector, ratio_on: float) -> dict[str, tuple[float, float,
     return out
 
 
+def frozen_statistics(watch, imu: int) -> dict[str, tuple[float, float, int]]:
+    """The frozen watch's run of equal values per axis of ``imu`` (health.frozen_watch.FrozenWatch): its
+    motion pairs so far against the ``NEED`` that names the axis, keyed ``frozen/axis``."""
+    tr = watch.imus.get(imu) if watch is not None else None
+    if tr is None:
+        return {}
+    return {f"frozen/{ax}": (float(r.motion * _frz.NEED), float(_frz.NEED), int(r.state))
+            for ax, r in zip(_frz.AXES, tr.runs)}
+
+
 def minmax_buckets(t: np.ndarray, y: np.ndarray, width: float,
                    hi: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Decimation that keeps every spike and plateau: the samples ``y`` (n, k) at times ``t`` (n,, in order)
@@ -159,6 +180,20 @@ def sentence(kind: str, imu: int, axis: str, value: float, detail: str = "", thr
     who = f"IMU{imu} gyro" + (f" axis {axis[1].upper()}" if axis else "")
     h = f"{threshold:g}" if math.isfinite(threshold) else "its threshold"
     v = value if math.isfinite(value) else math.nan
+    if kind == "frozen":
+        what, word = ("exactly 0", "dead") if value == 0.0 else (f"one value ({v:.4g} rad/s)", "frozen")
+        if detail == "float":
+            return (f"{who}: it read {what} at rest for far more pairs of samples than its own noise allows (it "
+                    f"changed value in most pairs before): {word}.")
+        return (f"{who}: it read {what} in {h} or more pairs of consecutive samples while the other IMUs' same "
+                f"axis (or its own accelerometer) showed the vehicle turning: {word}.")
+    if kind in ("flight_noise", "ground_noise"):
+        where = "in flight" if kind == "flight_noise" else "armed on the ground"
+        way = "rose" if not v < 1.0 else "fell"
+        return (f"{who}: {where}, the noise of its difference with a twin IMU {way} to {v:.2g}x the level learned "
+                f"{where}; the lower 3-sigma bound of the change (a fall as its inverse) stayed beyond {h}x for "
+                "several checks in a row while the other IMUs' difference stayed as before: this IMU's own noise "
+                "or its pick-up of the frame's vibration changed.")
     words = {
         "noise": f"{who}: its noise rose to {v:.1f}x the level learned at rest; the CUSUM of the per-block "
                  f"variance test passed {h} nats.",

@@ -8,6 +8,10 @@ IMU's last ``SPECTRUM_S`` (taken at the next block, which holds the alarm's data
 more of message time has passed (or the run ends) the gyro of the alarm IMU and of its twins and the
 statistic against its threshold over the minute before and after. The newest ``MAX_KEPT`` items are kept;
 a series holds at most ``2 * WINDOW_S / BUCKET_S`` buckets. The item schema: docs/reports.md.
+
+The alarms of the sample-level frozen watch (service/frozen_hook.py) show its count of equal pairs while
+moving (``frozen/axis``); those of the in-flight noise test (service/inflight_report.py, kinds
+``flight_noise`` and ``ground_noise``) the change of the IMU's pair figures from their baseline.
 """
 
 from __future__ import annotations
@@ -19,8 +23,8 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from companion.health.evidence_data import (ALARM_BAR, STAT_NAMES, allan_statistics, imu_statistics, minmax_buckets,
-                                            pair_statistics, psd_two_sided, sentence)
+from companion.health.evidence_data import (ALARM_BAR, STAT_NAMES, allan_statistics, frozen_statistics,
+                                            imu_statistics, minmax_buckets, pair_statistics, psd_two_sided, sentence)
 from companion.health.faults import FAULT
 
 WINDOW_S = 60.0  #: s of message time kept before and after an alarm
@@ -43,6 +47,24 @@ def _mark_trips(stats: dict, prev: Mapping) -> None:
         if s == 1 and prev.get(key, (0.0, 0.0, 0))[2] == 0:
             bar = ALARM_BAR.get(key.split("/")[0], h)
             stats[key] = (max(v, bar) if math.isfinite(v) else bar, h, s)
+
+
+def inflight_statistics(report, imu: int) -> dict[str, tuple[float, float, int]]:
+    """The in-flight test's latest change of ``imu``'s pair figures from their baseline per condition and axis
+    (service.inflight_report.InflightReport): the largest lower z-sigma bound of the change (a fall as its
+    inverse) against ``ratio_on``, which names the IMU after ``hold_on`` checks in a row above it; keyed
+    ``flight_noise/axis`` and ``ground_noise/axis``."""
+    noise = getattr(report, "noise", None)
+    if noise is None:
+        return {}
+    bar = float(noise.cfg.test.ratio_on)
+    out = {}
+    for cond, ratios in noise.last_ratios.items():
+        for ax in ("gx", "gy", "gz"):
+            rs = [lo for (k, a), (_, lo) in ratios.items() if a == ax and imu in k and math.isfinite(lo)]
+            if rs:
+                out[f"{cond}_noise/{ax}"] = (max(rs), bar, int((cond, imu, ax) in noise.named))
+    return out
 
 
 class ImuRing:
@@ -102,6 +124,7 @@ class EvidenceLog:
         self.terms: dict[int, dict] = {}  # IMU -> axis -> the terms reported at the last check (the live page)
         self.publish: Callable[[dict], None] | None = None  # the live page's receiver of snapshots
         self._last_pub = -math.inf
+        self.from_watch = None  # the event the frozen watch is saying (service/frozen_hook.py)
 
     # ------------------------------------------------------------------ hooks
     def on_block(self, pipeline, ch, data: np.ndarray) -> None:
@@ -112,6 +135,8 @@ class EvidenceLog:
         stats = imu_statistics(ch.faults, getattr(st, "top", None))
         stats.update(pair_statistics(pipeline.group.pairs, ch.imu))
         stats.update(allan_statistics(ch.allan.detector, ch.allan.detector.cfg.ratio_on))
+        stats.update(frozen_statistics(getattr(pipeline, "frozen", None), ch.imu))
+        stats.update(inflight_statistics(getattr(pipeline, "inflight", None), ch.imu))
         ring = self.rings.setdefault(ch.imu, ImuRing())
         _mark_trips(stats, ring.stats[-1][1] if ring.stats else {})
         ring.add(data, stats, ch.rate_hz)
@@ -134,19 +159,23 @@ class EvidenceLog:
         self.publish(snapshot(pipeline))
 
     def on_alarm(self, pipeline, imu: int, axis: str, kind: str, value: float, detail: str, text: str,
-                 t: float) -> None:
-        """An alarm at message time ``t``: an item opened (one per IMU, axis and kind while it waits)."""
+                 t: float, stat: str | None = None) -> None:
+        """An alarm at message time ``t``: an item opened (one per IMU, axis and kind while it waits).
+        ``stat``: the statistic shown when not the kind's own (``frozen``: the sample-level watch's)."""
         if any(p["imu"] == imu and p["axis"] == axis and p["kind"] == kind for p in self.pending):
             return
-        key = f"{'stuck' if kind == 'dead' else kind}/{axis}"
+        stat = stat or ("stuck" if kind == "dead" else kind)
+        if stat == "frozen" and kind == "dead":
+            value = 0.0
+        key = f"{stat}/{axis}"
         ring = self.rings.get(imu)
         last = ring.stats[-1][1].get(key) if ring and ring.stats else None
-        threshold = ALARM_BAR.get(kind, last[1] if last else math.nan)
-        name, unit = STAT_NAMES.get(kind, (kind, ""))
+        threshold = ALARM_BAR.get(stat, last[1] if last else math.nan)
+        name, unit = STAT_NAMES.get(stat, (kind, ""))
         self.pending.append({
             "source": "run", "imu": int(imu), "axis": axis, "kind": kind,
             "t_s": float(t), "text": text, "value": value if math.isfinite(value) else None,
-            "sentence": sentence(kind, imu, axis, value, detail, threshold),
+            "sentence": sentence("frozen" if stat == "frozen" else kind, imu, axis, value, detail, threshold),
             "window_s": [float(t) - WINDOW_S, float(t) + WINDOW_S], "series": [],
             "statistic": {"name": name, "unit": unit, "key": key, "t_s": [], "value": [], "threshold": [],
                           "state": []},
@@ -154,7 +183,15 @@ class EvidenceLog:
 
     def on_fault_event(self, pipeline, ev, t: float) -> None:
         if ev.state == FAULT:
-            self.on_alarm(pipeline, ev.imu, ev.axis, ev.kind, ev.value, ev.detail, ev.text(), t)
+            frozen = ev is self.from_watch
+            self.on_alarm(pipeline, ev.imu, ev.axis, ev.kind, ev.value, ev.detail, ev.text(), t,
+                          "frozen" if frozen else None)
+
+    def on_inflight(self, pipeline, verdict, t: float) -> None:
+        """A change named by the in-flight noise test (service/inflight_live.py): an item when it turns bad."""
+        if verdict.state == 1:
+            self.on_alarm(pipeline, verdict.who, verdict.axis, f"{verdict.cond}_noise", verdict.ratio,
+                          verdict.cond, verdict.text(), t)
 
     def on_check(self, pipeline, ch, reported: Mapping, transitions, t: float) -> None:
         """A check: the terms reported (the live page), and an alarm per axis turning degrading."""

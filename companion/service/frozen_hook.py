@@ -34,6 +34,7 @@ def say_frozen(pipeline) -> None:
         if ev.state == FAULT and own:  # the block tests said it already
             pipeline._set_state(target)
             continue
+        pipeline.evidence.from_watch = ev  # its evidence shows the watch's statistic
         pipeline._report([ev], t)
     # a rate switch makes the IMU's detectors afresh: what the watch holds stays on its code
     for imu, other in pipeline.channels.items():

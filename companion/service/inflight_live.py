@@ -206,6 +206,8 @@ class InflightNoise:
         self.baseline: dict[str, dict] = {c: {} for c in CONDITIONS}
         self.detectors: dict[tuple, ParamDetector] = {}  # (cond, pair, axis, "up" | "down")
         self.named: set = set()  # (cond, imu, axis) the test names
+        #: cond -> {(pair, axis): (now / baseline, its lower z-sigma bound folded: a fall as its inverse)}
+        self.last_ratios: dict[str, dict] = {}
 
     # ------------------------------------------------------------------ condition
     def _condition(self, channels, armed: bool, t: float) -> str | None:
@@ -329,6 +331,7 @@ class InflightNoise:
         now = self._pair_levels(cond)
         changed: dict[str, set] = {ax: set() for ax in AXES}
         ratios: dict = {}
+        folded: dict = {}
         for k, axes in now.items():
             for ax, (x, sx) in axes.items():
                 if ax not in base.get(k, {}):
@@ -339,8 +342,11 @@ class InflightNoise:
                 up.check(x, sx, b, sb, cfg)
                 down.check(b, sb, x, sx, cfg)
                 ratios[(k, ax)] = x / b
+                if x > 0 and b > 0:
+                    folded[(k, ax)] = (x / b, math.exp(abs(math.log(x / b)) - cfg.z * math.hypot(sx / x, sb / b)))
                 if DEGRADING in (up.state, down.state):
                     changed[ax].add(k)
+        self.last_ratios[cond] = folded
         imus = sorted({i for k in self.pairs for i in k})
         for ax in AXES:
             named = set()

@@ -46,6 +46,7 @@ class InflightReport:
             p.transitions.append((t, text))
             p.log(text)
             p.reporter.statustext(text, MAV_SEVERITY_WARNING if v.state == DEGRADING else MAV_SEVERITY_NOTICE, t)
+            p.evidence.on_inflight(p, v, t)
             for imu in v.imus():
                 if imu in p.channels:
                     p._set_state(p.channels[imu])

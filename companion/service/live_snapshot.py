@@ -1,7 +1,9 @@
 """What the live page of ``run --web`` shows, as one JSON-ready dict built in the pipeline's own thread
 (:meth:`companion.service.evidence_log.EvidenceLog.publish_now`): per IMU its health, active faults, the
 coefficients of the last check with their 95 % intervals (SI and the datasheet text), the Allan deviation of
-its slow estimator with 95 % bands, and the alarms with their evidence (key ``evidence``, served apart)."""
+its slow estimator with 95 % bands, the white noise N per condition (``conditions``: still, from the IMU
+alone; armed on the ``ground`` and in ``flight``, from the differences with the other IMUs,
+service/inflight_live.py) and the alarms with their evidence (key ``evidence``, served apart)."""
 
 from __future__ import annotations
 
@@ -55,6 +57,55 @@ def coefficient_rows(terms, axis: str) -> list[dict]:
     return out
 
 
+def _inflight_terms(n: float, s: float, bound: bool) -> list[dict]:
+    """One in-flight figure (N, 1-sigma, bound) as the terms ``cell`` reads: a 95 % interval, or a bound."""
+    lo, hi = max(n - 1.96 * s, 0.0), n + 1.96 * s
+    return [{"N": n, "bound": bool(bound), "std": {"N": s}, "ci95": {"N": [lo, hi]}}]
+
+
+def condition_rows(pipeline, imu: int) -> list[dict]:
+    """Per condition (still, ground, flight) and axis the IMU's white noise N: its value, 95 % interval or
+    bound (SI and the datasheet text) and where it comes from, or a note saying why there is none."""
+    from companion import units
+    from companion.estimators.online_report import cell
+    from companion.service.inflight_live import CONDITIONS
+
+    out = []
+    terms = pipeline.evidence.terms.get(imu, {})
+    for ax in GYRO_AXES:
+        row = next((r for r in coefficient_rows(terms.get(ax), ax) if r["param"] == "N"), None)
+        out.append(dict(row or {"value": None, "bound": False, "ci95": None, "text": "n/a"}, condition="still",
+                        axis=ax, unit=units.datasheet_unit("N", ax),
+                        source=("the IMU alone at rest (online Allan fit)" if row
+                                else "no figure yet: no check at rest")))
+    noise = pipeline.inflight.noise
+    for cond in CONDITIONS:
+        figs = noise.figures.get(cond) or {}
+        who = imu if imu in figs else next((w for w in figs if isinstance(w, tuple) and imu in w), None)
+        secs = max((p.seconds[cond] for k, p in noise.pairs.items() if imu in k), default=0.0)
+        if len(pipeline.channels) < 2:
+            why = "no figure: one IMU (its noise cannot be told from the motion)"
+        elif who is None:
+            none = "no data armed on the ground" if cond == "ground" else "no data armed and turning"
+            why = "no figure yet: " + (none if secs == 0 else f"{secs:.0f} s of data, no noise level resolved yet")
+        for ax in GYRO_AXES:
+            fig = figs[who].get(ax) if who is not None else None
+            if fig is None:
+                out.append({"condition": cond, "axis": ax, "value": None, "bound": False, "ci95": None,
+                            "text": "n/a", "unit": units.datasheet_unit("N", ax),
+                            "source": why if who is None else "no figure yet on this axis"})
+                continue
+            n, sd, bound = fig
+            pair = isinstance(who, tuple)
+            t = _inflight_terms(n, sd, bound or pair)
+            out.append({"condition": cond, "axis": ax, "value": _finite(n), "bound": bool(bound or pair),
+                        "ci95": None if bound or pair else [_finite(x) for x in t[0]["ci95"]["N"]],
+                        "text": cell(t, "N", ax), "unit": units.datasheet_unit("N", ax),
+                        "source": (f"the pair IMU{who[0]}-IMU{who[1]}'s figure bounds each" if pair
+                                   else "three-cornered hat of the IMU differences") + f"; {secs:.0f} s"})
+    return out
+
+
 def snapshot(pipeline) -> dict:
     """The live page's data (SI; message time in s)."""
     ev = pipeline.evidence
@@ -67,7 +118,7 @@ def snapshot(pipeline) -> dict:
             axes[ax] = {"coefficients": coefficient_rows(terms.get(ax), ax), "adev": adev_curve(est)}
         imus.append({"imu": imu, "message": ch.message, "rate_hz": ch.rate_hz, "t_s": ch.last_t,
                      "health": STATE_NAMES[pipeline.health(ch)], "faults": pipeline.fault_texts(ch),
-                     "still_s": ch.fed_s, "axes": axes})
+                     "still_s": ch.fed_s, "axes": axes, "conditions": condition_rows(pipeline, imu)})
     items = ev.all_items()
     alarms = [{"index": i, "imu": it["imu"], "axis": it["axis"], "kind": it["kind"], "t_s": it["t_s"],
                "text": it["text"], "sentence": it["sentence"], "complete": it.get("complete", False)}

@@ -4,6 +4,7 @@
 var Companion = (function () {
   var AXIS_COLORS = {gx: "#1f77b4", gy: "#2ca02c", gz: "#d62728", ax: "#9467bd", ay: "#8c564b", az: "#e377c2"};
   var fmt = CPlot.fmt;
+  var CONDITION_WORDS = {still: "still (at rest)", ground: "armed, on the ground", flight: "in flight"};
 
   function el(tag, attrs, parent, text) {
     var e = document.createElement(tag);
@@ -167,6 +168,13 @@ var Companion = (function () {
         rows.push({cells: [ax, c.N || "n/a", c.B || "n/a", c.K || "n/a"]});
       });
       table(sec, "coef-" + m.imu, ["axis", "N (95 %)", "B (95 %)", "K (95 %)"], rows);
+      if (m.conditions && m.conditions.length) {
+        el("p", {}, sec, "White noise N per condition: still from the IMU alone; armed from its differences with the other IMUs");
+        table(sec, "cond-" + m.imu, ["condition", "axis", "N (95 %)", "from"], m.conditions.map(function (r) {
+          return {cls: "cond-" + r.condition, cells: [CONDITION_WORDS[r.condition] || r.condition, r.axis,
+            r.text === "n/a" ? "n/a" : r.text + " " + r.unit, r.source]};
+        }));
+      }
       var adev = {};
       Object.keys(m.axes).forEach(function (ax) { adev[ax] = m.axes[ax].adev; });
       adevPlot(sec, "IMU" + m.imu + " Allan deviation (rad/s), 95 % bands; still data used " + fmt(m.still_s) + " s", adev,

@@ -107,7 +107,8 @@ def test_the_kept_alarms_are_capped():
 
 #: kind -> (the fault's size, the words of the sentence, the check of the faulty axis' buckets after the alarm
 #: against before: spread (max - min) ratio, mean shift in rad/s, or the largest excursion)
-KINDS = {"stuck": (0.0, "stopped changing", lambda before, after: after["spread"] < 0.2 * before["spread"]),
+#: (a stuck axis at rest is named first by the sample-level frozen watch: its sentence and statistic)
+KINDS = {"stuck": (0.0, "read one value", lambda before, after: after["spread"] < 0.2 * before["spread"]),
          "bias_jump": (0.01745, "stepped by", lambda before, after: abs(after["mid"] - before["mid"]) > 0.012),
          "spikes": (0.005, "isolated outliers", lambda before, after: after["peak"] > 0.2 > 5 * before["peak"])}
 

@@ -172,3 +172,44 @@ def test_web_address_errors_before_any_work(noisy_log, where, capsys):
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("companion: error: --web"), err
     assert "replayed" not in out + err and "IMU0" not in out
+
+
+def test_live_page_shows_the_noise_per_condition(tmp_path):
+    """Three IMUs of the copter preset flying 20-140 s: the live page's condition table per IMU, still, on the
+    ground and in flight, the flight row a three-cornered-hat figure with its interval or bound."""
+    log = tmp_path / "flight.tlog"
+    assert main(["simulate", "--vehicle", "--preset", "copter", "--imus", "3", "--arm-at", "20", "--disarm-at",
+                 "140", "--duration", "150", "--seed", "3", "--out", str(log)]) == 0
+    out = tmp_path / "run.err"
+    with open(out, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "companion", "run", "--source", str(log), "--no-state",
+                                 "--quiet", "--web", "127.0.0.1:0"], cwd=tmp_path, env=env(),
+                                stdout=subprocess.DEVNULL, stderr=fh, start_new_session=True)
+    try:
+        url = re.search(rf"{WEB_READY} (\S+)", wait_for_text(out, WEB_READY, proc)).group(1)
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline:  # polled as the page does, until the replay is done
+            d = json.loads(_get(url + "data.json"))
+            if not d["running"]:
+                break
+            time.sleep(0.05)  # polling interval
+        assert not d["running"]
+        for m in d["imus"]:
+            rows = {(r["condition"], r["axis"]): r for r in m["conditions"]}
+            assert sorted({c for c, _ in rows}) == ["flight", "ground", "still"] and len(rows) == 9
+            for ax in ("gx", "gy", "gz"):
+                fl = rows[("flight", ax)]
+                assert "three-cornered hat" in fl["source"] and fl["value"] > 0, fl
+                assert fl["bound"] or fl["ci95"][0] < fl["value"] < fl["ci95"][1]
+                assert fl["text"].startswith("<") == fl["bound"]
+        html = browser.dom(tmp_path / "chr", url, "--virtual-time-budget=2000")
+        for imu in range(3):
+            rows = _rows(html, f"cond-{imu}")
+            assert len(rows) == 1 + 9 and "N (95 %)" in rows[0], rows[:2]
+            flight = [r for r in rows if "in flight" in r]
+            assert len(flight) == 3 and all("deg/sqrt(h)" in r and "three-cornered hat" in r for r in flight)
+            assert sum("still (at rest)" in r for r in rows) == 3 and sum("on the ground" in r for r in rows) == 3
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        rc = stop(proc)
+    assert rc == 0, out.read_text()
