@@ -43,3 +43,11 @@ def say_frozen(pipeline) -> None:
                 other.faults.set_external(kind, ax, FAULT)
                 other.faults.external_detail[ax] = pipeline.frozen.detail(imu, ax)
                 pipeline._set_state(other)
+
+
+def not_said_by_watch(ch, events) -> list:
+    """The block tests' events of one IMU less those the watch has said already: a dead or stuck axis the
+    watch holds was announced once, when the watch named it, and is not announced again (or cleared) by the
+    block test that comes to the same conclusion later."""
+    return [ev for ev in events
+            if not (ev.kind in ("dead", "stuck") and ch.faults.external.get((ev.kind, ev.axis)) == FAULT)]

@@ -39,7 +39,7 @@ from companion.service.baseline_match import check_baseline, stream_meta
 from companion.service.channel import INT16_MESSAGES, Channel
 from companion.service.evidence_log import EvidenceLog
 from companion.service.fault_followups import announce_restored, confirm_bias
-from companion.service.frozen_hook import say_frozen, watch_rows
+from companion.service.frozen_hook import not_said_by_watch, say_frozen, watch_rows
 from companion.service.pipeline_config import PipelineConfig  # noqa: F401  (re-exported: the pipeline's configuration)
 from companion.service.imu_summary import fault_texts, final_terms, send_final, summary_rows, too_slow_note
 from companion.service.pipeline_state import load_pipeline_state, pipeline_state
@@ -322,7 +322,7 @@ class Pipeline:
         t_end = float(data[-1, 0])
         if ch.gate.mislearned:
             self._forget_rest(ch, t_end)
-        self._report(ch.on_block(data, st, still), t_end)
+        self._report(not_said_by_watch(ch, ch.on_block(data, st, still)), t_end)
         if ch.imu in self._restored:
             announce_restored(self, ch, t_end)
         self._report(self.group.compare(ch.imu, self.channels, self.armed), t_end)
