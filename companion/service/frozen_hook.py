@@ -35,6 +35,8 @@ def say_frozen(pipeline) -> None:
             pipeline._set_state(target)
             continue
         pipeline.evidence.from_watch = ev  # its evidence shows the watch's statistic
+        if ev.state == FAULT:
+            pipeline.watch_said.add((ev.imu, ev.kind, ev.axis))
         pipeline._report([ev], t)
     # a rate switch makes the IMU's detectors afresh: what the watch holds stays on its code
     for imu, other in pipeline.channels.items():
@@ -45,9 +47,10 @@ def say_frozen(pipeline) -> None:
                 pipeline._set_state(other)
 
 
-def not_said_by_watch(ch, events) -> list:
-    """The block tests' events of one IMU less those the watch has said already: a dead or stuck axis the
-    watch holds was announced once, when the watch named it, and is not announced again (or cleared) by the
-    block test that comes to the same conclusion later."""
-    return [ev for ev in events
-            if not (ev.kind in ("dead", "stuck") and ch.faults.external.get((ev.kind, ev.axis)) == FAULT)]
+def not_said_by_watch(pipeline, ch, events) -> list:
+    """The block tests' events of one IMU less those the watch has said itself: a dead or stuck axis the watch
+    announced and still holds is not announced again (or cleared) by the block test that comes to the same
+    conclusion later. What the block tests said first, and their later words on it, stay theirs."""
+    said = {(k, ax) for imu, k, ax in pipeline.watch_said
+            if imu == ch.imu and ch.faults.external.get((k, ax)) == FAULT}
+    return [ev for ev in events if (ev.kind, ev.axis) not in said]

@@ -68,6 +68,7 @@ class Pipeline:
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
         self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
+        self.watch_said: set = set()  # (imu, kind, axis) the watch announced itself (service.frozen_hook)
         self.inflight = InflightReport(self)  # each IMU's own noise while armed, from the other IMUs
         self.ignored = {"other_sysid": 0, "other_message": 0}
         self.transitions: list[tuple[float, str]] = []
@@ -322,7 +323,7 @@ class Pipeline:
         t_end = float(data[-1, 0])
         if ch.gate.mislearned:
             self._forget_rest(ch, t_end)
-        self._report(not_said_by_watch(ch, ch.on_block(data, st, still)), t_end)
+        self._report(not_said_by_watch(self, ch, ch.on_block(data, st, still)), t_end)
         if ch.imu in self._restored:
             announce_restored(self, ch, t_end)
         self._report(self.group.compare(ch.imu, self.channels, self.armed), t_end)
