@@ -26,6 +26,10 @@ REF_BLOCKS = 10  # blocks whose median rate is the reference
 HOLD = 5  # bad (good) blocks in a row that flag (clear) it
 DROP = 0.7  # the rate below this share of the reference: the sensor itself slowed by 30 %
 JITTER = 0.2  # rms interval scatter over the period (ArduPilot's 100 Hz streams show a few %)
+#: intervals a block needs for its jitter to be judged: below it (a telemetry stream under 10 Hz) the rms of
+#: a few intervals scatters past JITTER by chance, and such a stream's times are the autopilot's choice of
+#: which sample to send, not the sensor's clock; its rate drop is still judged
+JITTER_MIN_INTERVALS = 10
 
 
 class TimingDetector:
@@ -63,7 +67,7 @@ class TimingDetector:
                 self.ref_rate = float(np.median(self._rates))
                 self._rates = []
             return False
-        bad = rate < DROP * self.ref_rate or jitter > JITTER
+        bad = rate < DROP * self.ref_rate or (jitter > JITTER and dt.size >= JITTER_MIN_INTERVALS)
         self.state, self.count, changed = debounce(self.state, self.count, bad, HOLD, HOLD)
         if changed and self.state == FAULT:
             self.value = rate

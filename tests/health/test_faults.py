@@ -257,6 +257,27 @@ def test_timing_rate_drop_and_jitter():
     assert ch and "irregular" in d2.detail
 
 
+
+def test_timing_jitter_needs_ten_intervals_a_block():
+    """A 4 Hz telemetry stream (5 samples a block) whose send times scatter by +-30 %: its jitter is not judged
+    (a few intervals' rms passes 20 % by chance, and the times are the autopilot's choice of sample). At 100 Hz the same relative scatter is still called irregular."""
+    from companion.health.timing_faults import JITTER_MIN_INTERVALS
+
+    def blocks(rng, rate, scatter, n, t0=0.0):
+        for _ in range(n):
+            t = t0 + np.concatenate([[0.0], np.cumsum(1.0 + rng.uniform(-scatter, scatter, int(rate)))]) / rate
+            t0 = t[-1] + 1.0 / rate
+            yield t
+
+    assert JITTER_MIN_INTERVALS > 5
+    for seed in range(3):
+        d = TimingDetector()
+        events = [ev for t in blocks(np.random.default_rng(seed), 4.0, 0.3, 3000) for ev in d.update(Observation(t=t))]
+        assert events == [], [e.text() for e in events]
+    d = TimingDetector()
+    events = [ev for t in blocks(np.random.default_rng(3), 100.0, 0.9, 40) for ev in d.update(Observation(t=t))]
+    assert events and "irregular" in events[0].detail
+
 def rotation(rng, n, t0):
     t = (t0 + np.arange(n)) / FS
     w = np.column_stack([1.2 * np.sin(2 * np.pi * 0.4 * t + 1), 0.9 * np.sin(2 * np.pi * 0.7 * t),
