@@ -208,14 +208,7 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
 
     res = load(path, time_unit=time_unit)  # time_unit: of a CSV's time column
     pipeline.autopilot_view = res.meta.get("autopilot")  # the autopilot's own IMU health, for the summary
-    best: dict = {}
-    for s in res.imu_streams():
-        if not np.all(np.isfinite(s.gyro[:1])) or s.key.message.startswith("ISB_"):
-            continue
-        cur = best.get(s.key.instance)
-        if cur is None or s.samples > cur.samples:
-            best[s.key.instance] = s
-    streams = [best[k] for k in sorted(best)]
+    streams = replayed_streams(res)
     if not streams:
         return {"frames": int(res.totals.get("frames", 0)), "bad_frames": 0, "bad_bytes": 0, "heartbeats": 0,
                 "imu_samples": 0, "used": 0}
@@ -298,3 +291,16 @@ def _autopilot_view(pipeline, index, scales) -> None:
             keys += [raw.key for raw, _ in split_by_imu(layout, rec, index.sysid[sel], index.compid[sel], scales)
                      if raw.is_imu]
     pipeline.autopilot_view = safe_view("tlog", from_tlog, index, keys)
+
+
+def replayed_streams(res) -> list:
+    """The IMU streams a replay feeds: per instance the stream with the most samples, no batch-sampler bursts
+    (ISB_*), none whose first gyro value is missing (also what a restored state is checked against)."""
+    best: dict = {}
+    for s in res.imu_streams():
+        if not np.all(np.isfinite(s.gyro[:1])) or s.key.message.startswith("ISB_"):
+            continue
+        cur = best.get(s.key.instance)
+        if cur is None or s.samples > cur.samples:
+            best[s.key.instance] = s
+    return [best[k] for k in sorted(best)]

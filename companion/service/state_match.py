@@ -13,21 +13,6 @@ from companion.errors import CompanionError
 RATE_TOLERANCE = 0.05
 
 
-def replayed_streams(res) -> list:
-    """The IMU streams a replay feeds (service.replay.replay_log's choice): per instance the stream with the most
-    samples, no batch-sampler bursts (ISB_*), none whose first gyro value is missing."""
-    import numpy as np
-
-    best: dict = {}
-    for s in res.imu_streams():
-        if not np.all(np.isfinite(s.gyro[:1])) or s.key.message.startswith("ISB_"):
-            continue
-        cur = best.get(s.key.instance)
-        if cur is None or s.samples > cur.samples:
-            best[s.key.instance] = s
-    return [best[k] for k in sorted(best)]
-
-
 def differences(channels: dict, streams) -> list[str]:
     """What differs between the restored channels ({imu: Channel}) and the source's streams, in words."""
     have = {s.key.instance: s for s in streams}
@@ -48,6 +33,7 @@ def check_state_matches(pipeline, src, state, time_unit=None) -> None:
     """Refuse (one line) a restored state whose IMUs, messages or rates are not the log's ``src``."""
     if not pipeline.channels:
         return
+    from companion.service.replay import replayed_streams
     from companion.sources import load
 
     res = load(src, time_unit=time_unit)
