@@ -2,9 +2,11 @@
 in-flight figure (N value or bound) on every gyro axis of every IMU, and that none ends in a traceback.
 
 Logs: ../shared/data/ardupilot/*.bin, ../shared/data/px4/*.ulg and every file under ../reallogs (not in the
-repository; missing directories are skipped). Each is analysed as ``companion analyze LOG --axes gx,gy,gz``
-(companion.analysis.source.analyze_source). Target (issue 47): >= 90 % of the multi-IMU flight logs get
-in-flight figures per IMU; 0 tracebacks.
+repository; missing directories are skipped); a file whose bytes repeat an earlier one is counted once. Each is
+analysed as ``companion analyze LOG --axes gx,gy,gz`` (companion.analysis.source.analyze_source). A log of
+ArduPilot's simulator (SITL: SIM_* parameters) is listed but not counted among the real logs. Targets (issue
+47): >= 90 % of the real multi-IMU flight logs get in-flight figures per IMU; no log with multi-IMU flight
+data or a ground stretch refused; 0 tracebacks.
 
     python -m benchmarks.bench_inflight_real
 """
@@ -12,6 +14,7 @@ in-flight figures per IMU; 0 tracebacks.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import sys
 import time
 import traceback
@@ -41,19 +44,36 @@ def _figures(entry: dict) -> bool:
                for e in axes.values())
 
 
-def census(path: Path) -> tuple[int, float]:
-    """(IMUs of the vehicle's redundant family, seconds of flight condition) of a log, from the log alone."""
+def unique(files: list[Path]) -> tuple[list[Path], list[tuple[Path, Path]]]:
+    """The files with distinct contents, and (duplicate, the file it repeats) for the others."""
+    seen: dict = {}
+    out, dup = [], []
+    for f in files:
+        h = hashlib.sha256(f.read_bytes()).hexdigest()
+        if h in seen:
+            dup.append((f, seen[h]))
+        else:
+            seen[h] = f
+            out.append(f)
+    return out, dup
+
+
+def census(path: Path) -> tuple[int, float, float, bool]:
+    """(IMUs of the vehicle's redundant family, seconds of flight, seconds of ground condition, whether the log
+    comes from ArduPilot's simulator) of a log, from the log alone."""
     from companion.analysis.conditions import condition_intervals
     from companion.analysis.inflight import _monotonic, imu_family
     from companion.sources import load
 
     res = load(str(path))
+    sitl = any(str(k).startswith("SIM_") for k in (res.meta.get("params") or {}))
     members = imu_family(res.imu_streams())
     if not members:
-        return 0, 0.0
+        return 0, 0.0, 0.0, sitl
     t, g = _monotonic(members[0])
     c = condition_intervals(t, g, res.meta.get("armed"), bool(res.meta.get("has_armed_state")))
-    return len(members), float(sum(b - a for a, b in c["flight"]))
+    return (len(members), float(sum(b - a for a, b in c["flight"])), float(sum(b - a for a, b in c["ground"])),
+            sitl)
 
 
 def one(path: Path) -> dict:
@@ -61,24 +81,36 @@ def one(path: Path) -> dict:
     from companion.errors import CompanionError
 
     try:
-        imus, flight_s = census(path)
+        imus, flight_s, ground_s, sitl = census(path)
     except CompanionError:
-        imus, flight_s = 0, 0.0
+        imus, flight_s, ground_s, sitl = 0, 0.0, 0.0, False
     except Exception:  # the count this benchmark exists for
         return {"status": "traceback", "text": traceback.format_exc(limit=3)[-400:], "multi": False}
     multi = imus >= 2 and flight_s > 0
+    base = {"multi": multi, "imus": imus, "flight_s": flight_s, "ground_s": ground_s, "sitl": sitl}
     try:
         entries, summary = analyze_source(str(path), ["gx", "gy", "gz"])
     except CompanionError as exc:
-        return {"status": "error", "text": str(exc)[-200:], "multi": multi, "figures": False, "imus": imus,
-                "flight_s": flight_s, "methods": []}
+        return dict(base, status="error", text=str(exc)[-200:], figures=False, methods=[])
     except Exception:
         return {"status": "traceback", "text": traceback.format_exc(limit=3)[-400:], "multi": multi}
     fl = [e for e in entries if (e.get("flight") or {}).get("intervals_s")]
-    return {"status": "ok", "multi": multi, "figures": multi and len(fl) >= 2 and all(_figures(e) for e in fl),
-            "imus": imus, "flight_s": flight_s,
-            "methods": sorted({(e.get("flight") or {}).get("method", "") for e in fl}),
-            "text": "; ".join(sorted({n for e in fl for n in (e.get("flight") or {}).get("notes", [])}))[:200]}
+    return dict(base, status="ok", figures=multi and len(fl) >= 2 and all(_figures(e) for e in fl),
+                n=[_n_text(e) for e in fl], methods= sorted({(e.get("flight") or {}).get("method", "") for e in fl}),
+                text="; ".join(sorted({n for e in fl for n in (e.get("flight") or {}).get("notes", [])}))[:200])
+
+
+def _n_text(entry: dict) -> str:
+    """One IMU's in-flight N per gyro axis in deg/sqrt(h) ("<" for a bound, "-" for none)."""
+    from companion.units import to_datasheet
+
+    out = []
+    for ax in ("gx", "gy", "gz"):
+        e = ((entry.get("flight") or {}).get("axes") or {}).get(ax) or {}
+        t = next((x for x in list(e.get("terms", [])) + list(e.get("bounds", [])) if x["effect"] == "white_noise"),
+                 None)
+        out.append("-" if t is None else ("<" if t.get("bound") else "") + f"{to_datasheet('N', t['N']):.2g}")
+    return "/".join(out)
 
 
 def main() -> int:
@@ -87,28 +119,45 @@ def main() -> int:
     ap.add_argument("paths", nargs="*", default=[str(results.SHARED_DATA / "ardupilot"),
                                                   str(results.SHARED_DATA / "px4"), str(root / "reallogs")])
     args = ap.parse_args()
-    files = logs(args.paths)
+    files, dups = unique(logs(args.paths))
+    for d, f in dups:
+        print(f"{d.name}: the same bytes as {f.name}, counted once")
     t0 = time.time()
     rows = []
     for p in files:
         r = one(p)
         rows.append((p, r))
-        if r["status"] == "traceback":
-            print(f"TRACEBACK {p.name}: {r['text']}")
-        elif r.get("multi"):
-            print(f"{p.name}: {r['imus']} IMUs, {r['flight_s']:.0f} s in flight, figures per IMU: "
-                  f"{'yes' if r['figures'] else 'NO'} ({'; '.join(r['methods'])})"
-                  + ("" if r["figures"] else f": {r.get('text', '')}"), flush=True)
-    ok = [r for _, r in rows if r["status"] == "ok"]
-    multi = [r for _, r in rows if r.get("multi")]
+        _print(p, r)
+    real = [r for _, r in rows if not r.get("sitl")]
+    ok = [r for r in real if r["status"] == "ok"]
+    multi = [r for r in real if r.get("multi")]
     tb = sum(r["status"] == "traceback" for _, r in rows)
-    err = sum(r["status"] == "error" for _, r in rows)
+    err = sum(r["status"] == "error" for r in real)
     fig = sum(bool(r["figures"]) for r in multi)
-    print(f"\n{len(files)} logs in {time.time() - t0:.0f} s: {len(ok)} analysed, {err} refused with one error line, "
-          f"{tb} tracebacks")
-    print(f"multi-IMU logs with flight data (2-3 IMUs of one family, armed and moving): {len(multi)}; in-flight figures (N or bound) on every gyro axis of "
-          f"every IMU: {fig} of {len(multi)} ({fig / max(len(multi), 1):.0%}; target >= 90 %)")
+    refused = [p.name for p, r in rows if r["status"] == "error" and not r.get("sitl")
+               and (r.get("multi") or r.get("ground_s", 0) > 0)]
+    sitl = [p.name for p, r in rows if r.get("sitl")]
+    print(f"\n{len(files)} distinct logs in {time.time() - t0:.0f} s ({len(sitl)} from ArduPilot's simulator, not "
+          f"counted: {', '.join(sitl) or 'none'}); of {len(real)} real logs: {len(ok)} analysed, {err} refused with "
+          f"one error line, {tb} tracebacks")
+    print(f"refused although they hold multi-IMU flight data or a ground stretch: {len(refused)}"
+          + (f" ({', '.join(refused)})" if refused else ""))
+    print(f"real multi-IMU logs with flight data (2-3 IMUs of one family, armed and moving): {len(multi)}; in-flight "
+          f"figures (N or bound) on every gyro axis of every IMU: {fig} of {len(multi)} "
+          f"({fig / max(len(multi), 1):.0%}; target >= 90 %)")
     return 0 if tb == 0 else 1
+
+
+def _print(p: Path, r: dict) -> None:
+    if r["status"] == "traceback":
+        print(f"TRACEBACK {p.name}: {r['text']}")
+    elif r.get("multi"):
+        print(f"{p.name}{' (SITL)' if r.get('sitl') else ''}: {r['imus']} IMUs, {r['flight_s']:.0f} s in flight, "
+              f"figures per IMU: {'yes' if r['figures'] else 'NO'} ({'; '.join(r['methods'])})"
+              + (f", N deg/sqrt(h) per IMU gx/gy/gz: {', '.join(r.get('n', []))}" if r["figures"] else
+                 f": {r.get('text', '')}"), flush=True)
+    elif r["status"] == "error" and r.get("ground_s", 0) > 0:
+        print(f"{p.name}: refused with {r['ground_s']:.0f} s of ground condition: {r['text']}", flush=True)
 
 
 if __name__ == "__main__":
