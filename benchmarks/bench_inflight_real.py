@@ -133,7 +133,7 @@ def main() -> int:
     multi = [r for r in real if r.get("multi")]
     tb = sum(r["status"] == "traceback" for _, r in rows)
     err = sum(r["status"] == "error" for r in real)
-    fig = sum(bool(r["figures"]) for r in multi)
+    fig = sum(bool(r.get("figures")) for r in multi)
     refused = [p.name for p, r in rows if r["status"] == "error" and not r.get("sitl")
                and (r.get("multi") or r.get("ground_s", 0) > 0)]
     sitl = [p.name for p, r in rows if r.get("sitl")]

@@ -170,8 +170,9 @@ def fit_pair(pa: list, pb: list, rate: float, filters=(None, None)) -> tuple[Pai
     pa, pb, crossed = cross_filter(pa, pb, filters[0], filters[1], rate)
     M, bias, dt, c2, resid = _fit_once(pa, pb, rate, crossed)
     shift = 0.0
+    can_shift = any(p.shape[0] > 3 * SHIFT_TAPS for p in pa)  # else the shift would leave no piece
     for _ in range(SHIFT_ROUNDS):
-        if abs(float(np.median(dt))) * rate < MIN_SHIFT:
+        if abs(float(np.median(dt))) * rate < MIN_SHIFT or not can_shift:
             break  # far below a sample (slow telemetry): the first-order term carries it, no piece is trimmed
         shift += float(np.median(dt))
         sa, sb = _shifted(pa, pb, shift, rate)

@@ -93,3 +93,15 @@ def test_a_short_flight_gets_figures_in_the_report(tmp_path):
         pair = f["pairs"][0]["N"]
         for ax, n in pair.items():
             assert n is not None and n >= 0.5 * math.hypot(*n_true), (ax, n)
+
+
+def test_slow_telemetry_cut_into_short_pieces_gets_a_figure():
+    """5-Hz streams whose flight is cut into 6-s stretches (30 samples, shorter than the pair fit's
+    fractional delay needs) with a time offset of a tenth of a sample: every piece is used (the offset left
+    to the first-order term) and each axis gets a figure."""
+    t, g, _ = flight(3, [1.0 * DEG, 2.0 * DEG], seconds=60.0, offsets=[0.0, 0.02])
+    t, g = t[::40], [x[::40] for x in g]
+    stretches = [(a, a + 5.9) for a in (0.0, 8.0, 16.0, 24.0, 32.0)]
+    res = redundant_noise([ImuTrack(t, g[i], 5.0) for i in range(2)], stretches, min_seconds=MIN_FIGURE_SECONDS)
+    assert res.seconds >= 25.0 and res.pairs
+    assert all(_n(e) is not None for p in res.per_imu for e in p["axes"].values())
