@@ -29,13 +29,34 @@ def add_conditions(entries: list, streams, meta: dict, summary: dict) -> None:
     by_key = {s.key: still.get((s.key.sysid, s.key.compid, s.key.message, s.key.instance)) for s in streams}
     cond, notes = condition_reports(streams, meta, _filters(meta), {k: v for k, v in by_key.items() if v})
     summary["notes"] += notes
+    source = next((e["source"] for e in entries if "source" in e), None)
+    added = False
     for s in streams:
         e = by_key.get(s.key)
+        if e is None and _has_figures({s.key: cond.get(s.key, {})}):
+            # a redundant IMU left out at rest (its gyro changed alone while the vehicle was still) keeps its
+            # ground and flight figures: an IMU that misbehaves is the one whose in-flight noise matters
+            e = by_key[s.key] = _condition_only_entry(s, source)
+            e["warnings"].append("not analysed at rest (the notes say why): its ground and flight figures only")
+            added = True
         if e is None:
             continue
         for c in CONDITIONS:
             e[c] = cond.get(s.key, {}).get(c) or {"axes": {}, "seconds": 0.0, "method": "none",
                                                   "notes": ["not one of the vehicle's redundant IMU streams"]}
+    if added:  # in the streams' order, as the analysed ones are
+        entries[:] = [by_key[s.key] for s in streams if by_key.get(s.key) is not None]
+
+
+def _condition_only_entry(stream, source) -> dict:
+    """The entry of a stream with ground or flight figures and no still analysis."""
+    from companion.analysis.stream import analyze_stream
+
+    e = analyze_stream(stream, [], "octave", ranges=[])
+    e["warnings"] = []
+    if source is not None:
+        e["source"] = source
+    return e
 
 
 def entries_without_still(spec, streams, meta: dict, summary: dict, taus, reason: str) -> list:

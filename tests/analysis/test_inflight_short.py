@@ -105,3 +105,34 @@ def test_slow_telemetry_cut_into_short_pieces_gets_a_figure():
     res = redundant_noise([ImuTrack(t, g[i], 5.0) for i in range(2)], stretches, min_seconds=MIN_FIGURE_SECONDS)
     assert res.seconds >= 25.0 and res.pairs
     assert all(_n(e) is not None for p in res.per_imu for e in p["axes"].values())
+
+
+def test_an_imu_left_out_at_rest_keeps_its_flight_figure(tmp_path):
+    """Three IMUs, still then flying: the report of an IMU whose still analysis was left out (as when its gyro
+    changed alone at rest) still gains an entry, in the streams' order, with its ground/flight figures."""
+    from companion.analysis.condition_hook import add_conditions
+    from companion.analysis.source import analyze_source
+    from companion.sources import load
+    from companion.sim.dataflash_writer import write_imu_log
+
+    n_true = np.array([1.0, 1.5, 2.0]) * DEG
+    t, g, _ = flight(21, n_true, seconds=100.0, offsets=[0.0, 0.001, 0.0005])
+    still = t < 40.0  # at rest: each IMU's own noise only
+    rng = np.random.default_rng(2)
+    for x in g:
+        x[still] = rng.normal(0.0, 1e-3, x[still].shape)
+    t = t + 1.0
+    accel = np.zeros((3, t.shape[0], 3))
+    accel[..., 2] = -9.8
+    path = tmp_path / "three.bin"
+    write_imu_log(path, t, np.array(g), accel, layout="4.x", armed=[(0.5, False), (42.0, True)])
+    entries, summary = analyze_source(str(path), ["gx", "gy", "gz"])
+    assert [e["instance"] for e in entries] == [0, 1, 2] and all(e["axes"] for e in entries)
+    res = load(str(path))
+    kept = [{k: v for k, v in e.items() if k not in ("flight", "ground")} for e in entries if e["instance"] != 1]
+    add_conditions(kept, res.imu_streams(), res.meta, {"notes": []})
+    assert [e["instance"] for e in kept] == [0, 1, 2]
+    left = kept[1]
+    assert not left["axes"] and "not analysed at rest" in left["warnings"][0]
+    assert left["flight"]["method"].startswith("three-cornered hat") and len(left["flight"]["axes"]) == 3
+    assert all(_n(r) is not None for r in left["flight"]["axes"].values())
