@@ -3,8 +3,8 @@ in-flight figure (N value or bound) on every gyro axis of every IMU, and that no
 
 Logs: ../shared/data/ardupilot/*.bin, ../shared/data/px4/*.ulg and every file under ../reallogs (not in the
 repository; missing directories are skipped); a file whose bytes repeat an earlier one is counted once. Each is
-analysed as ``companion analyze LOG --axes gx,gy,gz`` (companion.analysis.source.analyze_source). A log of
-ArduPilot's simulator (SITL: SIM_* parameters) is listed but not counted among the real logs. Targets (issue
+analysed as ``companion analyze LOG --axes gx,gy,gz`` (companion.analysis.source.analyze_source). A log of a
+simulator (ArduPilot or PX4 SITL: SIM_* parameters) is listed but not counted among the real logs. Targets (issue
 47): >= 90 % of the real multi-IMU flight logs get in-flight figures per IMU; no log with multi-IMU flight
 data or a ground stretch refused; 0 tracebacks.
 
@@ -60,7 +60,7 @@ def unique(files: list[Path]) -> tuple[list[Path], list[tuple[Path, Path]]]:
 
 def census(path: Path) -> tuple[int, float, float, bool]:
     """(IMUs of the vehicle's redundant family, seconds of flight, seconds of ground condition, whether the log
-    comes from ArduPilot's simulator) of a log, from the log alone."""
+    comes from a simulator: SITL) of a log, from the log alone."""
     from companion.analysis.conditions import condition_intervals
     from companion.analysis.inflight import _monotonic, imu_family
     from companion.sources import load
@@ -137,9 +137,9 @@ def main() -> int:
     refused = [p.name for p, r in rows if r["status"] == "error" and not r.get("sitl")
                and (r.get("multi") or r.get("ground_s", 0) > 0)]
     sitl = [p.name for p, r in rows if r.get("sitl")]
-    print(f"\n{len(files)} distinct logs in {time.time() - t0:.0f} s ({len(sitl)} from ArduPilot's simulator, not "
-          f"counted: {', '.join(sitl) or 'none'}); of {len(real)} real logs: {len(ok)} analysed, {err} refused with "
-          f"one error line, {tb} tracebacks")
+    print(f"\n{len(files)} distinct logs in {time.time() - t0:.0f} s ({len(sitl)} from a simulator (SITL: SIM_* "
+          f"parameters), not counted: {', '.join(sitl) or 'none'}); of {len(real)} real logs: {len(ok)} analysed, "
+          f"{err} refused with one error line, {tb} tracebacks")
     print(f"refused although they hold multi-IMU flight data or a ground stretch: {len(refused)}"
           + (f" ({', '.join(refused)})" if refused else ""))
     print(f"real multi-IMU logs with flight data (2-3 IMUs of one family, armed and moving): {len(multi)}; in-flight "
