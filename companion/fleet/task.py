@@ -118,6 +118,13 @@ def fault_rows(stream, axes, vehicle: str) -> dict:
     return out
 
 
+def _condition_figure(row: dict) -> bool:
+    """A ground or flight row that carries a figure: a fitted N, or a white-noise bound (a pair's IMUs, a
+    stretch too short to fit: what ``companion analyze`` reports for it too)."""
+    bounds = (row.get("extra") or {}).get("bounds") or []
+    return row["status"] == "ok" or any(b.get("effect") == "white_noise" for b in bounds)
+
+
 def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=None) -> dict:
     """Analyse one log file (see the module docstring). Never raises (but KeyboardInterrupt)."""
     from companion.fleet.discover import log_format
@@ -168,7 +175,7 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
 
         cond_rows = condition_rows(streams, getattr(res, "meta", {}) or {}, entries, vehicle_of,
                                    [a for a in axes if a in GYRO_AXES])
-        figures = any(r["status"] == "ok" for r in cond_rows)
+        figures = any(_condition_figure(r) for r in cond_rows)
         rows += cond_rows
         out["log"] = {"sysid": sysid, "vehicle": vehicle, "board_id": board,
                       "imu_ids": {int(k): int(v) for k, v in ident.get("imu_ids", {}).items()},
@@ -180,7 +187,7 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
             out["error"] = (f"no stream carries the axes {','.join(axes)} (only {', '.join(lacking)})")
         elif not rows or not (still or figures):
             out["error"] = f"no still data ({sel.describe()}) and no ground or flight figure"
-        elif not any(r["status"] == "ok" for r in rows):
+        elif not any(r["status"] == "ok" for r in rows) and not figures:
             notes = sorted({f"{r['status']}" + (f" ({r['note']})" if r.get("note") else "") for r in rows})
             out["error"] = "no axis could be analysed: " + "; ".join(notes)[:300]
         else:

@@ -136,3 +136,29 @@ def test_an_imu_left_out_at_rest_keeps_its_flight_figure(tmp_path):
     assert not left["axes"] and "not analysed at rest" in left["warnings"][0]
     assert left["flight"]["method"].startswith("three-cornered hat") and len(left["flight"]["axes"]) == 3
     assert all(_n(r) is not None for r in left["flight"]["axes"].values())
+
+
+def test_a_flight_with_bounds_only_is_analysed_by_analyze_and_fleet(tmp_path):
+    """Two IMUs logged at 2 Hz, armed and flying for 60 s: too few cluster times to fit, so each axis gets a
+    white-noise bound only. ``analyze`` reports it and ``fleet analyze`` records the log as analysed (not
+    failed) with those bounds, each at or above its truth."""
+    from companion.analysis.source import analyze_source
+    from companion.fleet.task import analyze_log
+    from companion.sim.dataflash_writer import write_imu_log
+
+    n_true = np.array([1.0, 2.0]) * DEG
+    t, g, _ = flight(5, n_true, seconds=60.0)
+    t, g = t[::100] + 1.0, [x[::100] for x in g]
+    accel = np.zeros((2, t.shape[0], 3))
+    accel[..., 2] = -9.8
+    path = tmp_path / "slow.bin"
+    write_imu_log(path, t, np.array(g), accel, layout="4.x", armed=[(0.5, True)])
+    entries, _ = analyze_source(str(path), ["gx", "gy", "gz"])
+    assert len(entries) == 2 and all(_n(r) for e in entries for r in e["flight"]["axes"].values())
+    out = analyze_log(str(path))
+    assert out["status"] == "ok", out["error"]
+    flight_rows = [r for r in out["rows"] if r["condition"] == "flight"]
+    assert len(flight_rows) == 6
+    for r in flight_rows:
+        b = [x for x in r["extra"]["bounds"] if x["effect"] == "white_noise"]
+        assert b and b[0]["N"] >= n_true[r["imu"]]
