@@ -24,7 +24,7 @@ from itertools import combinations
 
 import numpy as np
 
-from companion.redundancy.align import ImuTrack, align
+from companion.redundancy.align import MIN_PIECE, ImuTrack, align
 from companion.redundancy.calibration import fit_pair
 from companion.redundancy.fit_points import axis_entry, tau_min_for
 from companion.redundancy.hat import hat_share, pair_points, quantization_avar
@@ -196,7 +196,8 @@ def redundant_noise(tracks: list[ImuTrack], intervals, *, still_n=None, min_seco
     tracks = tracks[:3]
     al = align(tracks, intervals)
     if al.seconds < min_seconds:
-        note = f"only {al.seconds:.0f} s with every IMU logged (< {min_seconds:g} s): no figure"
+        note = (f"only {al.seconds:.0f} s with every IMU logged, in stretches of {MIN_PIECE} samples or more "
+                f"(< {min_seconds:g} s): no figure")
         return RedundancyResult([_empty("none", al.seconds, [note]) for _ in tracks], [], al.seconds)
     pieces, equalized, tau_min = _equalized(al, tracks)
     n = int(round(al.seconds * al.rate_hz))
