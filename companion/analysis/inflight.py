@@ -23,9 +23,9 @@ _TLOG_IMU = {"RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU
 #: a family member slower than this fraction of the family's fastest is left out (a 1-Hz copy beside 250 Hz)
 MIN_RATE_FRACTION = 0.5
 #: the fewest seconds of aligned data for a ground or flight figure. The pair figure's 95 % interval widens as
-#: the span shortens and still holds the truth at this length (95 % of the axes of simulated 10-s flights:
-#: tests/analysis/test_inflight_short.py); a short flight is what most real multi-IMU logs hold after the
-#: take-off and landing are cut, and a figure with its wide interval, or a bound, says more than none
+#: the span shortens and still holds the truth at this length (575 of 600 axes of simulated 10.5-s flights,
+#: benchmarks/bench_inflight_short.py; tests/analysis/test_inflight_short.py); many real multi-IMU logs fly
+#: little once take-off and landing are cut, and a figure with its wide interval, or a bound, says more than none
 MIN_FIGURE_SECONDS = 10.0
 ONE_IMU_GROUND = ("one IMU, armed on the ground: its Allan analysis over the ground stretches; the motors' "
                   "vibration is in the figure (a second IMU would cancel it)")

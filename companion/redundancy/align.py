@@ -15,8 +15,8 @@ import numpy as np
 #: a step between two samples longer than this many nominal periods is a gap (no interpolation across it)
 GAP_PERIODS = 2.5
 #: pieces shorter than this many grid samples carry no Allan point of use and are dropped: the fit's first
-#: cluster time is 8 periods (fit_points.ROLLOFF_TAU0), whose overlapping AVAR needs 2 x 8 + 1 samples (a 2-Hz
-#: telemetry stream's flight is cut into runs of 10-20 s by the turns and the hover between them)
+#: cluster time is 8 periods (fit_points.ROLLOFF_TAU0), whose overlapping AVAR needs 2 x 8 + 1 samples (the
+#: flight of a 2-Hz telemetry stream can come in runs of 5-15 s between quiet stretches)
 MIN_PIECE = 17
 
 
