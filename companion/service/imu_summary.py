@@ -10,6 +10,7 @@ from companion.health.degradation import STATE_NAMES
 from companion.health.faults import FAULT, MIN_NOISE_SAMPLES, FaultEvent
 from companion.service.blocks import MIN_WATCH_RATE_HZ
 from companion.service.channel import INT16_MESSAGES
+from companion.service.final_analysis import final_analysis
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 
 
@@ -31,6 +32,8 @@ def summary_rows(pipeline) -> list[dict]:
                 terms = final_terms(pipeline, ch, ax)
                 row["axes"][ax] = {"current": ch.current_params(ax, terms), "terms": terms,
                                    "baseline": pipeline.baseline.get(imu, ax) if pipeline.baseline else None}
+            # analyze's figure on the still samples fed (service.final_analysis), beside the online terms
+            row["final"] = final_analysis(ch)
         out.append(row)
     return out
 
