@@ -48,7 +48,7 @@ class EstimatorBank:
         self._junctions: set[int] = set()  # queue indices whose block starts a new segment
         self.held: dict | None = None  # the snapshot taken at the onset of a transient fault
         # the still samples fed, for the run's final analysis (companion.service.still_record)
-        self.record = StillRecord({a: COLUMNS[a] for a in self.fast})
+        self.record = StillRecord({"t": 0, **{a: COLUMNS[a] for a in self.fast}})
 
     @classmethod
     def create(cls, axes, make: MakeEstimator, fast_s: float, slow_s: float, learning: bool) -> "EstimatorBank":

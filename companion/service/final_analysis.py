@@ -32,13 +32,28 @@ def final_analysis(ch) -> dict:
     elif rec.kept_s < MIN_FINAL_S:
         out["note"] = f"only {rec.kept_s:.0f} s of still samples kept (< {MIN_FINAL_S:g} s): too few for the analysis"
     else:
-        for ax in rec.columns:
-            out["axes"][ax] = axis_analysis(ch, ax, rec.axis_pieces(ax))
+        rate = kept_rate(ch, rec)
+        out["rate_hz"] = rate
+        for ax in rec.axes:
+            out["axes"][ax] = axis_analysis(ch, ax, rec.axis_pieces(ax), rate)
     bank._final_analysis = (rec.version, out)
     return out
 
 
-def axis_analysis(ch, ax: str, pieces) -> dict:
+def kept_rate(ch, rec) -> float:
+    """The sample rate of the kept still samples by the rule ``analyze`` applies to a stream's intervals
+    (:func:`companion.timebase.period_of`): the channel's rate was taken from its first blocks, and a rate
+    0.2 % off moves N by 0.1 %."""
+    import numpy as np
+
+    from companion.timebase import period_of
+
+    d = [np.diff(t) for t in rec.axis_pieces("t") if t.shape[0] > 1]
+    period = period_of(np.concatenate(d), ch.time_res) if d else float("nan")
+    return 1.0 / period if np.isfinite(period) and period > 0 else float(ch.rate_hz)
+
+
+def axis_analysis(ch, ax: str, pieces, rate_hz: float) -> dict:
     """The analysis of one axis' kept still pieces (the entry ``companion analyze`` gives for the same samples)."""
     from companion.analysis.stream import pieces_entry
     from companion.service.channel import INT16_MESSAGES
@@ -50,7 +65,7 @@ def axis_analysis(ch, ax: str, pieces) -> dict:
         lsb = ch.gyro_lsb
     else:
         lsb = DEFAULT_SCALES["accel_scale"] if ch.message in INT16_MESSAGES else None
-    return pieces_entry(pieces, float(ch.rate_hz), ax, ch.message, {kind: fc} if fc else {}, "octave", lsb)
+    return pieces_entry(pieces, rate_hz, ax, ch.message, {kind: fc} if fc else {}, "octave", lsb)
 
 
 def analysis_text(entry: dict, axis: str) -> str:
