@@ -150,6 +150,7 @@ def test_simulated_log_one_n_per_axis_everywhere(tmp_path):
 REAL = Path(os.environ.get("COMPANION_SHARED", "/work/shared")) / "data" / "ardupilot" / "dronekit_log171.bin"
 
 
+@pytest.mark.soak  # 60 s on 2 cores (3 IMUs replayed and analysed): benchmarks/soak_checks.py runs it
 @pytest.mark.skipif(not REAL.exists(), reason="shared real data not present")
 def test_real_log_one_n_per_axis_everywhere(tmp_path):
     """A real ArduCopter log (3 IMUs at 50 Hz with jittered stamps, 33 s still before arming): analyze, gap,
