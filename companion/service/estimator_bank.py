@@ -49,6 +49,7 @@ class EstimatorBank:
         self.held: dict | None = None  # the snapshot taken at the onset of a transient fault
         # the still samples fed, for the run's final analysis (companion.service.still_record)
         self.record = StillRecord({"t": 0, **{a: COLUMNS[a] for a in self.fast}})
+        self.final_cache: tuple | None = None  # (record version, its final analysis): service.final_analysis
 
     @classmethod
     def create(cls, axes, make: MakeEstimator, fast_s: float, slow_s: float, learning: bool) -> "EstimatorBank":

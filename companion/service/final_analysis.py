@@ -20,7 +20,7 @@ def final_analysis(ch) -> dict:
     (the summary is asked for more than once at the end of a run)."""
     bank = ch.bank
     rec = bank.record
-    cached = getattr(bank, "_final_analysis", None)
+    cached = bank.final_cache
     if cached is not None and cached[0] == rec.version:
         return cached[1]
     out = {"axes": {}, "kept_s": rec.kept_s, "dropped_s": rec.dropped_s,
@@ -28,15 +28,17 @@ def final_analysis(ch) -> dict:
            "missing_s": max(0.0, ch.fed_s - rec.kept_s - rec.dropped_s),
            "ranges_s": [list(r) for r in rec.ranges_s()], "note": None}
     if not ch.rate_hz or not rec.pieces:
-        out["note"] = "no still samples kept at this rate" + (" since the restart" if out["missing_s"] else "")
+        out["note"] = "no still samples kept at this rate" + (" since the restart" if out["missing_s"] >= 1.0 else "")
     elif rec.kept_s < MIN_FINAL_S:
         out["note"] = f"only {rec.kept_s:.0f} s of still samples kept (< {MIN_FINAL_S:g} s): too few for the analysis"
     else:
         rate = kept_rate(ch, rec)
         out["rate_hz"] = rate
+        cuts = split_points(rec, rate, ch.time_res)
         for ax in rec.axes:
-            out["axes"][ax] = axis_analysis(ch, ax, rec.axis_pieces(ax), rate)
-    bank._final_analysis = (rec.version, out)
+            pieces = [p[a:b] for p, edges in zip(rec.axis_pieces(ax), cuts) for a, b in zip(edges[:-1], edges[1:])]
+            out["axes"][ax] = axis_analysis(ch, ax, pieces, rate)
+    bank.final_cache = (rec.version, out)
     return out
 
 
@@ -51,6 +53,22 @@ def kept_rate(ch, rec) -> float:
     d = [np.diff(t) for t in rec.axis_pieces("t") if t.shape[0] > 1]
     period = period_of(np.concatenate(d), ch.time_res) if d else float("nan")
     return 1.0 / period if np.isfinite(period) and period > 0 else float(ch.rate_hz)
+
+
+def split_points(rec, rate_hz: float, resolution: float) -> list[list[int]]:
+    """Per kept piece the edges of its parts: a step over ``analyze``'s split threshold (10 periods,
+    :func:`companion.sources.timestamps.step_rules`) splits it as ``analyze`` splits a stream's segments, where
+    the run's blocks go on over a shorter gap than its ``gap_s`` (0.5 s)."""
+    import numpy as np
+
+    from companion.sources.timestamps import step_rules
+
+    split_s = step_rules(1.0 / rate_hz, resolution).split_s
+    out = []
+    for t in rec.axis_pieces("t"):
+        cuts = (np.flatnonzero(np.diff(t) > split_s) + 1).tolist()
+        out.append([0, *cuts, int(t.shape[0])])
+    return out
 
 
 def axis_analysis(ch, ax: str, pieces, rate_hz: float) -> dict:
