@@ -80,9 +80,10 @@ def final_terms(pipeline, ch, ax: str) -> list[dict]:
 
 
 def send_final(pipeline) -> int:
-    """At the end of a live run: the summary's terms of every reported IMU set and sent at once (values,
+    """At the end of a live run: the summary's online terms of every reported IMU set and sent at once (values,
     sigmas, bounds), then its health and fault code, so the last values a ground station got are the
-    summary's. Returns the number of NAMED_VALUE_FLOAT sent."""
+    summary's ``online`` lines (its final analysis, analyze's figure, is printed, not sent). Returns the number
+    of NAMED_VALUE_FLOAT sent."""
     n = 0
     reporter = pipeline.reporter
     for imu, ch in sorted(pipeline.channels.items()):
