@@ -53,7 +53,7 @@ def main() -> int:
             out, _, relay = loop_through_relay(Path(d), **CASES[name])
         m = re.search(r"link from 1/1: (\d+) frames received, (\d+) lost \(([\d.]+) %\)", out)
         counted = int(m.group(2)) if m else -1
-        ns = [float(x) for x in re.findall(r"  g[xyz]: N ([\d.]+) ", out)[:3]]
+        ns = [float(x) for x in re.findall(r"  g[xyz] online: N ([\d.]+) ", out)[:3]]
         worst = max(abs(n / N_TRUE - 1.0) for n in ns) if ns else float("nan")
         worst_all = max(worst_all, worst)
         pct = 100.0 * relay.dropped / max(relay.dropped + relay.forwarded, 1)

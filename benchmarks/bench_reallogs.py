@@ -110,8 +110,9 @@ KINDS = (
 )
 ALARM = re.compile(r"^\s+at (-?\d+) s: (IMU(\d+) gyro(?: ([XYZ]))? (.*))$")
 HEAD = re.compile(r"^IMU(\d+) \(([^,]+), ([\d.]+) Hz\).*?(\d+) samples")
-#: a summary line of run's Allan terms: "  gx: N 0.229 +- 0.0064 deg/sqrt(h); ..." or "  gx: N < 0.667 deg/sqrt(h)"
-N_LINE = re.compile(r"^  (g[xyz]): N (<\s*)?([\d.eE+-]+)")
+#: a summary line of run's Allan terms: the final analysis ("  gx: N 0.229 [0.221, 0.237] deg/sqrt(h); ..." or
+#: "  gx: N < 0.667 deg/sqrt(h)"), else the online one ("  gx online: N 0.229 +- 0.0064 deg/sqrt(h); ...")
+N_LINE = re.compile(r"^  (g[xyz])( online)?: N (<\s*)?([\d.eE+-]+)")
 RAD_TO_DEG_SQRT_H = 180.0 / 3.141592653589793 * 60.0
 CLEARED = re.compile(r"cleared|recovered|healthy again|back to|\bOK\b")
 
@@ -168,7 +169,7 @@ def run_log(path: Path, analyze: bool) -> dict:
             continue
         m = N_LINE.match(line)
         if m and row["imus"]:
-            row["imus"][-1]["N"][m[1]] = (float(m[3]), bool(m[2]))
+            row["imus"][-1]["N"].setdefault(m[1], (float(m[4]), bool(m[3])))  # the final analysis' first
             continue
         m = ALARM.match(line)
         if m:

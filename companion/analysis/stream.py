@@ -67,15 +67,24 @@ def axis_entry(stream, axis: str, ranges, filters=None, taus="octave", lsb=None)
     """The analysis of one axis of ``stream`` over the index ``ranges`` (pooled), with the low-pass cut-off
     of ``filters`` modelled as the log's signal path has it (:func:`stream_sampling`): the one estimate
     ``analyze``, ``gap`` and the Kalibr file report. ``lsb``: the output step (None: the stream's)."""
-    rate = float(stream.rate_hz)
     if lsb is None:
         lsb = stream.gyro_lsb if axis in GYRO_AXES else stream.accel_lsb
-    fc = (filters or {}).get("gyro" if axis in GYRO_AXES else "accel")
-    samp = stream_sampling(stream)
-    wf = {"filter_hz": float(fc), "sample_hz": rate if samp == "point" else None} if fc else None
     col = stream.axis(axis)
-    return analyze_axis(None, rate, taus, lsb=lsb, segments=[col[a:b] for a, b in ranges], white_filter=wf,
-                        sampling=samp)
+    return pieces_entry([col[a:b] for a, b in ranges], float(stream.rate_hz), axis, stream.key.message, filters,
+                        taus, lsb)
+
+
+def pieces_entry(pieces, rate_hz: float, axis: str, message: str, filters=None, taus="octave", lsb=None) -> dict:
+    """The analysis of one axis over still ``pieces`` (arrays of one axis' samples at ``rate_hz``, pooled) of a
+    stream of IMU ``message``: the function behind :func:`axis_entry`, and the final report of ``companion run``
+    on the still blocks it kept (:mod:`companion.service.still_record`), so both give one figure for one set of
+    samples. ``filters``: {"gyro": Hz, "accel": Hz}; ``lsb``: the output step (None: none modelled)."""
+    from companion.analysis.filters import sampling
+
+    fc = (filters or {}).get("gyro" if axis in GYRO_AXES else "accel")
+    samp = sampling(message)
+    wf = {"filter_hz": float(fc), "sample_hz": rate_hz if samp == "point" else None} if fc else None
+    return analyze_axis(None, rate_hz, taus, lsb=lsb, segments=list(pieces), white_filter=wf, sampling=samp)
 
 
 def stream_sampling(stream) -> str:

@@ -20,6 +20,7 @@ import numpy as np
 from companion.estimators import from_state_dict as estimator_from_state
 from companion.health.baseline import check_params
 from companion.samples import ACCEL_AXES, GYRO_AXES
+from companion.service.still_record import StillRecord
 
 COLUMNS = {ax: 1 + i for i, ax in enumerate(GYRO_AXES + ACCEL_AXES)}  # column of each axis in a block row
 FAST_EFFECTS = ("quantization", "white_noise")  # reported from the fast estimator, the rest from the slow one
@@ -46,6 +47,9 @@ class EstimatorBank:
         self._queue: list[np.ndarray] = []
         self._junctions: set[int] = set()  # queue indices whose block starts a new segment
         self.held: dict | None = None  # the snapshot taken at the onset of a transient fault
+        # the still samples fed, for the run's final analysis (companion.service.still_record)
+        self.record = StillRecord({"t": 0, **{a: COLUMNS[a] for a in self.fast}})
+        self.final_cache: tuple | None = None  # (record version, its final analysis): service.final_analysis
 
     @classmethod
     def create(cls, axes, make: MakeEstimator, fast_s: float, slow_s: float, learning: bool) -> "EstimatorBank":
@@ -59,6 +63,7 @@ class EstimatorBank:
         if junction:
             self._junctions.add(len(self._queue))
         self._queue.append(data)
+        self.record.add(data, duration, junction)
         self.fed_s += duration
         self.queue_s += duration
         if self.learn:
@@ -142,7 +147,8 @@ class EstimatorBank:
                 "slow": {a: e.state_dict() for a, e in self.slow.items()},
                 "learn": {a: e.state_dict() for a, e in self.learn.items()} if learning else None,
                 "fed_s": self.fed_s - self.queue_s,
-                "learned_s": max(0.0, self.learned_s - self.queue_s) if learning else self.learned_s}
+                "learned_s": max(0.0, self.learned_s - self.queue_s) if learning else self.learned_s,
+                "record": self.record.mark(len(self._queue))}
 
     def put_back(self, snap: Mapping) -> float:
         """Restore :meth:`snapshot`; the queue is dropped. Returns the still seconds taken back out."""
@@ -155,6 +161,7 @@ class EstimatorBank:
             self.learned_s = float(snap["learned_s"])
         self.fed_s = float(snap["fed_s"])
         self.clear_queue()
+        self.record.trim(snap.get("record") or ["", 0])
         return max(0.0, dropped)
 
     # ------------------------------------------------------------------ persistence

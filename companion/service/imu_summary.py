@@ -10,6 +10,7 @@ from companion.health.degradation import STATE_NAMES
 from companion.health.faults import FAULT, MIN_NOISE_SAMPLES, FaultEvent
 from companion.service.blocks import MIN_WATCH_RATE_HZ
 from companion.service.channel import INT16_MESSAGES
+from companion.service.final_analysis import final_analysis
 from companion.service.rate_tracker import RATE_SWITCHES_LOGGED
 
 
@@ -31,6 +32,8 @@ def summary_rows(pipeline) -> list[dict]:
                 terms = final_terms(pipeline, ch, ax)
                 row["axes"][ax] = {"current": ch.current_params(ax, terms), "terms": terms,
                                    "baseline": pipeline.baseline.get(imu, ax) if pipeline.baseline else None}
+            # analyze's figure on the still samples fed (service.final_analysis), beside the online terms
+            row["final"] = final_analysis(ch)
         out.append(row)
     return out
 
@@ -77,9 +80,10 @@ def final_terms(pipeline, ch, ax: str) -> list[dict]:
 
 
 def send_final(pipeline) -> int:
-    """At the end of a live run: the summary's terms of every reported IMU set and sent at once (values,
+    """At the end of a live run: the summary's online terms of every reported IMU set and sent at once (values,
     sigmas, bounds), then its health and fault code, so the last values a ground station got are the
-    summary's. Returns the number of NAMED_VALUE_FLOAT sent."""
+    summary's ``online`` lines (its final analysis, analyze's figure, is printed, not sent). Returns the number
+    of NAMED_VALUE_FLOAT sent."""
     n = 0
     reporter = pipeline.reporter
     for imu, ch in sorted(pipeline.channels.items()):

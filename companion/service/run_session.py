@@ -173,7 +173,7 @@ def run(opts: RunOptions, hooks: RunHooks) -> RunResult:
 def summary_lines(pipeline) -> list[str]:
     """The run summary: per IMU its health, data used and counts, active faults and per-axis estimates,
     then the health transitions."""
-    from companion.estimators.online_report import summary_line
+    from companion.service.final_analysis import summary_lines as final_lines
 
     rows = pipeline.summary()
     if not rows:
@@ -192,9 +192,7 @@ def summary_lines(pipeline) -> list[str]:
             out.append(f"  FAULT: {text}")
         for text in r.get("notes") or ():
             out.append(f"  note: {text}")
-        for ax, d in r["axes"].items():
-            text = summary_line(d["terms"], ax, d["baseline"])
-            out.append(f"  {ax}: " + (text or f"no estimate yet ({r['still_s']:.0f} s of still data at this rate)"))
+        out += final_lines(r)  # analyze's figures on the still data, then the online ones (service.final_analysis)
         out += pipeline.inflight.summary_lines(r["imu"])
     for t, text in pipeline.transitions:
         out.append(f"  at {t:.0f} s: {text}")

@@ -86,7 +86,7 @@ def test_run_prints_the_same_report_as_analyze_online(online_report, repo_root, 
     text = capsys.readouterr().out
     held = []
     for axis in ("gx", "gy", "gz"):
-        line = next(s for s in text.splitlines() if s.strip().startswith(axis + ":"))
+        line = next(s for s in text.splitlines() if s.strip().startswith(axis + " online:"))  # the online figures
         on = {t["effect"]: t for t in online_report["streams"][0]["axes"][axis]["online"]}
         tr = truth(repo_root, axis)
         for e, p in (("white_noise", "N"), ("bias_instability", "B"), ("random_walk", "K")):

@@ -50,7 +50,7 @@ def test_reports_reach_a_gcs_behind_mavproxy_through_gcs_output(tmp_path):
         out = (tmp_path / "run.out").read_text()
         counted = re.search(r"stopping: \d+ messages sent, (\d+) NAMED_VALUE_FLOAT, (\d+) STATUSTEXT", out)
         assert counted and int(counted.group(2)) == len(texts), (counted, texts)  # the exit line counts right
-        m = re.search(r"^  gy: N ([\d.]+) \+- [\d.]+ .*?; B (<? ?)([\d.e+]+) deg/h; K (<? ?)([\d.e+]+) deg/h\^1.5", out, re.M)
+        m = re.search(r"^  gy online: N ([\d.]+) \+- [\d.]+ .*?; B (<? ?)([\d.e+]+) deg/h; K (<? ?)([\d.e+]+) deg/h\^1.5", out, re.M)
         assert m, out
         with gcs.lock:
             last = dict(gcs.names)

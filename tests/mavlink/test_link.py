@@ -79,7 +79,7 @@ def check_loss_run(out, sim_out, relay, lo, hi):
     assert lo <= relay.dropped / (relay.dropped + relay.forwarded) <= hi
     assert "companion: link loss" in out  # the warning (sent as STATUSTEXT; logged on stderr)
     for ax in "xyz":
-        n = re.search(rf"  g{ax}: N ([\d.]+) \+- ([\d.]+) ", out)
+        n = re.search(rf"  g{ax} online: N ([\d.]+) \+- ([\d.]+) ", out)  # what run sent live
         assert n, out
         value, sigma = float(n.group(1)), float(n.group(2))
         # within 5 %, or within twice the 1-sigma the report gives when it widened it: under 20 % burst loss

@@ -79,7 +79,13 @@ def test_noise_burst_leaves_the_estimates_when_it_clears(seed):
     # the reported N is the gyro's own again: within 4 sigma of the truth
     n = gz_n(p)
     assert abs(n["N"] - N) < 4.0 * n["std"]["N"] + 0.02 * N, (n, N)
-    assert any("taken back out of the Allan estimates" in x for x in p.summary()[0]["notes"])
+    row = p.summary()[0]
+    assert any("taken back out of the Allan estimates" in x for x in row["notes"])
+    # the summary's final analysis (analyze's figure) leaves the burst's still samples out as well
+    fin = row["final"]
+    assert fin["kept_s"] == pytest.approx(ch.fed_s) and all(b <= 400.0 or a >= 460.0 for a, b in fin["ranges_s"])
+    fn = next(x for x in fin["axes"]["gz"]["terms"] if x["effect"] == "white_noise")
+    assert fn["ci95"]["N"][0] - 0.02 * N < N < fn["ci95"]["N"][1] + 0.02 * N, (fn, N)
 
 
 def test_the_estimates_show_the_fault_while_it_lasts():
