@@ -93,8 +93,8 @@ def read_csv(path, time_unit: str | None = None) -> RawStream:
     t, gyro, accel = cols
     if t.shape[0] == 0:
         raise CompanionError(f"{path}: no data rows after the header")
-    bad = ~(np.isfinite(t) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1))
-    if np.any(bad):
+    if not (np.isfinite(t).all() and np.isfinite(gyro).all() and np.isfinite(accel).all()):
+        bad = ~(np.isfinite(t) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1))
         raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {int(np.flatnonzero(bad)[0]) + 1}")
     check_resolution(path, t)
     step = _median_step(t)  # once: each check below needs it, and it costs a sort-sized pass over the column
