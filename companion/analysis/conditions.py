@@ -38,15 +38,21 @@ def armed_windows(transitions, t_end: float) -> list[tuple[float, float]]:
     return out
 
 
-def _quiet(t: np.ndarray, gyro: np.ndarray, edges: np.ndarray, half: int) -> np.ndarray:
-    """Per window [edges[k], edges[k+1]): quiet (see the module docstring); a window without samples is not."""
+def _quiet(t: np.ndarray, gyro: np.ndarray, edges: np.ndarray, half: int, idx: np.ndarray | None = None) -> np.ndarray:
+    """Per window [edges[k], edges[k+1]): quiet (see the module docstring); a window without samples is not.
+    ``idx``: each sample's window, ``searchsorted(edges, t, "right") - 1``, where the caller has it."""
     nb = edges.shape[0] - 1
-    idx = np.searchsorted(edges, t, side="right") - 1
-    ok = (idx >= 0) & (idx < nb) & np.all(np.isfinite(gyro), axis=1)
-    cnt = np.bincount(idx[ok], minlength=nb).astype(float)
+    if idx is None:
+        idx = np.searchsorted(edges, t, side="right") - 1
+    ok = (idx >= 0) & (idx < nb)
+    if not np.isfinite(gyro).all():  # tested whole first: a row-wise test costs more than the rest of the step
+        ok &= np.all(np.isfinite(gyro), axis=1)
+    every = bool(ok.all())  # the usual case: no masked copies of the columns
+    iok = idx if every else idx[ok]
+    cnt = np.bincount(iok, minlength=nb).astype(float)
     mean = np.full((nb, 3), np.nan)
     for j in range(3):
-        s = np.bincount(idx[ok], weights=gyro[ok, j], minlength=nb)
+        s = np.bincount(iok, weights=gyro[:, j] if every else gyro[ok, j], minlength=nb)
         mean[:, j] = np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan)
     pad = np.full((half, 3), np.nan)
     win = np.lib.stride_tricks.sliding_window_view(np.vstack([pad, mean, pad]), 2 * half + 1, axis=0)
@@ -89,10 +95,10 @@ def condition_intervals(t: np.ndarray, gyro: np.ndarray, transitions, has_armed_
     edges = np.arange(float(np.nanmin(t)), float(np.nanmax(t)) + window, window)
     if edges.shape[0] < 2:
         return {"flight": [], "ground": [], "method": "no data"}
-    quiet = _quiet(t, np.asarray(gyro, dtype=float), edges, max(1, int(round(QUIET_SPAN_S / window / 2))))
+    idx = np.searchsorted(edges, t, side="right") - 1  # each sample's window, for both steps below
+    quiet = _quiet(t, np.asarray(gyro, dtype=float), edges, max(1, int(round(QUIET_SPAN_S / window / 2))), idx)
     mid = (edges[:-1] + edges[1:]) / 2.0
-    has = np.bincount(np.clip(np.searchsorted(edges, t, side="right") - 1, 0, mid.shape[0] - 1),
-                      minlength=mid.shape[0]) > 0
+    has = np.bincount(np.clip(idx, 0, mid.shape[0] - 1), minlength=mid.shape[0]) > 0
     if not has_armed_state:
         return {"flight": _runs(~quiet & has, edges), "ground": [],
                 "method": "motion only (no armed state in this source)"}

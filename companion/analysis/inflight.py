@@ -36,9 +36,13 @@ def _family(msg: str) -> str:
 
 
 def _has_gyro(s) -> bool:
+    if not getattr(s, "is_imu", True):
+        return False
     g = s.gyro
+    if np.isfinite(g).all():  # the usual case, without a row-wise test and a masked copy
+        return g.shape[0] >= 16 and bool(np.any(g != 0))
     ok = np.all(np.isfinite(g), axis=1)
-    return bool(getattr(s, "is_imu", True) and ok.sum() >= 16 and np.any(g[ok] != 0))
+    return int(ok.sum()) >= 16 and bool(np.any(g[ok] != 0))
 
 
 def imu_family(streams) -> list:

@@ -44,17 +44,36 @@ WHOLE_TOLERANCE = 1e-9  #: relative: a time this close to a whole number is one 
 RESTART_RUN_ROWS = 100
 
 
+def _gzip_open(path: Path):
+    """A gzip file opened for reading: through ISA-L (isal) where installed, a third of zlib's time on a large
+    CSV (the decompression is a fifth of reading one), else the standard library's gzip."""
+    try:
+        from isal import igzip
+    except ImportError:
+        return gzip.open(path, "rb")
+    return igzip.open(path, "rb")
+
+
+def _gzip_errors() -> tuple[type[BaseException], ...]:
+    """The exceptions of a corrupt gzip stream, isal's among them where installed."""
+    try:
+        from isal.isal_zlib import error as isal_error
+    except ImportError:
+        return gzip.BadGzipFile, zlib.error, EOFError
+    return gzip.BadGzipFile, zlib.error, EOFError, isal_error
+
+
 def _read_bytes(path: Path) -> bytes:
     try:
         if opens_as_gzip(path):
-            with gzip.open(path, "rb") as fh:
+            with _gzip_open(path) as fh:
                 return fh.read()
         return path.read_bytes()
     except FileNotFoundError:
         raise CompanionError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise CompanionError(f"{path}: is a directory, expected a CSV file") from None
-    except (gzip.BadGzipFile, zlib.error, EOFError) as exc:
+    except _gzip_errors() as exc:
         raise CompanionError(f"{path}: not a readable gzip file ({exc})") from None
     except OSError as exc:
         raise CompanionError(f"{path}: cannot read ({exc.strerror or exc})") from None
@@ -74,8 +93,8 @@ def read_csv(path, time_unit: str | None = None) -> RawStream:
     t, gyro, accel = cols
     if t.shape[0] == 0:
         raise CompanionError(f"{path}: no data rows after the header")
-    bad = ~(np.isfinite(t) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1))
-    if np.any(bad):
+    if not (np.isfinite(t).all() and np.isfinite(gyro).all() and np.isfinite(accel).all()):
+        bad = ~(np.isfinite(t) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1))
         raise CompanionError(f"{path}: non-finite value (nan/inf) on data row {int(np.flatnonzero(bad)[0]) + 1}")
     check_resolution(path, t)
     step = _median_step(t)  # once: each check below needs it, and it costs a sort-sized pass over the column
@@ -166,7 +185,7 @@ def _open(path: Path):
         with open(path, "rb") as fh:
             fh.seek(-4, 2)
             size = int.from_bytes(fh.read(4), "little")
-    return gzip.open(path, "rb"), size
+    return _gzip_open(path), size
 
 
 def _read_columns(path: Path):
@@ -193,7 +212,7 @@ def _read_columns(path: Path):
                     cols.add(arr)
                 if not block:
                     return cols.arrays()
-    except (ValueError, IndexError, OSError, EOFError, zlib.error):
+    except (ValueError, IndexError, OSError) + _gzip_errors():
         return None
 
 

@@ -58,3 +58,23 @@ def test_bad_value_in_a_late_block_names_the_file_line(tmp_path, monkeypatch):
     p.write_text("time_s,gx,gy,gz,ax,ay,az\n" + "\n".join(rows) + "\n")
     with pytest.raises(CompanionError, match="line 352"):
         csvfile.read_csv(p)
+
+
+@pytest.mark.parametrize("isal", [True, False])
+def test_gzip_through_isal_or_the_standard_library(tmp_path, monkeypatch, isal):
+    """A gzip CSV reads to the same values through ISA-L and, where isal is absent, through the standard
+    library; a gzip stream cut short is the one error line either way."""
+    if isal:
+        pytest.importorskip("isal")
+    else:
+        monkeypatch.setitem(__import__("sys").modules, "isal", None)  # import isal raises ImportError
+    arr, rows = _text(500)
+    p = tmp_path / "g.csv.gz"
+    data = gzip.compress(("time_s,gx,gy,gz,ax,ay,az\n" + "\n".join(rows) + "\n").encode())
+    p.write_bytes(data)
+    raw = csvfile.read_csv(p)
+    assert np.array_equal(raw.t, arr[:, 0]) and np.array_equal(raw.gyro, arr[:, 1:4])
+    cut = tmp_path / "cut.csv.gz"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(CompanionError, match="not a readable gzip file"):
+        csvfile.read_csv(cut)

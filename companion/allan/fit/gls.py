@@ -45,6 +45,8 @@ class _Problem:
         corr = (U * np.maximum(w, _EIG_FLOOR)) @ U.T
         self.L = np.linalg.cholesky(corr) * d[:, None]
         self.vw = self._w(v)
+        #: solve's results by design: the model search asks for the same design again (a fifth of the solves)
+        self._solved: dict = {}
 
     def _w(self, x):
         """L^-1 x: the whitened vector or columns."""
@@ -55,6 +57,15 @@ class _Problem:
 
         A candidate whose covariance is ~0 at some point (a term that vanishes there) whitens to 1e150 and
         beyond: its chi^2 is inf (the candidate loses), without a RuntimeWarning."""
+        key = (A.shape, A.tobytes())
+        done = self._solved.get(key)
+        if done is not None:
+            return done[0].copy(), done[1]
+        done = self._solve(A)
+        self._solved[key] = done
+        return done[0].copy(), done[1]
+
+    def _solve(self, A):
         with np.errstate(over="ignore", invalid="ignore"):
             Aw = self._w(A)
             scale = np.maximum(np.sqrt((Aw**2).sum(axis=0)), _SD_FLOOR)
@@ -99,11 +110,21 @@ def _filtered_white_column(tau, white):
     return _FILTERED_COLUMNS.get(key, lambda: avar_white_noise(tau, 1.0, **white))
 
 
+#: the plain columns phi_j by (tau, effect): the model search builds thousands of designs from the same few
+_LINEAR_COLUMNS = BoundedMemo(256, read_only=True)
+
+
+def _linear_column(tau, effect):
+    """The column phi_j of a linear effect at ``tau`` (:func:`companion.allan.terms.linear_basis`)."""
+    key = (np.asarray(tau, dtype=float).tobytes(), effect)
+    return _LINEAR_COLUMNS.get(key, lambda: np.ascontiguousarray(linear_basis(tau, [effect])[:, 0]))
+
+
 def _columns(linear, nonlinear, tau, white=None):
     """Design matrix A: the columns phi_j of the ``linear`` effects, then one per (effect, shape) of
     ``nonlinear``; ``white``: {"filter_hz", "sample_hz"[, "filter_order"]} of a low-pass filter seen by the
     white noise (its column is then the filtered shape)."""
-    cols = [_filtered_white_column(tau, white) if (e == "white_noise" and white) else linear_basis(tau, [e])[:, 0]
+    cols = [_filtered_white_column(tau, white) if (e == "white_noise" and white) else _linear_column(tau, e)
             for e in linear]
     cols += [_shape_column(e, s, tau) for e, s in nonlinear]
     return np.column_stack(cols) if cols else np.zeros((len(tau), 0))
