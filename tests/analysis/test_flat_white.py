@@ -93,9 +93,9 @@ LOG171 = SHARED / "data" / "ardupilot" / "dronekit_log171.bin"
 @pytest.mark.skipif(not LOG171.exists(), reason="needs the shared real data (COMPANION_SHARED)")
 def test_real_log_N_at_its_flat_level():
     """dronekit_log171 (three IMUs, 44 s still at 50 Hz, INS_GYRO_FILTER / INS_ACCEL_FILTER 20 Hz): on every
-    axis whose curve holds a flat white region of an octave or more with EDF >= 100 once the log's own
-    two-pole filter (its parameter, point-sampled at the stream's rate) is divided out, N within 3 % of its
-    level and the interval covering it."""
+    axis whose curve holds a flat white region of an octave or more with EDF >= 100, N within 3 % of its
+    level with the log's own two-pole filter (its parameter, point-sampled at the stream's rate) divided out
+    and the interval covering it."""
     from companion.allan.terms import avar_white_noise
     from companion.analysis.source import analyze_source
     from companion.samples import AXES, GYRO_AXES
@@ -109,7 +109,7 @@ def test_real_log_N_at_its_flat_level():
             fc = s["filters_hz"]["gyro" if axis in GYRO_AXES else "accel"]
             tau, adev, edf = map(np.asarray, (e["tau"], e["adev"], e["edf"]))
             shape = np.array([avar_white_noise(t, 1.0, fc, s["rate_hz"]) * t for t in tau])
-            p = widest(plateaus(tau, adev**2 / shape, edf))
+            p = widest(plateaus(tau, adev**2, edf, shape=shape))
             if p is None:
                 continue
             seen += 1
