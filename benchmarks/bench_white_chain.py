@@ -127,7 +127,7 @@ def draw(c: Chain, seed: int, N_in: float = 1e-3) -> Draw:
     regs = []
     for i, j, level in flat_regions(e["tau"], e["adev"], e["adev_lo"], e["adev_hi"], e["edf"]):
         w = np.asarray(e["edf"][i:j + 1])
-        corr = level / math.sqrt(float(np.sum(w * shape[i:j + 1]) / np.sum(w)))
+        corr = math.sqrt(float(np.sum(w * adev[i:j + 1] ** 2 * tau[i:j + 1] / shape[i:j + 1]) / np.sum(w)))
         regs.append((tau[i], tau[j], level / truth, corr / truth))
     wn = next(t for t in e["terms"] if t["effect"] == "white_noise")
     lo, hi = wn["ci95"]["N"]
