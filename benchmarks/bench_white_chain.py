@@ -24,7 +24,10 @@ roll-off divided out, both against the true N; and the analysis' N (told the log
 is) against the truth, with its 95 % interval's coverage. ``--figure PNG`` draws ADEV*sqrt(tau) / N (mean and
 2.5-97.5 % of the seeds) with the flagged range.
 
-    python -m benchmarks.bench_white_chain [--seeds 100] [--figure docs/img/white_chain.png]
+    python -m benchmarks.bench_white_chain [--seeds 100] [--untold] [--figure docs/img/white_chain.png]
+
+``--untold`` also analyses each seed as ``analyze`` does a log without the filter's parameter (the data's own
+roll-off).
 """
 
 from __future__ import annotations
@@ -111,9 +114,10 @@ class Draw:
     N: float  #: the analysis' N / N_true
     covered: bool
     ci: tuple  #: the analysis' 95 % interval of N / N_true
+    untold: tuple | None = None  #: (N / N_true, interval covers) of the analysis not told the filter
 
 
-def draw(c: Chain, seed: int, N_in: float = 1e-3) -> Draw:
+def draw(c: Chain, seed: int, N_in: float = 1e-3, untold: bool = False) -> Draw:
     from benchmarks.bench_white_level import flat_regions
     from companion.allan.terms import avar_white_noise
     from companion.analysis.axis import analyze_axis
@@ -132,8 +136,16 @@ def draw(c: Chain, seed: int, N_in: float = 1e-3) -> Draw:
     wn = next(t for t in e["terms"] if t["effect"] == "white_noise")
     lo, hi = wn["ci95"]["N"]
     direct = np.array([oadev_sqrt_tau(y, c.log_hz, int(round(t * c.log_hz))) for t in tau])
-    return Draw(tau, adev * np.sqrt(tau) / truth, direct / truth, regs, wn["N"] / truth, lo <= truth <= hi,
-                (lo / truth, hi / truth))
+    out = Draw(tau, adev * np.sqrt(tau) / truth, direct / truth, regs, wn["N"] / truth, lo <= truth <= hi,
+               (lo / truth, hi / truth))
+    if untold:
+        # as analyze runs on a log without the filter's parameter: the data's own roll-off
+        e = analyze_axis(y, c.log_hz, white_filter=None, sampling=c.sampling)
+        wn = next((t for t in e["terms"] if t["effect"] == "white_noise"), None)
+        if wn is not None:
+            lo, hi = wn["ci95"]["N"]
+            out.untold = (wn["N"] / truth, lo <= truth <= hi)
+    return out
 
 
 def _at_flagged(c: Chain, d: Draw):
@@ -184,6 +196,12 @@ def report(c: Chain, draws: list[Draw]) -> dict:
     print(f"  the analysis' N (told the log's filter): N / true {N.mean():.4f} (sd {N.std():.4f}), 95 % interval "
           f"covers the truth on {cover}/{len(draws)} seeds; within 3 % of the raw level on {ok_raw}/{len(both)}, "
           f"of the corrected level on {ok_corr}/{len(both)}")
+    un = [d.untold for d in draws if d.untold is not None]
+    if un:
+        v = np.array([u[0] for u in un])
+        print(f"  the analysis not told the filter (the data's own roll-off), N resolved on {len(un)}/{len(draws)} "
+              f"seeds: N / true {v.mean():.4f} (sd {v.std():.4f}), 95 % interval covers the truth on "
+              f"{sum(u[1] for u in un)}/{len(un)}")
     return out
 
 
@@ -222,13 +240,14 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=100)
     ap.add_argument("--chain", choices=sorted(CHAINS), action="append")
     ap.add_argument("--figure", help="PNG of ADEV*sqrt(tau) / N per chain")
+    ap.add_argument("--untold", action="store_true", help="also analyse each seed without the filter's parameter")
     args = results.parse_args(ap, {"seeds": 20}, argv)
     per_chain = {}
     for key in args.chain or sorted(CHAINS):
         c = CHAINS[key]
         print(f"{key}: true white level of the logged samples / input density = "
               f"{true_level(c, 1.0):.4f}")
-        per_chain[c] = [draw(c, seed) for seed in range(args.seeds)]
+        per_chain[c] = [draw(c, seed, untold=args.untold) for seed in range(args.seeds)]
         report(c, per_chain[c])
     if args.figure:
         figure(args.figure, per_chain)

@@ -12,8 +12,8 @@ flat within its noise, spanning at least MIN_SPAN in tau. Flat within its noise:
 over the run within the FLAT_LEVEL point of chi^2 (:func:`flat_chi2`), each point of variance 2 / EDF and
 neighbouring octaves correlated as the overlapping estimator makes them (0.53, 0.19, ...): taken point by point
 (their 95 % intervals sharing a value) a rise of 17 % per octave passes as flat at EDF 126-225, where the ratio
-of two neighbours is known to +-11 %. The run is found on the curve as measured (the issue's "ADEV*sqrt(tau)
-flat"); its level is the EDF-weighted mean of AVAR*tau with the fitted filter's roll-off divided out (a filtered
+of two neighbours is known to +-11 %. The run is found on the curve as measured (ADEV*sqrt(tau) itself
+flat); its level is the EDF-weighted mean of AVAR*tau with the fitted filter's roll-off divided out (a filtered
 white curve approaches N as 1 - c/tau: white noise of known N through ArduPilot's and PX4's real filter chains
 puts the raw level of such a run 2.6-4 % below N on average, the corrected one within 0.4 %,
 ``python -m benchmarks.bench_white_chain``), square-rooted; its interval the chi-square one of the run's
@@ -125,9 +125,9 @@ def filter_shape(terms: list, bounds: list, tau) -> np.ndarray:
 def flat_white_level(terms: list, bounds: list, tau, avar, edf, notes: list, record: dict):
     """N from the widest plateau of the curve (at cluster times where the fitted filter leaves at least
     MIN_FILTER_SHARE of the white AVAR; its level with the roll-off divided out, :func:`filter_shape`) where
-    the fit's N misses it
-    (more than KEEP_WITHIN off, or its interval not covering the level) or where N was left as a bound: the white-noise term gets the level and its interval, ``record`` (the
-    entry's ``fit.white_refit``) the plateau's cluster times and the N it replaces. Returns (terms, bounds)."""
+    the fit's N misses it (more than KEEP_WITHIN off, or its interval not covering the level) or where N was
+    left as a bound: the white-noise term gets the level and its interval, ``record`` (the entry's
+    ``fit.white_refit``) the plateau's cluster times and the N it replaces. Returns (terms, bounds)."""
     shape = filter_shape(terms, bounds, tau)
     # only where the filter's share is small: deep in the roll-off the level would be the filter model's
     edf = np.where(shape >= MIN_FILTER_SHARE, np.asarray(edf, dtype=float), 0.0)
