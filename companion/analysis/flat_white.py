@@ -7,11 +7,18 @@ instability and a ramp that lift the curve where a local refit looks, pull N bel
 a plateau that thousands of EDF pin down. Where such a plateau exists, its level is the data's own answer
 for N, and the analysis takes it (:func:`flat_white_level`).
 
-A plateau: a maximal run of consecutive cluster times, each with EDF >= MIN_EDF, whose 95 % intervals of
-ADEV*sqrt(tau) share a common value, spanning at least MIN_SPAN in tau. Its level is the EDF-weighted mean
-of AVAR*tau, square-rooted; its interval the chi-square one of the run's best-resolved point (the points of
-an overlapping estimator at neighbouring cluster times are correlated, so their EDF do not add). Of several,
-the widest is the white level (:func:`widest`).
+A plateau: a maximal run of consecutive cluster times, each with EDF >= MIN_EDF, on which ADEV*sqrt(tau) is
+flat within its noise, spanning at least MIN_SPAN in tau. Flat within its noise: a constant fits ln(AVAR*tau)
+over the run within the FLAT_LEVEL point of chi^2 (:func:`flat_chi2`), each point of variance 2 / EDF and
+neighbouring octaves correlated as the overlapping estimator makes them (0.53, 0.19, ...): taken point by point
+(their 95 % intervals sharing a value) a rise of 17 % per octave passes as flat at EDF 126-225, where the ratio
+of two neighbours is known to +-11 %. The run is found on the curve as measured (ADEV*sqrt(tau) itself
+flat); its level is the EDF-weighted mean of AVAR*tau with the fitted filter's roll-off divided out (a filtered
+white curve approaches N as 1 - c/tau: white noise of known N through ArduPilot's and PX4's real filter chains
+puts the raw level of such a run 2.6-4 % below N on average, the corrected one within 0.4 %,
+``python -m benchmarks.bench_white_chain``), square-rooted; its interval the chi-square one of the run's
+best-resolved point (the points of an overlapping estimator at neighbouring cluster times are correlated, so
+their EDF do not add). Of several, the widest is the white level (:func:`widest`).
 """
 
 from __future__ import annotations
@@ -40,32 +47,49 @@ class Plateau:
     edf: float  #: the EDF its interval is taken with
 
 
-def plateaus(tau, avar, edf, level: float = 0.95) -> list[Plateau]:
+#: the flatness test's level: a run ends where a constant is rejected at this level (each extension of a run
+#: is one more test, so the family of tests is held to a stricter level than 95 %)
+FLAT_LEVEL = 0.99
+
+
+def flat_chi2(avar_tau, edf) -> float:
+    """chi^2 of a constant fitted to ln(AVAR*tau) over consecutive octave points (module docstring)."""
+    from companion.allan.white import OCTAVE_CORRELATION
+
+    x = np.log(np.asarray(avar_tau, dtype=float))
+    sd = np.sqrt(2.0 / np.asarray(edf, dtype=float))
+    k = np.abs(np.subtract.outer(np.arange(x.size), np.arange(x.size)))
+    rho = np.asarray(OCTAVE_CORRELATION + (0.0,))[np.minimum(k, len(OCTAVE_CORRELATION))]
+    vi = np.linalg.inv(rho * np.outer(sd, sd))
+    one = np.ones_like(x)
+    r = x - float(one @ vi @ x / (one @ vi @ one))
+    return float(r @ vi @ r)
+
+
+def plateaus(tau, avar, edf, level: float = 0.95, shape=None) -> list[Plateau]:
     """The plateau starting at each point of the curve (module docstring), left to right: runs from
-    neighbouring starts overlap (a rising roll-off holds several short ones)."""
+    neighbouring starts overlap (a rising roll-off holds several short ones). ``shape``: the filter's share of
+    the white AVAR at each cluster time, divided out of the level (not of the flatness test)."""
     from companion.allan.confidence import adev_ci
+    from companion.allan.special import chi2_ppf
 
     tau, avar, edf = (np.asarray(x, dtype=float) for x in (tau, avar, edf))
+    shape = np.ones_like(tau) if shape is None else np.asarray(shape, dtype=float)
     ok = np.isfinite(avar) & (avar > 0) & np.isfinite(edf) & (edf >= MIN_EDF)
     if ok.sum() < 2:
         return []
-    s = np.sqrt(np.where(ok, avar * tau, 1.0))
-    lo, hi = adev_ci(s, np.where(ok, edf, 1.0), level)
-    out, i, n = [], 0, tau.shape[0]
-    while i < n:
-        if not ok[i]:
-            i += 1
-            continue
-        bot, top, j = lo[i], hi[i], i
-        while j + 1 < n and ok[j + 1] and max(bot, lo[j + 1]) <= min(top, hi[j + 1]):
-            bot, top, j = max(bot, lo[j + 1]), min(top, hi[j + 1]), j + 1
+    at = np.where(ok, avar * tau, 1.0)
+    out, n = [], tau.shape[0]
+    for i in np.flatnonzero(ok):
+        j = i
+        while j + 1 < n and ok[j + 1] and flat_chi2(at[i:j + 2], edf[i:j + 2]) <= chi2_ppf(FLAT_LEVEL, j + 1 - i):
+            j += 1
         if tau[j] >= MIN_SPAN * tau[i] * (1 - 1e-9):
             w = edf[i:j + 1]
-            lev = math.sqrt(float(np.sum(w * avar[i:j + 1] * tau[i:j + 1]) / np.sum(w)))
+            lev = math.sqrt(float(np.sum(w * at[i:j + 1] / shape[i:j + 1]) / np.sum(w)))
             e = float(np.max(w))
             (clo,), (chi,) = adev_ci([lev], [e], level)
-            out.append(Plateau(i, j, (float(tau[i]), float(tau[j])), lev, (float(clo), float(chi)), e))
-        i += 1
+            out.append(Plateau(int(i), int(j), (float(tau[i]), float(tau[j])), lev, (float(clo), float(chi)), e))
     return out
 
 
@@ -99,15 +123,15 @@ def filter_shape(terms: list, bounds: list, tau) -> np.ndarray:
 
 
 def flat_white_level(terms: list, bounds: list, tau, avar, edf, notes: list, record: dict):
-    """N from the widest plateau of the curve (the fitted filter's roll-off divided out, :func:`filter_shape`,
-    at cluster times where it leaves at least MIN_FILTER_SHARE of the white AVAR) where the fit's N misses it
-    (more than KEEP_WITHIN off, or its interval not covering the level) or where N was left as a bound: the white-noise term gets the level and its interval, ``record`` (the
-    entry's ``fit.white_refit``) the plateau's cluster times and the N it replaces. Returns (terms, bounds)."""
+    """N from the widest plateau of the curve (at cluster times where the fitted filter leaves at least
+    MIN_FILTER_SHARE of the white AVAR; its level with the roll-off divided out, :func:`filter_shape`) where
+    the fit's N misses it (more than KEEP_WITHIN off, or its interval not covering the level) or where N was
+    left as a bound: the white-noise term gets the level and its interval, ``record`` (the entry's
+    ``fit.white_refit``) the plateau's cluster times and the N it replaces. Returns (terms, bounds)."""
     shape = filter_shape(terms, bounds, tau)
-    avar = np.asarray(avar, dtype=float) / shape
     # only where the filter's share is small: deep in the roll-off the level would be the filter model's
     edf = np.where(shape >= MIN_FILTER_SHARE, np.asarray(edf, dtype=float), 0.0)
-    p = widest(plateaus(tau, avar, edf))
+    p = widest(plateaus(tau, avar, edf, shape=shape))
     if p is None:
         return terms, bounds
     wn = next((t for t in terms if t["effect"] == "white_noise"), None)
