@@ -13,18 +13,11 @@ import urllib.request
 import pytest
 
 from companion.cli.run_web import WEB_READY
-from tests.support.loopback import free_udp_port, pacing, start, stop
+from tests.support.loopback import MODEL, N_SI, free_udp_port, pacing, start, stop
 from tests.support.readiness import READY, wait_for_text
 
 pytestmark = pytest.mark.network
 
-N_SI = 3e-3
-MODEL = f"""rate_hz: 100
-axes:
-  gx: [{{effect: white_noise, N: {N_SI}}}]
-  gy: [{{effect: white_noise, N: {N_SI}}}]
-  gz: [{{effect: white_noise, N: {N_SI}}}]
-"""
 
 
 def _json(url):

@@ -19,23 +19,16 @@ from pathlib import Path
 import pytest
 from tests.support.readiness import READY, wait_for_text
 
-from tests.support.loopback import env, free_udp_port, link_losses, pacing, read_record, start, stop
+from tests.support.loopback import (MODEL, N_SI, RATE, env, free_udp_port, link_losses, pacing, read_record, start,
+                                    stop)
 from tests.support.run_status import expected_run_status
 
 pytestmark = pytest.mark.network
 
 ROOT = Path(__file__).resolve().parents[2]
-N_SI = 3e-3
-RATE = 100.0
 LSB = 1e-3
 N_TRUE_SI = math.sqrt(N_SI**2 + LSB**2 / (12 * RATE))
 N_TRUE = N_TRUE_SI * 180 / math.pi * 60  # deg/sqrt(h)
-MODEL = f"""rate_hz: {RATE}
-axes:
-  gx: [{{effect: white_noise, N: {N_SI}}}]
-  gy: [{{effect: white_noise, N: {N_SI}}}]
-  gz: [{{effect: white_noise, N: {N_SI}}}]
-"""
 
 
 def last_before(nvf, name, t_sim):

@@ -16,17 +16,10 @@ import re
 
 import pytest
 
-from tests.support.loopback import sim_against_run
+from tests.support.loopback import MODEL, sim_against_run
 
 pytestmark = pytest.mark.network
 
-N_SI = 3e-3
-MODEL = f"""rate_hz: 100
-axes:
-  gx: [{{effect: white_noise, N: {N_SI}}}]
-  gy: [{{effect: white_noise, N: {N_SI}}}]
-  gz: [{{effect: white_noise, N: {N_SI}}}]
-"""
 BASELINE_S = 60.0
 #: wall-clock speedups that keep the receiver lossless on a busy 2-core machine (about 1000 IMU messages/s):
 #: the pace without flow control (tests/support/loopback.py), else only the deadlines
