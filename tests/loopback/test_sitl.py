@@ -132,8 +132,10 @@ def test_sim_autopilot_against_run_direct(tmp_path):
 
 @pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")
 def test_sim_autopilot_against_run_through_mavproxy(tmp_path):
-    nvf, texts = run_loop(tmp_path, via_mavproxy=True, speedup=16.0, duration=480.0, degrade_at=280.0)
-    check_loop(tmp_path, nvf, texts, 280.0, 480.0)
+    # the baseline is learned at 121 s; the 2x noise from 200 s is named by the noise test within seconds and by
+    # the Allan test 80-100 s later (measured at 282 s; 382 s for a degradation at 280 s): 400 s leave it 200 s
+    nvf, texts = run_loop(tmp_path, via_mavproxy=True, speedup=16.0, duration=400.0, degrade_at=200.0)
+    check_loop(tmp_path, nvf, texts, 200.0, 400.0)
 
 
 def test_request_data_stream_fallback_when_interval_refused(tmp_path):
