@@ -26,14 +26,9 @@ LOG_SUFFIXES = (".bin", ".ulg", ".tlog")
 
 
 def logs(roots) -> list[Path]:
-    out = []
-    for r in roots:
-        r = Path(r)
-        if r.is_file():
-            out.append(r)
-        elif r.is_dir():
-            out += sorted(p for p in r.rglob("*") if p.is_file() and p.suffix.lower() in LOG_SUFFIXES)
-    return out
+    from benchmarks.bench_reallogs import find_logs
+
+    return find_logs(roots, LOG_SUFFIXES)
 
 
 def _figures(entry: dict) -> bool:

@@ -117,25 +117,33 @@ RAD_TO_DEG_SQRT_H = 180.0 / 3.141592653589793 * 60.0
 CLEARED = re.compile(r"cleared|recovered|healthy again|back to|\bOK\b")
 
 
-def find_logs(dirs: list[Path]) -> list[Path]:
-    """The real logs under ``dirs``, each once: by content, not by path (../shared/data is always searched, a
-    folder named again or inside another would count its logs twice, and a public log fetched again under
-    another name -- ../shared/data's pyulog_sample.ulg is pyulog's test/sample.ulg -- is the same flight)."""
+def find_logs(dirs: list[Path], exts: tuple[str, ...] = EXTS) -> list[Path]:
+    """The real logs under ``dirs`` (a file among them is taken as given), each once: by content, not by path
+    (../shared/data is always searched, a folder named again or inside another would count its logs twice, and
+    a public log fetched again under another name -- ../shared/data's pyulog_sample.ulg is pyulog's
+    test/sample.ulg -- is the same flight). ``exts``: the name endings of a log (the other benchmarks' own)."""
     import hashlib
 
     out, seen = [], set()
-    for d in dirs:
-        if not d.exists():
+
+    def take(p: Path) -> None:
+        digest = hashlib.sha1(p.read_bytes()).hexdigest()
+        if digest not in seen:
+            seen.add(digest)
+            out.append(p)
+
+    for d in map(Path, dirs):
+        if d.is_file():
+            take(d)
+            continue
+        if not d.is_dir():
             continue
         for p in sorted(d.rglob("*")):
             name = p.name.lower()
             if "sim" in p.relative_to(d).parts[:-1]:
                 continue  # simulated logs kept beside the real ones are not real data
-            if p.is_file() and name.endswith(EXTS) and p.stat().st_size > 20_000:
-                digest = hashlib.sha1(p.read_bytes()).hexdigest()
-                if digest not in seen:
-                    seen.add(digest)
-                    out.append(p)
+            if p.is_file() and name.endswith(exts) and p.stat().st_size > 20_000:
+                take(p)
     return out
 
 

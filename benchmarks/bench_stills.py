@@ -36,14 +36,9 @@ TARGET_USED = 0.80
 
 
 def logs_in(dirs) -> list[Path]:
-    out = []
-    for d in dirs:
-        d = Path(d)
-        if d.is_file():
-            out.append(d)
-        elif d.is_dir():
-            out += sorted(p for p in d.rglob("*") if p.is_file() and p.name.lower().endswith(EXTS))
-    return out
+    from benchmarks.bench_reallogs import find_logs
+
+    return find_logs(dirs, EXTS)
 
 
 def used_intervals(sel, streams) -> dict[int, list[tuple[float, float]]]:

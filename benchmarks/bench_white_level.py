@@ -187,14 +187,9 @@ def check_doc(doc: dict) -> list[dict]:
 
 
 def logs_in(dirs) -> list[Path]:
-    out = []
-    for d in dirs:
-        d = Path(d)
-        if d.is_file():
-            out.append(d)
-        elif d.is_dir():
-            out += sorted(p for p in d.rglob("*") if p.is_file() and p.suffix.lower() in EXTS)
-    return out
+    from benchmarks.bench_reallogs import find_logs
+
+    return find_logs(dirs, EXTS)
 
 
 def _fmt(v):

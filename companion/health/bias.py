@@ -40,7 +40,9 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.faults import FAULT, OK, AxisRef, Cusum, FaultEvent, Observation, debounce
+from companion.health.axis_ref import AxisRef
+from companion.health.faults import Cusum, FaultEvent, Observation
+from companion.health.hold import FAULT, OK, debounce
 from companion.health.evidence_rules import FaultLimits, capped, floored_mean_llr, wander_var
 from companion.health.bias_temperature import LAG, ThermalBias
 

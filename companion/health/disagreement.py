@@ -45,7 +45,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from companion.health.evidence_rules import FaultLimits, capped, floored_mean_llr
-from companion.health.faults import AXES, FAULT, OK, Cusum, FaultEvent, Observation
+from companion.health.faults import AXES, Cusum, FaultEvent, Observation
+from companion.health.hold import FAULT, OK
 
 DEG = math.pi / 180.0
 DELTA = 0.5 * DEG  # rad/s, mean shift of the residual the CUSUMs are tuned to (above the floor)

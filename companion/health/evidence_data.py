@@ -26,7 +26,8 @@ from companion.health import resolution as _res
 from companion.health import spikes as _spk
 from companion.health import stuck as _stk
 from companion.health import timing_faults as _tim
-from companion.health.faults import AXES, FAULT, OK
+from companion.health.faults import AXES
+from companion.health.hold import FAULT, OK
 
 DEG = math.pi / 180.0
 

@@ -35,12 +35,9 @@ from typing import Iterable, Mapping, Protocol
 
 import numpy as np
 
-# the block statistics and the still reference have their own modules; their names are part of the fault
-# interface (detectors and the service import them from here)
-from companion.health.axis_ref import NU_REF_MIN, REF_MAX_FACTOR, AxisRef  # noqa: F401
-from companion.health.block_stats import (CARRY, DD_NU_PER_SAMPLE, MIN_NOISE_SAMPLES,  # noqa: F401
-                                          SPIKE_K, BlockStats, block_stats)
-from companion.health.hold import FAULT, OK, debounce  # noqa: F401  (re-exported)
+from companion.health.axis_ref import AxisRef
+from companion.health.block_stats import BlockStats
+from companion.health.hold import FAULT, OK
 
 #: fault kind -> code sent as IMU{i}G_FLT (0: no fault) and bit in IMU{i}G_FLM. The highest-priority active
 #: kind (lowest position in PRIORITY) is the code reported.

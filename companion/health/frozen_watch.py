@@ -34,7 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.health.faults import FAULT, OK, FaultEvent
+from companion.health.faults import FaultEvent
+from companion.health.hold import FAULT, OK
 
 AXES = ("gx", "gy", "gz")
 TWIN_STEP = 0.05  # rad/s: a twin axis moving this much between two instants is motion on that axis

@@ -2,8 +2,8 @@
 
 ``ImuFaults.on_block`` runs the checks valid on every block (stuck, spikes, saturation, timing: still or
 moving, armed or not); ``ImuFaults.on_quiet`` the ones valid only on still, settled blocks (noise, bias
-jump/drift, resolution) and learns the per-axis references (faults.AxisRef) from the first ``ref_blocks`` of them
-(the noise test's level on, on a slow stream, until it holds faults.NU_REF_MIN degrees of freedom).
+jump/drift, resolution) and learns the per-axis references (axis_ref.AxisRef) from the first ``ref_blocks`` of them
+(the noise test's level on, on a slow stream, until it holds axis_ref.NU_REF_MIN degrees of freedom).
 Disagreement lives with the pairs of IMUs (disagreement.py, driven by service/imu_group.py) and the Allan
 rise with degradation.py; both feed ``set_external`` so that one code per IMU is reported.
 """
@@ -16,8 +16,11 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.bias import BiasDetector
-from companion.health.faults import (AXES, FAULT, KIND_CODE, KNOCK_RUN, OK, PRIORITY, SPIKE_K, AxisRef, BlockStats,
-                                     FaultDetector, FaultEvent, Observation, fault_mask)
+from companion.health.axis_ref import AxisRef
+from companion.health.block_stats import SPIKE_K, BlockStats
+from companion.health.faults import (AXES, KIND_CODE, KNOCK_RUN, PRIORITY, FaultDetector, FaultEvent, Observation,
+                                     fault_mask)
+from companion.health.hold import FAULT, OK
 from companion.health.evidence_rules import FaultLimits
 from companion.health.noise import NoiseDetector
 from companion.health.resolution import ResolutionDetector

@@ -69,7 +69,8 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.evidence_rules import FaultLimits, capped
-from companion.health.faults import Cusum, FaultEvent, OK, Observation, chi2_llr
+from companion.health.faults import Cusum, FaultEvent, Observation, chi2_llr
+from companion.health.hold import OK
 
 R1 = 1.69  # variance ratio the CUSUM is tuned to: a 1.3x noise std
 H_ON = 20.0  # nats: ARL0 >= e^20 quiet blocks per axis
@@ -105,7 +106,7 @@ def v2_var(var, kappa4, m):
 
     With dd_k = a . z (a = 1, -2, 1), cov(dd_j^2, dd_k^2) = kappa4 sum_p a_jp^2 a_kp^2 + 2 var^2 (a_j . a_k)^2:
     summed over the block, kappa4 (36 (n - 4) + 52) + 2 var^2 (70 m - 36), over (6 m)^2. Normal noise
-    (kappa4 = 0) gives 3.89 var^2 / m, faults.DD_NU_PER_SAMPLE."""
+    (kappa4 = 0) gives 3.89 var^2 / m, block_stats.DD_NU_PER_SAMPLE."""
     m = np.maximum(np.asarray(m, float), 3.0)
     return (kappa4 * (36.0 * m - 20.0) + 2.0 * var * var * (70.0 * m - 36.0)) / (36.0 * m * m)
 
@@ -295,7 +296,7 @@ class NoiseDetector:
         return self.cusum.state
 
     def learn(self, obs: Observation) -> None:
-        """One reference block of the axis (the blocks faults.AxisRef learns from): kept for the per-offset
+        """One reference block of the axis (the blocks axis_ref.AxisRef learns from): kept for the per-offset
         reference (its v2, where its bias sat between two codes, its resolution)."""
         j, st = obs.col, obs.stats
         v2, step = float(st.v2[j]), float(st.step[j]) if st.step is not None else math.nan

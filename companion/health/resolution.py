@@ -14,7 +14,8 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
-from companion.health.faults import FAULT, FaultEvent, OK, Observation, debounce
+from companion.health.faults import FaultEvent, Observation
+from companion.health.hold import FAULT, OK, debounce
 
 MIN_CHANGES = 20  # changes a block needs before its smallest step says anything (see above)
 HOLD = 10  # suspect (good) blocks in a row that flag (clear) it: a healthy miss is < 0.07 per block

@@ -14,7 +14,8 @@ import math
 from collections import deque
 from typing import Mapping
 
-from companion.health.faults import FAULT, OK, FaultEvent, Observation, debounce
+from companion.health.faults import FaultEvent, Observation
+from companion.health.hold import FAULT, OK, debounce
 
 RUN = 5  # samples in a row exactly at the block's peak: healthy motion plus noise is never this flat
 BLOCKS = 3  # blocks at the same plateau level within WINDOW: a clip level is fixed

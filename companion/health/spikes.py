@@ -1,7 +1,7 @@
 """Spikes / glitches of a gyro axis: isolated outliers, counted and named as spikes (not as noise).
 
 Statistic: the number c of isolated outliers per block, |dd| > 6 robust sigmas of the second differences
-(faults.block_stats: one count per spike at its centre, where a spike of amplitude A gives dd = -2A;
+(block_stats.block_stats: one count per spike at its centre, where a spike of amplitude A gives dd = -2A;
 the robust sigma is the larger of the block's MAD and the still reference, so vibration in flight raises
 the bar and a quiet block uses the healthy noise). Healthy Gaussian noise gives 2e-9 per sample; the
 reference rate measured on still data is used when higher (floor 1e-5 per sample). A heavy tail is thus
@@ -39,7 +39,7 @@ LAMBDA0_MOTION = 1e-2  # outliers per sample a moving vehicle may show (heavy-ta
 MOTION_RATIO = 5.0  # lambda1 / lambda0 in motion: only a rate well above the vehicle's own counts
 MOTION_HOLD = 5  # blocks of evidence in motion: short glitches are judged once the vehicle is still again
 MOTION_TAU_BLOCKS = 60.0  # blocks of the EWMA of the moving outlier rate
-#: A still spike's size, u = ln(|dd| / bar) >= 0 (bar: SPIKE_K robust sigmas, faults.block_stats): healthy
+#: A still spike's size, u = ln(|dd| / bar) >= 0 (bar: SPIKE_K robust sigmas, block_stats.block_stats): healthy
 #: outliers beyond the bar are taken to fall off as z^-ALPHA0 (a Pareto tail: heavier than the copter flights'
 #: 2.4-3.6 measured on real logs, far heavier than Gaussian), a glitch's size spreads over decades up to full
 #: scale (z^-ALPHA1). The ratio of the two densities, ln(ALPHA1 / ALPHA0) + (ALPHA0 - ALPHA1) u, is added to

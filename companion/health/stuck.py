@@ -1,8 +1,8 @@
 """Stuck (frozen) gyro axis: the output repeats its value (codes) and its variance collapses.
 
-Statistic: u = v2 / sigma0^2, the block's white-noise variance from second differences (faults.BlockStats)
+Statistic: u = v2 / sigma0^2, the block's white-noise variance from second differences (block_stats.BlockStats)
 over the reference sigma0^2 learned from still data, its rest level (a knock among the reference blocks
-left out: faults.AxisRef.rest); nu v2 / sigma^2 ~ chi2(nu) (nu from the reference, smaller under coarse
+left out: axis_ref.AxisRef.rest); nu v2 / sigma^2 ~ chi2(nu) (nu from the reference, smaller under coarse
 rounding). The CUSUM (faults eq. (1)) of the LLR of a variance
 collapse by ``r1`` = 1/10
 
@@ -70,7 +70,8 @@ import numpy as np
 
 from companion.health.code_spread import (_STD_NORMAL, LEVEL_STEP, MAX_CODES, Q_RATIO, _block_level_logs, _pair_counts,
                                           two_code_llr, two_code_outside)
-from companion.health.faults import FAULT, OK, Cusum, FaultEvent, Observation, chi2_llr
+from companion.health.faults import Cusum, FaultEvent, Observation, chi2_llr
+from companion.health.hold import FAULT, OK
 from companion.health.evidence_rules import equal_codes_llr, p_equal_codes
 from companion.health.rest_tally import CodeTally, JitterTally, LeadErrors
 
@@ -157,7 +158,7 @@ class StuckDetector:
         return [obs.event(kind, OK, detail=detail, critical=True)]
 
     def _step(self, obs: Observation) -> bool:
-        # judged against the rest level (the reference with knocks left out: faults.AxisRef.rest)
+        # judged against the rest level (the reference with knocks left out: axis_ref.AxisRef.rest)
         j, st, ref = obs.col, obs.stats, obs.ref.rest
         v2, changes, n = float(st.v2[j]), int(st.changes[j]), st.n
         # in samples, at most EQUAL_MIN_SAMPLES per block: a block of 50 or more counts as one, a smaller one as

@@ -19,7 +19,8 @@ from typing import Mapping
 
 import numpy as np
 
-from companion.health.faults import FAULT, FaultEvent, OK, Observation, debounce
+from companion.health.faults import FaultEvent, Observation
+from companion.health.hold import FAULT, OK, debounce
 from companion.timebase import period_of
 
 REF_BLOCKS = 10  # blocks whose median rate is the reference

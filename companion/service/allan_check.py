@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 from companion.health.baseline import check_params, risen_params, rounding_ceiling, supported_params
 from companion.health.degradation import DEGRADING, HealthDetector, Transition
-from companion.health.faults import FAULT, OK
+from companion.health.hold import FAULT, OK
 from companion.health.monitor import ImuFaults
 from companion.samples import GYRO_AXES
 from companion.service.baseline_match import units_mismatch

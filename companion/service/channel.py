@@ -41,7 +41,8 @@ from companion.analysis.filters import sampling
 from companion.estimators import make_estimator
 from companion.health.baseline import check_params
 from companion.health.degradation import DEGRADING, LEARNING
-from companion.health.faults import CARRY, BlockStats, FaultEvent, block_stats
+from companion.health.block_stats import CARRY, BlockStats, block_stats
+from companion.health.faults import FaultEvent
 from companion.health.monitor import ImuFaults
 from companion.samples import ACCEL_AXES, GYRO_AXES
 from companion.service.allan_check import AllanCheck, CheckResult, StreamFacts
@@ -260,7 +261,7 @@ class Channel:
         self._tail = None
 
     def stats(self, data: np.ndarray) -> BlockStats:
-        """The statistics of a closed block (health.faults.block_stats), with its mean temperature."""
+        """The statistics of a closed block (health.block_stats.block_stats), with its mean temperature."""
         # the previous block's last samples, when this block follows them (one sample period apart): the spike
         # search sees a spike on either side of the junction
         prev = None

@@ -25,7 +25,7 @@ import numpy as np
 
 from companion.health.evidence_data import (ALARM_BAR, STAT_NAMES, allan_statistics, frozen_statistics,
                                             imu_statistics, minmax_buckets, pair_statistics, psd_two_sided, sentence)
-from companion.health.faults import FAULT
+from companion.health.hold import FAULT
 
 WINDOW_S = 60.0  #: s of message time kept before and after an alarm
 BUCKET_S = 0.5  #: s per min/max bucket: at most 240 points per series over the two minutes

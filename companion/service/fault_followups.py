@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import math
 
-from companion.health.faults import FAULT, FaultEvent
+from companion.health.faults import FaultEvent
+from companion.health.hold import FAULT
 
 CONFIRM_BLOCKS = 3  #: still blocks after a bias jump is flagged before its size is confirmed (their median)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from companion.health.faults import FAULT
+from companion.health.hold import FAULT
 
 
 def watch_rows(pipeline, ch, rows: np.ndarray) -> None:

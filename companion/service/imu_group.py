@@ -18,7 +18,8 @@ from typing import Mapping
 import numpy as np
 
 from companion.health.disagreement import PairDisagreement
-from companion.health.faults import AXES, FAULT, OK, FaultEvent, Observation
+from companion.health.faults import AXES, FaultEvent, Observation
+from companion.health.hold import FAULT, OK
 
 MIN_ALIGNED = 10  # samples both IMUs cover before a pair is tested (fewer give no usable block mean)
 #: faults that move a gyro's mean rate: while one of them is active on an axis of either IMU of a pair, the

@@ -7,7 +7,9 @@ from __future__ import annotations
 import math
 
 from companion.health.degradation import STATE_NAMES
-from companion.health.faults import FAULT, MIN_NOISE_SAMPLES, FaultEvent
+from companion.health.block_stats import MIN_NOISE_SAMPLES
+from companion.health.faults import FaultEvent
+from companion.health.hold import FAULT
 from companion.service.blocks import MIN_WATCH_RATE_HZ
 from companion.service.channel import INT16_MESSAGES
 from companion.service.final_analysis import final_analysis

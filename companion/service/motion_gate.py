@@ -36,7 +36,7 @@ from typing import Sequence
 
 import numpy as np
 
-from companion.health.faults import BlockStats
+from companion.health.block_stats import BlockStats
 
 REF_WEIGHT = 0.05  # EWMA weight of a still block in the accel reference
 QUIETER = 4.0  # an accel axis this many times quieter than its reference ...

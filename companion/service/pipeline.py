@@ -29,7 +29,8 @@ import numpy as np
 
 from companion.health.baseline import Baseline
 from companion.health.degradation import DEGRADING, LEARNING
-from companion.health.faults import FAULT, FaultEvent
+from companion.health.faults import FaultEvent
+from companion.health.hold import FAULT
 from companion.health.frozen_watch import FrozenWatch
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)

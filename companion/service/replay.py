@@ -22,8 +22,9 @@ from companion.sources.decode import ScaleTable, split_by_imu
 from companion.sources.timestamps import OK, classify_steps, step_rules
 
 
-def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: False) -> dict:
-    """Feed every HEARTBEAT and IMU sample of ``path`` to ``pipeline``; return counts."""
+def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: False, check=None) -> dict:
+    """Feed every HEARTBEAT and IMU sample of ``path`` to ``pipeline``; return counts. ``check(streams)``, when
+    given, sees the streams (:func:`best_streams`, timing analysed) before anything is fed; it may raise."""
     path = Path(path)
     data = tlog.read_file(path)
     index = tlog.scan(data)
@@ -49,6 +50,10 @@ def replay_tlog(path, pipeline, scales: ScaleTable | None = None, stop=lambda: F
             order_parts.append(sel[pos])
             srcs.append(np.full(raw.t.shape[0], len(streams) - 1, dtype=np.int64))
             rows.append(np.arange(raw.t.shape[0]))
+    if check is not None:
+        from companion.sources import build_stream
+
+        check(best_streams([build_stream(raw) for raw in streams]))
     frame = np.concatenate(order_parts)
     src = np.concatenate(srcs)
     row = np.concatenate(rows)
@@ -193,7 +198,7 @@ def is_replay_source(spec) -> bool:
     return file_kind(spec) is not None or kind_of(spec) in FILE_KINDS
 
 
-def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None) -> dict:
+def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None, check=None) -> dict:
     """Feed a DataFlash .bin, a ULog .ulg or a CSV file to ``pipeline`` in message-time order.
 
     Per IMU instance the stream with the most samples is replayed (a ULog holds sensor_combined,
@@ -203,12 +208,15 @@ def replay_log(path, pipeline, stop=lambda: False, time_unit: str | None = None)
     reads them.
     The log's armed state becomes a HEARTBEAT (base_mode armed flag) at every transition and once a
     second, exactly as a live vehicle sends them; a source without armed state sends none.
+    ``check(streams)``, when given, sees the streams to be replayed before anything is fed; it may raise.
     """
     from companion.sources import load
 
     res = load(path, time_unit=time_unit)  # time_unit: of a CSV's time column
     pipeline.autopilot_view = res.meta.get("autopilot")  # the autopilot's own IMU health, for the summary
     streams = replayed_streams(res)
+    if check is not None:
+        check(streams)
     if not streams:
         return {"frames": int(res.totals.get("frames", 0)), "bad_frames": 0, "bad_bytes": 0, "heartbeats": 0,
                 "imu_samples": 0, "used": 0}
@@ -294,10 +302,15 @@ def _autopilot_view(pipeline, index, scales) -> None:
 
 
 def replayed_streams(res) -> list:
-    """The IMU streams a replay feeds: per instance the stream with the most samples, no batch-sampler bursts
-    (ISB_*), none whose first gyro value is missing (also what a restored state is checked against)."""
+    """The IMU streams a replay of the loaded log ``res`` feeds (:func:`best_streams`)."""
+    return best_streams(res.imu_streams())
+
+
+def best_streams(streams) -> list:
+    """Of IMU ``streams``, per instance the one with the most samples, no batch-sampler bursts (ISB_*), none
+    whose first gyro value is missing (also what a restored state is checked against)."""
     best: dict = {}
-    for s in res.imu_streams():
+    for s in streams:
         if not np.all(np.isfinite(s.gyro[:1])) or s.key.message.startswith("ISB_"):
             continue
         cur = best.get(s.key.instance)

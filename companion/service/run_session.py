@@ -97,10 +97,11 @@ def replay(opts: RunOptions, hooks: RunHooks, writer=None):
     reporter = Reporter(sink, opts.report_period)
     pipeline = Pipeline(opts.pipeline, reporter, opts.baseline, hooks.log, opts.scales)
     restore(pipeline, state, opts.relearn, hooks.warn, hooks.log)
+    check = None
     if state is not None:
-        from companion.service.state_match import check_state_matches
+        from companion.service.state_match import state_check
 
-        check_state_matches(pipeline, src, state, opts.time_unit)
+        check = state_check(pipeline, src, state)  # on the streams the replay reads, before it feeds them
     hooks.started(pipeline)
     fp = None
     if state is not None:
@@ -116,9 +117,9 @@ def replay(opts: RunOptions, hooks: RunHooks, writer=None):
                                  "intervals; give another --state file or --no-state")
     try:
         if kind_of(src) == "tlog":  # frame order with its HEARTBEATs (armed state)
-            totals = replay_tlog(src, pipeline, opts.scales, stop=hooks.stop)
+            totals = replay_tlog(src, pipeline, opts.scales, stop=hooks.stop, check=check)
         else:
-            totals = replay_log(src, pipeline, stop=hooks.stop, time_unit=opts.time_unit)
+            totals = replay_log(src, pipeline, stop=hooks.stop, time_unit=opts.time_unit, check=check)
     finally:
         if fp is not None:  # (an interrupted replay fed part of it: that part must not be fed again either)
             pipeline.replayed.append(fp)

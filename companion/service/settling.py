@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from companion.health.faults import BlockStats
+from companion.health.block_stats import BlockStats
 
 
 class StillSettler:

@@ -29,18 +29,20 @@ def differences(channels: dict, streams) -> list[str]:
     return out
 
 
-def check_state_matches(pipeline, src, state, time_unit=None) -> None:
-    """Refuse (one line) a restored state whose IMUs, messages or rates are not the log's ``src``."""
-    if not pipeline.channels:
-        return
-    from companion.service.replay import replayed_streams
-    from companion.sources import load
+def state_check(pipeline, src, state):
+    """``check(streams)`` for the replay of the log ``src`` (it hands over the streams it is about to feed, from
+    its own reading of the log): refuses (one line) a restored state whose IMUs, messages or rates are not
+    those streams'."""
 
-    res = load(src, time_unit=time_unit)
-    diff = differences(pipeline.channels, replayed_streams(res))
-    if diff:
-        raise CompanionError(f"{src}: does not match the state file {state}: {'; '.join(diff)}; give a new --state "
-                             "file for this setup, or --no-state")
+    def check(streams) -> None:
+        if not pipeline.channels:
+            return
+        diff = differences(pipeline.channels, streams)
+        if diff:
+            raise CompanionError(f"{src}: does not match the state file {state}: {'; '.join(diff)}; give a new "
+                                 "--state file for this setup, or --no-state")
+
+    return check
 
 
 def _imus(keys) -> str:

@@ -13,7 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.health.faults import FAULT, block_stats
+from companion.health.block_stats import block_stats
+from companion.health.hold import FAULT
 from companion.health.evidence_rules import FaultLimits
 from companion.health.monitor import ImuFaults
 from companion.health.bias_temperature import ThermalBias

@@ -13,7 +13,8 @@ import math
 import numpy as np
 
 from companion.health.disagreement import CLEAR_BLOCKS, PairDisagreement
-from companion.health.faults import FAULT, OK, Observation
+from companion.health.faults import Observation
+from companion.health.hold import FAULT, OK
 from companion.service.imu_group import ImuGroup
 
 FS = 50

@@ -10,7 +10,10 @@ import pytest
 
 from companion.health.bias import BiasDetector
 from companion.health.disagreement import PairDisagreement
-from companion.health.faults import AXES, FAULT, OK, AxisRef, FaultEvent, Observation, block_stats
+from companion.health.axis_ref import AxisRef
+from companion.health.block_stats import block_stats
+from companion.health.faults import AXES, FaultEvent, Observation
+from companion.health.hold import FAULT, OK
 from companion.health.noise import NoiseDetector
 from companion.health.saturation import SaturationDetector
 from companion.health.spikes import SpikeDetector

@@ -5,7 +5,7 @@ gyro that reads 0 at rest (below resolution), and the same answer however the sa
 import numpy as np
 import pytest
 
-from companion.health.faults import FAULT, OK
+from companion.health.hold import FAULT, OK
 from companion.health.frozen_watch import CLEAR, NEED, FrozenWatch
 
 LSB = 1e-3

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 import companion.health.noise as noise
-from companion.health.faults import REF_MAX_FACTOR, AxisRef, Observation, chi2_llr
+from companion.health.axis_ref import REF_MAX_FACTOR, AxisRef
+from companion.health.faults import Observation, chi2_llr
 from companion.health.noise import NoiseDetector, quantized_moments, quantized_var, v2_var
 from tests.support.noise_blocks import learn_or_test, one_axis_stats as _stats
 
@@ -39,7 +40,7 @@ def _blocks(rng, n_blocks, sigma, fault_at=None, factor=2.0, q=0.002, sweep=0.00
 
 
 def _run(seed, sigma, n_blocks, fault_at=None, with_samples=True):
-    """Learn the reference (the noise level: 30 blocks and on to faults.NU_REF_MIN dof), then test ``n_blocks``
+    """Learn the reference (the noise level: 30 blocks and on to axis_ref.NU_REF_MIN dof), then test ``n_blocks``
     blocks, the fault from the ``fault_at``-th of them; (alarms, block of the first alarm after the fault counted
     from it, or None)."""
     def learned(t, y):

@@ -1,4 +1,4 @@
-"""The noise test against a reference learned from few degrees of freedom (health/faults.py NU_REF_MIN).
+"""The noise test against a reference learned from few degrees of freedom (health/axis_ref.py NU_REF_MIN).
 
 30 reference blocks of a 10 Hz stream hold 8 second differences each (about 120 chi-square dof in all), and such
 a reference is 20-30 % below the truth in a few runs in a hundred by chance alone; the noise test's CUSUM then
@@ -14,8 +14,9 @@ import json
 import numpy as np
 
 import companion.health.axis_ref as axis_ref
-import companion.health.faults as faults
-from companion.health.faults import NU_REF_MIN, AxisRef, Observation
+import companion.health.block_stats as block_stats
+from companion.health.axis_ref import NU_REF_MIN, AxisRef
+from companion.health.faults import Observation
 from companion.health.noise import NoiseDetector
 from tests.support.noise_blocks import learn_or_test, one_axis_stats as _stats
 
@@ -85,7 +86,7 @@ def test_references_of_50_samples_a_block_are_learned_in_30_blocks_as_before():
         ready = ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), 0, 51, 30)
         assert ready == (k == 29) and ref.noise_ready == (k == 29)
     assert ref.noise_sigma2 == ref.sigma2 and ref.noise_nu == ref.nu
-    assert NU_REF_MIN <= 30 * faults.DD_NU_PER_SAMPLE * 49
+    assert NU_REF_MIN <= 30 * block_stats.DD_NU_PER_SAMPLE * 49
 
 
 def test_a_noise_level_still_learning_goes_on_after_a_restart_and_an_old_state_keeps_the_reference():

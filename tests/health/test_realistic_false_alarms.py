@@ -18,7 +18,9 @@ import pytest
 
 from companion.health.baseline import check_params
 from companion.health.degradation import DEGRADING, HEALTHY, HealthDetector, log_ratio_bound
-from companion.health.faults import REF_MAX_FACTOR, AxisRef, Observation, block_stats
+from companion.health.axis_ref import REF_MAX_FACTOR, AxisRef
+from companion.health.block_stats import block_stats
+from companion.health.faults import Observation
 from companion.health.noise import NoiseDetector, quantized_ceiling, quantized_var
 
 LSB = 1e-3
@@ -50,7 +52,7 @@ def _blocks(rng, n_blocks, sigma, offsets, n=10):
 
 
 def _ref(rng, sigma, offset):
-    """The still reference, its noise level to faults.NU_REF_MIN dof (170 blocks of 10 samples)."""
+    """The still reference, its noise level to axis_ref.NU_REF_MIN dof (170 blocks of 10 samples)."""
     ref = AxisRef()
     for st in _blocks(rng, 30 * REF_MAX_FACTOR, sigma, [offset]):
         ref.add(float(st.v2[0]), float(st.m2[0]), float(st.mean[0]), int(st.spikes[0]), st.n, 30)

@@ -14,7 +14,10 @@ import math
 import numpy as np
 import pytest
 
-from companion.health.faults import AXES, FAULT, KIND_CODE, AxisRef, Observation, block_stats
+from companion.health.axis_ref import AxisRef
+from companion.health.block_stats import block_stats
+from companion.health.faults import AXES, KIND_CODE, Observation
+from companion.health.hold import FAULT
 from companion.health.code_spread import codes_glr, two_code_llr, two_code_outside
 from companion.health.stuck import StuckDetector
 from companion.mavlink.reporter import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING, Reporter

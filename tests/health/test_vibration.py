@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from companion.health.faults import block_stats
+from companion.health.block_stats import block_stats
 from companion.health.monitor import ImuFaults
 
 LSB = 1e-3  # int16 mrad/s

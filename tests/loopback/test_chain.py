@@ -25,6 +25,19 @@ pytestmark = [pytest.mark.network,
               pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")]
 
 
+def stuck_run_stopped(tmp_path, run):
+    """Stop `run` (SIGTERM: the summary, then the status it gives) after a stuck gyro X; the NAMED_VALUE_FLOAT
+    names and STATUSTEXTs it sent (its --out-tlog run.tlog): the reports, an alarm and the learned baseline."""
+    rc = stop(run)
+    said = (tmp_path / "run.out").read_text()
+    assert rc == expected_run_status(said), said
+    names, texts = sent_by_companion(tmp_path / "run.tlog")
+    assert {"IMU0GX_N", "IMU0G_HLTH", "IMU0G_FLT"} <= names, names
+    assert any("stuck" in t for t in texts), texts  # an alarm was sent
+    assert any("baseline learned" in t for t in texts), texts
+    return names, texts
+
+
 def test_reports_reach_a_gcs_behind_mavproxy_through_gcs_output(tmp_path):
     duration, speedup = 90.0, 10.0
     chain = start_chain(tmp_path, ["--baseline-s", "30", "--duration", "300", "--out-tlog", str(tmp_path / "run.tlog")])
@@ -35,13 +48,7 @@ def test_reports_reach_a_gcs_behind_mavproxy_through_gcs_output(tmp_path):
                                "--record", "rx.jsonl", "--quiet"])
         sim.wait(240)  # bounded by its --wall-limit
         assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
-        rc = stop(run)  # SIGTERM: the summary, then the status it gives
-        said = (tmp_path / "run.out").read_text()
-        assert rc == expected_run_status(said), said
-        names, texts = sent_by_companion(tmp_path / "run.tlog")
-        assert {"IMU0GX_N", "IMU0G_HLTH", "IMU0G_FLT"} <= names, names
-        assert any("stuck" in t for t in texts), texts  # an alarm was sent
-        assert any("baseline learned" in t for t in texts), texts
+        names, texts = stuck_run_stopped(tmp_path, run)
         # everything the companion sent is at the GCS (UDP on loopback: wait for the listener to catch up)
         ok = gcs.wait_for(lambda g: names <= set(g.names) and sorted(texts) == sorted(t for _, t in g.texts))
         assert ok, (sorted(names - set(gcs.names)), texts, gcs.texts)
@@ -159,12 +166,7 @@ def test_reports_reach_a_gcs_through_mavlink_router_on_the_companion_computer(tm
         procs.append(sim)
         sim.wait(240)  # bounded by its --wall-limit
         assert sim.returncode == 0, (tmp_path / "sim.out").read_text()
-        rc = stop(run)  # SIGTERM: the summary, then the status it gives
-        said = (tmp_path / "run.out").read_text()
-        assert rc == expected_run_status(said), said
-        names, texts = sent_by_companion(tmp_path / "run.tlog")
-        assert {"IMU0GX_N", "IMU0G_HLTH", "IMU0G_FLT"} <= names, names
-        assert any("stuck" in t for t in texts) and any("baseline learned" in t for t in texts), texts
+        names, texts = stuck_run_stopped(tmp_path, run)
         ok = gcs.wait_for(lambda g: names <= set(g.names) and sorted(texts) == sorted(t for _, t in g.texts))
         assert ok, (sorted(names - set(gcs.names)), texts, gcs.texts, (tmp_path / "router.out").read_text())
         assert gcs.heartbeats > 0

@@ -13,18 +13,11 @@ import urllib.request
 import pytest
 
 from companion.cli.run_web import WEB_READY
-from tests.support.loopback import free_udp_port, pacing, start, stop
+from tests.support.loopback import MODEL, N_SI, free_udp_port, pacing, start, stop
 from tests.support.readiness import READY, wait_for_text
 
 pytestmark = pytest.mark.network
 
-N_SI = 3e-3
-MODEL = f"""rate_hz: 100
-axes:
-  gx: [{{effect: white_noise, N: {N_SI}}}]
-  gy: [{{effect: white_noise, N: {N_SI}}}]
-  gz: [{{effect: white_noise, N: {N_SI}}}]
-"""
 
 
 def _json(url):
@@ -52,7 +45,7 @@ def test_live_page_follows_a_live_link(tmp_path):
                 seen.append(last["t_s"])
             if last["alarms"] and any(a["complete"] for a in last["alarms"]) or sim.poll() is not None:
                 break
-            time.sleep(0.05)  # polling interval, as the page's
+            time.sleep(0.25)  # polling interval (the page polls once a second)
         sim.wait(60)
         last = _json(url + "data.json")
         assert len(set(seen)) >= 3 and seen == sorted(seen), seen[:20]  # message time advanced while fed

@@ -19,23 +19,16 @@ from pathlib import Path
 import pytest
 from tests.support.readiness import READY, wait_for_text
 
-from tests.support.loopback import env, free_udp_port, link_losses, pacing, read_record, start, stop
+from tests.support.loopback import (MODEL, N_SI, RATE, env, free_udp_port, link_losses, pacing, read_record, start,
+                                    stop)
 from tests.support.run_status import expected_run_status
 
 pytestmark = pytest.mark.network
 
 ROOT = Path(__file__).resolve().parents[2]
-N_SI = 3e-3
-RATE = 100.0
 LSB = 1e-3
 N_TRUE_SI = math.sqrt(N_SI**2 + LSB**2 / (12 * RATE))
 N_TRUE = N_TRUE_SI * 180 / math.pi * 60  # deg/sqrt(h)
-MODEL = f"""rate_hz: {RATE}
-axes:
-  gx: [{{effect: white_noise, N: {N_SI}}}]
-  gy: [{{effect: white_noise, N: {N_SI}}}]
-  gz: [{{effect: white_noise, N: {N_SI}}}]
-"""
 
 
 def last_before(nvf, name, t_sim):
@@ -139,8 +132,10 @@ def test_sim_autopilot_against_run_direct(tmp_path):
 
 @pytest.mark.skipif(shutil.which("mavproxy.py") is None, reason="MAVProxy not installed")
 def test_sim_autopilot_against_run_through_mavproxy(tmp_path):
-    nvf, texts = run_loop(tmp_path, via_mavproxy=True, speedup=16.0, duration=480.0, degrade_at=280.0)
-    check_loop(tmp_path, nvf, texts, 280.0, 480.0)
+    # the baseline is learned at 121 s; the 2x noise from 200 s is named by the noise test within seconds and by
+    # the Allan test 80-100 s later (measured at 282 s; 382 s for a degradation at 280 s): 400 s leave it 200 s
+    nvf, texts = run_loop(tmp_path, via_mavproxy=True, speedup=16.0, duration=400.0, degrade_at=200.0)
+    check_loop(tmp_path, nvf, texts, 200.0, 400.0)
 
 
 def test_request_data_stream_fallback_when_interval_refused(tmp_path):

@@ -13,6 +13,7 @@ from companion.cli.main import main
 from companion.sources import dataflash as df
 from companion.sources import load
 from companion.sources.autopilot_health import from_dataflash, from_ulog
+from tests.support.sys_status import T0, gyro_unhealthy_tlog, sys_status
 
 REALLOGS = __import__("pathlib").Path("/work/reallogs")
 
@@ -199,7 +200,7 @@ def _px4_tlog(path, gyro2_bad=(12.0, 30.5), clip_from=20.0, clip_total=140, base
                 w.write(mav.vibration_encode(int(t * 1e6), 1.0, 1.2, 2.0, 0, clip, 0), t0 + t)
             if k % 25 == 0:
                 health = sensors & ~(1 << 17) if gyro2_bad[0] <= t < gyro2_bad[1] else sensors
-                w.write(mav.sys_status_encode(sensors, sensors, health, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0), t0 + t)
+                w.write(sys_status(mav, sensors, health), t0 + t)
             for i in range(3):
                 g = rng.integers(-3, 4, 3)
                 w.write(mav.raw_imu_encode(int(t * 1e6), 0, 0, 1000, g[0], g[1], g[2], 0, 0, 0, i, 0), t0 + t)
@@ -224,19 +225,8 @@ def test_tlog_sys_status_and_vibration_written_by_hand(tmp_path, capsys):
 
 def test_ardupilot_sys_status_gyro_bit_applies_to_every_imu(tmp_path):
     """ArduPilot clears 3D_GYRO when any of its gyros is unhealthy: the interval goes to every IMU of the system."""
-    from companion.mavlink.tlog_writer import TlogWriter
-
     path = tmp_path / "ap.tlog"
-    with TlogWriter(path) as w:
-        mav = w.mav
-        for k in range(1000):
-            t = k * 0.02
-            if k % 25 == 0:
-                w.write(mav.heartbeat_encode(2, 3, 0, 0, 3), 1.7e9 + t)
-                w.write(mav.sys_status_encode(3, 3, 2 if 5.0 <= t < 8.0 else 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),
-                        1.7e9 + t)
-            for i in range(2):
-                w.write(mav.raw_imu_encode(int(t * 1e6), 0, 0, 1000, 1, -1, 0, 0, 0, 0, i, 0), 1.7e9 + t)
+    gyro_unhealthy_tlog(path, autopilot=3, imus=2)  # MAV_AUTOPILOT_ARDUPILOTMEGA
     view = load(path).meta["autopilot"]
     for i in (0, 1):
         assert view.imu(i).reasons() == ["gyro unhealthy (SYS_STATUS 3D_GYRO, all IMUs) 5.0-8.0 s"]
@@ -304,8 +294,7 @@ def test_inspect_live_link_shows_the_autopilots_sys_status(tmp_path, capsys):
             msgs = [mav.raw_imu_encode(1_000_000 + k * 10_000, 0, 0, -1000, 1, 2, 3, 0, 0, 0, i, 4000) for i in (0, 1)]
             if k % 10 == 0:
                 msgs.append(mav.heartbeat_encode(2, 12, 0, 0, 3))
-                msgs.append(mav.sys_status_encode(sensors, sensors, sensors & ~(1 << 17) if k >= 50 else sensors,
-                                                  0, 0, 0, 0, 0, 0, 0, 0, 0, 0))
+                msgs.append(sys_status(mav, sensors, sensors & ~(1 << 17) if k >= 50 else sensors))
             for m in msgs:
                 sock.sendto(m.pack(mav), ("127.0.0.1", port))
                 mav.seq = (mav.seq + 1) % 256
@@ -336,16 +325,12 @@ def test_another_components_sys_status_does_not_end_an_unhealthy_interval(tmp_pa
     from companion.mavlink.tlog_writer import TlogWriter
 
     path = tmp_path / "cc.tlog"
-    with TlogWriter(path) as w, TlogWriter(tmp_path / "unused.tlog", compid=191) as other:
-        mav, cc = w.mav, other.mav
-        for k in range(1000):
-            t = k * 0.02
-            if k % 25 == 0:
-                w.write(mav.heartbeat_encode(2, 12, 0, 0, 3), 1.7e9 + t)
-                w.write(mav.sys_status_encode(3, 3, 2 if 5.0 <= t < 8.0 else 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),
-                        1.7e9 + t)
-                w.write_raw(cc.sys_status_encode(1 << 5, 1 << 5, 1 << 5, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(cc),
-                            1.7e9 + t + 0.01)
-            w.write(mav.raw_imu_encode(int(t * 1e6), 0, 0, 1000, 1, -1, 0, 0, 0, 0, 0, 0), 1.7e9 + t)
+    with TlogWriter(tmp_path / "unused.tlog", compid=191) as other:
+        cc = other.mav
+
+        def companion_sys_status(w, t):
+            w.write_raw(sys_status(cc, 1 << 5, 1 << 5).pack(cc), T0 + t + 0.01)
+
+        gyro_unhealthy_tlog(path, autopilot=12, beside=companion_sys_status)  # MAV_AUTOPILOT_PX4
     r = load(path).meta["autopilot"].imu(0)
     assert r.reasons() == ["gyro unhealthy (SYS_STATUS) 5.0-8.0 s"]

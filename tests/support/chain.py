@@ -17,14 +17,8 @@ from pathlib import Path
 
 from tests.support.readiness import READY, wait_for_text
 
-from tests.support.loopback import free_udp_port, start, stop
+from tests.support.loopback import MODEL, free_udp_port, start, stop
 
-MODEL = """rate_hz: 100
-axes:
-  gx: [{effect: white_noise, N: 3e-3}]
-  gy: [{effect: white_noise, N: 3e-3}]
-  gz: [{effect: white_noise, N: 3e-3}]
-"""
 COMPANION = 191  # MAV_COMP_ID_ONBOARD_COMPUTER: the component id the companion sends with
 FAULT_WORDS = ("stuck", "dead", "noise", "bias", "spike", "drift", "saturat", "rate", "timing", "disagree", "degrad")
 

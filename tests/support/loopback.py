@@ -25,6 +25,18 @@ ROOT = Path(__file__).resolve().parents[2]
 #: elsewhere, or with COMPANION_TEST_WALL_PACING=1, a test's own --speedup paces by the wall clock.
 FLOW_CONTROL = Path("/proc/net/udp").is_file() and not os.environ.get("COMPANION_TEST_WALL_PACING")
 FAST = 1000.0
+#: the loopback tests' vehicle: white noise of N_SI rad/s/sqrt(Hz) on each gyro axis at RATE Hz (30 mrad/s per
+#: sample, 30x the 1 mrad/s LSB of RAW_IMU)
+N_SI = 3e-3
+RATE = 100.0
+
+
+def white_model(n_si: float = N_SI, rate: float = RATE) -> str:
+    """A sim-autopilot model (YAML) of white noise ``n_si`` rad/s/sqrt(Hz) on each gyro axis at ``rate`` Hz."""
+    return f"rate_hz: {rate:g}\naxes:\n" + "".join(f"  {a}: [{{effect: white_noise, N: {n_si}}}]\n" for a in ("gx", "gy", "gz"))
+
+
+MODEL = white_model()
 
 
 def pacing(speedup: float, *ports: int) -> list[str]:

@@ -19,13 +19,10 @@ import time
 
 from tests.support.readiness import DEADLINE_S, READY, kill_left, udp_rx_queue, wait_for_text
 
-from tests.support.loopback import env, free_udp_port
+from tests.support.loopback import MODEL, N_SI, RATE, env, free_udp_port
 from tests.support.run_status import expected_run_status
 
-N_SI = 3e-3
-RATE = 100.0
 N_TRUE = math.sqrt(N_SI**2 + 1e-6 / (12 * RATE)) * 180 / math.pi * 60  # deg/sqrt(h), with the LSB rounding
-MODEL = f"rate_hz: {RATE}\naxes:\n" + "".join(f"  {a}: [{{effect: white_noise, N: {N_SI}}}]\n" for a in ("gx", "gy", "gz"))
 
 
 class LossyRelay(threading.Thread):
@@ -103,9 +100,11 @@ class LossyRelay(threading.Thread):
         return not self.pending and udp_rx_queue(self.run_port) in (0, None)
 
 
-def loop_through_relay(tmp_path, **relay_kw):
+def loop_through_relay(tmp_path, speedup: float = 10.0, **relay_kw):
+    """150 s of the test model through the relay at ``speedup`` x real time (wall clock); run's loss window is
+    50 s of that simulated time (5 s of wall clock at 10x). Returns (run output, sim-autopilot output, relay)."""
     (tmp_path / "model.yaml").write_text(MODEL)
-    (tmp_path / "cfg.yaml").write_text("run:\n  loss_window_s: 5.0\n  baseline_s: 60\n")
+    (tmp_path / "cfg.yaml").write_text(f"run:\n  loss_window_s: {50.0 / speedup:g}\n  baseline_s: 60\n")
     p_run = free_udp_port()
     relay = LossyRelay(p_run, seed=7, **relay_kw)
     relay.start()
@@ -119,7 +118,7 @@ def loop_through_relay(tmp_path, **relay_kw):
         # paced by the wall clock, not flow-controlled: the loss warning looks at a window of wall-clock
         # seconds (run.loss_window_s), which a flow-controlled run at hundreds x real time would never fill
         sim = subprocess.Popen([sys.executable, "-m", "companion", "sim-autopilot", "--model", "model.yaml",
-                                "--connect", f"udpout:127.0.0.1:{relay.port}", "--speedup", "10", "--duration", "150",
+                                "--connect", f"udpout:127.0.0.1:{relay.port}", "--speedup", f"{speedup:g}", "--duration", "150",
                                 "--wall-limit", "60", "--quiet"], cwd=tmp_path, env=env(),
                                stdout=open(tmp_path / "sim.out", "w"), stderr=subprocess.STDOUT)
         sim.wait(DEADLINE_S)  # bounded by its --wall-limit
