@@ -39,6 +39,8 @@ MAX_STREAM_HZ = 50.0  # the highest rate REQUEST_DATA_STREAM sets, as ArduPilot'
 FLOW_BURST_MESSAGES = 24.0  # IMU messages sent at once under flow control: well within a receive buffer
 IDLE_SLEEP_S = 0.005  # wall seconds between two passes of the send loop
 FLOW_SLEEP_S = 0.002  # the same under flow control (smaller bursts, more often)
+FLOW_BACKOFF_MAX_S = 0.03  # the longest wait while the receiver's queue stays full: reading /proc/net/udp
+# costs about 0.13 ms, so polling a slow (loaded) receiver every 2 ms spent CPU in proportion to wall time
 
 
 @dataclass(frozen=True)
@@ -116,6 +118,7 @@ class SimAutopilot:
         self.flow_limit = flow_limit()
         self.next_hb = 1.0
         self.t_flow = 1.0  # flow control: simulated time sent so far
+        self.flow_sleep = FLOW_SLEEP_S  # flow control: wall seconds to the next pass (longer while the queue is full)
         # whole blocks packed with numpy (the same bytes as pymavlink's *_send); a signed or MAVLink 1 link
         # keeps pymavlink's per-message path
         dialect = sys.modules.get(type(self.mav).__module__)
@@ -145,7 +148,7 @@ class SimAutopilot:
                 break
             if opts.wall_limit is not None and now - wall_start >= opts.wall_limit:
                 break
-            time.sleep(FLOW_SLEEP_S if opts.flow_ports is not None else IDLE_SLEEP_S)
+            time.sleep(self.flow_sleep if opts.flow_ports is not None else IDLE_SLEEP_S)
 
     def sim_time(self, now: float, wall0: float) -> float:
         """The simulated time to send up to: by the wall clock, held back by flow control, capped."""
@@ -159,6 +162,9 @@ class SimAutopilot:
                 self.t_flow = max(self.t_flow, t_sim)
             elif queued <= self.flow_limit:
                 self.t_flow = min(t_sim, self.t_flow + burst_s)
+                self.flow_sleep = FLOW_SLEEP_S
+            else:  # the receiver is behind: wait longer each pass, up to FLOW_BACKOFF_MAX_S
+                self.flow_sleep = min(2.0 * self.flow_sleep, FLOW_BACKOFF_MAX_S)
             t_sim = self.t_flow
         if opts.duration is not None:
             t_sim = min(t_sim, 1.0 + opts.duration)
