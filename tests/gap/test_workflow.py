@@ -8,6 +8,9 @@ import math
 import numpy as np
 import pytest
 
+# Each case runs one seed in the README's command; its further seeds are soak checks (python -m
+# benchmarks.soak_checks), which run them all.
+
 from companion.allan.terms import adev_model
 from companion.gap import run_gap
 from companion.gap.workflow import NOISE_FLOOR_G
@@ -42,7 +45,7 @@ def _visible(base, hidden):
 
 
 @pytest.mark.parametrize("base,hidden", HIDDEN, ids=[h["effect"] for _, h in HIDDEN])
-@pytest.mark.parametrize("seed", [11, 12])
+@pytest.mark.parametrize("seed", [11, pytest.param(12, marks=pytest.mark.soak)])
 def test_names_the_hidden_effect(base, hidden, seed):
     assert _visible(base, hidden) >= 3.0  # the case is one where the effect is visible
     y = _measure(base + [hidden], seed)
@@ -62,7 +65,7 @@ def test_names_the_hidden_effect(base, hidden, seed):
         assert got["spectral"]["confirmed"] and "confirmed" in got["explanation"]
 
 
-@pytest.mark.parametrize("seed", [21, 22, 23])
+@pytest.mark.parametrize("seed", [21, pytest.param(22, marks=pytest.mark.soak), pytest.param(23, marks=pytest.mark.soak)])
 def test_null_case_adds_nothing(seed):
     base = WB + [{"effect": "random_walk", "K": 5e-6}]
     r = run_gap(_measure(base, seed), RATE, base, seed=seed)
@@ -155,7 +158,7 @@ def _rounded(N, seed, n=int(3600 * AP_RATE)):
     return terms, np.round(y / LSB) * LSB
 
 
-@pytest.mark.parametrize("seed", [61, 62])
+@pytest.mark.parametrize("seed", [61, pytest.param(62, marks=pytest.mark.soak)])
 def test_rate_quantization_named_when_lsb_known(seed):
     # per-sample noise N sqrt(fs) = 0.64 LSB: dithered, N_q^2 / N^2 = 1/12 / 0.41 = 20 %
     terms, y = _rounded(9e-5, seed)
@@ -210,7 +213,7 @@ def test_adis16405_against_datasheet(shared_data):
     assert 1.03 < math.sqrt(n_eff2) / 5.82e-4 < 1.35
 
 
-@pytest.mark.parametrize("seed", [7000, 7009])
+@pytest.mark.parametrize("seed", [7000, pytest.param(7009, marks=pytest.mark.soak)])
 def test_strong_random_walk_is_not_named_gauss_markov(seed):
     """K = 1e-3 over white + flicker: the raw likelihood ratio of a Gauss-Markov fit over the random walk is
     17-20 for these two draws (above the old uncorrected threshold 15.1; 48 random-walk draws give up to
@@ -223,7 +226,7 @@ def test_strong_random_walk_is_not_named_gauss_markov(seed):
     assert nested["lr_raw"] > 15.1 and nested["inflation"] > 1.5 and nested["lr"] < nested["threshold"]
 
 
-@pytest.mark.parametrize("seed", [1000, 1001])
+@pytest.mark.parametrize("seed", [1000, pytest.param(1001, marks=pytest.mark.soak)])
 def test_gauss_markov_at_a_hundredth_of_the_record(seed):
     """tau_c = 75 s in 7200 s: named Gauss-Markov, not its random-walk limit. The Cramer-Rao bound on
     ln tau_c for this record is 0.23 (benchmarks/bench_gap.py, limit table), so the tolerance is its 99 %
@@ -328,7 +331,7 @@ def test_issue_ramp_is_named_not_a_larger_random_walk():
     assert alt["runner_up"]["score"] < alt["chosen"]["score"] and "weighed against" in alt["text"]
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.soak), pytest.param(3, marks=pytest.mark.soak)])
 def test_issue_ramp_family_names_the_ramp(seed):
     """Fresh draws like the issue's case: N, B, K and R each scaled by a factor in 0.8-1.25."""
     rng = np.random.default_rng(1600 + seed)
@@ -390,7 +393,7 @@ def test_gauss_markov_preferred_by_likelihood_still_meets_its_limit():
     assert r.gap_after <= NOISE_FLOOR_G
 
 
-@pytest.mark.parametrize("seed", [71, 72])
+@pytest.mark.parametrize("seed", [71, pytest.param(72, marks=pytest.mark.soak)])
 def test_null_fresh_random_model_adds_nothing(seed):
     """Model == truth with random magnitudes (white/flicker crossover 1-100 s, flicker/random-walk
     crossover T/10-3T, as in benchmarks/bench_gap.py): nothing added."""
