@@ -137,19 +137,19 @@ def _trim(pieces: list) -> list:
     return [p[SHIFT_TAPS:-SHIFT_TAPS] for p in pieces]
 
 
-def _fit_once(pa: list, pb: list, rate: float, crossed: bool):
-    """One instrumental-variable fit per axis: (M, bias, dt, c2, residual (n, 3))."""
+def _fit_once(pa: list, pb: list, rate: float, second: bool):
+    """One instrumental-variable fit per axis: (M, bias, dt, c2, residual (n, 3)); c2 only with ``second``."""
     A, B = np.vstack(pa), np.vstack(pb)
     d1, d2 = _derivatives(pa, rate)
-    e1, _ = _derivatives(pb, rate)
+    e1, e2 = _derivatives(pb, rate)
     M, bias, dt, c2 = np.eye(3), np.zeros(3), np.zeros(3), np.zeros(3)
     ones = np.ones((A.shape[0], 1))
     for k in range(3):
-        cols = [A, ones, d1[:, [k]]] + ([] if crossed else [d2[:, [k]]])
-        inst = [A, ones, e1[:, [k]]] + ([] if crossed else [d2[:, [k]]])
+        cols = [A, ones, d1[:, [k]]] + ([d2[:, [k]]] if second else [])
+        inst = [A, ones, e1[:, [k]]] + ([e2[:, [k]]] if second else [])
         coef = _solve(np.hstack(cols), B[:, k], np.hstack(inst))
         M[k], bias[k], dt[k] = coef[:3], coef[3], coef[4]
-        c2[k] = 0.0 if crossed else coef[5]
+        c2[k] = coef[5] if second else 0.0
     return M, bias, dt, c2, B - (A @ M.T + bias + d1 * dt + d2 * c2)
 
 
@@ -162,20 +162,23 @@ def _shifted(pa: list, pb: list, shift_s: float, rate: float):
     return _trim([fractional_delay(pa[i], d) for i in keep]), _trim([pb[i] for i in keep])
 
 
-def fit_pair(pa: list, pb: list, rate: float, filters=(None, None)) -> tuple[PairCalibration, list]:
+def fit_pair(pa: list, pb: list, rate: float, filters=(None, None), *, equalized: bool = False
+             ) -> tuple[PairCalibration, list]:
     """The relative calibration of b on a over their aligned pieces (lists of (n, 3) arrays), and the
     residual pieces r = w_b - model(w_a). The time offset is applied as a fractional delay of a (one for the
     three axes: the median of the axes' first-order terms, SHIFT_ROUNDS rounds): the first-order term alone
-    misses a delay's effect on vibration at tens of Hz."""
+    misses a delay's effect on vibration at tens of Hz. ``equalized``: the pieces already went through the
+    same cascade of filters (no second-order term, no cross-filtering)."""
     pa, pb, crossed = cross_filter(pa, pb, filters[0], filters[1], rate)
-    M, bias, dt, c2, resid = _fit_once(pa, pb, rate, crossed)
+    second = not (crossed or equalized)
+    M, bias, dt, c2, resid = _fit_once(pa, pb, rate, second)
     shift = 0.0
     for _ in range(SHIFT_ROUNDS):
         if abs(float(np.median(dt))) * rate < MIN_SHIFT:
             break  # far below a sample (slow telemetry): the first-order term carries it, no piece is trimmed
         shift += float(np.median(dt))
         sa, sb = _shifted(pa, pb, shift, rate)
-        M, bias, dt, c2, resid = _fit_once(sa, sb, rate, crossed)
+        M, bias, dt, c2, resid = _fit_once(sa, sb, rate, second)
     exc = _excitation(resid, pa)
     fit_m = bool(np.all(exc >= MIN_EXCITATION))
     notes = []

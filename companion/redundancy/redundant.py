@@ -71,7 +71,7 @@ def _pair_curves(pieces, rate, tracks, i, j, equalized):
     """Calibration and (tau, avar, edf) per axis of pair (i, j) (pieces per track), the rounding of both IMUs
     removed and, with ``equalized`` (the filters' cascade), the cascade's shape divided out."""
     fl = (None, None) if equalized else (tracks[i].filter_hz, tracks[j].filter_hz)
-    cal, res = fit_pair(pieces[i], pieces[j], rate, fl)
+    cal, res = fit_pair(pieces[i], pieces[j], rate, fl, equalized=bool(equalized))
     r, b = np.vstack(res), np.vstack(pieces[j])
     if np.all(np.var(r, axis=0) <= COPY_RATIO * np.var(b, axis=0)):
         raise _Copies(f"{tracks[i].label or i} and {tracks[j].label or j}")
