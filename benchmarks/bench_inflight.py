@@ -84,7 +84,7 @@ def main() -> int:
         for key, v in r.items():
             agg.setdefault(key, []).extend(v)
         print(f"draw {args.seed + k}: 3 IMUs {sum(r['three'])}/9 within 10 %, pair {sum(r['pair'])}/3, "
-              f"bounds {sum(r['bound_holds'])}/6 hold", flush=True)
+              f"bounds {sum(r['bound_holds'])}/6 hold, interval holds the truth {sum(r['cover'])}/9", flush=True)
     cpu = time.process_time() - t0
     ratio = np.array(agg["ratio"], dtype=float)
     ratio = ratio[np.isfinite(ratio)]
