@@ -9,7 +9,10 @@ behind a (the first term of the Taylor series of w_a(t + dt)), and c the second-
 different low-pass filters differ. dt is fitted with dw_b/dt as its instrument (instrumental variables): the
 derivative of a's own noise in the regressor would otherwise shrink dt by the noise's share of dw_a/dt (a few %
 in calm flight), and the motion left by that shrinkage lands in r at 0.5-2 s; the central difference of b is
-uncorrelated with b's noise at the same instant, so the instrument is valid. Where the log gives both cut-offs, each stream is filtered with the other's
+uncorrelated with b's noise at the same instant, so the instrument is valid; c likewise with a second
+difference of b that leaves b(t) out. On streams already equalized (every IMU through every IMU's filter) c is
+not fitted: the filters no longer differ, and a term fitted on a's second derivative, which a calm flight's
+noise dominates, would trade a's noise for motion left in r. Where the log gives both cut-offs, each stream is filtered with the other's
 filter instead (both then went through the same two filters; gain 1 at 0 Hz, so the white-noise level is
 unchanged) and c is not fitted. The least-squares fit is per axis of b over all pieces.
 
@@ -137,11 +140,25 @@ def _trim(pieces: list) -> list:
     return [p[SHIFT_TAPS:-SHIFT_TAPS] for p in pieces]
 
 
+def _second_instrument(pieces: list, rate: float) -> np.ndarray:
+    """(b(t+2) + b(t-2) - b(t+1) - b(t-1)) / (3 tau0^2) per piece (~ b''; the ends 0): it leaves out b(t), so
+    it is uncorrelated with white noise of b at t, which the plain second difference (weight -2 on b(t)) is
+    not; a's own second derivative as its instrument would carry a's noise (errors in variables)."""
+    out = []
+    for x in pieces:
+        y = np.zeros_like(x, dtype=float)
+        if x.shape[0] > 4:
+            y[2:-2] = (x[4:] + x[:-4] - x[3:-1] - x[1:-3]) * (rate * rate / 3.0)
+        out.append(y)
+    return np.vstack(out)
+
+
 def _fit_once(pa: list, pb: list, rate: float, second: bool):
     """One instrumental-variable fit per axis: (M, bias, dt, c2, residual (n, 3)); c2 only with ``second``."""
     A, B = np.vstack(pa), np.vstack(pb)
     d1, d2 = _derivatives(pa, rate)
-    e1, e2 = _derivatives(pb, rate)
+    e1, _ = _derivatives(pb, rate)
+    e2 = _second_instrument(pb, rate) if second else None
     M, bias, dt, c2 = np.eye(3), np.zeros(3), np.zeros(3), np.zeros(3)
     ones = np.ones((A.shape[0], 1))
     for k in range(3):
