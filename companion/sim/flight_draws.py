@@ -90,13 +90,13 @@ def alias_floor(filter_hz, offset_s, rate_hz: float, sensor_hz: float, broadband
     return out
 
 
-def _realism(fmt: str, rng, gains, vibration: float, max_offset_s: float):
+def _realism(fmt: str, rng, gains, vibration: float, max_offset_s: float, broadband: float = 1.0):
     from companion.sim.realism import Realism
 
     rate, fs, (f_lo, f_hi), lsb = FORMATS[fmt]
     fc = tuple(float(x) for x in rng.uniform(f_lo, f_hi, 3))
     skew = (0.0,) + tuple(float(x) for x in rng.uniform(0.0, max_offset_s, 2))
-    vib = {"rotor_hz": 111.0, "harmonics": [0.3 * vibration, 0.15 * vibration], "broadband": 0.1 * vibration,
+    vib = {"rotor_hz": 111.0, "harmonics": [0.3 * vibration, 0.15 * vibration], "broadband": 0.1 * vibration * broadband,
            "wander": 0.05}
     idle = {"rotor_hz": 60.0, "harmonics": [0.05 * vibration], "broadband": 0.02 * vibration}
     return Realism(sensor_rate_hz=fs, gyro_lpf_hz=fc[0], imu_lpf_hz=fc, imu_noise_gain=tuple(gains), skew_s=skew,
@@ -105,8 +105,9 @@ def _realism(fmt: str, rng, gains, vibration: float, max_offset_s: float):
 
 def draw_flight(seed: int, fmt: str = "log400", imus: int = 3, flight_s: float = 600.0, n_lo: float = 0.5,
                 n_hi: float = 3.0, spread: float = 0.005, max_offset_s: float = 0.002, vibration: float = 1.0,
-                still_s: float = 0.0) -> FlightDraw:
-    """One random flight (module docstring); ``still_s`` seconds disarmed before arming."""
+                still_s: float = 0.0, broadband: float = 1.0) -> FlightDraw:
+    """One random flight (module docstring); ``still_s`` seconds disarmed before arming; ``broadband`` scales the
+    flight's broadband vibration alone (0: rotor lines only)."""
     from companion.sim.body_motion import Flight, Schedule
     from companion.sim.vehicle import ImuSpread, VehicleSimulator
 
@@ -115,7 +116,7 @@ def draw_flight(seed: int, fmt: str = "log400", imus: int = 3, flight_s: float =
     gains = rng.uniform(n_lo, n_hi, 3)
     model = {"rate_hz": rate, "axes": {a: [{"effect": "white_noise", "N": DEG_SQRT_H},
                                            {"effect": "bias_instability", "B": 3e-6}] for a in ("gx", "gy", "gz")}}
-    real, fc, skew = _realism(fmt, rng, gains, vibration, max_offset_s)
+    real, fc, skew = _realism(fmt, rng, gains, vibration, max_offset_s, broadband)
     arm = 5.0 + still_s
     sched = Schedule(flights=[Flight(arm_at=arm, disarm_at=arm + flight_s + 40.0)])
     sim = VehicleSimulator(model, imus=imus, seed=seed, realism=real, schedule=sched,
