@@ -9,7 +9,10 @@ behind a (the first term of the Taylor series of w_a(t + dt)), and c the second-
 different low-pass filters differ. dt is fitted with dw_b/dt as its instrument (instrumental variables): the
 derivative of a's own noise in the regressor would otherwise shrink dt by the noise's share of dw_a/dt (a few %
 in calm flight), and the motion left by that shrinkage lands in r at 0.5-2 s; the central difference of b is
-uncorrelated with b's noise at the same instant, so the instrument is valid. Where the log gives both cut-offs, each stream is filtered with the other's
+uncorrelated with b's noise at the same instant, so the instrument is valid; c likewise with a second
+difference of b that leaves b(t) out. On streams already equalized (every IMU through every IMU's filter) c is
+not fitted: the filters no longer differ, and a term fitted on a's second derivative, which a calm flight's
+noise dominates, would trade a's noise for motion left in r. Where the log gives both cut-offs, each stream is filtered with the other's
 filter instead (both then went through the same two filters; gain 1 at 0 Hz, so the white-noise level is
 unchanged) and c is not fitted. The least-squares fit is per axis of b over all pieces.
 
@@ -137,19 +140,33 @@ def _trim(pieces: list) -> list:
     return [p[SHIFT_TAPS:-SHIFT_TAPS] for p in pieces]
 
 
-def _fit_once(pa: list, pb: list, rate: float, crossed: bool):
-    """One instrumental-variable fit per axis: (M, bias, dt, c2, residual (n, 3))."""
+def _second_instrument(pieces: list, rate: float) -> np.ndarray:
+    """(b(t+2) + b(t-2) - b(t+1) - b(t-1)) / (3 tau0^2) per piece (~ b''; the ends 0): it leaves out b(t), so
+    it is uncorrelated with white noise of b at t, which the plain second difference (weight -2 on b(t)) is
+    not; a's own second derivative as its instrument would carry a's noise (errors in variables)."""
+    out = []
+    for x in pieces:
+        y = np.zeros_like(x, dtype=float)
+        if x.shape[0] > 4:
+            y[2:-2] = (x[4:] + x[:-4] - x[3:-1] - x[1:-3]) * (rate * rate / 3.0)
+        out.append(y)
+    return np.vstack(out)
+
+
+def _fit_once(pa: list, pb: list, rate: float, second: bool):
+    """One instrumental-variable fit per axis: (M, bias, dt, c2, residual (n, 3)); c2 only with ``second``."""
     A, B = np.vstack(pa), np.vstack(pb)
     d1, d2 = _derivatives(pa, rate)
     e1, _ = _derivatives(pb, rate)
+    e2 = _second_instrument(pb, rate) if second else None
     M, bias, dt, c2 = np.eye(3), np.zeros(3), np.zeros(3), np.zeros(3)
     ones = np.ones((A.shape[0], 1))
     for k in range(3):
-        cols = [A, ones, d1[:, [k]]] + ([] if crossed else [d2[:, [k]]])
-        inst = [A, ones, e1[:, [k]]] + ([] if crossed else [d2[:, [k]]])
+        cols = [A, ones, d1[:, [k]]] + ([d2[:, [k]]] if second else [])
+        inst = [A, ones, e1[:, [k]]] + ([e2[:, [k]]] if second else [])
         coef = _solve(np.hstack(cols), B[:, k], np.hstack(inst))
         M[k], bias[k], dt[k] = coef[:3], coef[3], coef[4]
-        c2[k] = 0.0 if crossed else coef[5]
+        c2[k] = coef[5] if second else 0.0
     return M, bias, dt, c2, B - (A @ M.T + bias + d1 * dt + d2 * c2)
 
 
@@ -162,13 +179,16 @@ def _shifted(pa: list, pb: list, shift_s: float, rate: float):
     return _trim([fractional_delay(pa[i], d) for i in keep]), _trim([pb[i] for i in keep])
 
 
-def fit_pair(pa: list, pb: list, rate: float, filters=(None, None)) -> tuple[PairCalibration, list]:
+def fit_pair(pa: list, pb: list, rate: float, filters=(None, None), *, equalized: bool = False
+             ) -> tuple[PairCalibration, list]:
     """The relative calibration of b on a over their aligned pieces (lists of (n, 3) arrays), and the
     residual pieces r = w_b - model(w_a). The time offset is applied as a fractional delay of a (one for the
     three axes: the median of the axes' first-order terms, SHIFT_ROUNDS rounds): the first-order term alone
-    misses a delay's effect on vibration at tens of Hz."""
+    misses a delay's effect on vibration at tens of Hz. ``equalized``: the pieces already went through the
+    same cascade of filters (no second-order term, no cross-filtering)."""
     pa, pb, crossed = cross_filter(pa, pb, filters[0], filters[1], rate)
-    M, bias, dt, c2, resid = _fit_once(pa, pb, rate, crossed)
+    second = not (crossed or equalized)
+    M, bias, dt, c2, resid = _fit_once(pa, pb, rate, second)
     shift = 0.0
     can_shift = any(p.shape[0] > 3 * SHIFT_TAPS for p in pa)  # else the shift would leave no piece
     for _ in range(SHIFT_ROUNDS):
@@ -176,7 +196,7 @@ def fit_pair(pa: list, pb: list, rate: float, filters=(None, None)) -> tuple[Pai
             break  # far below a sample (slow telemetry): the first-order term carries it, no piece is trimmed
         shift += float(np.median(dt))
         sa, sb = _shifted(pa, pb, shift, rate)
-        M, bias, dt, c2, resid = _fit_once(sa, sb, rate, crossed)
+        M, bias, dt, c2, resid = _fit_once(sa, sb, rate, second)
     exc = _excitation(resid, pa)
     fit_m = bool(np.all(exc >= MIN_EXCITATION))
     notes = []
