@@ -30,6 +30,7 @@ import numpy as np
 from companion.health.baseline import Baseline
 from companion.health.degradation import DEGRADING, LEARNING
 from companion.health.faults import FAULT, FaultEvent
+from companion.health.clip_watch import ClipWatch
 from companion.health.frozen_watch import FrozenWatch
 from companion.mavlink.reporter import (MAV_SEVERITY_CRITICAL, MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING,
                                         Reporter, health_name)
@@ -68,6 +69,7 @@ class Pipeline:
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
         self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
+        self.clip = ClipWatch()  # clipped axes sample by sample, streams up to 20 Hz (service.frozen_hook)
         self.watch_said: set = set()  # (imu, kind, axis) the watch announced itself (service.frozen_hook)
         self.inflight = InflightReport(self)  # each IMU's own noise while armed, from the other IMUs
         self.ignored = {"other_sysid": 0, "other_message": 0}
