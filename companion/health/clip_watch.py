@@ -8,13 +8,14 @@ samples, while the values just below it stay sparse. Over the last ``WINDOW`` sa
 
 * at each sample, ``top`` = its |value|, over the samples since the last one beyond it (a clip that
   begins mid-window: the larger values before it do not count); ``at`` = those at exactly +-top,
-  ``near`` = those within ``BAND`` (5 % of top) below it;
+  ``near`` = those within ``BAND`` (5 % of top, 0.01 rad/s at least) below it;
 * the axis is named when ``at >= NEED`` (4), ``at >= RATIO * near`` (2), and top >= ``MIN_LEVEL``
   (0.05 rad/s, far above a gyro's noise: a bias at rest is not a clip).
 
 Healthy motion reaches its largest value once; samples one telemetry period apart (>= ``MIN_SPACING_S``)
 hit the same exact value at the top of a window only where the rate holds still (a steady turn), and then
-its neighbours just below are as many (``near``). A clip puts every sample beyond the limit at the limit.
+its neighbours just below are as many (``near``: a yaw of 0.05 rad/s held for a minute in a real tlog read
+55 mrad/s four times, 53 and 54 twice, 48-52 many times). A clip puts every sample beyond the limit at the limit.
 The samples needed are those that reach the limit: NEED of them within WINDOW samples, at any rate; a
 vehicle that stays below the limit (at rest, a gentle cruise) shows no clip, as it shows no saturation.
 It clears when a sample goes beyond the named level by more than BAND (the limit is gone), or after
@@ -39,6 +40,7 @@ WINDOW = 60  # samples of an axis judged together
 NEED = 4  # samples at the window's top |value| that name a clip
 RATIO = 2.0  # ... at least this many times the samples just below it
 BAND = 0.05  # relative: "just below" is within 5 % of the top
+BAND_MIN = 0.01  # rad/s, and at least this (10 steps of RAW_IMU: a steady turn's values within 1-3 steps)
 MIN_LEVEL = 0.05  # rad/s: a clip level far above any gyro's noise and bias at rest
 CLEAR = 2 * WINDOW  # samples without one at the named level that clear it
 MIN_SPACING_S = 0.05  # median interval below which a stream is left to the block test (above 20 Hz)
@@ -118,7 +120,7 @@ class ClipWatch:
         if stretch.size < NEED:
             return None
         at = int(np.count_nonzero(stretch == top))
-        near = int(np.count_nonzero((stretch < top) & (stretch >= top * (1.0 - BAND))))
+        near = int(np.count_nonzero((stretch < top) & (stretch >= top - max(BAND * top, BAND_MIN))))
         if at >= NEED and at >= RATIO * near:
             st.state, st.level, st.quiet = FAULT, top, 0
             return FaultEvent(imu, ax, "saturation", FAULT, top, critical=True)

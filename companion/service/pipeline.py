@@ -290,21 +290,21 @@ class Pipeline:
         if rate_event is not None:
             if rate_event == "changed":  # the cutter saw it first (a slow drift of the rate)
                 new, old = ch.cutter.rate_hz, ch.cutter.prev_rate_hz
-                ch.cutter.rate_hz = old
-                self._switch_rate(ch, new, data[:, 0], old)
+                self._switch_rate(ch, new, data[:, 0], old, keep_window=True)
             ch.rates.off_rate = []
             return rate_event == "changed"
         if ch.rate_hz is None or data.shape[0] < 3:
             return False
-        held, new_rate = ch.rates.observe(data[:, 0], ch.rate_hz, ch.time_res)
+        held, new_rate = ch.rates.observe(data[:, 0], ch.rate_hz, ch.time_res, ch.cutter.tol)
         if held:
             ch.settler.drop_lookahead()
         if new_rate is not None:
             self._switch_rate(ch, new_rate, data[:, 0], ch.rate_hz)
         return held
 
-    def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None) -> None:
-        back = ch.switch_rate(rate, t_block)
+    def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None,
+                     keep_window: bool = False) -> None:
+        back = ch.switch_rate(rate, t_block, keep_window)
         if self._has_baseline(ch):
             ch.bank.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
         self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
