@@ -45,7 +45,9 @@ MIN_INTERVALS = 8  # intervals before the rate is taken
 GAP_PERIODS = 2.5
 RATE_WINDOW = 64  # intervals whose robust period is the stream's rate
 SETTLE = RATE_WINDOW // 2  # intervals a rate stands before it changes, and a change stands before it is taken
-WANDER_MAX = 2.0  # a switch and a switch back within this factor may be the stream's wander (BlockCutter.switch)
+#: a switch and a switch back within this factor and WANDER_INTERVALS is the stream's wander (BlockCutter.switch)
+WANDER_MAX = 2.0
+WANDER_INTERVALS = 4 * RATE_WINDOW
 #: below this a stream is not watched: a block of samples spans minutes, a dead gyro would be named after many
 #: minutes, and such a rate is more often a time column in the wrong unit than a real IMU stream
 MIN_WATCH_RATE_HZ = 0.5
@@ -75,6 +77,7 @@ class BlockCutter:
         self.n_in = 0  # intervals that entered the window so far
         self.set_at = 0  # n_in when the rate was last set
         self.off_since: int | None = None  # n_in when the window's rate left the tolerance
+        self.gap_t: list[float] = []  # times of the samples joined by gaps only (slower_rate)
         self.wander = 0.0  # the stream's own wander, learned from a switch and a switch back (switch)
         self._parts: list = []
         self._t0: float | None = None
@@ -122,6 +125,7 @@ class BlockCutter:
                     continue
                 elif kind != OK:  # a gap (a live gap also splits: the same here)
                     self.counts["gaps"] += 1
+                    self.gap_t = (self.gap_t or [self.last_t]) + [float(t[i])]
                     self.dts.append(float(t[i] - self.last_t))  # the window's median sees it (RATE_WINDOW)
                     self.n_in += 1
                     self.drop()
@@ -129,6 +133,7 @@ class BlockCutter:
                 else:
                     self.dts.append(float(t[i] - self.last_t))
                     self.n_in += 1
+                    self.gap_t = []
             # the clean stretch from i: every interval within (0, gap_s]; while the rate is unknown the period
             # (the median of the intervals so far) changes with every sample: one row at a time
             if self.rate_hz is None or n - i == 1:
@@ -193,22 +198,33 @@ class BlockCutter:
             j = min(j, int(np.searchsorted(t, check_t, side="left")))
         return j
 
+    def slower_rate(self) -> float | None:
+        """The rate of a stream now slower than GAP_PERIODS periods: every interval a gap, so no block closes
+        and the window is never re-taken (asked for 1 Hz after 4 Hz). MIN_INTERVALS gaps in a row whose
+        own rate is off the stream's by more than its tolerance give it; None otherwise."""
+        if self.rate_hz is None or len(self.gap_t) <= MIN_INTERVALS:
+            return None
+        rate = 1.0 / period_of(np.diff(self.gap_t), self.time_res)
+        return rate if math.log(self.rate_hz / rate) > math.log1p(self.tol) else None
+
     def switch(self, new_rate: float, intervals=None) -> None:
         """The channel switched to ``new_rate`` (service/channel.py); ``intervals``: those of the blocks held
         back at it, the window from here (None: the window is at the new rate already). A switch back to the
-        rate before, within a factor WANDER_MAX and SETTLE intervals of the last switch, is the stream's
-        wander (a radio that slows the stream for seconds at a time): the tolerance widens to cover both."""
+        rate before, within a factor WANDER_MAX and WANDER_INTERVALS of the last switch, is the stream's
+        wander (a radio that slows the stream for a minute or two): the tolerance widens to cover both. A
+        ground station that asks for 2 Hz, then 4 Hz and 2 Hz again within a few minutes is followed up to
+        there; a change by more than WANDER_MAX (1 to 4 Hz) always."""
         old, before = self.rate_hz, self.prev_rate_hz
-        if (old is not None and before is not None and self.n_in - self.set_at < SETTLE
+        if (old is not None and before is not None and self.n_in - self.set_at < WANDER_INTERVALS
                 and abs(math.log(new_rate / before)) <= math.log1p(self.tol)
                 and abs(math.log(new_rate / old)) <= math.log(WANDER_MAX)):
-            self.wander = max(self.wander, math.exp(abs(math.log(new_rate / old))) - 1.0 + RATE_CHANGE / 4.0)
+            self.wander = max(self.wander, math.exp(abs(math.log(new_rate / old))) * (1.0 + RATE_CHANGE) - 1.0)
             self.tol = max(self.tol, self.wander)
         self.prev_rate_hz, self.rate_hz = old, float(new_rate)
         if intervals is not None:
             self.dts.clear()
             self.dts.extend([float(v) for v in intervals])
-        self.set_at, self.off_since = self.n_in, None
+        self.set_at, self.off_since, self.gap_t = self.n_in, None, []
 
     def _rate(self) -> str | None:
         if len(self.dts) < MIN_INTERVALS:
