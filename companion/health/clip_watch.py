@@ -6,9 +6,9 @@ in several blocks: a telemetry stream at 1-4 Hz has one to four samples in a blo
 that needs no consecutive samples: the axis piles up at one exact |value|, the largest of its recent
 samples, while the values just below it stay sparse. Over the last ``WINDOW`` samples of an axis:
 
-* at each sample, ``top`` = its |value|, over the samples since the last one beyond it (a clip that
-  begins mid-window: the larger values before it do not count); ``at`` = those at exactly +-top,
-  ``near`` = those within ``BAND`` (5 % of top, 0.01 rad/s at least) below it;
+* at each sample, ``top`` = its |value|; ``at`` = the samples at exactly +-top since the last one beyond
+  it (a clip that begins mid-window: the larger values before it do not count); ``near`` = those of the
+  whole window within ``BAND`` (5 % of top, 0.01 rad/s at least) below it;
 * the axis is named when ``at >= NEED`` (4), ``at >= RATIO * near`` (2), and top >= ``MIN_LEVEL``
   (0.05 rad/s, far above a gyro's noise: a bias at rest is not a clip).
 
@@ -120,7 +120,9 @@ class ClipWatch:
         if stretch.size < NEED:
             return None
         at = int(np.count_nonzero(stretch == top))
-        near = int(np.count_nonzero((stretch < top) & (stretch >= top - max(BAND * top, BAND_MIN))))
+        # the neighbours over the whole window: a short stretch after a sample just above (a biased gyro at
+        # rest, 172-177 mrad/s: four 175 after a 176) has none of them in it
+        near = int(np.count_nonzero((win < top) & (win >= top - max(BAND * top, BAND_MIN))))
         if at >= NEED and at >= RATIO * near:
             st.state, st.level, st.quiet = FAULT, top, 0
             return FaultEvent(imu, ax, "saturation", FAULT, top, critical=True)
