@@ -2,7 +2,8 @@
 
 The block test (health/saturation.py) looks for RUN (5) samples in a row at one block's peak, at one level
 in several blocks: a telemetry stream at 1-4 Hz has one to four samples in a block and never shows it
-(a sample at the message's own limit, 32.767 rad/s, it names at any rate). A clip leaves another mark
+(a sample at the message's own limit, 32.767 rad/s, it names at any rate, but not in a block held back
+for a rate change: this test names that one too, at its sample). A clip leaves another mark
 that needs no consecutive samples: the axis piles up at one exact |value|, the largest of its recent
 samples, while the values just below it stay sparse. Over the last ``WINDOW`` samples of an axis:
 
@@ -64,7 +65,8 @@ class ClipTrack:
 class ClipWatch:
     """Every IMU of one vehicle: :meth:`add` samples, :meth:`take` the ``saturation`` events they brought."""
 
-    def __init__(self):
+    def __init__(self, limit: float = math.inf):
+        self.limit = float(limit)  # rad/s: the range limit of the message (int16 mrad/s: 32.767)
         self.imus: dict[int, ClipTrack] = {}
         self.pending: list[tuple[float, FaultEvent]] = []
 
@@ -90,6 +92,13 @@ class ClipWatch:
         if np.median(tr.spacing) < MIN_SPACING_S:  # a fast stream: the block test sees its plateaus
             tr.g = np.zeros((0, 3))
             return
+        if np.any(np.abs(g) >= 0.999 * self.limit):  # a sample at the limit, even in a block held back
+            for k, j in zip(*np.nonzero(np.abs(g) >= 0.999 * self.limit)):
+                st = tr.axes[j]
+                if st.state == OK:
+                    st.state, st.level, st.quiet = FAULT, float(abs(g[k, j])), 0
+                    self.pending.append((float(t[k]), FaultEvent(imu, AXES[j], "saturation", FAULT, st.level,
+                                                                 critical=True)))
         allg = np.concatenate([tr.g, g])
         tr.g = allg[-(WINDOW - 1):]
         m = g.shape[0]

@@ -69,7 +69,7 @@ class Pipeline:
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
         self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
-        self.clip = ClipWatch()  # clipped axes sample by sample, streams up to 20 Hz (service.frozen_hook)
+        self.clip = ClipWatch(cfg.gyro_limit)  # clipped axes sample by sample, streams up to 20 Hz (service.frozen_hook)
         self.watch_said: set = set()  # (imu, kind, axis) the watch announced itself (service.frozen_hook)
         self.inflight = InflightReport(self)  # each IMU's own noise while armed, from the other IMUs
         self.ignored = {"other_sysid": 0, "other_message": 0}
