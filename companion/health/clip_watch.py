@@ -8,15 +8,19 @@ that needs no consecutive samples: the axis piles up at one exact |value|, the l
 samples, while the values just below it stay sparse. Over the last ``WINDOW`` samples of an axis:
 
 * at each sample, ``top`` = its |value|; ``at`` = the samples at exactly +-top since the last one beyond
-  it (a clip that begins mid-window: the larger values before it do not count); ``near`` = those of the
-  whole window within ``BAND`` (5 % of top, 0.01 rad/s at least) below it;
-* the axis is named when ``at >= NEED`` (4), ``at >= RATIO * near`` (2), and top >= ``MIN_LEVEL``
-  (0.05 rad/s, far above a gyro's noise: a bias at rest is not a clip).
+  it (a clip that begins mid-window: the larger values before it do not count), in ``visits`` apart by a
+  sample more than ``BAND`` (5 % of top, 0.01 rad/s at least) below it; ``near`` = the most samples of the
+  whole window at any one value within BAND below top;
+* the axis is named when ``at >= NEED`` (4) in 2 visits or more (SINGLE_VISIT, 6, in one), ``at >= RATIO *
+  near`` (2), and
+  top >= ``MIN_LEVEL`` (0.05 rad/s, far above a gyro's noise: a bias at rest is not a clip).
 
 Healthy motion reaches its largest value once; samples one telemetry period apart (>= ``MIN_SPACING_S``)
-hit the same exact value at the top of a window only where the rate holds still (a steady turn), and then
-its neighbours just below are as many (``near``: a yaw of 0.05 rad/s held for a minute in a real tlog read
-55 mrad/s four times, 53 and 54 twice, 48-52 many times). A clip puts every sample beyond the limit at the limit.
+hit the same exact value at the top of a window only where the rate holds still (a steady turn), in one
+visit, and then its neighbouring values are as frequent (``near``: a yaw of 0.05 rad/s held for a minute in
+a real tlog read 55 mrad/s four times, 53 and 54 twice, 50 eight times). The neighbourhood is judged value by
+value, not as a whole: a vehicle spinning near its clip level (a compass-calibration dance at 5 rad/s) puts
+many samples within 5 % below it, each at its own value. A clip puts every sample beyond the limit at the limit.
 The samples needed are those that reach the limit: NEED of them within WINDOW samples, at any rate; a
 vehicle that stays below the limit (at rest, a gentle cruise) shows no clip, as it shows no saturation.
 It clears when a sample goes beyond the named level by more than BAND (the limit is gone), or after
@@ -39,6 +43,9 @@ from companion.health.faults import FAULT, OK, FaultEvent
 AXES = ("gx", "gy", "gz")
 WINDOW = 60  # samples of an axis judged together
 NEED = 4  # samples at the window's top |value| that name a clip
+#: samples at the top in one visit that name a clip too (a manoeuvre held beyond the limit): a healthy gyro
+#: above MIN_LEVEL read the same value at most 3 times in a row in the real tlogs of bench_telemetry_rates
+SINGLE_VISIT = 6
 RATIO = 2.0  # ... at least this many times the samples just below it
 BAND = 0.05  # relative: "just below" is within 5 % of the top
 BAND_MIN = 0.01  # rad/s, and at least this (10 steps of RAW_IMU: a steady turn's values within 1-3 steps)
@@ -128,10 +135,20 @@ class ClipWatch:
         stretch = win[above[-1] + 1:] if above.size else win  # since the last sample beyond this value
         if stretch.size < NEED:
             return None
-        at = int(np.count_nonzero(stretch == top))
-        # the neighbours over the whole window: a short stretch after a sample just above (a biased gyro at
-        # rest, 172-177 mrad/s: four 175 after a 176) has none of them in it
-        near = int(np.count_nonzero((win < top) & (win >= top - max(BAND * top, BAND_MIN))))
+        hit = stretch == top
+        at = int(np.count_nonzero(hit))
+        if at < NEED:
+            return None
+        band = max(BAND * top, BAND_MIN)
+        # a clip is left and reached again: visits to the level apart by a sample well below it
+        below = np.cumsum(stretch < top - band)[hit]
+        visits = 1 + int(np.count_nonzero(np.diff(below) > 0))
+        # the most samples at one other value just below, over the whole window (a steady turn, a biased
+        # gyro at rest: as many at the neighbouring values as at the top)
+        vals, counts = np.unique(win[(win < top) & (win >= top - band)], return_counts=True)
+        near = int(counts.max()) if counts.size else 0
+        if visits < 2 and at < SINGLE_VISIT:
+            return None
         if at >= NEED and at >= RATIO * near:
             st.state, st.level, st.quiet = FAULT, top, 0
             return FaultEvent(imu, ax, "saturation", FAULT, top, critical=True)

@@ -330,7 +330,7 @@ class Pipeline:
         self._report(not_said_by_watch(self, ch, ch.on_block(data, st, still)), t_end)
         if ch.imu in self._restored:
             announce_restored(self, ch, t_end)
-        self._report(self.group.compare(ch.imu, self.channels, self.armed), t_end)
+        self._report(self.group.compare(ch.imu, self.channels, self.armed, still), t_end)
         self.inflight.on_block(ch, t_end)
         if rate_event == "first":
             if self.baseline_fixed and self._has_baseline(ch):

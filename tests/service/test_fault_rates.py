@@ -22,7 +22,7 @@ import pytest
 from companion.health import clip_watch
 from companion.health.evidence_rules import FaultLimits
 from companion.service.imu_group import MIN_ALIGNED
-from tests.service.test_telemetry_rates import run, telemetry
+from tests.support.telemetry_sim import run, telemetry
 
 SOAK = pytest.mark.soak  # run by benchmarks/soak_checks.py: the suite's time keeps the extremes only
 RATES = [1.0, pytest.param(2.0, marks=SOAK), pytest.param(4.0, marks=SOAK), 10.0]
@@ -93,18 +93,17 @@ def test_a_gyro_biased_off_its_twins_is_named_odd_one_out_within_the_samples_nee
     assert not others_named(p, 1), p.transitions
 
 
-@pytest.mark.parametrize("rate", [pytest.param(4.0, marks=SOAK), pytest.param(10.0, marks=SOAK)])
-def test_with_two_imus_a_bias_at_rest_ends_with_the_biased_one_named_alone(rate):
-    """Two IMUs alone cannot say which of them is off: the pair's disagreement may name both as suspects
-    first; at rest the biased one's own bias test names it, and from then on only it is held (its twin's
-    disagreement cleared within a block)."""
-    t, g, a = telemetry(rate, 300.0, seed=3, imus=2, armed_at=1e9)
+@pytest.mark.parametrize("rate", [1.0, pytest.param(4.0, marks=SOAK), pytest.param(10.0, marks=SOAK)])
+def test_with_two_imus_at_rest_the_biased_one_is_named_alone(rate):
+    """Two IMUs alone cannot say which of them is off in flight (both are suspects there); at rest the true
+    rate is 0, and the IMU whose reading left its own mean at rest is named alone, at 1 Hz too (where the
+    bias test has no reference: 1 sample a block)."""
+    t, g, a = telemetry(rate, 260.0, seed=3, imus=2, armed_at=1e9)
     onset = 200.0
     g[1][t >= onset, 0] += math.radians(10.0)
     p, sink = run(t, g, a, armed_at=1e9)
-    jump = named(p, 1, "bias jump")
-    assert jump and named(p, 1, "disagrees with IMU0"), p.transitions
-    on = [te for te, x in p.transitions if x.startswith("IMU0 ") and "cleared" not in x]
-    off = [te for te, x in p.transitions if x.startswith("IMU0 ") and "cleared" in x]
-    assert len(on) == len(off) and all(te <= jump[0][0] + 1.0 for te in off), p.transitions
+    dis = named(p, 1, "disagrees with IMU0")
+    assert dis, p.transitions
+    assert int(np.count_nonzero((t >= onset) & (t <= dis[0][0]))) <= fault_samples_needed(rate)
+    assert not others_named(p, 1), p.transitions
     assert sink.values["IMU0G_FLT"] == 0.0 and sink.values["IMU1G_FLT"] > 0.0
