@@ -36,6 +36,7 @@ import numpy as np
 
 from benchmarks import results
 from benchmarks.tlog_zero_gyro import edit_gyro, gyro_values
+from companion.health.clip_watch import ClipWatch
 from companion.health.frozen_watch import FrozenWatch
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
@@ -89,7 +90,7 @@ def sim_run(seed: int, rate: float, hours: float, imus: int, dead: bool, watch_o
         onset = sim.t_start + f.arm_at + rng.uniform(60.0, f.disarm_at - f.arm_at - 180.0)
         bad = int(rng.integers(imus))
     p = Pipeline(PipelineConfig(), Reporter(Sink(), 1.0))
-    watch, events = FrozenWatch(), []
+    watch, clip, events = FrozenWatch(), ClipWatch(32.767), []
     keys = [StreamKey(1, 1, IMU_MESSAGES[i], i) for i in range(imus)]
     for blk in sim.blocks(dur, block_s=600.0):
         picks = [telemetry_pick(blk.t, rate, rng) for _ in range(imus)]
@@ -105,10 +106,11 @@ def sim_run(seed: int, rate: float, hours: float, imus: int, dead: bool, watch_o
                 a = np.round(blk.accel[i][j] / LSB_A) * LSB_A
                 if watch_only:
                     watch.add(i, blk.t[j], g, a)
+                    clip.add(i, blk.t[j], g)
                 else:
                     p.on_samples(keys[i], blk.t[j], g, a)
             if watch_only:
-                events += watch.judge()
+                events += watch.judge() + clip.take()
     return {"pipeline": p, "events": events, "onset": onset, "bad": bad, "dur": dur}
 
 
@@ -170,7 +172,8 @@ def simulated(rates, seeds: int, hours: float, imus: int) -> bool:
 
 
 def watch_only(rates, seeds: int, hours: float, imus: int) -> bool:
-    """The dead/frozen test alone (health/frozen_watch.py) on healthy runs: its false alarms per IMU-hour."""
+    """The sample tests alone (health/frozen_watch.py, health/clip_watch.py) on healthy runs: their false
+    alarms per IMU-hour."""
     total_h, total_false = 0.0, 0
     for rate in rates:
         n_false = 0
@@ -179,8 +182,9 @@ def watch_only(rates, seeds: int, hours: float, imus: int) -> bool:
             n_false += sum(1 for _, ev in r["events"] if ev.state == 1)
         total_h += seeds * hours * imus
         total_false += n_false
-        print(f"  {rate:>4g} Hz: {seeds * hours * imus:6.1f} healthy IMU-h, dead/stuck false alarms {n_false}")
-    print(f"  total: {total_h:.1f} healthy simulated IMU-hours through the dead/frozen test, {total_false} false alarms")
+        print(f"  {rate:>4g} Hz: {seeds * hours * imus:6.1f} healthy IMU-h, dead/stuck/saturated false alarms {n_false}")
+    print(f"  total: {total_h:.1f} healthy simulated IMU-hours through the dead/frozen and clip tests, "
+          f"{total_false} false alarms")
     return total_false == 0
 
 
@@ -339,7 +343,7 @@ def main() -> int:
         print(f"simulated telemetry: {args.imus} IMUs, {args.seeds} healthy + {args.seeds} dead runs of "
               f"{args.hours:g} h per rate")
         ok &= simulated(args.rates, args.seeds, args.hours, args.imus)
-        print(f"the dead/frozen test alone: 3 healthy runs of {args.watch_hours:g} h per rate")
+        print(f"the dead/frozen and clip tests alone: 3 healthy runs of {args.watch_hours:g} h per rate")
         ok &= watch_only(args.rates, 3, args.watch_hours, args.imus)
         print(f"samples each fault needs (3 IMUs, {args.fault_seeds} runs per rate; docs/health.md):")
         ok &= fault_samples(args.rates, args.fault_seeds)
