@@ -17,8 +17,9 @@
    --source`` replays it (service.replay.replay_log): its gyro reading 0 (the delay to the first dead/stuck
    naming of that IMU); clipped at the 80th percentile of its largest |axis| in the second half (a range its
    fastest fifth of motion exceeds, 0.1 rad/s at least; logs with fewer than 5 % of those samples beyond
-   0.1 rad/s, at rest in their second half, are left out): the delay to "saturated"; in multi-IMU logs, its X axis biased by 10 deg/s: the delay to
-   "disagrees" or "bias jump". Any other IMU named after the onset counts against the case.
+   0.1 rad/s, at rest in their second half, are left out): the delay to "saturated" from the first sample
+   beyond the clip (a clip shows only once the motion reaches it); in multi-IMU logs, its X axis biased by
+   10 deg/s: the delay to "disagrees" or "bias jump". Any other IMU named after the onset counts against it.
 
 Targets (issue 48): every IMU watched, 0 false alarms over >= 100 simulated IMU-hours, every zeroed,
 clipped or biased gyro named within max(60 s, 60 samples), its healthy twins not named.
@@ -261,9 +262,11 @@ def clip_level(path, message: str) -> float | None:
     return max(CLIP_MIN_MRAD, float(np.percentile(top, 80.0)))
 
 
-def injected(path, s, fn, pattern, tmp) -> tuple[float | None, list]:
+def injected(path, s, fn, pattern, tmp, level: float | None = None) -> tuple[float | None, list]:
     """Replay a copy of ``path`` whose ``s`` gyro is ``fn(gyro)`` from the middle of its samples: (the delay to
-    the first naming of that IMU matching ``pattern``, the other IMUs named after the onset)."""
+    the first naming of that IMU matching ``pattern``, the other IMUs named after the onset). ``level``
+    (mrad/s, a clip): the delay from the first sample the clip changed, as a clip shows only once the motion
+    reaches it."""
     from companion.sources import load
 
     z = Path(tmp) / "z.tlog"
@@ -271,7 +274,12 @@ def injected(path, s, fn, pattern, tmp) -> tuple[float | None, list]:
     pz = replay(z)
     # the onset on the replay's time axis (a log with a reboot has its later sessions shifted)
     zs = [x for x in load(str(z)).streams if x.key == s.key][0]
-    onset = float(zs.t[zs.t.size - info["frames"]]) if zs.t.size == info["total"] else info["t0"]
+    k0 = zs.t.size - info["frames"]
+    onset = float(zs.t[k0]) if zs.t.size == info["total"] else info["t0"]
+    if level is not None and zs.t.size == info["total"]:
+        _, g = gyro_values(path, s.key.message)
+        reached = np.flatnonzero(np.any(np.abs(g[k0:]) > level, axis=1))
+        onset = float(zs.t[k0 + reached[0]]) if reached.size else onset
     return judge(pz, onset, s.key.instance, pattern)
 
 
@@ -296,15 +304,16 @@ def real(logs) -> bool:
             lines = {"zeroed": [], "clipped": [], "biased": []}
             for s in streams:
                 target = max(60.0, 60.0 / s.rate_hz)
-                cases = [("zeroed", np.zeros_like, NAMED, s.key.message)]
+                cases = [("zeroed", np.zeros_like, NAMED, s.key.message, None)]
                 level = clip_level(path, s.key.message)
                 if level is not None:
                     cases.append(("clipped", lambda g, c=level: np.clip(g, -c, c), SATURATED,
-                                  f"{s.key.message} at {level / 1000:.2f} rad/s"))
+                                  f"{s.key.message} at {level / 1000:.2f} rad/s", level))
                 if len(streams) > 1:
-                    cases.append(("biased", lambda g: g + np.array([BIAS_MRAD, 0.0, 0.0]), DISAGREES, s.key.message))
-                for kind, fn, pattern, name in cases:
-                    fz, delay = injected(path, s, fn, pattern, d)
+                    cases.append(("biased", lambda g: g + np.array([BIAS_MRAD, 0.0, 0.0]), DISAGREES, s.key.message,
+                                  None))
+                for kind, fn, pattern, name, lv in cases:
+                    fz, delay = injected(path, s, fn, pattern, d, lv)
                     text, good = verdict(name, delay, fz, target)
                     lines[kind].append(text)
                     tally[kind][0] += good

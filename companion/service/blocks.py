@@ -74,6 +74,7 @@ class BlockCutter:
         self.prev_rate_hz: float | None = None  # the rate before the last change
         self.too_slow_hz: float | None = None  # the rate learned when it is below MIN_WATCH_RATE_HZ
         self.tol = RATE_CHANGE  # relative change of the rate that is a change (RATE_CHANGE or the spread)
+        self.tol_known = False  # the spread learned (a rate restored from the state has none yet)
         self.n_in = 0  # intervals that entered the window so far
         self.set_at = 0  # n_in when the rate was last set
         self.off_since: int | None = None  # n_in when the window's rate left the tolerance
@@ -230,6 +231,9 @@ class BlockCutter:
         if len(self.dts) < MIN_INTERVALS:
             return None
         rate = 1.0 / period_of(self.dts, self.time_res)
+        if self.rate_hz is not None and not self.tol_known:  # a rate restored from the state: its spread now
+            self.tol = max(RATE_CHANGE, self.wander, interval_spread(self.dts, self.time_res))
+        self.tol_known = True
         if self.rate_hz is None:
             if rate < MIN_WATCH_RATE_HZ:  # said in the summary (service.imu_summary.too_slow_note)
                 self.too_slow_hz = rate
