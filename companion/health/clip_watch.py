@@ -11,13 +11,14 @@ samples, while the values just below it stay sparse. Over the last ``WINDOW`` sa
   it (a clip that begins mid-window: the larger values before it do not count), in ``visits`` apart by a
   sample more than ``BAND`` (5 % of top, 0.01 rad/s at least) below it; ``near`` = the most samples of the
   whole window at any one value within BAND below top;
-* the axis is named when ``at >= NEED`` (4) in 2 visits or more (SINGLE_VISIT, 6, in one), ``at >= RATIO *
-  near`` (2), and
+* the axis is named when ``at >= NEED`` (4) in 2 visits or more, ``at >= RATIO * near`` (2), and
   top >= ``MIN_LEVEL`` (0.05 rad/s, far above a gyro's noise: a bias at rest is not a clip).
 
 Healthy motion reaches its largest value once; samples one telemetry period apart (>= ``MIN_SPACING_S``)
-hit the same exact value at the top of a window only where the rate holds still (a steady turn), in one
-visit, and then its neighbouring values are as frequent (``near``: a yaw of 0.05 rad/s held for a minute in
+hit the same exact value at the top of a window only where the rate holds still (a steady turn): in one
+visit (a gyro quieter than its step, SITL, reads one value throughout a steady turn: one visit is never
+enough, and a clip held through one manoeuvre only is named at its next one), and its neighbouring values are
+as frequent (``near``: a yaw of 0.05 rad/s held for a minute in
 a real tlog read 55 mrad/s four times, 53 and 54 twice, 50 eight times). The neighbourhood is judged value by
 value, not as a whole: a vehicle spinning near its clip level (a compass-calibration dance at 5 rad/s) puts
 many samples within 5 % below it, each at its own value. A clip puts every sample beyond the limit at the limit.
@@ -43,9 +44,6 @@ from companion.health.faults import FAULT, OK, FaultEvent
 AXES = ("gx", "gy", "gz")
 WINDOW = 60  # samples of an axis judged together
 NEED = 4  # samples at the window's top |value| that name a clip
-#: samples at the top in one visit that name a clip too (a manoeuvre held beyond the limit): a healthy gyro
-#: above MIN_LEVEL read the same value at most 3 times in a row in the real tlogs of bench_telemetry_rates
-SINGLE_VISIT = 6
 RATIO = 2.0  # ... at least this many times the samples just below it
 BAND = 0.05  # relative: "just below" is within 5 % of the top
 BAND_MIN = 0.01  # rad/s, and at least this (10 steps of RAW_IMU: a steady turn's values within 1-3 steps)
@@ -147,7 +145,7 @@ class ClipWatch:
         # gyro at rest: as many at the neighbouring values as at the top)
         vals, counts = np.unique(win[(win < top) & (win >= top - band)], return_counts=True)
         near = int(counts.max()) if counts.size else 0
-        if visits < 2 and at < SINGLE_VISIT:
+        if visits < 2:  # one stay at a value is a steady turn as much as a clip (a gyro quieter than its step)
             return None
         if at >= NEED and at >= RATIO * near:
             st.state, st.level, st.quiet = FAULT, top, 0
