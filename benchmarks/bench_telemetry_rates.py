@@ -2,6 +2,7 @@
 
     python -m benchmarks.bench_telemetry_rates            # simulated 1, 2, 4, 10 Hz (>= 100 IMU-h) + real tlogs
     python -m benchmarks.bench_telemetry_rates --quick    # the short run
+    python -m benchmarks.bench_telemetry_rates --faults-only  # the samples each fault needs, alone
 
 1. Simulated telemetry (companion.sim.vehicle, 3 IMUs, random flights and handlings, 50 Hz inside): each
    IMU's samples taken as a telemetry stream takes them, the latest sample every 1/rate s with +-20 %
@@ -11,12 +12,17 @@
    every axis from the middle of a flight on; the delay to the first "dead"/"stuck" naming that IMU,
    against the target max(60 s, 60 samples); any other IMU named after the onset is a false alarm too.
 2. Real tlogs (the shared ArduSub tlog, /work/reallogs/ardusub, /work/reallogs/tlogs_extra; rates 1-4 Hz):
-   the log as it is (every IMU watched? false alarms), then once per IMU message a copy whose gyro reads 0
-   from the middle of its samples (benchmarks/tlog_zero_gyro.py), replayed as ``companion run --source``
-   replays it (service.replay.replay_log); the delay to the first dead/stuck naming of that IMU.
+   the log as it is (every IMU watched? false alarms, rate switches), then once per IMU message a copy
+   changed from the middle of its samples on (benchmarks/tlog_zero_gyro.py), replayed as ``companion run
+   --source`` replays it (service.replay.replay_log): its gyro reading 0 (the delay to the first dead/stuck
+   naming of that IMU); clipped at the 80th percentile of its largest |axis| in the second half (a range its
+   fastest fifth of motion exceeds, 0.1 rad/s at least; logs with fewer than 5 % of those samples beyond
+   0.1 rad/s, at rest in their second half, are left out): the delay to "saturated" from the first sample
+   beyond the clip (a clip shows only once the motion reaches it); in multi-IMU logs, its X axis biased by
+   10 deg/s: the delay to "disagrees" or "bias jump". Any other IMU named after the onset counts against it.
 
-Targets (issue 48): every IMU watched, 0 false alarms over >= 100 simulated IMU-hours, every zeroed gyro
-named within max(60 s, 60 samples).
+Targets (issue 48): every IMU watched, 0 false alarms over >= 100 simulated IMU-hours, every zeroed,
+clipped or biased gyro named within max(60 s, 60 samples), its healthy twins not named.
 """
 
 from __future__ import annotations
@@ -30,7 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import results
-from benchmarks.tlog_zero_gyro import zero_gyro
+from benchmarks.tlog_zero_gyro import edit_gyro, gyro_values
+from companion.health.clip_watch import ClipWatch
 from companion.health.frozen_watch import FrozenWatch
 from companion.mavlink.reporter import Reporter
 from companion.samples import StreamKey
@@ -84,7 +91,7 @@ def sim_run(seed: int, rate: float, hours: float, imus: int, dead: bool, watch_o
         onset = sim.t_start + f.arm_at + rng.uniform(60.0, f.disarm_at - f.arm_at - 180.0)
         bad = int(rng.integers(imus))
     p = Pipeline(PipelineConfig(), Reporter(Sink(), 1.0))
-    watch, events = FrozenWatch(), []
+    watch, clip, events = FrozenWatch(), ClipWatch(32.767), []
     keys = [StreamKey(1, 1, IMU_MESSAGES[i], i) for i in range(imus)]
     for blk in sim.blocks(dur, block_s=600.0):
         picks = [telemetry_pick(blk.t, rate, rng) for _ in range(imus)]
@@ -100,10 +107,11 @@ def sim_run(seed: int, rate: float, hours: float, imus: int, dead: bool, watch_o
                 a = np.round(blk.accel[i][j] / LSB_A) * LSB_A
                 if watch_only:
                     watch.add(i, blk.t[j], g, a)
+                    clip.add(i, blk.t[j], g)
                 else:
                     p.on_samples(keys[i], blk.t[j], g, a)
             if watch_only:
-                events += watch.judge()
+                events += watch.judge() + clip.take()
     return {"pipeline": p, "events": events, "onset": onset, "bad": bad, "dur": dur}
 
 
@@ -117,12 +125,12 @@ def faults_of(p: Pipeline) -> list[tuple[float, int, str]]:
     return out
 
 
-def judge(p: Pipeline, onset: float | None, bad: int | None) -> tuple[list, float | None]:
-    """(false alarms, delay to the dead IMU's naming or None)."""
+def judge(p: Pipeline, onset: float | None, bad: int | None, pattern=NAMED) -> tuple[list, float | None]:
+    """(false alarms, delay to the faulty IMU's naming by ``pattern`` or None)."""
     false, delay = [], None
     for t, imu, text in faults_of(p):
         if onset is not None and imu == bad and t >= onset:
-            if delay is None and NAMED.match(text):
+            if delay is None and pattern.match(text):
                 delay = t - onset
             continue
         false.append((t, text))
@@ -165,7 +173,8 @@ def simulated(rates, seeds: int, hours: float, imus: int) -> bool:
 
 
 def watch_only(rates, seeds: int, hours: float, imus: int) -> bool:
-    """The dead/frozen test alone (health/frozen_watch.py) on healthy runs: its false alarms per IMU-hour."""
+    """The sample tests alone (health/frozen_watch.py, health/clip_watch.py) on healthy runs: their false
+    alarms per IMU-hour."""
     total_h, total_false = 0.0, 0
     for rate in rates:
         n_false = 0
@@ -174,9 +183,46 @@ def watch_only(rates, seeds: int, hours: float, imus: int) -> bool:
             n_false += sum(1 for _, ev in r["events"] if ev.state == 1)
         total_h += seeds * hours * imus
         total_false += n_false
-        print(f"  {rate:>4g} Hz: {seeds * hours * imus:6.1f} healthy IMU-h, dead/stuck false alarms {n_false}")
-    print(f"  total: {total_h:.1f} healthy simulated IMU-hours through the dead/frozen test, {total_false} false alarms")
+        print(f"  {rate:>4g} Hz: {seeds * hours * imus:6.1f} healthy IMU-h, dead/stuck/saturated false alarms {n_false}")
+    print(f"  total: {total_h:.1f} healthy simulated IMU-hours through the dead/frozen and clip tests, "
+          f"{total_false} false alarms")
     return total_false == 0
+
+
+def fault_samples(rates, seeds: int) -> bool:
+    """The samples after the onset each fault needs at each rate, on the simulated telemetry of the tests
+    (tests/support/telemetry_sim.py: 3 IMUs, body rates +-0.5 rad/s changing from sample to sample; 100 s,
+    the fault on IMU1 from 50 s): the count of IMU1's samples from the onset to its naming, and whether
+    another IMU was named."""
+    from tests.support.telemetry_sim import run, telemetry
+
+    faults = {
+        "dead (gyro 0)": (lambda g, m: np.where(m[:, None], 0.0, g), NAMED),
+        "at the 32.767 rad/s limit": (lambda g, m: np.where(m[:, None], np.clip(100.0 * g, -32.767, 32.767), g),
+                                      SATURATED),
+        "clipped at 0.3 rad/s": (lambda g, m: np.where(m[:, None], np.clip(g, -0.3, 0.3), g), SATURATED),
+        "X biased 10 deg/s": (lambda g, m: g + np.where(m, np.radians(10.0), 0.0)[:, None] * [1.0, 0.0, 0.0],
+                              DISAGREES),
+    }
+    ok = True
+    for name, (fn, pattern) in faults.items():
+        row = []
+        for rate in rates:
+            counts, other = [], 0
+            for seed in range(seeds):
+                t, g, a = telemetry(rate, 100.0, seed=100 * seed + int(rate * 10) + 7, imus=3)
+                g[1] = fn(g[1], t >= 50.0)
+                p, _ = run(t, g, a)
+                false, delay = judge(p, 50.0, 1, pattern)
+                other += len(false)
+                counts.append(None if delay is None else int(np.count_nonzero((t >= 50.0) & (t <= 50.0 + delay))))
+            got = [c for c in counts if c is not None]
+            ok &= len(got) == len(counts) and other == 0
+            row.append(f"{rate:g} Hz {min(got) if got else '-'}-{max(got) if got else '-'}"
+                       + (f" ({len(counts) - len(got)} missed)" if len(got) < len(counts) else "")
+                       + (f" (+{other} other IMU)" if other else ""))
+        print(f"  {name:27s} samples to naming: " + "; ".join(row))
+    return ok
 
 
 def real_logs() -> list[Path]:
@@ -199,10 +245,54 @@ def replay(path) -> Pipeline:
     return p
 
 
+SATURATED = re.compile(r"^IMU(\d) gyro [XYZ] saturated")
+DISAGREES = re.compile(r"^IMU(\d) gyro X (disagrees|bias jump)")
+BIAS_MRAD = 1000.0 * np.radians(10.0)  # 10 deg/s: twice ArduPilot's 5 deg/s gyro consistency limit
+CLIP_MIN_MRAD = 100.0  # the lowest clip injected: far above any gyro's noise
+
+
+def clip_level(path, message: str) -> float | None:
+    """The injected clip (mrad/s): the 80th percentile of the largest |axis| of each sample of the second
+    half (a range its fastest fifth of motion exceeds), 0.1 rad/s at least; None where fewer than 5 % of
+    those samples exceed 0.1 rad/s (a log at rest in its second half: nothing to clip)."""
+    t, g = gyro_values(path, message)
+    top = np.abs(g[g.shape[0] // 2:]).max(axis=1)
+    if np.mean(top > CLIP_MIN_MRAD) < 0.05:
+        return None
+    return max(CLIP_MIN_MRAD, float(np.percentile(top, 80.0)))
+
+
+def injected(path, s, fn, pattern, tmp, level: float | None = None) -> tuple[float | None, list]:
+    """Replay a copy of ``path`` whose ``s`` gyro is ``fn(gyro)`` from the middle of its samples: (the delay to
+    the first naming of that IMU matching ``pattern``, the other IMUs named after the onset). ``level``
+    (mrad/s, a clip): the delay from the first sample the clip changed, as a clip shows only once the motion
+    reaches it."""
+    from companion.sources import load
+
+    z = Path(tmp) / "z.tlog"
+    info = edit_gyro(path, z, s.key.message, fn)
+    pz = replay(z)
+    # the onset on the replay's time axis (a log with a reboot has its later sessions shifted)
+    zs = [x for x in load(str(z)).streams if x.key == s.key][0]
+    k0 = zs.t.size - info["frames"]
+    onset = float(zs.t[k0]) if zs.t.size == info["total"] else info["t0"]
+    if level is not None and zs.t.size == info["total"]:
+        _, g = gyro_values(path, s.key.message)
+        reached = np.flatnonzero(np.any(np.abs(g[k0:]) > level, axis=1))
+        onset = float(zs.t[k0 + reached[0]]) if reached.size else onset
+    return judge(pz, onset, s.key.instance, pattern)
+
+
+def verdict(name, delay, false, target) -> tuple[str, bool]:
+    text = f"{name} " + ("not named" if delay is None else f"{delay:.1f} s") + (f" (+{len(false)} false)" if false else "")
+    return text, delay is not None and delay <= target and not false
+
+
 def real(logs) -> bool:
     from companion.sources import load
 
     ok = True
+    tally = {"zeroed": [0, 0], "clipped": [0, 0], "biased": [0, 0]}
     with tempfile.TemporaryDirectory() as d:
         for path in logs:
             streams = [s for s in load(str(path)).streams if s.is_imu]
@@ -210,25 +300,36 @@ def real(logs) -> bool:
             watched = sum(1 for ch in p.channels.values() if ch.rate_hz)
             false, _ = judge(p, None, None)
             rates = ", ".join(f"{s.rate_hz:.2f}" for s in streams)
-            named = []
+            switches = ", ".join(str(ch.rate_switches) for _, ch in sorted(p.channels.items()))
+            lines = {"zeroed": [], "clipped": [], "biased": []}
             for s in streams:
-                z = Path(d) / "z.tlog"
-                info = zero_gyro(path, z, s.key.message)
-                pz = replay(z)
-                # the onset on the replay's time axis (a log with a reboot has its later sessions shifted)
-                zs = [x for x in load(str(z)).streams if x.key == s.key][0]
-                onset = float(zs.t[zs.t.size - info["frames"]]) if zs.t.size == info["total"] else info["t0"]
-                fz, delay = judge(pz, onset, s.key.instance)
                 target = max(60.0, 60.0 / s.rate_hz)
-                named.append(f"{s.key.message} " + ("not named" if delay is None else f"{delay:.1f} s")
-                             + (f" (+{len(fz)} false)" if fz else ""))
-                ok &= delay is not None and delay <= target and not fz
+                cases = [("zeroed", np.zeros_like, NAMED, s.key.message, None)]
+                level = clip_level(path, s.key.message)
+                if level is not None:
+                    cases.append(("clipped", lambda g, c=level: np.clip(g, -c, c), SATURATED,
+                                  f"{s.key.message} at {level / 1000:.2f} rad/s", level))
+                if len(streams) > 1:
+                    cases.append(("biased", lambda g: g + np.array([BIAS_MRAD, 0.0, 0.0]), DISAGREES, s.key.message,
+                                  None))
+                for kind, fn, pattern, name, lv in cases:
+                    fz, delay = injected(path, s, fn, pattern, d, lv)
+                    text, good = verdict(name, delay, fz, target)
+                    lines[kind].append(text)
+                    tally[kind][0] += good
+                    tally[kind][1] += 1
+                    ok &= good
+                    for t, x in fz[:2]:
+                        lines[kind].append(f"[{kind} {s.key.message}: at {t:.0f} s {x}]")
             print(f"  {path.name}: {len(streams)} IMU(s) at {rates} Hz, {watched} watched, "
-                  f"{sum(1 for _ in p.channels)} seen, false alarms {len(false)}; zeroed from mid-log: "
-                  + "; ".join(named))
+                  f"{sum(1 for _ in p.channels)} seen, rate switches {switches}, false alarms {len(false)}")
+            for kind, texts in lines.items():
+                print(f"      {kind}: " + ("; ".join(texts) if texts else "-"))
             for t, text in false[:3]:
                 print(f"      false alarm at {t:.0f} s: {text}")
             ok &= watched == len(streams) and not false
+    print("  named within max(60 s, 60 samples), no other IMU named: " + ", ".join(
+        f"{k} {v[0]}/{v[1]}" for k, v in tally.items()))
     return ok
 
 
@@ -240,16 +341,25 @@ def main() -> int:
     ap.add_argument("--imus", type=int, default=3)
     ap.add_argument("--watch-hours", type=float, default=3.0, help="hours per healthy run of the dead/frozen "
                     "test alone (3 runs per rate)")
+    ap.add_argument("--fault-seeds", type=int, default=5, help="runs per fault and rate of the samples-needed table")
+    ap.add_argument("--faults-only", action="store_true", help="only the samples each fault needs")
     ap.add_argument("--no-real", action="store_true", help="skip the real tlogs")
     ap.add_argument("--no-sim", action="store_true", help="skip the simulated runs")
     args = results.parse_args(ap, {"seeds": 1, "hours": 0.35, "watch_hours": 0.5})
     ok = True
+    if args.faults_only:
+        print(f"samples each fault needs (3 IMUs, {args.fault_seeds} runs per rate; docs/health.md):")
+        ok = fault_samples(args.rates, args.fault_seeds)
+        print("targets met" if ok else "targets NOT met")
+        return 0
     if not args.no_sim:
         print(f"simulated telemetry: {args.imus} IMUs, {args.seeds} healthy + {args.seeds} dead runs of "
               f"{args.hours:g} h per rate")
         ok &= simulated(args.rates, args.seeds, args.hours, args.imus)
-        print(f"the dead/frozen test alone: 3 healthy runs of {args.watch_hours:g} h per rate")
+        print(f"the dead/frozen and clip tests alone: 3 healthy runs of {args.watch_hours:g} h per rate")
         ok &= watch_only(args.rates, 3, args.watch_hours, args.imus)
+        print(f"samples each fault needs (3 IMUs, {args.fault_seeds} runs per rate; docs/health.md):")
+        ok &= fault_samples(args.rates, args.fault_seeds)
     if not args.no_real:
         print("real tlogs (each IMU's gyro zeroed from the middle of its samples, one at a time):")
         ok &= real(real_logs())
@@ -260,5 +370,6 @@ def main() -> int:
 if __name__ == "__main__":
     import sys
 
-    part = " real" if "--no-sim" in sys.argv else " sim" if "--no-real" in sys.argv else ""
+    part = (" faults" if "--faults-only" in sys.argv else " real" if "--no-sim" in sys.argv
+            else " sim" if "--no-real" in sys.argv else "")
     raise SystemExit(results.run(main, "bench_telemetry_rates" + part))

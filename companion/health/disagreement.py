@@ -85,6 +85,10 @@ class PairDisagreement:
     def axis_state(self, a: int) -> int:
         return FAULT if FAULT in (self.up[a].state, self.down[a].state) else OK
 
+    def evidence(self) -> bool:
+        """Any axis in FAULT or with a CUSUM a quarter of the way to it."""
+        return any(self.axis_state(a) == FAULT or max(self.up[a].s, self.down[a].s) > 0.25 * H_ON for a in range(3))
+
     @property
     def state(self) -> int:
         return FAULT if any(self.axis_state(a) == FAULT for a in range(3)) else OK

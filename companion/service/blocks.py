@@ -11,14 +11,25 @@ interval longer than ``gap_s`` (and, once the rate is known, than GAP_PERIODS pe
 block is dropped). A block closes at the first sample with ``t - t0 >= block_s - period / 2``.
 
 The rate is 1 / :func:`companion.sources.timestamps.period_of` of the last RATE_WINDOW intervals, taken at the
-first block close with 8 intervals and re-taken at every close; a change of more than 20 % is reported. Every
-forward interval enters the window, gaps too: period_of starts from their median, so an occasional long gap
-or a burst moves it little, and a stream whose every interval is longer than ``gap_s`` (a 1 Hz telemetry
-stream, intervals of 0.5 to 2 s) still gets its rate, after which its gap rule is GAP_PERIODS periods.
+first block close with 8 intervals and re-taken at every close. Every forward interval enters the window, gaps
+too: period_of starts from their median, so an occasional long gap or a burst moves it little, and a stream
+whose every interval is longer than ``gap_s`` (a 1 Hz telemetry stream, intervals of 0.5 to 2 s) still gets
+its rate, after which its gap rule is GAP_PERIODS periods.
+
+A change is reported when the window's rate is off the stream's by more than the stream's tolerance
+(``tol``: RATE_CHANGE, or the spread of its own intervals where that is wider, :func:`interval_spread`) and
+has stayed off for SETTLE intervals, SETTLE intervals or more after the rate was last set. A telemetry
+stream the autopilot slows while the radio is busy (ArduPilot's stream slow-down: intervals of 0.5 to 1.4 s
+that wander from second to second) has no one period, and a window of 64 of its intervals moves by 20 %
+from one minute to the next: with RATE_CHANGE alone such a stream switched 16-29 times in 20 minutes,
+each switch restarting the estimators and holding blocks back. A stream asked for another rate changes by
+far more than its spread and is followed by the per-block test (service/rate_tracker.py) within a few
+blocks.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Iterator
 
@@ -33,9 +44,20 @@ MIN_INTERVALS = 8  # intervals before the rate is taken
 #: and with ``gap_s`` alone each would be a gap that drops the block: the stream would never fill one
 GAP_PERIODS = 2.5
 RATE_WINDOW = 64  # intervals whose robust period is the stream's rate
+SETTLE = RATE_WINDOW // 2  # intervals a rate stands before it changes, and a change stands before it is taken
+#: a switch and a switch back within this factor and WANDER_INTERVALS is the stream's wander (BlockCutter.switch)
+WANDER_MAX = 2.0
+WANDER_INTERVALS = 4 * RATE_WINDOW
 #: below this a stream is not watched: a block of samples spans minutes, a dead gyro would be named after many
 #: minutes, and such a rate is more often a time column in the wrong unit than a real IMU stream
 MIN_WATCH_RATE_HZ = 0.5
+
+
+def interval_spread(d, resolution: float = 0.0) -> float:
+    """The relative spread of a stream's intervals: their interquartile range, less two stamp resolutions
+    (a 400 Hz stream stamped in whole ms has intervals of 2 and 3 ms), over their median."""
+    q25, q50, q75 = np.percentile(np.asarray(d, dtype=float), [25.0, 50.0, 75.0])
+    return max(0.0, float(q75 - q25) - 2.0 * resolution) / q50 if q50 > 0 else 0.0
 
 
 class BlockCutter:
@@ -51,6 +73,13 @@ class BlockCutter:
         self.rate_hz: float | None = None
         self.prev_rate_hz: float | None = None  # the rate before the last change
         self.too_slow_hz: float | None = None  # the rate learned when it is below MIN_WATCH_RATE_HZ
+        self.tol = RATE_CHANGE  # relative change of the rate that is a change (RATE_CHANGE or the spread)
+        self.tol_known = False  # the spread learned (a rate restored from the state has none yet)
+        self.n_in = 0  # intervals that entered the window so far
+        self.set_at = 0  # n_in when the rate was last set
+        self.off_since: int | None = None  # n_in when the window's rate left the tolerance
+        self.gap_t: list[float] = []  # times of the samples joined by gaps only (slower_rate)
+        self.wander = 0.0  # the stream's own wander, learned from a switch and a switch back (switch)
         self._parts: list = []
         self._t0: float | None = None
         self.counts = {"samples": 0, "duplicates": 0, "backwards": 0, "resets": 0, "gaps": 0, "rate_changes": 0}
@@ -78,7 +107,7 @@ class BlockCutter:
         * ``("reset", t_before, t)`` / ``("gap", t)``: a discontinuity before the next sample (block dropped);
         * ``("samples", tt)``: accepted samples that close no block (their timestamps);
         * ``("block", data, rate)``: the block closed by its last sample; ``rate`` is None, ``"first"`` when
-          the rate was just taken or ``"changed"`` (``rate_hz`` holds the new value).
+          the rate was just taken or ``"changed"`` (``rate_hz`` holds the new value, ``prev_rate_hz`` the old).
         """
         t = rows[:, 0]
         n = t.shape[0]
@@ -97,11 +126,15 @@ class BlockCutter:
                     continue
                 elif kind != OK:  # a gap (a live gap also splits: the same here)
                     self.counts["gaps"] += 1
+                    self.gap_t = (self.gap_t or [self.last_t]) + [float(t[i])]
                     self.dts.append(float(t[i] - self.last_t))  # the window's median sees it (RATE_WINDOW)
+                    self.n_in += 1
                     self.drop()
                     yield ("gap", float(t[i]))
                 else:
                     self.dts.append(float(t[i] - self.last_t))
+                    self.n_in += 1
+                    self.gap_t = []
             # the clean stretch from i: every interval within (0, gap_s]; while the rate is unknown the period
             # (the median of the intervals so far) changes with every sample: one row at a time
             if self.rate_hz is None or n - i == 1:
@@ -111,6 +144,7 @@ class BlockCutter:
                 end = i + 1 + (int(bad[0]) if bad.size else n - i - 1)
                 if end - i > 1:
                     self.dts.extend(np.diff(t[i:end])[-self.dts.maxlen:].tolist())
+                    self.n_in += end - i - 1
             self.counts["samples"] += end - i
             self.last_t = float(t[end - 1])
             rules = self.rules
@@ -165,19 +199,59 @@ class BlockCutter:
             j = min(j, int(np.searchsorted(t, check_t, side="left")))
         return j
 
+    def slower_rate(self) -> float | None:
+        """The rate of a stream now slower than GAP_PERIODS periods: every interval a gap, so no block closes
+        and the window is never re-taken (asked for 1 Hz after 4 Hz). MIN_INTERVALS gaps in a row whose
+        own rate is off the stream's by more than its tolerance give it; None otherwise."""
+        if self.rate_hz is None or len(self.gap_t) <= MIN_INTERVALS:
+            return None
+        rate = 1.0 / period_of(np.diff(self.gap_t), self.time_res)
+        return rate if math.log(self.rate_hz / rate) > math.log1p(self.tol) else None
+
+    def switch(self, new_rate: float, intervals=None) -> None:
+        """The channel switched to ``new_rate`` (service/channel.py); ``intervals``: those of the blocks held
+        back at it, the window from here (None: the window is at the new rate already). A switch back to the
+        rate before, within a factor WANDER_MAX and WANDER_INTERVALS of the last switch, is the stream's
+        wander (a radio that slows the stream for a minute or two): the tolerance widens to cover both. A
+        ground station that asks for 2 Hz, then 4 Hz and 2 Hz again within a few minutes is followed up to
+        there; a change by more than WANDER_MAX (1 to 4 Hz) always."""
+        old, before = self.rate_hz, self.prev_rate_hz
+        if (old is not None and before is not None and self.n_in - self.set_at < WANDER_INTERVALS
+                and abs(math.log(new_rate / before)) <= math.log1p(self.tol)
+                and abs(math.log(new_rate / old)) <= math.log(WANDER_MAX)):
+            self.wander = max(self.wander, math.exp(abs(math.log(new_rate / old))) * (1.0 + RATE_CHANGE) - 1.0)
+            self.tol = max(self.tol, self.wander)
+        self.prev_rate_hz, self.rate_hz = old, float(new_rate)
+        if intervals is not None:
+            self.dts.clear()
+            self.dts.extend([float(v) for v in intervals])
+        self.set_at, self.off_since, self.gap_t = self.n_in, None, []
+
     def _rate(self) -> str | None:
         if len(self.dts) < MIN_INTERVALS:
             return None
         rate = 1.0 / period_of(self.dts, self.time_res)
+        if self.rate_hz is not None and not self.tol_known:  # a rate restored from the state: its spread now
+            self.tol = max(RATE_CHANGE, self.wander, interval_spread(self.dts, self.time_res))
+        self.tol_known = True
         if self.rate_hz is None:
             if rate < MIN_WATCH_RATE_HZ:  # said in the summary (service.imu_summary.too_slow_note)
                 self.too_slow_hz = rate
                 return None
             self.too_slow_hz = None
             self.rate_hz = rate
+            self.tol = max(RATE_CHANGE, self.wander, interval_spread(self.dts, self.time_res))
+            self.set_at, self.off_since = self.n_in, None
             return "first"
-        if abs(rate / self.rate_hz - 1.0) > RATE_CHANGE:
-            self.counts["rate_changes"] += 1
-            self.prev_rate_hz, self.rate_hz = self.rate_hz, rate
-            return "changed"
-        return None
+        if abs(math.log(rate / self.rate_hz)) <= math.log1p(self.tol):
+            # at the stream's rate: its spread is learned here, never from a window that straddles a change
+            self.tol = max(RATE_CHANGE, self.wander, interval_spread(self.dts, self.time_res))
+            self.off_since = None
+            return None
+        if self.off_since is None:
+            self.off_since = self.n_in
+        if self.n_in - self.set_at < SETTLE or self.n_in - self.off_since < SETTLE:
+            return None
+        self.counts["rate_changes"] += 1
+        self.switch(rate)
+        return "changed"

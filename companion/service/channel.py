@@ -226,19 +226,20 @@ class Channel:
         return True
 
     # ------------------------------------------------------------------ rate changes
-    def switch_rate(self, new_rate: float, t_block: np.ndarray) -> bool:
+    def switch_rate(self, new_rate: float, t_block: np.ndarray, keep_window: bool = False) -> bool:
         """The stream now comes at ``new_rate`` (another client's stream request, a log-rate change): not a
         sensor fault. What depends on the rate (the estimators, the fault references and detectors, the timing
         reference) is kept aside for the old rate; the state kept for the new rate comes back when there is one
         (a rate that returns), else it is learned afresh, without alarms. True when a kept state came back."""
         self.flush()
-        old = self.rate_hz
+        # a drift the cutter re-took (``keep_window``) has switched the cutter already, its window at the new
+        # rate; else the window is that of the blocks held back at the new rate
+        old = self.cutter.prev_rate_hz if keep_window else self.rate_hz
         if old is not None:
             self.rates.keep(old, RateProfile(self.bank, self.faults))
         back = self.rates.take(new_rate)
-        self.cutter.prev_rate_hz, self.cutter.rate_hz = old, float(new_rate)
-        self.cutter.dts.clear()
-        self.cutter.dts.extend(np.diff(np.asarray(t_block, dtype=float)).tolist())
+        if not keep_window:
+            self.cutter.switch(new_rate, self.rates.off_dts or np.diff(np.asarray(t_block, dtype=float)).tolist())
         self.settler.drop_lookahead()
         self._tail = None
         self.rates.switched()

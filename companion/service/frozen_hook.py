@@ -1,4 +1,4 @@
-"""The sample-level dead/frozen test (health/frozen_watch.py) in the pipeline: every accepted row of every
+"""The sample-level dead/frozen test (health/frozen_watch.py) and clip test (health/clip_watch.py) in the pipeline: every accepted row of every
 IMU goes to one :class:`~companion.health.frozen_watch.FrozenWatch` per vehicle, whatever the stream's rate
 and whether or not its blocks are held back (a rate being learned, blocks off the rate); what it names is
 held on the IMU's fault code as an external fault (``ImuFaults.set_external``), as a disagreement is, and
@@ -13,37 +13,48 @@ from __future__ import annotations
 
 import numpy as np
 
-from companion.health.hold import FAULT
+from companion.health.hold import FAULT, OK
 
 
 def watch_rows(pipeline, ch, rows: np.ndarray) -> None:
     """Hand one IMU's rows ``(t, gx, gy, gz, ax, ay, az, ...)`` to the watch; they are judged at
     :func:`say_frozen`."""
     pipeline.frozen.add(ch.imu, rows[:, 0], rows[:, 1:4], rows[:, 4:7])
+    pipeline.clip.add(ch.imu, rows[:, 0], rows[:, 1:4])
 
 
 def say_frozen(pipeline) -> None:
     """At a block close: the watch's events so far on the IMUs' fault codes, the log and STATUSTEXT."""
-    for t, ev in pipeline.frozen.judge():
+    clips = pipeline.clip.take()
+    for t, ev in sorted(pipeline.frozen.judge() + clips, key=lambda te: te[0]):
         target = pipeline.channels.get(ev.imu)
         if target is None:
             continue
         own = (ev.kind, ev.axis) in target.faults.active() and (ev.kind, ev.axis) not in target.faults.external
+        if ev.state == OK and own:  # the block test holds it: its own clear says when it ends
+            continue
         target.faults.set_external(ev.kind, ev.axis, ev.state)
-        target.faults.external_detail[ev.axis] = ev.detail
+        if ev.kind == "saturation":
+            if not own:  # the level quoted (ImuFaults.value_of)
+                target.faults.axes[ev.axis].saturation.value = ev.value
+        else:
+            target.faults.external_detail[ev.axis] = ev.detail
         if ev.state == FAULT and own:  # the block tests said it already
             pipeline._set_state(target)
             continue
-        pipeline.evidence.from_watch = ev  # its evidence shows the watch's statistic
+        pipeline.evidence.from_watch = ev if ev.kind != "saturation" else None  # the frozen watch's statistic
         if ev.state == FAULT:
             pipeline.watch_said.add((ev.imu, ev.kind, ev.axis))
         pipeline._report([ev], t)
     # a rate switch makes the IMU's detectors afresh: what the watch holds stays on its code
     for imu, other in pipeline.channels.items():
-        for kind, ax in pipeline.frozen.active(imu):
+        for kind, ax in pipeline.frozen.active(imu) + pipeline.clip.active(imu):
             if other.faults.external.get((kind, ax)) != FAULT:
                 other.faults.set_external(kind, ax, FAULT)
-                other.faults.external_detail[ax] = pipeline.frozen.detail(imu, ax)
+                if kind == "saturation":
+                    other.faults.axes[ax].saturation.value = pipeline.clip.level(imu, ax)
+                else:
+                    other.faults.external_detail[ax] = pipeline.frozen.detail(imu, ax)
                 pipeline._set_state(other)
 
 

@@ -5,7 +5,10 @@ Inputs: after every block of an IMU, :meth:`ImuGroup.compare` with that IMU and 
 blocks and still noise references, :class:`companion.service.channel.Channel`); outputs: the
 ``disagree`` FaultEvents of the named IMUs (the caller reports them). With three or more IMUs the odd one
 out is named (its pairs disagree, the others agree); with two both are suspects unless only one of them
-has another fault (:meth:`ImuGroup.name` again when another fault appears). The named IMUs' fault state
+has another fault (:meth:`ImuGroup.name` again when another fault appears), or the vehicle rests and only one
+of them reads away from its own mean at rest before (``rest``: each IMU's still block means, learned while no
+pair holds evidence against it; at rest the true rate is 0, so the IMU whose reading moved is the one at
+fault, at any rate, where the bias test needs 5 samples a block); that naming stays until the pair agrees. The named IMUs' fault state
 gets the ``disagree`` kind (``ImuFaults.set_external``). A pair's disagreement on an axis is held (not
 cleared) while either IMU has a fault of ``CAUSES`` on that axis.
 """
@@ -27,6 +30,8 @@ MIN_ALIGNED = 10  # samples both IMUs cover before a pair is tested (fewer give 
 #: hover agrees with the other IMU there: clearing would name the same fault again at the next turn)
 CAUSES = ("stuck", "dead", "saturation", "bias_jump", "bias_drift")
 SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
+REST_TAU_BLOCKS = 60.0  # still blocks of the EWMA of an IMU's mean rate at rest
+REST_MIN_BLOCKS = 10  # still blocks before that mean is used
 
 
 def _period(t: np.ndarray) -> float:
@@ -40,6 +45,9 @@ class ImuGroup:
         self.pairs: dict[tuple[int, int], PairDisagreement] = {}
         self.pair_done: dict[tuple[int, int], float] = {}
         self.disagree: dict[tuple[int, str], str] = {}  # (imu, axis) -> detail of an active disagreement
+        self.rest: dict[int, tuple[np.ndarray, int]] = {}  # imu -> (mean rate at rest, still blocks in it)
+        self.now: dict[int, tuple[np.ndarray, bool]] = {}  # imu -> (last block's mean rate, still and disarmed)
+        self.blamed: dict[tuple[int, int, int], int] = {}  # (i, j, axis) -> the IMU of the pair named at rest
 
     def active(self) -> bool:
         return bool(self.disagree)
@@ -47,11 +55,15 @@ class ImuGroup:
     def detail(self, imu: int, axis: str) -> str:
         return self.disagree.get((imu, axis), "another IMU")
 
-    def compare(self, imu: int, channels: Mapping[int, "object"], armed: bool) -> list[FaultEvent]:
-        """Compare IMU ``imu`` with every other over the time both have covered since the pair's last test;
-        returns the disagreement events of the named IMUs."""
+    def compare(self, imu: int, channels: Mapping[int, "object"], armed: bool, still: bool = False) -> list[FaultEvent]:
+        """Compare IMU ``imu`` with every other over the time both have covered since the pair's last test
+        (``still``: its last block was judged still); returns the disagreement events of the named IMUs."""
         ch = channels[imu]
         events: list[FaultEvent] = []
+        if ch.recent:
+            self._at_rest(imu, ch.recent[-1][1].mean(axis=0), still and not armed)
+            if still and not armed and len(channels) == 2 and any(p.state == FAULT for p in self.pairs.values()):
+                events += self.name(channels, armed)  # the rest may tell which of the two it is
         for other in list(channels.values()):
             if other is ch or not other.recent or not ch.recent:
                 continue
@@ -112,12 +124,17 @@ class ImuGroup:
             if len(imus) == 2 and bad:
                 i, j = imus
                 other_faults = {k: [f for f in channels[k].faults.active() if f[0] != "disagree"] for k in (i, j)}
+                odd = self._rest_odd(i, j, a)
                 if other_faults[i] and not other_faults[j]:
                     named = {i: [j]}
                 elif other_faults[j] and not other_faults[i]:
                     named = {j: [i]}
+                elif odd is not None:
+                    named = {odd: [j if odd == i else i]}
                 else:
                     named = {i: [j], j: [i]}
+            elif len(imus) == 2:
+                self.blamed.pop((*imus, a), None)
             elif len(imus) >= 3 and bad:
                 partners = {k: sorted(p[0] if p[1] == k else p[1] for p in bad if k in p) for k in imus}
                 most = max(len(v) for v in partners.values())
@@ -138,6 +155,31 @@ class ImuGroup:
                 events.append(FaultEvent(k, ax, "disagree", FAULT if now else OK, value, detail,
                                          critical=armed and now))
         return events
+
+    def _at_rest(self, imu: int, mean: np.ndarray, still: bool) -> None:
+        """Each IMU's mean rate at rest: the still blocks' means while no pair holds evidence against it."""
+        self.now[imu] = (mean, still)
+        if not still or any(imu in key and p.evidence() for key, p in self.pairs.items()):
+            return
+        ref, n = self.rest.get(imu, (mean, 0))
+        w = 1.0 / min(n + 1, REST_TAU_BLOCKS)
+        self.rest[imu] = (ref + w * (mean - ref), n + 1)
+
+    def _rest_odd(self, i: int, j: int, a: int) -> int | None:
+        """The IMU of the pair (i, j) whose axis ``a`` reads away from its own mean at rest while the other
+        does not, both at rest now (once found, kept while the pair disagrees on that axis); None if unknown."""
+        if (i, j, a) in self.blamed:
+            return self.blamed[(i, j, a)]
+        if not all(k in self.now and self.now[k][1] and self.rest.get(k, (None, 0))[1] >= REST_MIN_BLOCKS
+                   for k in (i, j)):
+            return None
+        off = {k: abs(float(self.now[k][0][a] - self.rest[k][0][a])) for k in (i, j)}
+        floor = 0.5 * (self.limits.disagree if self.limits is not None else math.radians(5.0))
+        for k, o in ((i, j), (j, i)):
+            if off[k] >= floor and off[o] <= 0.25 * off[k]:
+                self.blamed[(i, j, a)] = k
+                return k
+        return None
 
     def state_dict(self) -> dict:
         return {"pairs": {f"{i}-{j}": p.state_dict() for (i, j), p in self.pairs.items()},

@@ -29,6 +29,7 @@ import numpy as np
 
 from companion.health.baseline import Baseline
 from companion.health.degradation import DEGRADING, LEARNING
+from companion.health.clip_watch import ClipWatch
 from companion.health.faults import FaultEvent
 from companion.health.hold import FAULT
 from companion.health.frozen_watch import FrozenWatch
@@ -69,6 +70,7 @@ class Pipeline:
         self.channels: dict[int, Channel] = {}
         self.group = ImuGroup(cfg.reset_s, cfg.faults)
         self.frozen = FrozenWatch()  # dead or frozen axes sample by sample, at any rate (service.frozen_hook)
+        self.clip = ClipWatch(cfg.gyro_limit)  # clipped axes sample by sample, streams up to 20 Hz (service.frozen_hook)
         self.watch_said: set = set()  # (imu, kind, axis) the watch announced itself (service.frozen_hook)
         self.inflight = InflightReport(self)  # each IMU's own noise while armed, from the other IMUs
         self.ignored = {"other_sysid": 0, "other_message": 0}
@@ -206,6 +208,8 @@ class Pipeline:
                 ch.on_break()
             else:  # gap
                 ch.on_break()
+                if ch.cutter.slower_rate() is not None:  # every interval a gap: a slower stream
+                    self._switch_rate(ch, ch.cutter.slower_rate(), np.array(ch.cutter.gap_t), ch.rate_hz)
             if self.failed:
                 break
         return ch.cutter.counts["samples"] - before
@@ -289,21 +293,21 @@ class Pipeline:
         if rate_event is not None:
             if rate_event == "changed":  # the cutter saw it first (a slow drift of the rate)
                 new, old = ch.cutter.rate_hz, ch.cutter.prev_rate_hz
-                ch.cutter.rate_hz = old
-                self._switch_rate(ch, new, data[:, 0], old)
+                self._switch_rate(ch, new, data[:, 0], old, keep_window=True)
             ch.rates.off_rate = []
             return rate_event == "changed"
         if ch.rate_hz is None or data.shape[0] < 3:
             return False
-        held, new_rate = ch.rates.observe(data[:, 0], ch.rate_hz, ch.time_res)
+        held, new_rate = ch.rates.observe(data[:, 0], ch.rate_hz, ch.time_res, ch.cutter.tol)
         if held:
             ch.settler.drop_lookahead()
         if new_rate is not None:
             self._switch_rate(ch, new_rate, data[:, 0], ch.rate_hz)
         return held
 
-    def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None) -> None:
-        back = ch.switch_rate(rate, t_block)
+    def _switch_rate(self, ch: Channel, rate: float, t_block: np.ndarray, old: float | None,
+                     keep_window: bool = False) -> None:
+        back = ch.switch_rate(rate, t_block, keep_window)
         if self._has_baseline(ch):
             ch.bank.stop_learning()  # the IMU's baseline exists: a profile kept from before it learns no other
         self.rate_log.append((float(t_block[-1]), ch.imu, old, ch.rate_hz))
@@ -327,7 +331,7 @@ class Pipeline:
         self._report(not_said_by_watch(self, ch, ch.on_block(data, st, still)), t_end)
         if ch.imu in self._restored:
             announce_restored(self, ch, t_end)
-        self._report(self.group.compare(ch.imu, self.channels, self.armed), t_end)
+        self._report(self.group.compare(ch.imu, self.channels, self.armed, still), t_end)
         self.inflight.on_block(ch, t_end)
         if rate_event == "first":
             if self.baseline_fixed and self._has_baseline(ch):

@@ -9,16 +9,18 @@ channel switches to it. What depends on the rate (estimators, fault references) 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from companion.health.monitor import ImuFaults
-from companion.service.blocks import RATE_CHANGE
+from companion.service.blocks import MIN_INTERVALS, RATE_CHANGE
 from companion.service.estimator_bank import EstimatorBank
 from companion.timebase import period_of
 
-OFF_RATE_BLOCKS = 3  # consecutive blocks at one new rate before the channel switches to it
+#: consecutive blocks at one new rate, with MIN_INTERVALS intervals among them, before the channel switches
+OFF_RATE_BLOCKS = 3
 FEW_INTERVALS = 8  # a block with fewer intervals (a stream below 8 Hz) is off rate only when every one is
 #: other rates whose estimators and references are kept for when the stream returns to them (memory: each
 #: holds three estimator banks per axis)
@@ -29,18 +31,18 @@ KEPT_RATES = 4
 RATE_SWITCHES_LOGGED = 3
 
 
-def block_off_rate(d: np.ndarray, rate_hz: float, resolution: float = 0.0) -> float | None:
+def block_off_rate(d: np.ndarray, rate_hz: float, resolution: float = 0.0, tol: float = RATE_CHANGE) -> float | None:
     """The rate of a block with intervals ``d`` when it is off the stream's ``rate_hz`` by more than
-    RATE_CHANGE, else None. A block of a slow stream holds two or three intervals, and one late message splits
+    ``tol`` (RATE_CHANGE, or the stream's own spread: service/blocks.py), else None. A block of a slow stream holds two or three intervals, and one late message splits
     a period into a short and a long interval (a 2 Hz telemetry stream: 0.13 + 0.87 s) that no period rule
     reads on its own: such a block is off rate only when all its intervals are off the period, the same way
     (a stream requested at another rate); the blocks held back for it cost the estimators their long taus."""
     p = period_of(d, resolution)
-    if not (p > 0) or abs(1.0 / (p * rate_hz) - 1.0) <= RATE_CHANGE:
+    if not (p > 0) or abs(math.log(p * rate_hz)) <= math.log1p(tol):
         return None
     if d.shape[0] < FEW_INTERVALS:
         k = d * rate_hz  # the intervals in periods of the stream
-        if not (np.all(k < 1.0 / (1.0 + RATE_CHANGE)) or np.all(k > 1.0 + RATE_CHANGE)):
+        if not (np.all(k < 1.0 / (1.0 + tol)) or np.all(k > 1.0 + tol)):
             return None
     return 1.0 / p
 
@@ -58,21 +60,29 @@ class RateTracker:
 
     def __init__(self):
         self.off_rate: list[float] = []  # block rates of the consecutive blocks off the stream's rate
+        self.off_dts: list[float] = []  # their intervals (the window of the rate switched to)
         self.switches = 0
         self.kept: list[tuple[float, RateProfile]] = []
 
-    def observe(self, t: np.ndarray, rate_hz: float, resolution: float) -> tuple[bool, float | None]:
+    def observe(self, t: np.ndarray, rate_hz: float, resolution: float,
+                tol: float = RATE_CHANGE) -> tuple[bool, float | None]:
         """A closed block's times ``t`` at the stream's ``rate_hz``: (held back, the rate to switch to or
-        None). Blocks off rate count only while they agree with each other within RATE_CHANGE."""
-        r = block_off_rate(np.diff(t), rate_hz, resolution)
+        None). Blocks off rate count only while they agree with each other within ``tol``."""
+        d = np.diff(t)
+        r = block_off_rate(d, rate_hz, resolution, tol)
         if r is None:
-            self.off_rate = []
+            self.off_rate, self.off_dts = [], []
             return False, None
-        if self.off_rate and abs(r / self.off_rate[-1] - 1.0) > RATE_CHANGE:
-            self.off_rate = []
+        if self.off_rate and abs(math.log(r / self.off_rate[-1])) > math.log1p(tol):
+            self.off_rate, self.off_dts = [], []
         self.off_rate.append(r)
-        if len(self.off_rate) >= OFF_RATE_BLOCKS:
-            return True, float(np.median(self.off_rate))
+        self.off_dts += d.tolist()
+        if len(self.off_rate) >= OFF_RATE_BLOCKS and len(self.off_dts) >= MIN_INTERVALS:
+            # the held blocks together: a slow stream's blocks hold one or two intervals each, and three
+            # of them off the same way happen by chance where the intervals wander (a busy radio)
+            rate = 1.0 / period_of(self.off_dts, resolution)
+            if abs(math.log(rate / rate_hz)) > math.log1p(tol):
+                return True, float(rate)
         return True, None
 
     def keep(self, rate: float, profile: RateProfile) -> None:
@@ -98,7 +108,7 @@ class RateTracker:
 
     def switched(self) -> None:
         """A switch happened: the off-rate count starts again."""
-        self.off_rate = []
+        self.off_rate, self.off_dts = [], []
         self.switches += 1
 
     def kept_summary(self) -> tuple[int, float]:

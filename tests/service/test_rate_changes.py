@@ -90,7 +90,7 @@ def test_a_stream_whose_rate_keeps_wandering_is_logged_a_few_times_then_summed_u
     for k in range(t.size):
         p.on_sample(KEY, float(t[k]), g[k], a[k])
     ch = p.channels[0]
-    assert ch.rate_switches >= 10, ch.rate_switches  # the stream did switch, again and again
+    assert ch.rate_switches >= 6, ch.rate_switches  # the stream did switch, again and again (a factor 2.6)
     changed = [x for x in lines if "rate changed" in x]
     assert len(changed) == 3, lines
     assert len([x for x in lines if "keeps changing" in x]) == 1, lines
