@@ -24,9 +24,8 @@ its own estimators, baseline and test.
 
 The baseline (per condition: the hat figures and each pair's figure) is learned from the first
 ``baseline_s`` of that condition's data and kept in the state file; then every check tests each pair's figure
-against its baseline both ways with the at-rest statistic and hysteresis
-(:class:`companion.health.degradation.ParamDetector`, thresholds :data:`INFLIGHT_TEST`) and names the IMU
-whose pairs changed while the others' did not (:meth:`InflightNoise._test`). The online calibration differs
+against its baseline both ways (:class:`InflightTest`: a z test whose threshold is set by its false-alarm
+rate per IMU-hour, :mod:`companion.service.inflight_alarm`) and names the IMU whose pairs changed while the others' did not (:meth:`InflightNoise._test`). The online calibration differs
 from the offline one (:mod:`companion.redundancy.calibration`, a batch fit with instrumental variables and
 cross-filtering) in being recursive, scipy-free and fitted on 0.1-s means; the Allan points, the hat and the
 cluster time are the offline method's.
@@ -43,14 +42,49 @@ from companion.redundancy.fit_points import tau_min_for
 from companion.redundancy.hat import hat_share, quantization_avar
 from companion.estimators.octave_bank import OctaveBankEstimator
 from companion.estimators.pair_calibration import PairCalibration
-from companion.health.degradation import DEGRADING, HEALTHY, DetectorConfig, ParamDetector
+from companion.health.degradation import DEGRADING, HEALTHY
 from companion.health.faults import AXES
+from companion.health.hold import debounce
+from companion.service.inflight_alarm import overlap_edf_gain, z_for_rate
 
 CONDITIONS = ("ground", "flight")
-#: the degradation test in flight: the at-rest statistic (health.degradation) on each pair's figure, with
-#: thresholds chosen with benchmarks/bench_inflight_live.py (0 false alarms on the simulated flights and the
-#: real logs, a doubled noise named within 120 s); a check every check_s = 5 s
-INFLIGHT_TEST = DetectorConfig(z=3.0, ratio_on=1.25, ratio_off=1.12, hold_on=4, hold_off=6, params=("N",))
+PHASES = 4  # staggered phases of the octave accumulators
+#: the overlap of a level's min(PHASES, m) phases: its EDF over the bank's (the count of one phase's differences)
+EDF_GAIN = {p: overlap_edf_gain(p) for p in range(1, PHASES + 1)}
+
+
+@dataclass
+class InflightTest:
+    """The degradation test in flight (:mod:`companion.service.inflight_alarm`): per pair, axis and direction,
+    Z = ln(now / baseline) / sigma_L above ``z`` for ``hold_on`` checks in a row, ``z`` solved so that all the
+    tests of a vehicle give ``per_imu_hour`` false alarms per IMU and flight hour; back after ``hold_off``
+    checks with |Z| below ``z_back``. The pair without the named IMU must stay within ``z_stable`` of its
+    baseline (the other two agree as before)."""
+
+    per_imu_hour: float = 1e-3
+    hold_on: int = 4
+    hold_off: int = 6
+    z_back: float = 2.0
+    z_stable: float = 2.0
+    ratio_on: float = 1.0  # the evidence's bar on the lower z-sigma bound of the change: a pure z test
+
+    def z(self, imus: int, check_s: float, memory_s: float, baseline_s: float) -> float:
+        base_share = 1.0 / (1.0 + baseline_s / (2.0 * memory_s))  # sigma_b^2 / sigma_L^2 from the two EDFs
+        return z_for_rate(self.per_imu_hour, imus, self.hold_on, check_s, memory_s, round(base_share, 4))
+
+
+@dataclass
+class ZDetector:
+    """Hysteresis of one test (one pair, axis and direction)."""
+
+    state: int = HEALTHY
+    count: int = 0
+
+    def check(self, zval: float, z_on: float, test: InflightTest) -> None:
+        self.state, self.count, _ = debounce(self.state, self.count, zval > z_on, test.hold_on, test.hold_off,
+                                             good=zval < test.z_back)
+
+
 SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
 MIN_ALIGNED = 10
 VERSION = 1
@@ -66,7 +100,7 @@ class InflightConfig:
     min_edf: float = 20.0
     turning: float = 0.03  # rad/s: a half-second mean body rate above this is flight, not ground
     ground_hold_s: float = 10.0  # not turning for this long before flight becomes ground again
-    test: DetectorConfig = field(default_factory=lambda: INFLIGHT_TEST)
+    test: InflightTest = field(default_factory=InflightTest)
 
 
 def _period(t: np.ndarray) -> float:
@@ -115,7 +149,7 @@ class PairTrack:
 
     def _banks(self, cond: str, learning: bool):
         if cond not in self.cur:
-            mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=4, max_tau_s=8.0, fit="diag")
+            mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=PHASES, max_tau_s=8.0, fit="diag")
             self.cur[cond] = [OctaveBankEstimator(forgetting_s=self.cfg.memory_s, **mk) for _ in AXES]
             self.learn[cond] = [OctaveBankEstimator(**mk) for _ in AXES] if learning else None
         return self.cur[cond], self.learn[cond]
@@ -150,6 +184,8 @@ class PairTrack:
         if not banks or self.rate_hz is None:
             return math.nan, math.nan, 0.0
         tau, avar, edf = banks[a].avar()
+        m = np.maximum(np.rint(tau * self.rate_hz), 1.0)
+        edf = edf * np.where(m >= PHASES, EDF_GAIN[PHASES], [EDF_GAIN[int(min(x, PHASES))] for x in m])
         ok = np.flatnonzero((tau >= tau_min_for(self.rate_hz, self.filter_hz) * (1 - 1e-9))
                             & (edf >= self.cfg.min_edf) & np.isfinite(avar))
         if ok.size == 0:
@@ -204,7 +240,7 @@ class InflightNoise:
         # per condition: {who: {axis: (N, 1-sigma, bound)}}; who an IMU, or a pair (i, j) of two IMUs
         self.figures: dict[str, dict] = {c: {} for c in CONDITIONS}
         self.baseline: dict[str, dict] = {c: {} for c in CONDITIONS}
-        self.detectors: dict[tuple, ParamDetector] = {}  # (cond, pair, axis, "up" | "down")
+        self.detectors: dict[tuple, ZDetector] = {}  # (cond, pair, axis, "up" | "down")
         self.named: set = set()  # (cond, imu, axis) the test names
         #: cond -> {(pair, axis): (now / baseline, its lower z-sigma bound folded: a fall as its inverse)}
         self.last_ratios: dict[str, dict] = {}
@@ -319,31 +355,43 @@ class InflightNoise:
             out += self._test(cond)
         return out
 
+    def z_on(self) -> float:
+        """The test's threshold on Z for this vehicle's number of IMUs (:class:`InflightTest`)."""
+        imus = len({i for k in self.pairs for i in k})
+        c = self.cfg
+        return c.test.z(max(imus, 2), c.check_s, c.memory_s, c.baseline_s)
+
     def _test(self, cond: str) -> list[Verdict]:
-        """Per pair and axis, has the difference's N changed from its baseline (up or down: the at-rest
-        statistic both ways, with its hysteresis)? Three IMUs: an IMU is named when a pair it is in has
-        changed while the pair without it stays within ``ratio_off`` of its baseline (the other two agree as
-        before), and no other IMU fits this; a change of every pair is the vibration of the whole frame, not one IMU. Both ways, because
-        what an IMU picks up of the frame's vibration is shared with the others: when one IMU's pick-up grows
-        towards another's, their difference shrinks. Two IMUs: a changed pair names both as suspects."""
-        cfg, out = self.cfg.test, []
+        """Per pair and axis, has the difference's N changed from its baseline (up or down: Z of
+        :class:`InflightTest` both ways, with its hysteresis)? Three IMUs: an IMU is named when a pair it is
+        in has changed while the pair without it stays within ``z_stable`` of its baseline (the other two
+        agree as before), and no other IMU fits this; a change of every pair is the vibration of the whole
+        frame, not one IMU. Both ways, because what an IMU picks up of the frame's vibration is shared with the
+        others: when one IMU's pick-up grows towards another's, their difference shrinks. Two IMUs: a changed
+        pair names both as suspects."""
+        test, out = self.cfg.test, []
+        z_on = self.z_on()
         base = self.baseline[cond]["pairs"]
         now = self._pair_levels(cond)
         changed: dict[str, set] = {ax: set() for ax in AXES}
         ratios: dict = {}
+        zs: dict = {}
         folded: dict = {}
         for k, axes in now.items():
             for ax, (x, sx) in axes.items():
                 if ax not in base.get(k, {}):
                     continue
                 b, sb = base[k][ax]
-                up = self.detectors.setdefault((cond, k, ax, "up"), ParamDetector())
-                down = self.detectors.setdefault((cond, k, ax, "down"), ParamDetector())
-                up.check(x, sx, b, sb, cfg)
-                down.check(b, sb, x, sx, cfg)
-                ratios[(k, ax)] = x / b
-                if x > 0 and b > 0:
-                    folded[(k, ax)] = (x / b, math.exp(abs(math.log(x / b)) - cfg.z * math.hypot(sx / x, sb / b)))
+                if not (x > 0 and b > 0 and sx > 0 and sb > 0):
+                    continue
+                sig = math.hypot(sx / x, sb / b)
+                zv = math.log(x / b) / sig
+                up = self.detectors.setdefault((cond, k, ax, "up"), ZDetector())
+                down = self.detectors.setdefault((cond, k, ax, "down"), ZDetector())
+                up.check(zv, z_on, test)
+                down.check(-zv, z_on, test)
+                ratios[(k, ax)], zs[(k, ax)] = x / b, zv
+                folded[(k, ax)] = (x / b, math.exp((abs(zv) - z_on) * sig))
                 if DEGRADING in (up.state, down.state):
                     changed[ax].add(k)
         self.last_ratios[cond] = folded
@@ -356,7 +404,7 @@ class InflightNoise:
                 for i in imus:
                     others = [k for k in self.pairs if i not in k]
                     if (changed[ax] & {k for k in self.pairs if i in k}) and all(
-                            abs(math.log(ratios.get((k, ax), math.inf))) < math.log(cfg.ratio_off) for k in others):
+                            abs(zs.get((k, ax), math.inf)) < test.z_stable for k in others):
                         named.add(i)
                 if len(named) > 1:  # the changed pair's two IMUs both fit: which one is not known yet
                     named = set()
