@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 import re
 import sys
 import time
@@ -239,9 +240,97 @@ def fa_mode(hours: float, flight_s: float, flights: int) -> None:
           f"(expected at the design rate: {per * total_h:.2f})")
 
 
+def _offline(path: str) -> dict:
+    """`companion analyze`'s flight figures of a log: {imu: {axis: (N, lo, hi, bound)}} (rad/s/sqrt(Hz))."""
+    import contextlib
+    import io
+    import json
+    import tempfile
+
+    from companion.cli.main import main as cli
+
+    with tempfile.TemporaryDirectory() as d, contextlib.redirect_stdout(io.StringIO()):
+        cli(["analyze", path, "--quiet", "--json", f"{d}/r.json"])
+        rep = json.loads(open(f"{d}/r.json").read())
+    out: dict = {}
+    for st in rep.get("streams", []):
+        for ax, e in ((st.get("flight") or {}).get("axes") or {}).items():
+            for term in e.get("terms", []) + e.get("bounds", []):
+                if term["effect"] == "white_noise":
+                    lo, hi = term.get("ci95", {}).get("N", [0.0, term["N"]])
+                    out.setdefault(st["instance"], {})[ax] = (term["N"], lo, hi, bool(term.get("bound")))
+    return out
+
+
+def _live(path: str) -> dict:
+    """`run`'s flight figures of the same log, replayed: {imu: {axis: (N, 1-sigma, bound)}} (pairs: each IMU)."""
+    from companion.mavlink.reporter import Reporter
+    from companion.service.pipeline import Pipeline, PipelineConfig
+    from companion.service.replay import replay_log, replay_tlog
+
+    p = Pipeline(PipelineConfig(), Reporter(_Sink(), 1.0))
+    (replay_tlog if path.lower().endswith(".tlog") else replay_log)(path, p)
+    p.inflight.noise.check()
+    out: dict = {}
+    for who, axes in p.inflight.noise.figures["flight"].items():
+        for imu in (who if isinstance(who, tuple) else (who,)):
+            out[imu] = {ax: (n, s, bound or isinstance(who, tuple)) for ax, (n, s, bound) in axes.items()}
+    return out
+
+
+def _sim_log(path: str, kind: str, seed: int, imus: int, flight_s: float) -> None:
+    """A simulated flight of ``kind`` written as a DataFlash log (float samples, the preset's filter as
+    INS_GYRO_FILTER), armed 30 s after the start."""
+    from companion.sim.dataflash_writer import write_imu_log
+
+    sim, _ = simulator(kind, seed, flight_s, imus=imus)
+    blk = sim.run(flight_s + 40.0)
+    params = {"INS_GYRO_FILTER": 20.0} if kind != "plain" else None
+    arm = np.flatnonzero(np.diff(blk.armed.astype(int)))
+    events = [(float(blk.t[k + 1]), bool(blk.armed[k + 1])) for k in arm]
+    write_imu_log(path, blk.t, np.array(blk.gyro), np.array(blk.accel), layout="4.x", params=params, armed=events)
+
+
+def compare_mode(kinds, seeds: int, flight_s: float, real: list[str]) -> None:
+    """Live (`run` replaying the log) against offline (`analyze`) flight N per IMU and axis on the same logs:
+    their ratio, and whether they agree within their intervals (live 1.96 sigma, offline its 95 % interval)."""
+    import tempfile
+
+    logs = []
+    with tempfile.TemporaryDirectory() as d:
+        for spec in kinds:
+            kind, imus, _ = parse_kind(spec)
+            for s in range(seeds):
+                path = f"{d}/{kind}{imus}_{s}.bin"
+                _sim_log(path, kind, 300 + s, imus, flight_s)
+                logs.append((f"{spec} seed {300 + s}", path))
+        logs += [(Path(f).name, f) for f in real]
+        ratios, agree, n_all = [], 0, 0
+        for name, path in logs:
+            off, live = _offline(path), _live(path)
+            parts, r_log = [], []
+            for imu in sorted(set(off) & set(live)):
+                for ax in sorted(set(off[imu]) & set(live[imu])):
+                    n0, lo, hi, b0 = off[imu][ax]
+                    n1, s1, b1 = live[imu][ax]
+                    if b0 or b1:
+                        parts.append(f"IMU{imu} {ax} bound(s) {n1 / n0:.2f}")
+                        continue
+                    ok = abs(n1 - n0) <= math.hypot(1.96 * s1, 0.5 * (hi - lo))
+                    ratios.append(n1 / n0)
+                    r_log.append(n1 / n0)
+                    agree += ok
+                    n_all += 1
+                    parts.append(f"IMU{imu} {ax} {n1 / n0:.2f}{'' if ok else '!'}")
+            print(f"  {name}: live/offline N " + ("; ".join(parts) or "no common figures"), flush=True)
+    r = np.array(ratios) if ratios else np.array([math.nan])
+    print(f"COMPARE: {n_all} IMU-axes with values both ways, within their intervals {agree}/{n_all}; live/offline "
+          f"median {np.median(r):.3f}, range {np.min(r):.2f}-{np.max(r):.2f} ('!': outside the intervals)")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--mode", choices=("all", "detect", "fa", "cpu"), default="all",
+    ap.add_argument("--mode", choices=("all", "detect", "fa", "cpu", "compare"), default="all",
                     help="one part only (each mode its own section of RESULTS.md)")
     ap.add_argument("--kinds", nargs="+", default=list(DETECT), help="fault flights: preset[:imus[:rate]]")
     ap.add_argument("--seeds", type=int, default=10, help="flights with a fault per kind")
@@ -251,10 +340,13 @@ def main():
     ap.add_argument("--cpu-s", type=float, default=300.0, help="data seconds of the CPU measurement")
     ap.add_argument("--real", nargs="+", metavar="DIR", help="only: replay the real logs under DIR (e.g. "
                     "/work/shared/data /work/reallogs) and count in-flight verdicts")
+    ap.add_argument("--logs", nargs="*", default=[], help="with --mode compare: real logs compared too")
     ap.add_argument("--real-baseline-s", type=float, default=None, help="with --real: a shorter in-flight baseline")
     args = results.parse_args(ap, {"seeds": 4, "fa_hours": 10.0, "flight_s": 900.0, "cpu_s": 120.0})
     if args.real:
         return real_logs(args.real, args.real_baseline_s)
+    if args.mode == "compare":
+        return compare_mode(args.kinds, args.seeds, args.flight_s, args.logs)
     if args.mode in ("all", "detect"):
         detect_mode(args.kinds, args.seeds)
     if args.mode in ("all", "fa"):

@@ -66,11 +66,11 @@ class InflightTest:
     hold_off: int = 6
     z_back: float = 2.0
     z_stable: float = 2.0
-    ratio_on: float = 1.0  # the evidence's bar on the lower z-sigma bound of the change: a pure z test
 
     def z(self, imus: int, check_s: float, memory_s: float, baseline_s: float) -> float:
         base_share = 1.0 / (1.0 + baseline_s / (2.0 * memory_s))  # sigma_b^2 / sigma_L^2 from the two EDFs
-        return z_for_rate(self.per_imu_hour, imus, self.hold_on, check_s, memory_s, round(base_share, 4))
+        z = z_for_rate(self.per_imu_hour, imus, self.hold_on, check_s, memory_s, round(base_share, 4))
+        return math.ceil(z * 100.0) / 100.0  # two decimals, rounded up
 
 
 @dataclass
@@ -144,15 +144,18 @@ class PairTrack:
         self.lsb: tuple = ()  # the two IMUs' sample rounding (rad/s; int16 messages)
         self.cur: dict[str, list[OctaveBankEstimator]] = {}
         self.learn: dict[str, list[OctaveBankEstimator] | None] = {}
+        self.whole: dict[str, list[OctaveBankEstimator]] = {}  # this flight (since arming), no forgetting
         self.seconds = {c: 0.0 for c in CONDITIONS}
         self.last_cond: str | None = None
 
     def _banks(self, cond: str, learning: bool):
+        mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=PHASES, max_tau_s=8.0, fit="diag")
         if cond not in self.cur:
-            mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=PHASES, max_tau_s=8.0, fit="diag")
             self.cur[cond] = [OctaveBankEstimator(forgetting_s=self.cfg.memory_s, **mk) for _ in AXES]
             self.learn[cond] = [OctaveBankEstimator(**mk) for _ in AXES] if learning else None
-        return self.cur[cond], self.learn[cond]
+        if cond not in self.whole:  # a whole flight reaches the slow telemetry streams' cluster times
+            self.whole[cond] = [OctaveBankEstimator(**dict(mk, max_tau_s=64.0)) for _ in AXES]
+        return self.cur[cond], self.learn[cond], self.whole[cond]
 
     def feed(self, t: np.ndarray, gi: np.ndarray, gj: np.ndarray, cond: str | None, learning: bool) -> None:
         if self.rate_hz is None:
@@ -164,11 +167,11 @@ class PairTrack:
         if e is None or cond is None:
             self.last_cond = None
             return
-        cur, learn = self._banks(cond, learning)
+        cur, learn, whole = self._banks(cond, learning)
         junction = gap or self.last_cond != cond
         self.last_cond = cond
         for a in range(3):
-            for est in (cur[a], learn[a] if learn is not None else None):
+            for est in (cur[a], whole[a], learn[a] if learn is not None else None):
                 if est is None:
                     continue
                 if junction:
@@ -176,11 +179,12 @@ class PairTrack:
                 est.update(e[:, a])
         self.seconds[cond] += t.shape[0] / self.rate_hz
 
-    def level(self, cond: str, a: int, learned: bool = False) -> tuple[float, float, float]:
-        """(N^2, 1-sigma, EDF) of axis ``a``'s difference now (``learned``: over the learning data): the
-        Allan variance at the first octave at or above :func:`tau_min_for` with ``min_edf``, times tau,
-        without the rounding of the two IMUs' samples."""
-        banks = (self.learn if learned else self.cur).get(cond)
+    def level(self, cond: str, a: int, which: str = "cur") -> tuple[float, float, float]:
+        """(N^2, 1-sigma, EDF) of axis ``a``'s difference over ``which`` accumulators (``cur``: the last
+        ``memory_s``; ``learn``: the learning data; ``whole``: this flight): the Allan variance at the first
+        octave at or above :func:`tau_min_for` with ``min_edf``, times tau, without the rounding of the two
+        IMUs' samples."""
+        banks = getattr(self, which).get(cond)
         if not banks or self.rate_hz is None:
             return math.nan, math.nan, 0.0
         tau, avar, edf = banks[a].avar()
@@ -238,12 +242,14 @@ class InflightNoise:
         self._still_since: float | None = None
         self.next_check: float | None = None
         # per condition: {who: {axis: (N, 1-sigma, bound)}}; who an IMU, or a pair (i, j) of two IMUs
-        self.figures: dict[str, dict] = {c: {} for c in CONDITIONS}
+        self.figures: dict[str, dict] = {c: {} for c in CONDITIONS}  # this flight (since arming)
+        self.recent: dict[str, dict] = {c: {} for c in CONDITIONS}  # the last memory_s (what the test sees)
+        self._armed = False
         self.baseline: dict[str, dict] = {c: {} for c in CONDITIONS}
         self.detectors: dict[tuple, ZDetector] = {}  # (cond, pair, axis, "up" | "down")
         self.named: set = set()  # (cond, imu, axis) the test names
-        #: cond -> {(pair, axis): (now / baseline, its lower z-sigma bound folded: a fall as its inverse)}
-        self.last_ratios: dict[str, dict] = {}
+        #: cond -> {(pair, axis): Z of the latest check (InflightTest)}
+        self.last_z: dict[str, dict] = {}
 
     # ------------------------------------------------------------------ condition
     def _condition(self, channels, armed: bool, t: float) -> str | None:
@@ -278,6 +284,10 @@ class InflightNoise:
         the figures and the test when a check is due. Returns the test's changes."""
         if len(channels) < 2:
             return []
+        if armed and not self._armed:  # a new flight: its own figures
+            for p in self.pairs.values():
+                p.whole = {}
+        self._armed = bool(armed)
         cond = self._condition(channels, armed, t)
         ch = channels[imu]
         for other in channels.values():
@@ -305,10 +315,10 @@ class InflightNoise:
         return self.check()
 
     # ------------------------------------------------------------------ figures and test
-    def _figures(self, cond: str, learned: bool = False) -> dict:
+    def _figures(self, cond: str, which: str = "cur") -> dict:
         """{who: {axis: (N, 1-sigma, bound)}} of one condition from the current (or learning) accumulators:
         three IMUs per IMU (the hat), two IMUs the pair (i, j) (its figure bounds each IMU)."""
-        levels = {k: [p.level(cond, a, learned) for a in range(3)] for k, p in self.pairs.items()}
+        levels = {k: [p.level(cond, a, which) for a in range(3)] for k, p in self.pairs.items()}
         imus = sorted({i for k in levels for i in k})
         out: dict = {}
         if len(imus) == 3 and len(levels) == 3:
@@ -331,11 +341,11 @@ class InflightNoise:
                     out.setdefault(k, {})[ax] = (n, s, False)
         return out
 
-    def _pair_levels(self, cond: str, learned: bool = False) -> dict:
+    def _pair_levels(self, cond: str, which: str = "cur") -> dict:
         """{(i, j): {axis: (N, 1-sigma)}} of the pairs' differences."""
         out = {}
         for k, p in self.pairs.items():
-            axes = {ax: _n(*p.level(cond, a, learned)[:2]) for a, ax in enumerate(AXES)}
+            axes = {ax: _n(*p.level(cond, a, which)[:2]) for a, ax in enumerate(AXES)}
             out[k] = {ax: v for ax, v in axes.items() if math.isfinite(v[0]) and v[0] > 0}
         return out
 
@@ -343,12 +353,13 @@ class InflightNoise:
         """Figures, baseline learning and the test of every condition; the changes of the named IMUs."""
         out: list[Verdict] = []
         for cond in CONDITIONS:
-            self.figures[cond] = self._figures(cond)
+            self.figures[cond] = self._figures(cond, "whole")
+            self.recent[cond] = self._figures(cond)
             if not self.baseline[cond]:
                 if self.pairs and all(p.learned_s(cond) >= self.cfg.baseline_s for p in self.pairs.values()):
-                    pairs = self._pair_levels(cond, learned=True)
+                    pairs = self._pair_levels(cond, "learn")
                     if any(pairs.values()):  # else (a slow stream: no level resolved yet) learning goes on
-                        self.baseline[cond] = {"imus": self._figures(cond, learned=True), "pairs": pairs}
+                        self.baseline[cond] = {"imus": self._figures(cond, "learn"), "pairs": pairs}
                         for p in self.pairs.values():
                             p.learn[cond] = None
                 continue
@@ -376,7 +387,6 @@ class InflightNoise:
         changed: dict[str, set] = {ax: set() for ax in AXES}
         ratios: dict = {}
         zs: dict = {}
-        folded: dict = {}
         for k, axes in now.items():
             for ax, (x, sx) in axes.items():
                 if ax not in base.get(k, {}):
@@ -391,10 +401,9 @@ class InflightNoise:
                 up.check(zv, z_on, test)
                 down.check(-zv, z_on, test)
                 ratios[(k, ax)], zs[(k, ax)] = x / b, zv
-                folded[(k, ax)] = (x / b, math.exp((abs(zv) - z_on) * sig))
                 if DEGRADING in (up.state, down.state):
                     changed[ax].add(k)
-        self.last_ratios[cond] = folded
+        self.last_z[cond] = zs
         imus = sorted({i for k in self.pairs for i in k})
         for ax in AXES:
             named = set()
