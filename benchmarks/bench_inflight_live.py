@@ -76,29 +76,38 @@ def fly(sim, lsb, duration_s, stop=None):
     return p, [(t, x) for t, x in p.transitions if NAMED.search(x)]
 
 
-def detection(spec: str, seeds: int, rng_seed: int = 47) -> tuple[list[str], list[float], int]:
-    """Flights of ``spec`` (:func:`parse_kind`) with one IMU's in-flight noise doubled at a random time, IMU
-    and axis; (summary lines, delays of the named faults (inf when not named), flights naming another IMU).
-    Two IMUs: both are named (suspects), so only the delay counts."""
+def _detect_one(spec: str, seed: int, imu: int, axis: str, at: float) -> tuple[float, list]:
+    """One fault flight (:func:`detection`): (delay of the naming or inf, other IMUs' verdicts)."""
     from companion.sim.vehicle import Fault
 
     kind, imus, rate = parse_kind(spec)
-    rng = np.random.default_rng(rng_seed)
-    delays, wrong = [], 0
     fault_kind = "noise" if kind == "plain" else "flight_noise"
+    sim, lsb = simulator(kind, seed, at + 200.0, Fault(fault_kind, at=at, size=2.0, imu=imu, axis=axis),
+                         imus=imus, rate_hz=rate)
+    want = f"IMU{imu} gyro {axis[1].upper()} flight noise changed"
+    p, v = fly(sim, lsb, at + 240.0, stop=lambda p: any(want in x for _, x in p.transitions))
+    hit = [t for t, x in v if want in x]
+    others = [x for _, x in v if want not in x and "changed" in x and (imus > 2 or axis[1].upper() not in x)]
+    return (hit[0] - (sim.t_start + at) if hit else math.inf), others
+
+
+def detection(spec: str, seeds: int, pool, rng_seed: int = 47) -> tuple[list[str], list[float], int]:
+    """Flights of ``spec`` (:func:`parse_kind`) with one IMU's in-flight noise doubled at a random time, IMU
+    and axis; (summary lines, delays of the named faults (inf when not named), flights naming another IMU).
+    Two IMUs: both are named (suspects), so only the delay counts."""
+    imus = parse_kind(spec)[1]
+    rng = np.random.default_rng(rng_seed)
+    draws = []
     for s in range(seeds):
         imu, axis = int(rng.integers(imus)), ("gx", "gy", "gz")[int(rng.integers(3))]
-        at = 30.0 + 240.0 + float(rng.uniform(150.0, 400.0))
-        sim, lsb = simulator(kind, 100 + s, at + 200.0, Fault(fault_kind, at=at, size=2.0, imu=imu, axis=axis),
-                             imus=imus, rate_hz=rate)
-        want = f"IMU{imu} gyro {axis[1].upper()} flight noise changed"
-        p, v = fly(sim, lsb, at + 240.0, stop=lambda p: any(want in x for _, x in p.transitions))
-        hit = [t for t, x in v if want in x]
-        others = [x for _, x in v if want not in x and "changed" in x and (imus > 2 or axis[1].upper() not in x)]
+        draws.append((100 + s, imu, axis, 30.0 + 240.0 + float(rng.uniform(150.0, 400.0))))
+    got = list(pool.map(_detect_one, *zip(*[(spec, *d) for d in draws])))
+    delays, wrong = [], 0
+    for (seed, imu, axis, at), (delay, others) in zip(draws, got):
+        delays.append(delay)
         wrong += bool(others)
-        delays.append(hit[0] - (sim.t_start + at) if hit else math.inf)
-        print(f"  {spec} seed {100 + s}: x2 on IMU{imu} {axis} at {at:.0f} s: "
-              + (f"named after {delays[-1]:.0f} s" if hit else "NOT named")
+        print(f"  {spec} seed {seed}: x2 on IMU{imu} {axis} at {at:.0f} s: "
+              + (f"named after {delay:.0f} s" if math.isfinite(delay) else "NOT named")
               + (f"; others named: {others}" if others else ""), flush=True)
     d = np.array(delays)
     fin = d[np.isfinite(d)] if np.isfinite(d).any() else np.array([math.nan])
@@ -108,22 +117,32 @@ def detection(spec: str, seeds: int, rng_seed: int = 47) -> tuple[list[str], lis
     return [line], delays, wrong
 
 
-def false_alarms(spec: str, imu_hours: float, flight_s: float, flights: int) -> tuple[float, int, list]:
+def _fa_vehicle(spec: str, seed: int, flight_s: float, flights: int) -> tuple[float, list]:
+    """One healthy vehicle (:func:`false_alarms`): (flight IMU-hours under test, its verdicts)."""
+    kind, imus, rate = parse_kind(spec)
+    sim, lsb = simulator(kind, seed, flight_s, imus=imus, rate_hz=rate, flights=flights)
+    p, v = fly(sim, lsb, flights * (flight_s + 60.0))
+    nz = p.inflight.noise
+    flown = max((pr.seconds["flight"] for pr in nz.pairs.values()), default=0.0)
+    hours = imus * max(flown - nz.cfg.baseline_s, 0.0) / 3600.0 if nz.baseline["flight"] else 0.0
+    return hours, [x for _, x in v if "changed" in x]
+
+
+def false_alarms(spec: str, imu_hours: float, flight_s: float, flights: int, pool) -> tuple[float, int, list]:
     """Healthy vehicles of ``spec`` (:func:`parse_kind`), each flying ``flights`` flights of ``flight_s`` (the
     baseline learned in the first and kept, as `run`'s state file keeps it), until ``imu_hours`` flight
     IMU-hours under test (after the baseline) are flown; (tested IMU-hours, verdicts, their texts)."""
-    kind, imus, rate = parse_kind(spec)
+    imus = parse_kind(spec)[1]
     hours, alarms, seen, s = 0.0, 0, [], 0
     while hours < imu_hours:
-        sim, lsb = simulator(kind, 5000 + s, flight_s, imus=imus, rate_hz=rate, flights=flights)
-        p, v = fly(sim, lsb, flights * (flight_s + 60.0))
-        nz = p.inflight.noise
-        flown = max((pr.seconds["flight"] for pr in nz.pairs.values()), default=0.0)
-        if nz.baseline["flight"]:
-            hours += imus * max(flown - nz.cfg.baseline_s, 0.0) / 3600.0
-        alarms += sum(1 for _, x in v if "changed" in x)
-        seen += [(5000 + s, x) for _, x in v]
-        s += 1
+        per = imus * (flights * flight_s - 300.0) / 3600.0  # about: the baseline and the take-offs not tested
+        n = max(1, math.ceil((imu_hours - hours) / per))
+        seeds = list(range(5000 + s, 5000 + s + n))
+        for seed, (h, texts) in zip(seeds, pool.map(_fa_vehicle, [spec] * n, seeds, [flight_s] * n, [flights] * n)):
+            hours += h
+            alarms += len(texts)
+            seen += [(seed, x) for x in texts]
+        s += n
     return hours, alarms, seen
 
 
@@ -198,14 +217,22 @@ def real_logs(paths: list[str], baseline_s: float | None) -> None:
 DETECT = ("copter:3", "copter:3:400", "px4:3", "plain:3", "copter:2")
 #: healthy vehicles for the false-alarm count: (kind, share of the IMU-hours); copter vibration at 50 and 400 Hz,
 #: 3 and 2 IMUs, and the PX4 quad at 250 Hz with 3 IMUs
-FA_MIX = (("copter:3", 0.35), ("copter:2", 0.25), ("copter:3:400", 0.2), ("px4:3", 0.2))
+FA_MIX = (("copter:3", 0.4), ("copter:2", 0.3), ("copter:3:400", 0.15), ("px4:3", 0.15))
 
 
-def detect_mode(kinds, seeds: int) -> None:
+def _cpu_now() -> float:
+    """CPU seconds of this process and its finished workers."""
+    import resource
+
+    return sum(resource.getrusage(w).ru_utime + resource.getrusage(w).ru_stime
+               for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+
+
+def detect_mode(kinds, seeds: int, pool) -> None:
     print("doubled in-flight noise on one IMU: delay from the fault to its STATUSTEXT (2 IMUs: both named)")
     lines, all_d, wrong, n = [], [], 0, 0
     for spec in kinds:
-        ln, d, w = detection(spec, seeds)
+        ln, d, w = detection(spec, seeds, pool)
         lines += ln
         all_d += d
         wrong += w if parse_kind(spec)[1] > 2 else 0
@@ -220,7 +247,7 @@ def detect_mode(kinds, seeds: int) -> None:
           f"{wrong} flights")
 
 
-def fa_mode(hours: float, flight_s: float, flights: int) -> None:
+def fa_mode(hours: float, flight_s: float, flights: int, pool) -> None:
     from companion.service.inflight_live import InflightNoise
 
     nz = InflightNoise()
@@ -231,11 +258,11 @@ def fa_mode(hours: float, flight_s: float, flights: int) -> None:
           f"design false-alarm rate {per:g} per flight IMU-hour (z {z3:.2f} at 3 IMUs, {z2:.2f} at 2)")
     total_h, total_a = 0.0, 0
     for spec, share in FA_MIX:
-        t0 = time.process_time()
-        h, a, seen = false_alarms(spec, share * hours, flight_s, flights)
+        t0 = _cpu_now()
+        h, a, seen = false_alarms(spec, share * hours, flight_s, flights, pool)
         total_h, total_a = total_h + h, total_a + a
         print(f"  {spec}: {h:.1f} flight IMU-hours under test, false alarms {a}"
-              + (f" ({seen[:3]})" if a else "") + f", {time.process_time() - t0:.0f} s CPU", flush=True)
+              + (f" ({seen[:3]})" if a else "") + f", {_cpu_now() - t0:.0f} s CPU", flush=True)
     print(f"FALSE ALARMS: {total_a} in {total_h:.1f} simulated flight IMU-hours under test "
           f"(expected at the design rate: {per * total_h:.2f})")
 
@@ -332,11 +359,12 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--mode", choices=("all", "detect", "fa", "cpu", "compare"), default="all",
                     help="one part only (each mode its own section of RESULTS.md)")
-    ap.add_argument("--kinds", nargs="+", default=list(DETECT), help="fault flights: preset[:imus[:rate]]")
+    ap.add_argument("--kinds", nargs="*", default=list(DETECT), help="fault flights: preset[:imus[:rate]]")
     ap.add_argument("--seeds", type=int, default=10, help="flights with a fault per kind")
     ap.add_argument("--fa-hours", type=float, default=100.0, help="healthy flight IMU-hours under test (target: >= 100)")
     ap.add_argument("--flight-s", type=float, default=900.0, help="length of each healthy flight")
-    ap.add_argument("--flights", type=int, default=3, help="flights per healthy vehicle")
+    ap.add_argument("--flights", type=int, default=4, help="flights per healthy vehicle")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes (the flights are independent)")
     ap.add_argument("--cpu-s", type=float, default=300.0, help="data seconds of the CPU measurement")
     ap.add_argument("--real", nargs="+", metavar="DIR", help="only: replay the real logs under DIR (e.g. "
                     "/work/shared/data /work/reallogs) and count in-flight verdicts")
@@ -347,11 +375,14 @@ def main():
         return real_logs(args.real, args.real_baseline_s)
     if args.mode == "compare":
         return compare_mode(args.kinds, args.seeds, args.flight_s, args.logs)
-    if args.mode in ("all", "detect"):
-        detect_mode(args.kinds, args.seeds)
-    if args.mode in ("all", "fa"):
-        print()
-        fa_mode(args.fa_hours, args.flight_s, args.flights)
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(args.jobs) as pool:
+        if args.mode in ("all", "detect"):
+            detect_mode(args.kinds, args.seeds, pool)
+        if args.mode in ("all", "fa"):
+            print()
+            fa_mode(args.fa_hours, args.flight_s, args.flights, pool)
     if args.mode in ("all", "cpu"):
         on, off = cpu(400.0, args.cpu_s, True), cpu(400.0, args.cpu_s, False)
         print(f"\nCPU, 3 IMUs x 400 Hz in flight (copter preset at 400 Hz): {100 * on:.1f} % of one core with the "

@@ -87,3 +87,21 @@ def z_for_rate(per_imu_hour: float, imus: int, hold: int, check_s: float, memory
         else:
             hi = mid
     return hi
+
+
+SHAPE_GRID = 1 << 12  # frequency points of the Allan shape's integral
+
+
+def allan_shape(filters, rate_hz: float, m) -> np.ndarray:
+    """Allan variance of white noise through the cascade of 2-pole Butterworth low-passes ``filters`` (Hz,
+    bilinear and pre-warped as ArduPilot's LowPassFilter2p) over that of plain white noise, at cluster sizes
+    ``m``: as :func:`companion.redundancy.shape.avar_shape`, numpy only (the live pipeline loads no scipy),
+    from the filters' exact gain |H|^2 = 1 / (1 + (tan(pi f) / tan(pi f_c / f_s))^4)."""
+    m = np.asarray(m, dtype=float)
+    f = (np.arange(SHAPE_GRID) + 0.5) / SHAPE_GRID * 0.5  # cycles per sample
+    h2 = np.ones_like(f)
+    for fc in filters:
+        h2 /= 1.0 + (np.tan(np.pi * f) / math.tan(math.pi * fc / rate_hz)) ** 4
+    s2 = np.sin(np.pi * f) ** 2
+    kern = np.sin(np.pi * f[None, :] * m[:, None]) ** 4 / s2[None, :]
+    return np.sum(kern * h2[None, :], axis=1) / np.sum(kern, axis=1)

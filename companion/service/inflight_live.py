@@ -9,11 +9,13 @@ body see the same rotation, so per pair (:class:`PairTrack`):
    the rotation; what is left is the two IMUs' own noise (common-mode vibration cancels, what each IMU
    picks up of it on its own does not: that is part of the figure, "the IMU's own noise in flight");
 3. the calibrated difference feeds octave Allan accumulators (:mod:`companion.estimators.octave_bank`),
-   one per condition and axis with a ``memory_s`` memory, and while learning one without forgetting;
-4. every ``check_s`` its white level N^2 = AVAR(tau) tau is read at the first octave at or above the offline
-   method's shortest cluster time (:func:`companion.redundancy.fit_points.tau_min_for`: above the low-pass
-   filter's roll-off), the rounding of int16 messages removed
-   (:func:`companion.redundancy.hat.quantization_avar`), 1-sigma from its EDF.
+   one per condition and axis with a ``memory_s`` memory (the test's), one over this flight (since arming;
+   the figures reported), and while learning one without forgetting (the baseline);
+4. every ``check_s`` its white level N^2 = AVAR(tau) tau is read at the first octave at or above a shortest
+   cluster time, the rounding of int16 messages removed (:func:`companion.redundancy.hat.quantization_avar`),
+   1-sigma from its EDF (the overlap of the staggered phases counted). The test's accumulators: above the
+   low-pass roll-off (:func:`companion.redundancy.fit_points.tau_min_for`). This flight's figures: the
+   offline method's cluster time and filter shape (:meth:`PairTrack._first`), so `run` and `analyze` agree.
 
 Three IMUs: each IMU's N from the three-cornered hat with the offline method's variance
 (:func:`companion.redundancy.hat.hat_share`; a share below two of its sigmas is a 95 % upper bound). Two
@@ -39,13 +41,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.redundancy.fit_points import tau_min_for
+from companion.redundancy.redundant import EQUALIZED_TAU0, SHAPE_MIN
+from companion.redundancy.shape import MAX_FILTER_FRACTION
 from companion.redundancy.hat import hat_share, quantization_avar
 from companion.estimators.octave_bank import OctaveBankEstimator
 from companion.estimators.pair_calibration import PairCalibration
 from companion.health.degradation import DEGRADING, HEALTHY
 from companion.health.faults import AXES
 from companion.health.hold import debounce
-from companion.service.inflight_alarm import overlap_edf_gain, z_for_rate
+from companion.service.inflight_alarm import allan_shape, overlap_edf_gain, z_for_rate
 
 CONDITIONS = ("ground", "flight")
 PHASES = 4  # staggered phases of the octave accumulators
@@ -141,11 +145,14 @@ class PairTrack:
         self.t_done = -math.inf
         self.rate_hz: float | None = None
         self.filter_hz: float | None = None  # the lower of the two IMUs' known gyro low-pass cut-offs
+        self.filters: tuple = ()  # both IMUs' cut-offs (None: unknown)
+        self.all_filters: tuple = ()  # every IMU's of the vehicle (analyze's cascade)
         self.lsb: tuple = ()  # the two IMUs' sample rounding (rad/s; int16 messages)
         self.cur: dict[str, list[OctaveBankEstimator]] = {}
         self.learn: dict[str, list[OctaveBankEstimator] | None] = {}
         self.whole: dict[str, list[OctaveBankEstimator]] = {}  # this flight (since arming), no forgetting
         self.seconds = {c: 0.0 for c in CONDITIONS}
+        self.whole_s = {c: 0.0 for c in CONDITIONS}  # behind the whole-flight figures
         self.last_cond: str | None = None
 
     def _banks(self, cond: str, learning: bool):
@@ -178,6 +185,7 @@ class PairTrack:
                     est.new_segment()
                 est.update(e[:, a])
         self.seconds[cond] += t.shape[0] / self.rate_hz
+        self.whole_s[cond] += t.shape[0] / self.rate_hz
 
     def level(self, cond: str, a: int, which: str = "cur") -> tuple[float, float, float]:
         """(N^2, 1-sigma, EDF) of axis ``a``'s difference over ``which`` accumulators (``cur``: the last
@@ -190,14 +198,30 @@ class PairTrack:
         tau, avar, edf = banks[a].avar()
         m = np.maximum(np.rint(tau * self.rate_hz), 1.0)
         edf = edf * np.where(m >= PHASES, EDF_GAIN[PHASES], [EDF_GAIN[int(min(x, PHASES))] for x in m])
-        ok = np.flatnonzero((tau >= tau_min_for(self.rate_hz, self.filter_hz) * (1 - 1e-9))
-                            & (edf >= self.cfg.min_edf) & np.isfinite(avar))
+        first, shape = self._first(which, m)
+        ok = np.flatnonzero((tau >= first * (1 - 1e-9)) & (edf >= self.cfg.min_edf) & np.isfinite(avar))
         if ok.size == 0:
             return math.nan, math.nan, 0.0
         k = int(ok[0])
         q = sum(float(quantization_avar(lsb, tau[k], self.rate_hz)) for lsb in self.lsb)
-        v = float(max(avar[k] - q, 0.0) * tau[k])
+        v = float(max(avar[k] - q, 0.0) * tau[k] / shape[k])
         return v, v * math.sqrt(2.0 / float(edf[k])), float(edf[k])
+
+    def _first(self, which: str, m: np.ndarray) -> tuple[float, np.ndarray]:
+        """(shortest cluster time read, the filters' Allan shape per level to divide out). The test's
+        accumulators: above the low-pass roll-off (:func:`tau_min_for`), no shape. This flight's figures:
+        analyze's choice (:func:`companion.redundancy.redundant._equalized`): with every IMU's cut-off known
+        and below 0.45 of the rate, from ``EQUALIZED_TAU0`` samples or where the cascade of all the IMUs'
+        filters keeps ``SHAPE_MIN`` of the white level, the pair's own filters' shape divided out."""
+        one = np.ones(m.shape[0])
+        fcs = self.all_filters
+        if which != "whole" or not fcs or not all(f and 0 < f < MAX_FILTER_FRACTION * self.rate_hz for f in fcs):
+            return tau_min_for(self.rate_hz, self.filter_hz), one
+        grid = np.arange(1, 257)
+        casc = allan_shape(fcs, self.rate_hz, grid)
+        m0 = int(grid[np.argmax(casc >= SHAPE_MIN)]) if np.any(casc >= SHAPE_MIN) else 256
+        own = 0.5 * (allan_shape(self.filters[:1], self.rate_hz, m) + allan_shape(self.filters[1:], self.rate_hz, m))
+        return max(EQUALIZED_TAU0, m0) / self.rate_hz, own
 
     def learned_s(self, cond: str) -> float:
         banks = self.learn.get(cond)
@@ -286,7 +310,7 @@ class InflightNoise:
             return []
         if armed and not self._armed:  # a new flight: its own figures
             for p in self.pairs.values():
-                p.whole = {}
+                p.whole, p.whole_s = {}, {c: 0.0 for c in CONDITIONS}
         self._armed = bool(armed)
         cond = self._condition(channels, armed, t)
         ch = channels[imu]
@@ -301,6 +325,8 @@ class InflightNoise:
                 pair.t_done = -math.inf  # a reboot: time starts again
             fc = [c.filters.get("gyro") for c in (channels[key[0]], channels[key[1]])]
             pair.filter_hz = min((f for f in fc if f), default=None)
+            pair.filters = tuple(fc)
+            pair.all_filters = tuple(c.filters.get("gyro") for c in channels.values())
             pair.lsb = tuple(c.gyro_lsb for c in (channels[key[0]], channels[key[1]]) if c.gyro_lsb)
             got = aligned(channels[key[0]], channels[key[1]], pair.t_done)
             if got is None:

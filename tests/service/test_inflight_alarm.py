@@ -74,3 +74,13 @@ def test_z_for_rate_gives_the_rate():
     per_test = false_alarms_per_hour(z, 4, 5.0, 30.0, 0.2)
     assert per_test * 18 / 3 == pytest.approx(1e-3, rel=0.02)  # 18 tests (3 pairs, 3 axes, 2 ways), 3 IMUs
     assert z_for_rate(1e-3, 2, 4, 5.0, 30.0, 0.2) < z  # fewer tests per IMU
+
+
+@pytest.mark.parametrize("filters,rate", [([20.0], 50.0), ([20.0, 20.0, 20.0], 50.0), ([30.0, 25.0], 400.0),
+                                          ([8.0], 50.0)])
+def test_allan_shape_is_the_offline_one(filters, rate):
+    from companion.redundancy.shape import avar_shape
+    from companion.service.inflight_alarm import allan_shape
+
+    m = np.array([1, 2, 3, 4, 8, 16, 64, 256])
+    np.testing.assert_allclose(allan_shape(filters, rate, m), avar_shape(filters, rate, m), rtol=1e-3)
