@@ -6,11 +6,15 @@ Targets (issue 47): one IMU's noise x2 in flight named within 120 s, the others 
 0 false alarms over >= 100 simulated flight IMU-hours (``--mode fa``, about 25 min of CPU; ``--quick`` flies
 10); 3 IMUs x 400 Hz within 10 % of one core, CPU time / data time (``--mode cpu``).
 
-Flights: the ``copter`` preset (companion/sim/presets: 3 IMUs at 50 Hz, per-IMU vibration pick-up, filter,
-skew, temperature bias, Gauss-Markov bias) with the fault ``flight_noise`` x2 (the IMU's white noise and its
-vibration pick-up doubled) on a random IMU and axis; and the plain vehicle (noise model only, common
-vibration, 100 Hz, int16) with the fault ``noise`` x2 (white noise doubled). The flight starts 30 s after
-the start; the in-flight baseline is learned from its first 240 s, the fault comes 150-400 s later.
+Fault flights (``--kinds``, ``preset[:imus[:rate]]``): the ``copter`` preset (companion/sim/presets: 3 IMUs
+at 50 Hz, per-IMU vibration pick-up, filter, skew, temperature bias, Gauss-Markov bias; also at 400 Hz and
+with 2 IMUs) and the ``px4`` preset flown with 3 IMUs at 250 Hz, with the fault ``flight_noise`` x2 (the IMU's
+white noise and its vibration pick-up doubled); the plain vehicle (noise model only, common vibration,
+100 Hz, int16) with the fault ``noise`` x2. The flight starts 30 s after the start, its first 240 s learn
+the baseline, the fault comes 150-400 s later on a random IMU and axis. Healthy vehicles (``--mode fa``,
+:data:`FA_MIX`) fly ``--flights`` flights each, the baseline learned in the first and kept; only the flight
+time after it counts. ``--mode compare``: `run`'s flight figures against `analyze`'s on the same logs
+(simulated flights written as DataFlash logs, and ``--logs``). ``--jobs``: flights in parallel.
 """
 
 from __future__ import annotations
@@ -91,17 +95,24 @@ def _detect_one(spec: str, seed: int, imu: int, axis: str, at: float) -> tuple[f
     return (hit[0] - (sim.t_start + at) if hit else math.inf), others
 
 
-def detection(spec: str, seeds: int, pool, rng_seed: int = 47) -> tuple[list[str], list[float], int]:
-    """Flights of ``spec`` (:func:`parse_kind`) with one IMU's in-flight noise doubled at a random time, IMU
-    and axis; (summary lines, delays of the named faults (inf when not named), flights naming another IMU).
-    Two IMUs: both are named (suspects), so only the delay counts."""
+def _submit_detection(spec: str, seeds: int, pool, rng_seed: int = 47) -> list:
+    """The fault flights of ``spec``: [(seed, imu, axis, fault time, future)] (random IMU, axis and time)."""
     imus = parse_kind(spec)[1]
     rng = np.random.default_rng(rng_seed)
-    draws = []
+    out = []
     for s in range(seeds):
         imu, axis = int(rng.integers(imus)), ("gx", "gy", "gz")[int(rng.integers(3))]
-        draws.append((100 + s, imu, axis, 30.0 + 240.0 + float(rng.uniform(150.0, 400.0))))
-    got = list(pool.map(_detect_one, *zip(*[(spec, *d) for d in draws])))
+        d = (100 + s, imu, axis, 30.0 + 240.0 + float(rng.uniform(150.0, 400.0)))
+        out.append((*d, pool.submit(_detect_one, spec, *d)))
+    return out
+
+
+def detection(spec: str, seeds: int, flights: list) -> tuple[list[str], list[float], int]:
+    """Flights of ``spec`` (:func:`parse_kind`) with one IMU's in-flight noise doubled at a random time, IMU
+    and axis (:func:`_submit_detection`); (summary lines, delays of the named faults (inf when not named),
+    flights naming another IMU). Two IMUs: both are named (suspects), so only the delay counts."""
+    draws = [f[:4] for f in flights]
+    got = [f[4].result() for f in flights]
     delays, wrong = [], 0
     for (seed, imu, axis, at), (delay, others) in zip(draws, got):
         delays.append(delay)
@@ -128,22 +139,41 @@ def _fa_vehicle(spec: str, seed: int, flight_s: float, flights: int) -> tuple[fl
     return hours, [x for _, x in v if "changed" in x]
 
 
-def false_alarms(spec: str, imu_hours: float, flight_s: float, flights: int, pool) -> tuple[float, int, list]:
-    """Healthy vehicles of ``spec`` (:func:`parse_kind`), each flying ``flights`` flights of ``flight_s`` (the
-    baseline learned in the first and kept, as `run`'s state file keeps it), until ``imu_hours`` flight
-    IMU-hours under test (after the baseline) are flown; (tested IMU-hours, verdicts, their texts)."""
-    imus = parse_kind(spec)[1]
-    hours, alarms, seen, s = 0.0, 0, [], 0
-    while hours < imu_hours:
+def false_alarms(specs, imu_hours: float, flight_s: float, flights: int, pool, deadline: float):
+    """Healthy vehicles of each (spec, share) of ``specs`` (:func:`parse_kind`), each flying ``flights`` flights
+    of ``flight_s`` (the baseline learned in the first and kept, as `run`'s state file keeps it), until
+    ``share x imu_hours`` flight IMU-hours under test (after the baseline) are flown, or the wall clock
+    passes ``deadline`` (then the vehicles still flying are dropped, and said so); {spec: [hours, verdicts,
+    texts, vehicles]}."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    out = {spec: [0.0, 0, [], 0] for spec, _ in specs}
+    jobs = {}
+    queue = []
+    for spec, share in specs:
+        imus = parse_kind(spec)[1]
         per = imus * (flights * flight_s - 300.0) / 3600.0  # about: the baseline and the take-offs not tested
-        n = max(1, math.ceil((imu_hours - hours) / per))
-        seeds = list(range(5000 + s, 5000 + s + n))
-        for seed, (h, texts) in zip(seeds, pool.map(_fa_vehicle, [spec] * n, seeds, [flight_s] * n, [flights] * n)):
-            hours += h
-            alarms += len(texts)
-            seen += [(seed, x) for x in texts]
-        s += n
-    return hours, alarms, seen
+        queue += [(spec, 5000 + k) for k in range(max(1, math.ceil(share * imu_hours / per)))]
+    queue.sort(key=lambda q: q[1])  # the kinds interleaved: each progresses
+    while (queue or jobs) and time.time() < deadline:
+        while queue and len(jobs) < pool._max_workers:
+            spec, seed = queue.pop(0)
+            jobs[pool.submit(_fa_vehicle, spec, seed, flight_s, flights)] = (spec, seed)
+        done, _ = wait(list(jobs), timeout=max(1.0, min(60.0, deadline - time.time())), return_when=FIRST_COMPLETED)
+        for f in done:
+            spec, seed = jobs.pop(f)
+            h, texts = f.result()
+            o = out[spec]
+            o[0] += h
+            o[1] += len(texts)
+            o[2] += [(seed, x) for x in texts]
+            o[3] += 1
+            print(f"    {spec} vehicle {seed}: {h:.2f} IMU-h under test, verdicts {texts or 0}", flush=True)
+    if jobs or queue:
+        print(f"  (wall-clock limit: {len(jobs)} vehicles in flight and {len(queue)} not started left out)")
+        for proc in list(pool._processes.values()):
+            proc.terminate()
+    return out
 
 
 def cpu(rate_hz: float, data_s: float, inflight: bool) -> float:
@@ -231,8 +261,9 @@ def _cpu_now() -> float:
 def detect_mode(kinds, seeds: int, pool) -> None:
     print("doubled in-flight noise on one IMU: delay from the fault to its STATUSTEXT (2 IMUs: both named)")
     lines, all_d, wrong, n = [], [], 0, 0
+    futures = {spec: _submit_detection(spec, seeds, pool) for spec in kinds}  # every flight queued at once
     for spec in kinds:
-        ln, d, w = detection(spec, seeds, pool)
+        ln, d, w = detection(spec, seeds, futures[spec])
         lines += ln
         all_d += d
         wrong += w if parse_kind(spec)[1] > 2 else 0
@@ -247,7 +278,7 @@ def detect_mode(kinds, seeds: int, pool) -> None:
           f"{wrong} flights")
 
 
-def fa_mode(hours: float, flight_s: float, flights: int, pool) -> None:
+def fa_mode(hours: float, flight_s: float, flights: int, pool, wall_s: float) -> None:
     from companion.service.inflight_live import InflightNoise
 
     nz = InflightNoise()
@@ -256,15 +287,15 @@ def fa_mode(hours: float, flight_s: float, flights: int, pool) -> None:
     z3, z2 = (c.test.z(k, c.check_s, c.memory_s, c.baseline_s) for k in (3, 2))
     print(f"healthy vehicles, {flights} flights of {flight_s:g} s each (baseline learned in the first, kept); "
           f"design false-alarm rate {per:g} per flight IMU-hour (z {z3:.2f} at 3 IMUs, {z2:.2f} at 2)")
+    t0 = _cpu_now()
+    out = false_alarms(FA_MIX, hours, flight_s, flights, pool, time.time() + wall_s)
     total_h, total_a = 0.0, 0
-    for spec, share in FA_MIX:
-        t0 = _cpu_now()
-        h, a, seen = false_alarms(spec, share * hours, flight_s, flights, pool)
+    for spec, (h, a, seen, n) in out.items():
         total_h, total_a = total_h + h, total_a + a
-        print(f"  {spec}: {h:.1f} flight IMU-hours under test, false alarms {a}"
-              + (f" ({seen[:3]})" if a else "") + f", {_cpu_now() - t0:.0f} s CPU", flush=True)
-    print(f"FALSE ALARMS: {total_a} in {total_h:.1f} simulated flight IMU-hours under test "
-          f"(expected at the design rate: {per * total_h:.2f})")
+        print(f"  {spec}: {n} vehicles, {h:.1f} flight IMU-hours under test, false alarms {a}"
+              + (f" ({seen[:3]})" if a else ""))
+    print(f"FALSE ALARMS: {total_a} in {total_h:.1f} simulated flight IMU-hours under test (expected at the "
+          f"design rate: {per * total_h:.2f}); {_cpu_now() - t0:.0f} s CPU")
 
 
 def _offline(path: str) -> dict:
@@ -365,6 +396,8 @@ def main():
     ap.add_argument("--flight-s", type=float, default=900.0, help="length of each healthy flight")
     ap.add_argument("--flights", type=int, default=4, help="flights per healthy vehicle")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (the flights are independent)")
+    ap.add_argument("--wall-s", type=float, default=math.inf, help="--mode fa: stop after this wall time (s), "
+                    "reporting the IMU-hours flown")
     ap.add_argument("--cpu-s", type=float, default=300.0, help="data seconds of the CPU measurement")
     ap.add_argument("--real", nargs="+", metavar="DIR", help="only: replay the real logs under DIR (e.g. "
                     "/work/shared/data /work/reallogs) and count in-flight verdicts")
@@ -382,7 +415,7 @@ def main():
             detect_mode(args.kinds, args.seeds, pool)
         if args.mode in ("all", "fa"):
             print()
-            fa_mode(args.fa_hours, args.flight_s, args.flights, pool)
+            fa_mode(args.fa_hours, args.flight_s, args.flights, pool, args.wall_s)
     if args.mode in ("all", "cpu"):
         on, off = cpu(400.0, args.cpu_s, True), cpu(400.0, args.cpu_s, False)
         print(f"\nCPU, 3 IMUs x 400 Hz in flight (copter preset at 400 Hz): {100 * on:.1f} % of one core with the "
