@@ -8,8 +8,8 @@ the state is OK (the alarm when S passes the threshold), then the evidence for h
 debounced one the count of bad blocks in a row against the blocks it needs; for the Allan check the
 current/baseline ratio of the worst parameter against ``ratio_on``; for the sample-level frozen watch
 (health/frozen_watch.py) the equal pairs of samples seen while the vehicle moved against the ``NEED`` that
-names the axis; for the in-flight noise test the change of the IMU's pair figures from their baseline
-against ``ratio_on``.
+names the axis; for the in-flight noise test the change of the IMU's pair figures from their baseline in
+standard deviations against the test's threshold.
 """
 
 from __future__ import annotations
@@ -48,11 +48,10 @@ STAT_NAMES = {
     "allan": ("online Allan term over its baseline (worst of N, B, K)", "ratio"),
     "frozen": ("pairs of consecutive samples with one value while the vehicle moved (calm pairs by their weight)",
                "pairs"),
-    "flight_noise": ("in flight: lower 3-sigma bound of the change of the noise of the IMU's differences with "
-                     "its twins from their baseline (a fall counted as its inverse; the largest)", "ratio"),
-    "ground_noise": ("armed on the ground: lower 3-sigma bound of the change of the noise of the IMU's "
-                     "differences with its twins from their baseline (a fall counted as its inverse; the largest)",
-                     "ratio"),
+    "flight_noise": ("in flight: the change of the noise of the IMU's differences with its twins from their "
+                     "baseline in standard deviations (a fall counted as a rise; the largest)", "sigma"),
+    "ground_noise": ("armed on the ground: the change of the noise of the IMU's differences with its twins from "
+                     "their baseline in standard deviations (a fall counted as a rise; the largest)", "sigma"),
 }
 
 
@@ -192,8 +191,8 @@ def sentence(kind: str, imu: int, axis: str, value: float, detail: str = "", thr
         where = "in flight" if kind == "flight_noise" else "armed on the ground"
         way = "rose" if not v < 1.0 else "fell"
         return (f"{who}: {where}, the noise of its difference with a twin IMU {way} to {v:.2g}x the level learned "
-                f"{where}; the lower 3-sigma bound of the change (a fall as its inverse) stayed beyond {h}x for "
-                "several checks in a row while the other IMUs' difference stayed as before: this IMU's own noise "
+                f"{where}; the change stayed beyond {h} standard deviations (the threshold of the test's false-alarm "
+                "rate) for several checks in a row while the other IMUs' difference stayed as before: this IMU's own noise "
                 "or its pick-up of the frame's vibration changed.")
     words = {
         "noise": f"{who}: its noise rose to {v:.1f}x the level learned at rest; the CUSUM of the per-block "

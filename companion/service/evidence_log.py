@@ -51,17 +51,17 @@ def _mark_trips(stats: dict, prev: Mapping) -> None:
 
 def inflight_statistics(report, imu: int) -> dict[str, tuple[float, float, int]]:
     """The in-flight test's latest change of ``imu``'s pair figures from their baseline per condition and axis
-    (service.inflight_report.InflightReport): the largest lower z-sigma bound of the change (a fall as its
-    inverse) against ``ratio_on``, which names the IMU after ``hold_on`` checks in a row above it; keyed
-    ``flight_noise/axis`` and ``ground_noise/axis``."""
+    (service.inflight_report.InflightReport): the largest |Z| of its pairs' changes (in standard deviations, a
+    fall counted as a rise) against the test's threshold, which names the IMU after ``hold_on`` checks in a
+    row above it; keyed ``flight_noise/axis`` and ``ground_noise/axis``."""
     noise = getattr(report, "noise", None)
-    if noise is None:
+    if noise is None or not noise.pairs:
         return {}
-    bar = float(noise.cfg.test.ratio_on)
+    bar = float(noise.z_on())
     out = {}
-    for cond, ratios in noise.last_ratios.items():
+    for cond, zs in noise.last_z.items():
         for ax in ("gx", "gy", "gz"):
-            rs = [lo for (k, a), (_, lo) in ratios.items() if a == ax and imu in k and math.isfinite(lo)]
+            rs = [abs(z) for (k, a), z in zs.items() if a == ax and imu in k and math.isfinite(z)]
             if rs:
                 out[f"{cond}_noise/{ax}"] = (max(rs), bar, int((cond, imu, ax) in noise.named))
     return out

@@ -9,11 +9,13 @@ body see the same rotation, so per pair (:class:`PairTrack`):
    the rotation; what is left is the two IMUs' own noise (common-mode vibration cancels, what each IMU
    picks up of it on its own does not: that is part of the figure, "the IMU's own noise in flight");
 3. the calibrated difference feeds octave Allan accumulators (:mod:`companion.estimators.octave_bank`),
-   one per condition and axis with a ``memory_s`` memory, and while learning one without forgetting;
-4. every ``check_s`` its white level N^2 = AVAR(tau) tau is read at the first octave at or above the offline
-   method's shortest cluster time (:func:`companion.redundancy.fit_points.tau_min_for`: above the low-pass
-   filter's roll-off), the rounding of int16 messages removed
-   (:func:`companion.redundancy.hat.quantization_avar`), 1-sigma from its EDF.
+   one per condition and axis with a ``memory_s`` memory (the test's), one over this flight (since arming;
+   the figures reported), and while learning one without forgetting (the baseline);
+4. every ``check_s`` its white level N^2 = AVAR(tau) tau is read at the first octave at or above a shortest
+   cluster time, the rounding of int16 messages removed (:func:`companion.redundancy.hat.quantization_avar`),
+   1-sigma from its EDF (the overlap of the staggered phases counted). The test's accumulators: above the
+   low-pass roll-off (:func:`companion.redundancy.fit_points.tau_min_for`). This flight's figures: the
+   offline method's cluster time and filter shape (:meth:`PairTrack._first`), so `run` and `analyze` agree.
 
 Three IMUs: each IMU's N from the three-cornered hat with the offline method's variance
 (:func:`companion.redundancy.hat.hat_share`; a share below two of its sigmas is a 95 % upper bound). Two
@@ -24,9 +26,8 @@ its own estimators, baseline and test.
 
 The baseline (per condition: the hat figures and each pair's figure) is learned from the first
 ``baseline_s`` of that condition's data and kept in the state file; then every check tests each pair's figure
-against its baseline both ways with the at-rest statistic and hysteresis
-(:class:`companion.health.degradation.ParamDetector`, thresholds :data:`INFLIGHT_TEST`) and names the IMU
-whose pairs changed while the others' did not (:meth:`InflightNoise._test`). The online calibration differs
+against its baseline both ways (:class:`InflightTest`: a z test whose threshold is set by its false-alarm
+rate per IMU-hour, :mod:`companion.service.inflight_alarm`) and names the IMU whose pairs changed while the others' did not (:meth:`InflightNoise._test`). The online calibration differs
 from the offline one (:mod:`companion.redundancy.calibration`, a batch fit with instrumental variables and
 cross-filtering) in being recursive, scipy-free and fitted on 0.1-s means; the Allan points, the hat and the
 cluster time are the offline method's.
@@ -40,17 +41,60 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.redundancy.fit_points import tau_min_for
+from companion.redundancy.redundant import EQUALIZED_TAU0, SHAPE_MIN
+from companion.redundancy.shape import MAX_FILTER_FRACTION
 from companion.redundancy.hat import hat_share, quantization_avar
 from companion.estimators.octave_bank import OctaveBankEstimator
 from companion.estimators.pair_calibration import PairCalibration
-from companion.health.degradation import DEGRADING, HEALTHY, DetectorConfig, ParamDetector
+from companion.health.degradation import DEGRADING, HEALTHY
 from companion.health.faults import AXES
+from companion.health.hold import debounce
+from companion.service.inflight_alarm import allan_shape, overlap_edf_gain, z_for_rate
 
 CONDITIONS = ("ground", "flight")
-#: the degradation test in flight: the at-rest statistic (health.degradation) on each pair's figure, with
-#: thresholds chosen with benchmarks/bench_inflight_live.py (0 false alarms on the simulated flights and the
-#: real logs, a doubled noise named within 120 s); a check every check_s = 5 s
-INFLIGHT_TEST = DetectorConfig(z=3.0, ratio_on=1.25, ratio_off=1.12, hold_on=4, hold_off=6, params=("N",))
+PHASES = 4  # staggered phases of the octave accumulators
+#: the overlap of a level's min(PHASES, m) phases: its EDF over the bank's (the count of one phase's differences)
+EDF_GAIN = {p: overlap_edf_gain(p) for p in range(1, PHASES + 1)}
+
+
+@dataclass
+class InflightTest:
+    """The degradation test in flight (:mod:`companion.service.inflight_alarm`): per pair, axis and direction,
+    Z = ln(now / baseline) / sigma_L above ``z`` for ``hold_on`` checks in a row, ``z`` solved so that all the
+    tests of a vehicle give ``per_imu_hour`` false alarms per IMU and flight hour; back after ``hold_off``
+    checks with |Z| below ``z_back``. The pair without the named IMU must stay within ``z_stable`` of its
+    baseline (the other two agree as before)."""
+
+    per_imu_hour: float = 1e-3
+    #: relative scatter of a pair's figure the Allan statistics do not hold (the frame's vibration level
+    #: wandering with throttle and manoeuvres, in the pair's difference through the IMUs' different pick-up),
+    #: added to sigma_L: healthy 250 Hz flights of the px4 preset move pair figures by 6-13 % over minutes
+    #: while their sampling sigma is 2-3 %. The stated false-alarm rate is that of the statistics alone: with
+    #: this term the rate of a stationary flight is lower
+    model_sigma: float = 0.05
+    hold_on: int = 4
+    hold_off: int = 6
+    z_back: float = 2.0
+    z_stable: float = 2.0
+
+    def z(self, imus: int, check_s: float, memory_s: float, baseline_s: float) -> float:
+        base_share = 1.0 / (1.0 + baseline_s / (2.0 * memory_s))  # sigma_b^2 / sigma_L^2 from the two EDFs
+        z = z_for_rate(self.per_imu_hour, imus, self.hold_on, check_s, memory_s, round(base_share, 4))
+        return math.ceil(z * 100.0) / 100.0  # two decimals, rounded up
+
+
+@dataclass
+class ZDetector:
+    """Hysteresis of one test (one pair, axis and direction)."""
+
+    state: int = HEALTHY
+    count: int = 0
+
+    def check(self, zval: float, z_on: float, test: InflightTest) -> None:
+        self.state, self.count, _ = debounce(self.state, self.count, zval > z_on, test.hold_on, test.hold_off,
+                                             good=zval < test.z_back)
+
+
 SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
 MIN_ALIGNED = 10
 VERSION = 1
@@ -66,7 +110,7 @@ class InflightConfig:
     min_edf: float = 20.0
     turning: float = 0.03  # rad/s: a half-second mean body rate above this is flight, not ground
     ground_hold_s: float = 10.0  # not turning for this long before flight becomes ground again
-    test: DetectorConfig = field(default_factory=lambda: INFLIGHT_TEST)
+    test: InflightTest = field(default_factory=InflightTest)
 
 
 def _period(t: np.ndarray) -> float:
@@ -107,18 +151,24 @@ class PairTrack:
         self.t_done = -math.inf
         self.rate_hz: float | None = None
         self.filter_hz: float | None = None  # the lower of the two IMUs' known gyro low-pass cut-offs
+        self.filters: tuple = ()  # both IMUs' cut-offs (None: unknown)
+        self.all_filters: tuple = ()  # every IMU's of the vehicle (analyze's cascade)
         self.lsb: tuple = ()  # the two IMUs' sample rounding (rad/s; int16 messages)
         self.cur: dict[str, list[OctaveBankEstimator]] = {}
         self.learn: dict[str, list[OctaveBankEstimator] | None] = {}
+        self.whole: dict[str, list[OctaveBankEstimator]] = {}  # this flight (since arming), no forgetting
         self.seconds = {c: 0.0 for c in CONDITIONS}
+        self.whole_s = {c: 0.0 for c in CONDITIONS}  # behind the whole-flight figures
         self.last_cond: str | None = None
 
     def _banks(self, cond: str, learning: bool):
+        mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=PHASES, max_tau_s=8.0, fit="diag")
         if cond not in self.cur:
-            mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=4, max_tau_s=8.0, fit="diag")
             self.cur[cond] = [OctaveBankEstimator(forgetting_s=self.cfg.memory_s, **mk) for _ in AXES]
             self.learn[cond] = [OctaveBankEstimator(**mk) for _ in AXES] if learning else None
-        return self.cur[cond], self.learn[cond]
+        if cond not in self.whole:  # a whole flight reaches the slow telemetry streams' cluster times
+            self.whole[cond] = [OctaveBankEstimator(**dict(mk, max_tau_s=64.0)) for _ in AXES]
+        return self.cur[cond], self.learn[cond], self.whole[cond]
 
     def feed(self, t: np.ndarray, gi: np.ndarray, gj: np.ndarray, cond: str | None, learning: bool) -> None:
         if self.rate_hz is None:
@@ -130,34 +180,54 @@ class PairTrack:
         if e is None or cond is None:
             self.last_cond = None
             return
-        cur, learn = self._banks(cond, learning)
+        cur, learn, whole = self._banks(cond, learning)
         junction = gap or self.last_cond != cond
         self.last_cond = cond
         for a in range(3):
-            for est in (cur[a], learn[a] if learn is not None else None):
+            for est in (cur[a], whole[a], learn[a] if learn is not None else None):
                 if est is None:
                     continue
                 if junction:
                     est.new_segment()
                 est.update(e[:, a])
         self.seconds[cond] += t.shape[0] / self.rate_hz
+        self.whole_s[cond] += t.shape[0] / self.rate_hz
 
-    def level(self, cond: str, a: int, learned: bool = False) -> tuple[float, float, float]:
-        """(N^2, 1-sigma, EDF) of axis ``a``'s difference now (``learned``: over the learning data): the
-        Allan variance at the first octave at or above :func:`tau_min_for` with ``min_edf``, times tau,
-        without the rounding of the two IMUs' samples."""
-        banks = (self.learn if learned else self.cur).get(cond)
+    def level(self, cond: str, a: int, which: str = "cur") -> tuple[float, float, float]:
+        """(N^2, 1-sigma, EDF) of axis ``a``'s difference over ``which`` accumulators (``cur``: the last
+        ``memory_s``; ``learn``: the learning data; ``whole``: this flight): the Allan variance at the first
+        octave at or above :func:`tau_min_for` with ``min_edf``, times tau, without the rounding of the two
+        IMUs' samples."""
+        banks = getattr(self, which).get(cond)
         if not banks or self.rate_hz is None:
             return math.nan, math.nan, 0.0
         tau, avar, edf = banks[a].avar()
-        ok = np.flatnonzero((tau >= tau_min_for(self.rate_hz, self.filter_hz) * (1 - 1e-9))
-                            & (edf >= self.cfg.min_edf) & np.isfinite(avar))
+        m = np.maximum(np.rint(tau * self.rate_hz), 1.0)
+        edf = edf * np.where(m >= PHASES, EDF_GAIN[PHASES], [EDF_GAIN[int(min(x, PHASES))] for x in m])
+        first, shape = self._first(which, m)
+        ok = np.flatnonzero((tau >= first * (1 - 1e-9)) & (edf >= self.cfg.min_edf) & np.isfinite(avar))
         if ok.size == 0:
             return math.nan, math.nan, 0.0
         k = int(ok[0])
         q = sum(float(quantization_avar(lsb, tau[k], self.rate_hz)) for lsb in self.lsb)
-        v = float(max(avar[k] - q, 0.0) * tau[k])
+        v = float(max(avar[k] - q, 0.0) * tau[k] / shape[k])
         return v, v * math.sqrt(2.0 / float(edf[k])), float(edf[k])
+
+    def _first(self, which: str, m: np.ndarray) -> tuple[float, np.ndarray]:
+        """(shortest cluster time read, the filters' Allan shape per level to divide out). The test's
+        accumulators: above the low-pass roll-off (:func:`tau_min_for`), no shape. This flight's figures:
+        analyze's choice (:func:`companion.redundancy.redundant._equalized`): with every IMU's cut-off known
+        and below 0.45 of the rate, from ``EQUALIZED_TAU0`` samples or where the cascade of all the IMUs'
+        filters keeps ``SHAPE_MIN`` of the white level, the pair's own filters' shape divided out."""
+        one = np.ones(m.shape[0])
+        fcs = self.all_filters
+        if which != "whole" or not fcs or not all(f and 0 < f < MAX_FILTER_FRACTION * self.rate_hz for f in fcs):
+            return tau_min_for(self.rate_hz, self.filter_hz), one
+        grid = np.arange(1, 257)
+        casc = allan_shape(fcs, self.rate_hz, grid)
+        m0 = int(grid[np.argmax(casc >= SHAPE_MIN)]) if np.any(casc >= SHAPE_MIN) else 256
+        own = 0.5 * (allan_shape(self.filters[:1], self.rate_hz, m) + allan_shape(self.filters[1:], self.rate_hz, m))
+        return max(EQUALIZED_TAU0, m0) / self.rate_hz, own
 
     def learned_s(self, cond: str) -> float:
         banks = self.learn.get(cond)
@@ -202,12 +272,14 @@ class InflightNoise:
         self._still_since: float | None = None
         self.next_check: float | None = None
         # per condition: {who: {axis: (N, 1-sigma, bound)}}; who an IMU, or a pair (i, j) of two IMUs
-        self.figures: dict[str, dict] = {c: {} for c in CONDITIONS}
+        self.figures: dict[str, dict] = {c: {} for c in CONDITIONS}  # this flight (since arming)
+        self.recent: dict[str, dict] = {c: {} for c in CONDITIONS}  # the last memory_s (what the test sees)
+        self._armed = False
         self.baseline: dict[str, dict] = {c: {} for c in CONDITIONS}
-        self.detectors: dict[tuple, ParamDetector] = {}  # (cond, pair, axis, "up" | "down")
+        self.detectors: dict[tuple, ZDetector] = {}  # (cond, pair, axis, "up" | "down")
         self.named: set = set()  # (cond, imu, axis) the test names
-        #: cond -> {(pair, axis): (now / baseline, its lower z-sigma bound folded: a fall as its inverse)}
-        self.last_ratios: dict[str, dict] = {}
+        #: cond -> {(pair, axis): Z of the latest check (InflightTest)}
+        self.last_z: dict[str, dict] = {}
 
     # ------------------------------------------------------------------ condition
     def _condition(self, channels, armed: bool, t: float) -> str | None:
@@ -242,6 +314,10 @@ class InflightNoise:
         the figures and the test when a check is due. Returns the test's changes."""
         if len(channels) < 2:
             return []
+        if armed and not self._armed:  # a new flight: its own figures
+            for p in self.pairs.values():
+                p.whole, p.whole_s = {}, {c: 0.0 for c in CONDITIONS}
+        self._armed = bool(armed)
         cond = self._condition(channels, armed, t)
         ch = channels[imu]
         for other in channels.values():
@@ -255,6 +331,8 @@ class InflightNoise:
                 pair.t_done = -math.inf  # a reboot: time starts again
             fc = [c.filters.get("gyro") for c in (channels[key[0]], channels[key[1]])]
             pair.filter_hz = min((f for f in fc if f), default=None)
+            pair.filters = tuple(fc)
+            pair.all_filters = tuple(c.filters.get("gyro") for c in channels.values())
             pair.lsb = tuple(c.gyro_lsb for c in (channels[key[0]], channels[key[1]]) if c.gyro_lsb)
             got = aligned(channels[key[0]], channels[key[1]], pair.t_done)
             if got is None:
@@ -269,10 +347,10 @@ class InflightNoise:
         return self.check()
 
     # ------------------------------------------------------------------ figures and test
-    def _figures(self, cond: str, learned: bool = False) -> dict:
+    def _figures(self, cond: str, which: str = "cur") -> dict:
         """{who: {axis: (N, 1-sigma, bound)}} of one condition from the current (or learning) accumulators:
         three IMUs per IMU (the hat), two IMUs the pair (i, j) (its figure bounds each IMU)."""
-        levels = {k: [p.level(cond, a, learned) for a in range(3)] for k, p in self.pairs.items()}
+        levels = {k: [p.level(cond, a, which) for a in range(3)] for k, p in self.pairs.items()}
         imus = sorted({i for k in levels for i in k})
         out: dict = {}
         if len(imus) == 3 and len(levels) == 3:
@@ -295,11 +373,11 @@ class InflightNoise:
                     out.setdefault(k, {})[ax] = (n, s, False)
         return out
 
-    def _pair_levels(self, cond: str, learned: bool = False) -> dict:
+    def _pair_levels(self, cond: str, which: str = "cur") -> dict:
         """{(i, j): {axis: (N, 1-sigma)}} of the pairs' differences."""
         out = {}
         for k, p in self.pairs.items():
-            axes = {ax: _n(*p.level(cond, a, learned)[:2]) for a, ax in enumerate(AXES)}
+            axes = {ax: _n(*p.level(cond, a, which)[:2]) for a, ax in enumerate(AXES)}
             out[k] = {ax: v for ax, v in axes.items() if math.isfinite(v[0]) and v[0] > 0}
         return out
 
@@ -307,46 +385,57 @@ class InflightNoise:
         """Figures, baseline learning and the test of every condition; the changes of the named IMUs."""
         out: list[Verdict] = []
         for cond in CONDITIONS:
-            self.figures[cond] = self._figures(cond)
+            self.figures[cond] = self._figures(cond, "whole")
+            self.recent[cond] = self._figures(cond)
             if not self.baseline[cond]:
                 if self.pairs and all(p.learned_s(cond) >= self.cfg.baseline_s for p in self.pairs.values()):
-                    pairs = self._pair_levels(cond, learned=True)
+                    pairs = self._pair_levels(cond, "learn")
                     if any(pairs.values()):  # else (a slow stream: no level resolved yet) learning goes on
-                        self.baseline[cond] = {"imus": self._figures(cond, learned=True), "pairs": pairs}
+                        self.baseline[cond] = {"imus": self._figures(cond, "learn"), "pairs": pairs}
                         for p in self.pairs.values():
                             p.learn[cond] = None
                 continue
             out += self._test(cond)
         return out
 
+    def z_on(self) -> float:
+        """The test's threshold on Z for this vehicle's number of IMUs (:class:`InflightTest`)."""
+        imus = len({i for k in self.pairs for i in k})
+        c = self.cfg
+        return c.test.z(max(imus, 2), c.check_s, c.memory_s, c.baseline_s)
+
     def _test(self, cond: str) -> list[Verdict]:
-        """Per pair and axis, has the difference's N changed from its baseline (up or down: the at-rest
-        statistic both ways, with its hysteresis)? Three IMUs: an IMU is named when a pair it is in has
-        changed while the pair without it stays within ``ratio_off`` of its baseline (the other two agree as
-        before), and no other IMU fits this; a change of every pair is the vibration of the whole frame, not one IMU. Both ways, because
-        what an IMU picks up of the frame's vibration is shared with the others: when one IMU's pick-up grows
-        towards another's, their difference shrinks. Two IMUs: a changed pair names both as suspects."""
-        cfg, out = self.cfg.test, []
+        """Per pair and axis, has the difference's N changed from its baseline (up or down: Z of
+        :class:`InflightTest` both ways, with its hysteresis)? Three IMUs: an IMU is named when a pair it is
+        in has changed while the pair without it stays within ``z_stable`` of its baseline (the other two
+        agree as before), and no other IMU fits this; a change of every pair is the vibration of the whole
+        frame, not one IMU. Both ways, because what an IMU picks up of the frame's vibration is shared with the
+        others: when one IMU's pick-up grows towards another's, their difference shrinks. Two IMUs: a changed
+        pair names both as suspects."""
+        test, out = self.cfg.test, []
+        z_on = self.z_on()
         base = self.baseline[cond]["pairs"]
         now = self._pair_levels(cond)
         changed: dict[str, set] = {ax: set() for ax in AXES}
         ratios: dict = {}
-        folded: dict = {}
+        zs: dict = {}
         for k, axes in now.items():
             for ax, (x, sx) in axes.items():
                 if ax not in base.get(k, {}):
                     continue
                 b, sb = base[k][ax]
-                up = self.detectors.setdefault((cond, k, ax, "up"), ParamDetector())
-                down = self.detectors.setdefault((cond, k, ax, "down"), ParamDetector())
-                up.check(x, sx, b, sb, cfg)
-                down.check(b, sb, x, sx, cfg)
-                ratios[(k, ax)] = x / b
-                if x > 0 and b > 0:
-                    folded[(k, ax)] = (x / b, math.exp(abs(math.log(x / b)) - cfg.z * math.hypot(sx / x, sb / b)))
+                if not (x > 0 and b > 0 and sx > 0 and sb > 0):
+                    continue
+                sig = math.sqrt((sx / x) ** 2 + (sb / b) ** 2 + test.model_sigma ** 2)
+                zv = math.log(x / b) / sig
+                up = self.detectors.setdefault((cond, k, ax, "up"), ZDetector())
+                down = self.detectors.setdefault((cond, k, ax, "down"), ZDetector())
+                up.check(zv, z_on, test)
+                down.check(-zv, z_on, test)
+                ratios[(k, ax)], zs[(k, ax)] = x / b, zv
                 if DEGRADING in (up.state, down.state):
                     changed[ax].add(k)
-        self.last_ratios[cond] = folded
+        self.last_z[cond] = zs
         imus = sorted({i for k in self.pairs for i in k})
         for ax in AXES:
             named = set()
@@ -356,7 +445,7 @@ class InflightNoise:
                 for i in imus:
                     others = [k for k in self.pairs if i not in k]
                     if (changed[ax] & {k for k in self.pairs if i in k}) and all(
-                            abs(math.log(ratios.get((k, ax), math.inf))) < math.log(cfg.ratio_off) for k in others):
+                            abs(zs.get((k, ax), math.inf)) < test.z_stable for k in others):
                         named.add(i)
                 if len(named) > 1:  # the changed pair's two IMUs both fit: which one is not known yet
                     named = set()

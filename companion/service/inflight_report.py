@@ -76,7 +76,7 @@ class InflightReport:
             who = imu if imu in figs else next((w for w in figs if isinstance(w, tuple) and imu in w), None)
             if who is None:
                 continue
-            secs = max(p.seconds[cond] for k, p in self.noise.pairs.items() if imu in k)
+            secs = max(p.whole_s[cond] for k, p in self.noise.pairs.items() if imu in k)  # this flight
             pair = isinstance(who, tuple)
             parts = []
             for ax, (n, s, bound) in figs[who].items():

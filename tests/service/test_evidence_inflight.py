@@ -11,7 +11,7 @@ import pytest
 
 from companion.health.frozen_watch import NEED
 from companion.mavlink.reporter import Reporter
-from companion.service.inflight_live import INFLIGHT_TEST, InflightConfig
+from companion.service.inflight_live import InflightConfig, InflightTest
 from companion.service.pipeline import Pipeline, PipelineConfig
 from companion.service.replay import replay_vehicle
 from companion.sim.vehicle import Fault, Flight, Schedule, VehicleSimulator
@@ -81,11 +81,13 @@ def test_flight_noise_alarm_evidence():
     p = _fly(sim, 700.0)
     it = _item(p, "flight_noise", imu, axis)
     assert at < it["t_s"] < at + 120 and "flight noise changed" in it["text"]
-    assert it["statistic"]["key"] == "flight_noise/gy" and it["statistic"]["unit"] == "ratio"
-    _crosses(it, INFLIGHT_TEST.ratio_on, (INFLIGHT_TEST.hold_on + 1) * InflightConfig().check_s + 1.0)
+    assert it["statistic"]["key"] == "flight_noise/gy" and it["statistic"]["unit"] == "sigma"
+    z_on = p.inflight.noise.z_on()
+    assert 3.5 < z_on < 5.0 and z_on == round(z_on, 2)
+    _crosses(it, z_on, (InflightTest().hold_on + 1) * InflightConfig().check_s + 1.0)
     _twins(it)
     assert it["spectrum"] and set(it["spectrum"]["psd"]) == {"gx", "gy", "gz"}
-    assert "in flight" in it["sentence"] and "rose to" in it["sentence"] and "beyond 1.25x" in it["sentence"]
+    assert "in flight" in it["sentence"] and "rose to" in it["sentence"] and f"beyond {z_on:g} standard deviations" in it["sentence"]
 
 
 def test_dead_gyro_in_flight_evidence():
