@@ -55,6 +55,8 @@ CALM_P = 0.8
 CALM_MARGIN = 0.25
 CALM_ALPHA = 1e-12
 HISTORY_S = 30.0  # seconds of samples kept per IMU (the twins' look-up, the pending pairs)
+REST_ZERO_SHARE = 0.5  # below resolution: at least this share of the pairs at rest read 0 twice in a row (a gyro
+# whose noise spans 2-3 steps does so on about 2 % of its pairs; one quieter than its step on nearly all)
 WAIT_S = 5.0  # a pair waits for the other IMUs' samples up to this long, then is judged with what there is
 
 
@@ -88,6 +90,7 @@ class ImuTrack:
     #: per axis: pairs reading 0 twice without motion, and pairs that changed while motion showed (a gyro
     #: reading 0 at rest but alive in motion is below the message's resolution: the summary's note)
     zero_still: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
+    rest_pairs: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))  # pairs with no motion
     alive_moving: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
     calm: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))  # calm pairs while healthy
     calm_changed: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))  # ... that changed
@@ -180,6 +183,7 @@ class FrozenWatch:
         tr.equal_pairs += int(equal.sum())
         tr.motion_pairs += int((equal & motion).sum())
         tr.zero_still += (equal & ~motion & (tr.g[k] == 0.0)).sum(axis=0)
+        tr.rest_pairs += (~motion).sum(axis=0)
         events = []
         for j, ax in enumerate(AXES):
             run = tr.runs[j]
@@ -226,12 +230,14 @@ class FrozenWatch:
                 tr.next_pair -= cut
 
     def below_resolution(self, imu: int, min_pairs: int = 20) -> list[str]:
-        """The axes that read 0 at rest (``min_pairs`` pairs or more) and changed while the vehicle moved
+        """The axes that read 0 at rest (``min_pairs`` pairs or more, and most of the pairs at rest: a gyro whose
+        noise spans a few steps reads 0 twice in a row now and then) and changed while the vehicle moved
         (``min_pairs`` too), and are not held dead: alive, quieter than the message's step at rest."""
         tr = self.imus.get(imu)
         if tr is None:
             return []
-        return [ax for j, ax in enumerate(AXES) if tr.zero_still[j] >= min_pairs
+        zero_enough = np.maximum(min_pairs, REST_ZERO_SHARE * tr.rest_pairs)
+        return [ax for j, ax in enumerate(AXES) if tr.zero_still[j] >= zero_enough[j]
                 and tr.alive_moving[j] >= min_pairs and tr.runs[j].state == OK]
 
     def detail(self, imu: int, axis: str) -> str:

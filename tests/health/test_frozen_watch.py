@@ -128,3 +128,26 @@ def test_a_quiet_gyro_at_rest_is_never_named(seed):
     off whatever its runs of equal values."""
     t, g, a = rest(3000, [0.3, 0.5, 1.0][seed % 3], seed=10 + seed)
     assert feed(FrozenWatch(), t, [g], [a], chunk=7) == []
+
+
+@pytest.mark.parametrize("sigma_lsb", [1.5, 2.5, 4.0])
+def test_a_gyro_noisier_than_its_step_is_not_below_resolution(sigma_lsb):
+    """A gyro whose noise spans a few 1 mrad/s steps reads 0 twice in a row on some pairs at rest (about
+    P(0)^2, 4-7 % here) and changes while moving: it is not 'below resolution'. One that reads 0 at rest
+    on nearly every pair and changes while moving is."""
+    rate, n = 50.0, 6000
+    rng = np.random.default_rng(int(sigma_lsb * 10))
+    t = 1.0 + np.arange(2 * n) / rate
+    acc = np.tile([0.0, 0.0, -9.81], (2 * n, 1))
+    still = np.round(rng.normal(0, sigma_lsb * LSB, (n, 3)) / LSB) * LSB
+    moving = np.round(rng.uniform(-0.5, 0.5, (n, 3)) / LSB) * LSB
+    twin_moving = moving + np.round(rng.normal(0, 0.002, (n, 3)) / LSB) * LSB
+    twin_still = np.round(rng.normal(0, sigma_lsb * LSB, (n, 3)) / LSB) * LSB
+    w = FrozenWatch()
+    feed(w, t, [np.vstack([still, moving]), np.vstack([twin_still, twin_moving])], [acc, acc], chunk=50)
+    assert w.imus[0].zero_still.min() >= 20  # the old count alone would have said "below resolution"
+    assert w.below_resolution(0) == []
+    quiet = FrozenWatch()
+    feed(quiet, t, [np.vstack([np.zeros((n, 3)), moving]), np.vstack([twin_still, twin_moving])], [acc, acc],
+         chunk=50)
+    assert quiet.below_resolution(0) == ["gx", "gy", "gz"]
