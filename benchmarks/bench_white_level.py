@@ -44,6 +44,8 @@ import numpy as np
 
 from benchmarks import results
 from benchmarks.results import SHARED_DATA
+# the flatness test is the analysis' own: the benchmark judges the flat regions the analysis reads its level from
+from companion.analysis.flat_white import FLAT_LEVEL, flat_chi2
 
 EXTS = (".bin", ".ulg", ".tlog")
 EXIT_FAULTS = 4  #: companion's exit status for a finished analysis that found a gyro fault
@@ -55,31 +57,6 @@ TOL = 0.03
 #: windows analysed besides each log's own still selection (name substring, start s, end s): still stretches
 #: the default selection leaves out or cuts short
 WINDOWS = ()
-
-
-#: correlation of the overlapping AVAR estimates of white noise 0-4 octaves apart (Greenhall's covariance of
-#: the overlapping estimator; by simulation, 400 records of 2000 white samples: 0.46-0.61, 0.10-0.25)
-OCTAVE_CORRELATION = (1.0, 0.53, 0.19, 0.07, 0.02)
-
-
-#: the flatness test's level: a run ends where a constant is rejected at this level
-FLAT_LEVEL = 0.99
-
-
-def flat_chi2(avar_tau, edf) -> float:
-    """chi^2 of a constant fitted to ln(AVAR*tau) over consecutive octave points, each of variance 2 / EDF and
-    correlated with its neighbours as OCTAVE_CORRELATION: the test that the points are flat within their noise.
-    Taken point by point (their 95 % intervals overlapping) the test would call a rise of 17 % per octave flat
-    at EDF 126-225: neighbouring points share half their variance, their ratio is far better known."""
-    x = np.log(np.asarray(avar_tau, dtype=float))
-    sd = np.sqrt(2.0 / np.asarray(edf, dtype=float))
-    k = np.abs(np.subtract.outer(np.arange(x.size), np.arange(x.size)))
-    rho = np.asarray(OCTAVE_CORRELATION + (0.0,))[np.minimum(k, len(OCTAVE_CORRELATION))]
-    Vi = np.linalg.inv(rho * np.outer(sd, sd))
-    one = np.ones_like(x)
-    mean = float(one @ Vi @ x / (one @ Vi @ one))
-    r = x - mean
-    return float(r @ Vi @ r)
 
 
 def flat_regions(tau, adev, lo, hi, edf) -> list[tuple[int, int, float]]:
