@@ -13,7 +13,7 @@ digits and at most one dot. For those the parse is done on whole arrays:
   decimal: the two are the same double. Fields of more than 15 digits are not read here.
 
 Anything else (an exponent, nan, inf, a plus sign, spaces, a CR, an empty field, a row of another length, a
-field longer than 16 bytes) returns None and the caller parses with ``np.loadtxt`` as before, with its errors.
+field of more than 15 digits) returns None and the caller parses with ``np.loadtxt`` as before, with its errors.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ import sys
 import numpy as np
 
 #: text parsed at a time: its index arrays stay in the cache, and the temporaries are a few MB
-CHUNK_BYTES = 1 << 20
-WIDTH = 16  #: the longest field read here: a sign, 15 digits or 14 and a dot
+CHUNK_BYTES = 1 << 18
+WIDTH = 16  #: the longest field read here (its sign aside): 15 digits and a dot
 MAX_DIGITS = 15  #: mantissas below 10**15 < 2**53 are exact doubles
 _U = np.uint64
 _LOW_NIBBLES = _U(0x0F0F0F0F0F0F0F0F)
@@ -44,7 +44,7 @@ def _top_bytes(keep: int) -> int:
     return ((1 << (8 * keep)) - 1) << (8 * (8 - keep)) if keep else 0
 
 
-#: per field length L: the masks of its (first, second) word, the field being the last L of the 16 bytes
+#: per field length L (sign aside): the masks of its (first, second) word, the field the last L of the 16 bytes
 _FIELD_MASK = np.array([[_top_bytes(n - 8), _top_bytes(n)] for n in range(WIDTH + 1)], dtype=np.uint64)
 
 
@@ -55,11 +55,12 @@ def parse_decimal(text: bytes, ncols: int) -> np.ndarray | None:
         return None
     out = []
     pos = 0
+    view = memoryview(text)  # chunks without copies
     while pos < len(text):
         cut = text.rfind(b"\n", pos, pos + CHUNK_BYTES) + 1 if pos + CHUNK_BYTES < len(text) else len(text)
         if cut <= pos:  # a line longer than a chunk: not a plain numeric row
             return None
-        arr = _parse_chunk(text[pos:cut], ncols)
+        arr = _parse_chunk(view[pos:cut], ncols)
         if arr is None:
             return None
         out.append(arr)
@@ -80,13 +81,13 @@ def _dot_bytes(w: np.ndarray) -> np.ndarray:
     return ~(((y & _SEVENS) + _SEVENS) | y | _SEVENS)
 
 
-def _parse_chunk(text: bytes, ncols: int) -> np.ndarray | None:
+def _parse_chunk(text: memoryview, ncols: int) -> np.ndarray | None:
     n = len(text)
     buf = np.empty(WIDTH + n + 1, np.uint8)
     buf[:WIDTH] = 44  # room for the first field's words: masked off
     b = buf[WIDTH:WIDTH + n]
     b[:] = np.frombuffer(text, np.uint8)
-    if text.endswith(b"\n"):
+    if b[-1] == 10:
         buf = buf[:-1]
     else:
         buf[-1] = 10
@@ -102,14 +103,15 @@ def _parse_chunk(text: bytes, ncols: int) -> np.ndarray | None:
             or np.count_nonzero(newline) != nf // ncols or not newline[sep[ncols - 1::ncols]].all()):
         return None
     length = np.diff(sep, prepend=-1) - 1
-    if length.max() > WIDTH:
-        return None
     neg = b[sep - length] == 45
     if np.count_nonzero(neg) != n_minus:  # a minus anywhere but first
         return None
+    body = length - neg  # digits and dot: the words hold them, the sign is read above
+    if body.max() > WIDTH:
+        return None
     # unaligned 8-byte words at every offset of buf: the field ending at text offset s is words[s], words[s + 8]
     words = np.ndarray((buf.size - 7,), dtype=np.uint64, buffer=buf, strides=(1,))
-    mask = _FIELD_MASK[length]
+    mask = _FIELD_MASK[body]
     first = words[sep] & mask[:, 0]
     second = words[sep + 8] & mask[:, 1]
     dot1, dot2 = _dot_bytes(first), _dot_bytes(second)
@@ -117,19 +119,19 @@ def _parse_chunk(text: bytes, ncols: int) -> np.ndarray | None:
     has_dot = in1 | in2
     if np.count_nonzero(has_dot) != n_dots or np.count_nonzero(in1 & in2):  # two dots in a field
         return None
-    digits = length - neg - has_dot
+    digits = body - has_dot
     if digits.min() < 1 or digits.max() > MAX_DIGITS:
         return None
     # the dot's bit (8 byte + 7 in its word) gives its byte, and the decimals after it
     bit = np.frexp((dot1 | dot2).astype(np.float64))[1] - 1
-    k = np.where(has_dot, np.where(in2, 7, 15) - (bit >> 3), 0)
+    k = np.where(has_dot, np.where(in2, 7, 15) - (bit >> 3), WIDTH)  # no dot: at 10^16, above every digit
     # digit bytes keep their low nibble; '-', '.', ',' and newline (bit 4 clear) become 0
     first &= ((first >> _U(4)) & _BYTE_ONES) * _U(255) & _LOW_NIBBLES
     second &= ((second >> _U(4)) & _BYTE_ONES) * _U(255) & _LOW_NIBBLES
     x = _eight_digits(first) * _U(100_000_000) + _eight_digits(second)
-    # x = I 10^(k+1) + F (the dot a zero digit); the mantissa is I 10^k + F
+    # x = I 10^(k+1) + F (the dot a zero digit); the mantissa is I 10^k + F (x itself without a dot: I = 0)
     p = _POW10_INT[k]
     mantissa = x - _U(9) * (x // (p * _U(10))) * p
-    val = mantissa.astype(np.float64) / _POW10[k]
+    val = mantissa.astype(np.float64) / _POW10[np.where(has_dot, k, 0)]
     np.negative(val, out=val, where=neg)
     return val.reshape(-1, ncols)

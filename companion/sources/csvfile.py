@@ -146,7 +146,7 @@ def _parse(text: bytes, usecols, ncols: int) -> np.ndarray:
     :func:`~companion.sources.csvdecimal.parse_decimal` (the same doubles), anything else through loadtxt."""
     arr = parse_decimal(text, ncols)
     if arr is not None:
-        return arr[:, usecols]
+        return arr if list(usecols) == list(range(ncols)) else arr[:, usecols]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported by the caller
         return np.loadtxt(io.BytesIO(text), delimiter=",", usecols=usecols, ndmin=2, dtype=np.float64)
