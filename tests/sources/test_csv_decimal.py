@@ -71,14 +71,44 @@ def test_hard_roundings_and_edges():
     assert np.signbit(got[fields.index("-0"), 0])
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_exponent_fields_bit_identical_to_loadtxt(seed):
+    """The %.Ne fields of np.savetxt and write_csv (1-15 significant digits, e/E, signed exponents of 1-3
+    digits), beside plain decimals: the same doubles as loadtxt."""
+    rng = np.random.default_rng(100 + seed)
+    vals = rng.normal(size=(2000, 4)) * 10.0 ** rng.integers(-9, 9, size=(2000, 4))
+    fields = []
+    for v in vals.ravel():
+        p = int(rng.integers(0, 15))
+        p = min(p, 22 + int(f"{v:e}".split("e")[1]))  # 10^-22 at most below the mantissa (exact powers)
+        s = f"{v:.{p}f}"
+        if rng.random() < 0.8 or sum(c.isdigit() for c in s) > 15:  # 16+ digits: loadtxt's (tested above)
+            s = f"{v:.{p}e}"
+        if rng.random() < 0.2:
+            s = s.replace("e", "E")
+        if rng.random() < 0.2:
+            s = s.replace("e-0", "e-").replace("e+0", "e")  # short and unsigned exponents
+        fields.append(s)
+    text = "\n".join(",".join(fields[r * 4:(r + 1) * 4]) for r in range(2000)) + "\n"
+    got = parse_decimal(text.encode(), 4)
+    assert got is not None and _same_bits(got, _loadtxt(text, 4))
+
+
+@pytest.mark.parametrize("text", ["1e,2\n", "e5,2\n", "1e5e5,2\n", "1e+-5,2\n", "1e1234,2\n", "1e-30,2\n",
+                                  "1e5.5,2\n", "1.5e+,2\n", "1-e5,2\n", "1e5-,2\n", "1+e5,2\n"])
+def test_refused_exponents(text):
+    """Exponents that are not one e, an optional sign and 1-3 digits, or beyond 10^+-22 of the mantissa."""
+    assert parse_decimal(text.encode(), 2) is None
+
+
 @pytest.mark.parametrize("text", [
-    "1e-5,2\n", "1.5E3,2\n", "nan,2\n", "inf,2\n", "-inf,2\n", "+1.0,2\n", " 1.0,2\n", "1.0 ,2\n", "1.0,2\r\n",
+    "nan,2\n", "inf,2\n", "-inf,2\n", "+1.0,2\n", " 1.0,2\n", "1.0 ,2\n", "1.0,2\r\n",
     "1..2,3\n", "1.2.3,4\n", "1-2,3\n", "--1,2\n", "-,2\n", ".,2\n", ",2\n", "1,2\n\n3,4\n", "1,2,3\n",
     "1\n", "1,2\n3\n", "1234567890123456,1\n", "0.1234567890123456,1\n", "#c\n1,2\n", "0x10,1\n", "1_0,2\n",
     "1;2\n", "\n",
 ])
 def test_refused_texts(text):
-    """Anything but rows of plain decimals is left to loadtxt: exponents, nan, inf, a plus sign, spaces, a CR,
+    """Anything but rows of plain decimals is left to loadtxt: nan, inf, a plus sign, spaces, a CR,
     empty fields, blank lines, rows of another length, 16+ digits, comments, other separators."""
     assert parse_decimal(text.encode(), 2) is None
 
@@ -96,7 +126,8 @@ def _read(path, fast: bool, monkeypatch):
 
 
 @pytest.mark.parametrize("body", [
-    "0.00,1,2,3,4,5,6\n0.01,1e-5,2,3,4,5,6\n0.02,1,2,3,4,5,6\n",  # an exponent: read by loadtxt
+    "0.00,1,2,3,4,5,6\n0.01,1e-5,2,3,4,5,6\n0.02,1,2,3,4,5,6\n",  # an exponent
+    "0.00,1,2,3,4,5,6\n0.01,1e-45,2,3,4,5,6\n",  # beyond the exact powers: read by loadtxt
     "0.00,1,2,3,4,5,6\n0.01,1,2,3,4,5\n",  # a short row
     "0.00,1,2,3,4,5,6\n0.01,1,2,3,4,5,6,7\n",  # a long row
     "0.00,1,2,3,4,5,6\n0.01,1,x,3,4,5,6\n",  # not a number
