@@ -50,6 +50,7 @@ from companion.health.degradation import DEGRADING, HEALTHY
 from companion.health.faults import AXES
 from companion.health.hold import debounce
 from companion.service.inflight_alarm import allan_shape, overlap_edf_gain, z_for_rate
+from companion.service.inflight_settle import SettledFlight
 
 CONDITIONS = ("ground", "flight")
 PHASES = 4  # staggered phases of the octave accumulators
@@ -110,6 +111,7 @@ class InflightConfig:
     min_edf: float = 20.0
     turning: float = 0.03  # rad/s: a half-second mean body rate above this is flight, not ground
     ground_hold_s: float = 10.0  # not turning for this long before flight becomes ground again
+    settle_s: float = 15.0  # the test leaves out each flight stretch's first and last (inflight_settle.py)
     test: InflightTest = field(default_factory=InflightTest)
 
 
@@ -160,6 +162,7 @@ class PairTrack:
         self.seconds = {c: 0.0 for c in CONDITIONS}
         self.whole_s = {c: 0.0 for c in CONDITIONS}  # behind the whole-flight figures
         self.last_cond: str | None = None
+        self.settled = SettledFlight(cfg.settle_s)  # the test's flight data: take-offs and landings left out
 
     def _banks(self, cond: str, learning: bool):
         mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=PHASES, max_tau_s=8.0, fit="diag")
@@ -179,19 +182,24 @@ class PairTrack:
         e = self.cal.update(t, gi, gj)
         if e is None or cond is None:
             self.last_cond = None
+            self.settled.end()
             return
         cur, learn, whole = self._banks(cond, learning)
         junction = gap or self.last_cond != cond
         self.last_cond = cond
         for a in range(3):
-            for est in (cur[a], whole[a], learn[a] if learn is not None else None):
-                if est is None:
-                    continue
-                if junction:
-                    est.new_segment()
-                est.update(e[:, a])
-        self.seconds[cond] += t.shape[0] / self.rate_hz
+            if junction:
+                whole[a].new_segment()
+            whole[a].update(e[:, a])
         self.whole_s[cond] += t.shape[0] / self.rate_hz
+        for eb, start in self.settled.route(t, e, cond, junction):  # the test's: take-offs, landings left out
+            for a in range(3):
+                for est in (cur[a], learn[a] if learn is not None else None):
+                    if est is not None:
+                        if start:
+                            est.new_segment()
+                        est.update(eb[:, a])
+            self.seconds[cond] += eb.shape[0] / self.rate_hz
 
     def level(self, cond: str, a: int, which: str = "cur") -> tuple[float, float, float]:
         """(N^2, 1-sigma, EDF) of axis ``a``'s difference over ``which`` accumulators (``cur``: the last
