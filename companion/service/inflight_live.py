@@ -20,9 +20,8 @@ body see the same rotation, so per pair (:class:`PairTrack`):
 Three IMUs: each IMU's N from the three-cornered hat with the offline method's variance
 (:func:`companion.redundancy.hat.hat_share`; a share below two of its sigmas is a 95 % upper bound). Two
 IMUs: the pair figure, an upper bound of each IMU's. One IMU: nothing (its noise cannot be separated from
-motion). Conditions: ``ground`` (armed, the body not turning)
-and ``flight`` (armed and turning), from the HEARTBEAT armed bit and the gyro's half-second means; each has
-its own estimators, baseline and test.
+motion). Conditions: ``ground`` (armed, the body not turning) and ``flight`` (armed and turning), from the
+HEARTBEAT armed bit and the gyro's half-second means; each has its own estimators, baseline and test.
 
 The baseline (per condition: the hat figures and each pair's figure) is learned from the first
 ``baseline_s`` of that condition's data and kept in the state file; then every check tests each pair's figure
@@ -193,12 +192,10 @@ class PairTrack:
             whole[a].update(e[:, a])
         self.whole_s[cond] += t.shape[0] / self.rate_hz
         for eb, start in self.settled.route(t, e, cond, junction):  # the test's: take-offs, landings left out
-            for a in range(3):
-                for est in (cur[a], learn[a] if learn is not None else None):
-                    if est is not None:
-                        if start:
-                            est.new_segment()
-                        est.update(eb[:, a])
+            for est, y in [(b[a], eb[:, a]) for b in (cur, learn) if b is not None for a in range(3)]:
+                if start:
+                    est.new_segment()
+                est.update(y)
             self.seconds[cond] += eb.shape[0] / self.rate_hz
 
     def level(self, cond: str, a: int, which: str = "cur") -> tuple[float, float, float]:
@@ -288,6 +285,7 @@ class InflightNoise:
         self.named: set = set()  # (cond, imu, axis) the test names
         #: cond -> {(pair, axis): Z of the latest check (InflightTest)}
         self.last_z: dict[str, dict] = {}
+        self.seen: dict = {}  # (cond, pair) -> its test data's seconds at the last check
 
     # ------------------------------------------------------------------ condition
     def _condition(self, channels, armed: bool, t: float) -> str | None:
@@ -438,12 +436,14 @@ class InflightNoise:
                 zv = math.log(x / b) / sig
                 up = self.detectors.setdefault((cond, k, ax, "up"), ZDetector())
                 down = self.detectors.setdefault((cond, k, ax, "down"), ZDetector())
-                up.check(zv, z_on, test)
-                down.check(-zv, z_on, test)
+                if self.pairs[k].seconds[cond] > self.seen.get((cond, k), -1.0):  # new data: another look
+                    up.check(zv, z_on, test)
+                    down.check(-zv, z_on, test)
                 ratios[(k, ax)], zs[(k, ax)] = x / b, zv
                 if DEGRADING in (up.state, down.state):
                     changed[ax].add(k)
         self.last_z[cond] = zs
+        self.seen.update({(cond, k): p.seconds[cond] for k, p in self.pairs.items()})
         imus = sorted({i for k in self.pairs for i in k})
         for ax in AXES:
             named = set()

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.service.inflight_live import InflightConfig, PairTrack
+from companion.service.inflight_live import InflightConfig, InflightNoise, PairTrack
 
 FS = 100.0
 SIGMA = 3e-3  # rad/s per sample, each IMU: the difference's white level N^2 = 2 SIGMA^2 / FS
@@ -64,3 +64,24 @@ def test_held_seconds_reach_the_test_while_the_flight_goes_on():
     v, s, _ = pt.level("flight", 0, "cur")
     assert abs(v - 2.0 * SIGMA ** 2 / FS) < 3.0 * s
     assert math.isfinite(v)
+
+
+def test_a_check_without_new_data_is_no_new_look():
+    """The debounced test counts checks as looks at new data: while the test gets none (on the ground, during
+    a take-off's settle_s) a figure far from its baseline is one look, not one per check."""
+    rng = np.random.default_rng(4)
+    noise = InflightNoise(InflightConfig())
+    pt = noise.pairs[(0, 1)] = PairTrack(noise.cfg)
+    blocks = _stretch(rng, 0.0, 200.0)
+    for blk in blocks[:120]:
+        pt.feed(*blk, "flight", learning=False)
+    now = noise._pair_levels("flight")[(0, 1)]
+    noise.baseline["flight"] = {"imus": {}, "pairs": {(0, 1): {ax: (n / 3.0, s / 3.0) for ax, (n, s) in now.items()}}}
+    for _ in range(10):  # no new data: however many checks, one look
+        assert noise._test("flight") == []
+    verdicts = []
+    for blk in blocks[120:125]:  # new data each check: the fourth look in a row names both IMUs
+        pt.feed(*blk, "flight", learning=False)
+        verdicts.append(noise._test("flight"))
+    assert [len(v) for v in verdicts[:2]] == [0, 0] and verdicts[2], verdicts
+    assert {v.who for v in verdicts[2]} == {0, 1}
