@@ -163,7 +163,8 @@ def _bounded(entry: dict) -> dict:
     b = [] if top is None else [{"effect": "white_noise", "N": top, "std": {}, "ci95": {"N": [0.0, top]},
                                  "bound": True, "reason": "at most the pair's figure (the other IMU's share unknown)"}]
     return {"status": entry.get("status", "ok"), "terms": [], "bounds": b, "fit": entry.get("fit"),
-            "quantization": None, "tau": [], "adev": [], "adev_lo": [], "adev_hi": [], "notes": []}
+            "quantization": None, "tau": [], "adev": [], "adev_lo": [], "adev_hi": [],
+            "notes": [] if b else list(entry.get("notes", []))}
 
 
 def _two(pair_out, still_n, seconds) -> list:
