@@ -35,3 +35,22 @@ def test_the_commands_example_config_names_take_config(capsys):
         with pytest.raises(SystemExit):
             main(name.split() + ["--help"])
         assert "--config" in capsys.readouterr().out, name
+
+
+def test_the_short_record_warning_shows_the_seconds_analysed(tmp_path, capsys):
+    # 0.3 s at 2 kHz (a batch-sampler burst): "only 0 s analysed" beside a table of values misleads
+    import json
+
+    import numpy as np
+
+    rng = np.random.default_rng(1)
+    t = np.arange(600) / 2000.0
+    g = rng.normal(0, 0.01, (t.size, 3))
+    csv = tmp_path / "burst.csv"
+    csv.write_text(HEADER + "\n".join(f"{ti:.6f},{a:.6f},{b:.6f},{c:.6f},0,0,-9.80665"
+                                      for ti, (a, b, c) in zip(t, g)) + "\n")
+    out = tmp_path / "r.json"
+    assert main(["analyze", str(csv), "--all", "--axes", "gx", "--quiet", "--json", str(out)]) == 0
+    warn = [w for w in json.loads(out.read_text())["streams"][0]["warnings"] if "analysed" in w]
+    assert warn and warn[0].startswith("only 0.3 s analysed"), warn
+    assert "whole record (--all), 0.3 s" in capsys.readouterr().out
