@@ -124,8 +124,9 @@ def run(args) -> int:
     if not (math.isfinite(args.min_still) and args.min_still >= 0):
         raise CompanionError(f"--min-still must be a number of seconds >= 0, got {args.min_still:g}")
     sources = args.source if isinstance(args.source, (list, tuple)) else [args.source]
-    from companion.cli.source_options import warn_ignored_options
+    from companion.cli.source_options import check_time_window, warn_ignored_options
 
+    check_time_window(args)
     warn_ignored_options(args, sources, "analyze")
     report = {"source": str(sources[0]) if len(sources) == 1 else ", ".join(map(str, sources)),
               "sources": [], "streams": []}

@@ -54,3 +54,27 @@ def test_the_short_record_warning_shows_the_seconds_analysed(tmp_path, capsys):
     warn = [w for w in json.loads(out.read_text())["streams"][0]["warnings"] if "analysed" in w]
     assert warn and warn[0].startswith("only 0.3 s analysed"), warn
     assert "whole record (--all), 0.3 s" in capsys.readouterr().out
+
+
+def test_a_bad_log_taus_is_a_taus_error_in_the_help_s_words(tmp_path, capsys):
+    import numpy as np
+
+    g = np.random.default_rng(2).normal(0, 0.01, (3000, 3))
+    csv = tmp_path / "w.csv"
+    csv.write_text(HEADER + "\n".join(f"{i * 0.01:.2f},{a:.6f},{b:.6f},{c:.6f},0,0,-9.8"
+                                      for i, (a, b, c) in enumerate(g)) + "\n")
+    for bad in ("log:0", "log:x"):
+        assert main(["analyze", str(csv), "--all", "--axes", "gx", "--quiet", "--taus", bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"companion: error: bad --taus '{bad}'"), err
+        assert "per decade" in err[0] and "K" not in err[0], err[0]
+
+
+def test_start_after_end_is_refused_in_those_words(tmp_path, capsys):
+    missing = str(tmp_path / "not_read.tlog")  # refused before the log is read
+    for argv in (["analyze", missing, "--start", "100", "--end", "50"],
+                 ["gap", missing, "--datasheet", "MPU-6000", "--start", "100", "--end", "50"],
+                 ["analyze", missing, "--start", "nan"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("companion: error: --start"), err
