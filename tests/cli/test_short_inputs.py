@@ -78,3 +78,16 @@ def test_start_after_end_is_refused_in_those_words(tmp_path, capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("companion: error: --start"), err
+
+
+def test_run_and_analyze_say_the_same_of_a_file_no_reader_takes(tmp_path, capsys):
+    import os
+
+    os.makedirs(tmp_path / "bin")
+    for f in (tmp_path / "noise.dat", tmp_path / "bin" / "tool"):  # under a bin/: never executed, same words
+        f.write_bytes(bytes(range(256)) * 20)
+        said = []
+        for argv in (["analyze", str(f)], ["run", "--source", str(f)], ["inspect", str(f)]):
+            assert main(argv) == 2
+            said.append(capsys.readouterr().err.strip())
+        assert len(set(said)) == 1 and "unknown file type" in said[0], said
