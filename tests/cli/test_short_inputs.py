@@ -91,3 +91,15 @@ def test_run_and_analyze_say_the_same_of_a_file_no_reader_takes(tmp_path, capsys
             assert main(argv) == 2
             said.append(capsys.readouterr().err.strip())
         assert len(set(said)) == 1 and "unknown file type" in said[0], said
+
+
+def test_json_dash_is_refused_where_it_is_not_standard_output(tmp_path, capsys, monkeypatch):
+    # `gap --json -` prints the JSON; `analyze --json -` wrote a file named "-" silently
+    monkeypatch.chdir(tmp_path)
+    csv = tmp_path / "x.csv"
+    csv.write_text(HEADER + "0,0.001,0,0,0,0,-9.8\n")
+    for argv in (["analyze", str(csv), "--json", "-"], ["inspect", str(csv), "--json", "-"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--json -: standard output is not supported" in err[0], err
+    assert not (tmp_path / "-").exists()
