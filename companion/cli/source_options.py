@@ -21,9 +21,16 @@ KIND_OPTIONS = {
 def ignored_option_warnings(args, sources) -> list[str]:
     """One sentence per option of :data:`KIND_OPTIONS` that is set on ``args`` and applies to none or only
     some of ``sources``. A source of unknown kind is not counted: loading it fails with its own error."""
+    from companion.errors import CompanionError
     from companion.sources.kind import kind_of
 
-    kinds = {str(s): kind_of(s) for s in sources}
+    def kind(s) -> str:
+        try:
+            return kind_of(s)
+        except CompanionError:  # an empty file, a Git LFS pointer: its own error when it is loaded, in its turn
+            return "unknown"
+
+    kinds = {str(s): kind(s) for s in sources}
     out = []
     for dest, (opt, applies, what) in KIND_OPTIONS.items():
         if getattr(args, dest, None) is None:

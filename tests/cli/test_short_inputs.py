@@ -103,3 +103,22 @@ def test_json_dash_is_refused_where_it_is_not_standard_output(tmp_path, capsys, 
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--json -: standard output is not supported" in err[0], err
     assert not (tmp_path / "-").exists()
+
+
+def test_an_empty_file_among_several_sources_is_one_failed_source(tmp_path, capsys):
+    import json
+
+    import numpy as np
+
+    g = np.random.default_rng(3).normal(0, 0.01, (3000, 3))
+    good = tmp_path / "good.csv"
+    good.write_text(HEADER + "\n".join(f"{i * 0.01:.2f},{a:.6f},{b:.6f},{c:.6f},0,0,-9.8"
+                                       for i, (a, b, c) in enumerate(g)) + "\n")
+    empty = tmp_path / "empty.bin"
+    empty.write_bytes(b"")
+    out = tmp_path / "r.json"
+    # as a missing file among several: the others analysed, the empty one named, exit status 2
+    assert main(["analyze", str(good), str(empty), "--all", "--axes", "gx", "--quiet", "--json", str(out)]) == 2
+    rep = json.loads(out.read_text())
+    assert len(rep["streams"]) == 1 and "empty file" in rep["failed_sources"][0]
+    assert "1 of 2 sources not analysed" in capsys.readouterr().err
