@@ -83,4 +83,12 @@ def kalibr_blockers(report: dict) -> list[str]:
     if not any(s.get("axes") for s in report["streams"]):  # a log armed throughout: ground and flight only
         return ["no still data (Kalibr's noise model is the still noise; the in-flight figures include vibration)"]
     st = max(report["streams"], key=lambda s: s["samples"])
-    return [f"{st['message']}[{st['instance']}]: {w}" for w in st.get("warnings", [])]
+    out = [f"{st['message']}[{st['instance']}]: {w}" for w in st.get("warnings", [])]
+    for sensor, axes in (("gyroscope", GYRO_AXES), ("accelerometer", ACCEL_AXES)):
+        # a 0 noise density tells Kalibr the sensor is perfect: never written without a word
+        if not any(t["effect"] == "white_noise" for a in axes for t in (st["axes"].get(a) or {}).get("terms", [])
+                   if (st["axes"].get(a) or {}).get("status") == "ok"):
+            asked = [a for a in axes if a in st["axes"]]
+            why = "no white-noise N resolved on " + ", ".join(asked) if asked else f"{','.join(axes)} not in --axes"
+            out.append(f"{sensor}: {why} (its noise density would be written as 0)")
+    return out

@@ -35,8 +35,10 @@ def format_table(report: dict) -> str:
         src = f"{st['source']}: " if len(report.get("sources", [])) > 1 and st.get("source") else ""
         tm = st.get("timing") or {}
         extra = ", ".join(f"{tm[k]} {k}" for k in ("gaps", "duplicates", "backwards", "resets") if tm.get(k))
-        lines.append(f"{src}{st['message']}[{st['instance']}] sys{st['sysid']}/comp{st['compid']}: "
-                     f"{st['samples']} samples at {st['rate_hz']:.4g} Hz, {st['duration_s']:.1f} s"
+        # a stream with ground/flight figures only: "0 samples, 0.0 s" would read as an empty stream
+        used = (f"{st['samples']} samples at {st['rate_hz']:.4g} Hz, {st['duration_s']:.1f} s" if st["samples"]
+                else f"{st['rate_hz']:.4g} Hz, no still samples")
+        lines.append(f"{src}{st['message']}[{st['instance']}] sys{st['sysid']}/comp{st['compid']}: {used}"
                      + (f" in {st['still_segments']} still segments" if st.get("still_segments", 1) > 1 else "")
                      + (f" ({extra} in the stream)" if extra else "")
                      + (f"; filter {', '.join(f'{k} {v:g} Hz' for k, v in st['filters_hz'].items())}"

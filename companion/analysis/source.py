@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from companion.errors import EXIT_FAULTS, CompanionError
+from companion.errors import EXIT_FAULTS, CompanionError, NoUsableData
 
 #: Log parameters copied into the source summary (low-pass filters, fast sampling, batch logging).
 SUMMARY_PARAMS = ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "INS_FAST_SAMPLE", "INS_LOG_BAT_OPT", "INS_LOG_BAT_MASK",
@@ -27,6 +27,7 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
 
     res = load(spec, config=config, duration=duration, time_unit=time_unit)
     streams = res.imu_streams()
+    require_a_rate(spec, streams)
     if isinstance(taus, str):
         check_taus_reachable(taus, streams, warn)
     sel = select_still(streams, res.meta, start=start, end=end, use_all=use_all, min_segment_s=min_still)
@@ -125,6 +126,15 @@ def dead_gyros(streams, axes=None) -> list[str]:
         if text:
             out.append(text)
     return out
+
+
+def require_a_rate(spec, streams) -> None:
+    """A source whose every IMU stream is too short for a sample rate (a log cut after a few messages) has
+    nothing to analyse: said as such, not as a --taus or still-selection problem."""
+    if streams and not any(s.rate_hz > 0 and math.isfinite(s.rate_hz) for s in streams):
+        each = ", ".join(f"{s.key.label()} {s.samples} sample(s)" for s in streams)
+        raise NoUsableData(f"{spec}: too few samples for a sample rate in every IMU stream ({each}): nothing to "
+                           "analyse")
 
 
 def check_taus_reachable(spec: str, streams, warn=None) -> None:

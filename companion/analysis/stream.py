@@ -34,7 +34,8 @@ def analyze_stream(stream, axes, taus, progress=None, online=False, ranges=None,
         entry["warnings"].append(f"only {rate:.3g} Hz (< {FIT_MIN_RATE_HZ:g} Hz): the Allan curve starts at "
                                  f"{1 / rate if rate > 0 else float('inf'):.3g} s, N is aliased with every faster effect")
     if secs < FIT_MIN_SECONDS:
-        entry["warnings"].append(f"only {secs:.0f} s analysed (< {FIT_MIN_SECONDS:g} s): too few clusters for a usable N")
+        shown = math.floor(secs * 100) / 100  # rounded down: never "only 0 s" nor "only 60 s (< 60 s)"
+        entry["warnings"].append(f"only {shown:g} s analysed (< {FIT_MIN_SECONDS:g} s): too few clusters for a usable N")
     for axis in axes:
         lsb = stream.gyro_lsb if axis in GYRO_AXES else stream.accel_lsb
         fc = (filters or {}).get("gyro" if axis in GYRO_AXES else "accel")

@@ -16,8 +16,9 @@ def parse_taus(spec: str, n: int, rate_hz: float):
     if spec in ("octave", "decade", "all") or spec.startswith("log:"):
         try:
             return cluster_sizes(n, spec)
-        except ValueError as exc:
-            raise CompanionError(str(exc)) from None
+        except ValueError:  # the core says "log:K"; K here is the rate random walk's name
+            raise CompanionError(f"bad --taus {spec!r}: log:N takes a whole number N >= 1 of cluster times per "
+                                 "decade") from None
     try:
         secs = [float(s) for s in spec.split(",") if s.strip()]
     except ValueError:

@@ -110,6 +110,7 @@ def run(args) -> int:
     from companion.analysis.kalibr import kalibr_blockers, kalibr_yaml
     from companion.analysis.report_table import format_table
     from companion.cli.output import check_output_path, check_plot_path
+    from companion.cli.source_options import check_time_window, warn_ignored_options
 
     for opt, path in (("--json", args.json), ("--kalibr", args.kalibr), ("--report", args.report)):  # outputs checked before the work
         if path:
@@ -124,8 +125,7 @@ def run(args) -> int:
     if not (math.isfinite(args.min_still) and args.min_still >= 0):
         raise CompanionError(f"--min-still must be a number of seconds >= 0, got {args.min_still:g}")
     sources = args.source if isinstance(args.source, (list, tuple)) else [args.source]
-    from companion.cli.source_options import warn_ignored_options
-
+    check_time_window(args)
     warn_ignored_options(args, sources, "analyze")
     report = {"source": str(sources[0]) if len(sources) == 1 else ", ".join(map(str, sources)),
               "sources": [], "streams": []}

@@ -11,7 +11,7 @@ Print one of the files shipped with companion, or write it to --out: a starting 
 wherever companion is installed (a wheel has no source tree).
 
   config  every configuration key with its default, with comments (edit, then pass --config FILE to
-          run, inspect, analyze or fleet analyze)
+          run, inspect, analyze, gap or compensate)
   model   a noise model (rate_hz and per-axis effects in SI units) for simulate and gap --model"""
 
 EPILOG = """\

@@ -104,7 +104,7 @@ def _axis_path(path, axis, several):
 def _check_options(args) -> None:
     """Everything that can be checked before the model and the log are read."""
     from companion.cli.output import check_output_path, check_plot_path
-    from companion.cli.source_options import warn_ignored_options
+    from companion.cli.source_options import check_time_window, warn_ignored_options
 
     for opt, path in (("--json", None if args.json == "-" else args.json), ("--out-model", args.out_model)):
         if path:
@@ -112,6 +112,7 @@ def _check_options(args) -> None:
     if args.plot:
         check_plot_path(args.plot)
     warn_ignored_options(args, [args.measured], "gap")
+    check_time_window(args)
     for opt in ("lsb", "cutoff"):
         v = getattr(args, opt)
         if v is not None and not (v > 0 and math.isfinite(v)):

@@ -47,6 +47,9 @@ def check_output_path(path, option: str) -> None:
     p = os.fspath(path)
     if not p or p.endswith(os.sep):
         raise CompanionError(f"{option} {p!r}: expected a file name")
+    if p == "-":  # only `gap --json -` writes to standard output (and never calls this); elsewhere a file named "-"
+        raise CompanionError(f"{option} -: standard output is not supported here; give a file name (./- for a file "
+                             "named '-')")
     if os.path.isdir(p):
         raise CompanionError(f"{option} {p}: is a directory; give a file name")
     parent = os.path.dirname(os.path.abspath(p))

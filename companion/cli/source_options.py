@@ -21,9 +21,16 @@ KIND_OPTIONS = {
 def ignored_option_warnings(args, sources) -> list[str]:
     """One sentence per option of :data:`KIND_OPTIONS` that is set on ``args`` and applies to none or only
     some of ``sources``. A source of unknown kind is not counted: loading it fails with its own error."""
+    from companion.errors import CompanionError
     from companion.sources.kind import kind_of
 
-    kinds = {str(s): kind_of(s) for s in sources}
+    def kind(s) -> str:
+        try:
+            return kind_of(s)
+        except CompanionError:  # an empty file, a Git LFS pointer: its own error when it is loaded, in its turn
+            return "unknown"
+
+    kinds = {str(s): kind(s) for s in sources}
     out = []
     for dest, (opt, applies, what) in KIND_OPTIONS.items():
         if getattr(args, dest, None) is None:
@@ -41,3 +48,18 @@ def warn_ignored_options(args, sources, command: str) -> None:
     """Print :func:`ignored_option_warnings` on stderr, one line each, as ``companion COMMAND: warning:``."""
     for text in ignored_option_warnings(args, sources):
         print(f"companion {command}: warning: {text}", file=sys.stderr)
+
+
+def check_time_window(args) -> None:
+    """--start/--end that cannot select anything (start at or after end, not a number) are refused before the
+    log is read, in those words rather than as an empty selection after it."""
+    import math
+
+    from companion.errors import CompanionError
+
+    start, end = getattr(args, "start", None), getattr(args, "end", None)
+    for opt, v in (("--start", start), ("--end", end)):
+        if v is not None and not math.isfinite(v):
+            raise CompanionError(f"{opt} must be a number of seconds, got {v}")
+    if start is not None and end is not None and start >= end:
+        raise CompanionError(f"--start {start:g} is not before --end {end:g}: the time window is empty")

@@ -12,7 +12,7 @@ from pathlib import Path
 
 #: name on the command line -> (file in this package, what it is)
 EXAMPLES = {
-    "config": ("default_config.yaml", "every configuration key with its default (run --config, fleet --config)"),
+    "config": ("default_config.yaml", "every configuration key with its default (run, inspect, analyze, gap, compensate: --config)"),
     "model": ("sample_model.yaml", "a noise model for simulate and gap --model (an ArduPilot-like MEMS gyro)"),
 }
 

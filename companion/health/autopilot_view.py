@@ -176,11 +176,26 @@ def view_lines(view: AutopilotView | None) -> list[str]:
            for r in view.imus]
     if view.gyro_inconsistency_max is not None:
         out.append(f"autopilot: {inconsistency_text(view.gyro_inconsistency_max)}")
-    out += [f"autopilot: {e.text()}" for e in view.events[:10]]
-    if len(view.events) > 10:
-        out.append(f"autopilot: {len(view.events) - 10} more ERR events")
+    out += [f"autopilot: {line}" for line in event_lines(view.events)]
     if view.error:
         out.append(f"autopilot: health records not read: {view.error}")
+    return out
+
+
+def event_lines(events: list[AutopilotEvent], limit: int = 10) -> list[str]:
+    """The ERR events as printed: a run of one repeated text once with its count (an autopilot logs the same
+    ERR again and again; records without a time of their own all get one time), at most ``limit`` lines, then
+    how many more."""
+    runs: list[list] = []
+    for e in events:
+        text = e.text()
+        if runs and runs[-1][0] == text:
+            runs[-1][1] += 1
+        else:
+            runs.append([text, 1])
+    out = [text if n == 1 else f"{text} ({n} times)" for text, n in runs[:limit]]
+    if len(runs) > limit:
+        out.append(f"{sum(n for _, n in runs[limit:])} more ERR events")
     return out
 
 

@@ -83,6 +83,10 @@ def axis_entry(tau, avar, edf, *, rate_hz: float, n: int, tau_min: float, level:
         out["status"] = "too_short" if tau.size < MIN_POINTS else "bound"
         b = _white_bound_term(tau, avar, edf, level, n_ceiling, "too few positive cluster times to fit")
         out["bounds"] = [b] if b else []
+        if not b:  # said, not left as a "bound" without one
+            out["status"] = "no_figure"
+            out["notes"].append("too few cluster times with a positive Allan variance of the differences for a "
+                                "value or a bound")
         return out
     m = np.round(tau[keep] * rate_hz)
     fit = fit_avar(tau[keep], avar[keep], edf[keep], n=None, rate_hz=None, m=m, level=level)

@@ -42,7 +42,7 @@ EQUALIZED_TAU0 = 8
 COPY_RATIO = 1e-9
 SHAPE_MIN = 0.6
 ONE_IMU = ("one IMU: in motion its noise cannot be separated from the motion; a second IMU, logging while "
-           "disarmed (ArduPilot LOG_DISARMED=1) or ground time (armed, motors running, not moving) would give "
+           "disarmed (ArduPilot LOG_DISARMED=1, PX4 SDLOG_MODE=1 or 2) or ground time (armed, motors running, not moving) would give "
            "figures")
 OWN_NOISE = ("the IMU's own noise in this condition: motion and vibration common to the IMUs cancel in their "
              "differences")
@@ -163,7 +163,8 @@ def _bounded(entry: dict) -> dict:
     b = [] if top is None else [{"effect": "white_noise", "N": top, "std": {}, "ci95": {"N": [0.0, top]},
                                  "bound": True, "reason": "at most the pair's figure (the other IMU's share unknown)"}]
     return {"status": entry.get("status", "ok"), "terms": [], "bounds": b, "fit": entry.get("fit"),
-            "quantization": None, "tau": [], "adev": [], "adev_lo": [], "adev_hi": [], "notes": []}
+            "quantization": None, "tau": [], "adev": [], "adev_lo": [], "adev_hi": [],
+            "notes": [] if b else list(entry.get("notes", []))}
 
 
 def _two(pair_out, still_n, seconds) -> list:

@@ -31,6 +31,9 @@ def report(pipeline) -> dict | None:
     view = pipeline.autopilot_view or pipeline.autopilot_link.view(instances)
     ours = {r["imu"]: list(r.get("faults") or ([r["health"]] if r["health"] not in ("healthy", "learning")
                                                 else [])) for r in rows}
+    for r in rows:  # a gyro reading exactly 0 throughout is a finding (the exit status says so) too
+        if r.get("all_zero") and not ours[r["imu"]]:
+            ours[r["imu"]] = [f"IMU{r['imu']} gyro X, Y, Z exactly 0 in every sample"]
     return check_report(view, ours, instances)
 
 

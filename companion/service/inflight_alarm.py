@@ -96,7 +96,16 @@ def allan_shape(filters, rate_hz: float, m) -> np.ndarray:
     """Allan variance of white noise through the cascade of 2-pole Butterworth low-passes ``filters`` (Hz,
     bilinear and pre-warped as ArduPilot's LowPassFilter2p) over that of plain white noise, at cluster sizes
     ``m``: as :func:`companion.redundancy.shape.avar_shape`, numpy only (the live pipeline loads no scipy),
-    from the filters' exact gain |H|^2 = 1 / (1 + (tan(pi f) / tan(pi f_c / f_s))^4)."""
+    from the filters' exact gain |H|^2 = 1 / (1 + (tan(pi f) / tan(pi f_c / f_s))^4).
+
+    Remembered per (filters, rate, m): the flight figures ask for the same shapes at every check, and one call
+    over 256 cluster sizes costs about 0.1 s of CPU (most of a replayed 3-IMU flight's time without it)."""
+    key = (tuple(float(f) for f in filters), float(rate_hz), tuple(np.asarray(m, dtype=float).ravel().tolist()))
+    return _allan_shape(*key).copy()
+
+
+@lru_cache(maxsize=256)
+def _allan_shape(filters: tuple, rate_hz: float, m: tuple) -> np.ndarray:
     m = np.asarray(m, dtype=float)
     f = (np.arange(SHAPE_GRID) + 0.5) / SHAPE_GRID * 0.5  # cycles per sample
     h2 = np.ones_like(f)

@@ -186,9 +186,11 @@ def summary_lines(pipeline) -> list[str]:
         k, other_s = r["other_rates"]
         # the figures below are this rate's: still data fed at other rates sit in the estimators kept for them
         other = f" (+ {other_s:.0f} s kept with {k} other rate{'s' if k > 1 else ''})" if other_s >= 1.0 else ""
+        # the block cutter's gaps (longer than gap_s), not inspect's (1.5 periods): said, as the counts differ
+        gap_s = pipeline.channels[r["imu"]].cutter.rules.gap_s if r["imu"] in pipeline.channels else pipeline.cfg.gap_s
         out.append(f"IMU{r['imu']} ({r['message']}, {rate}): {r['health']}; {r['still_s']:.0f} s still data used{other}; "
-                   f"{c['samples']} samples, {c['blocks_moving']} moving blocks, {c['resets']} resets, {c['gaps']} gaps, "
-                   f"{c['duplicates']} duplicates")
+                   f"{c['samples']} samples, {c['blocks_moving']} moving blocks, {c['resets']} resets, "
+                   f"{c['gaps']} gaps > {gap_s:.2g} s, {c['duplicates']} duplicates")
         for text in r.get("faults") or ():
             out.append(f"  FAULT: {text}")
         for text in r.get("notes") or ():

@@ -268,7 +268,7 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
     reboots has its boot sessions laid end to end (:func:`companion.sources.sessions.join_sessions`).
     Any user-caused problem raises :class:`CompanionError` (one line).
     """
-    from companion.sources.connection import parse_connection
+    from companion.sources.connection import parse_connection, unknown_file
 
     s = str(spec)
     decision = decide(s)
@@ -285,8 +285,7 @@ def load(spec, config=None, *, duration: float | None = None, baud: int | None =
         parse_connection(s, baud)  # validate before anything else
         res = load_live(s, duration or 0.0, config, baud, split_periods)
     elif Path(s).is_file():
-        raise CompanionError(f"{s}: unknown file type: its content is none of a tlog, a DataFlash .bin, a ULog "
-                             ".ulg or a CSV with a time_s header (each optionally gzip-compressed)")
+        raise CompanionError(unknown_file(s))
     else:
         parse_connection(s, baud)  # raises the 'unknown source' error
         raise CompanionError(f"{s}: unknown source")  # pragma: no cover - parse_connection raised

@@ -303,12 +303,12 @@ def from_tlog(idx, imu_keys) -> AutopilotView:
 def check_report(view: AutopilotView | None, ours: dict[int, list[str]], instances: list[int]) -> dict | None:
     """The ``autopilot`` entry of a report: the view, the cross-check per IMU and its printed lines; None when the
     source carries no autopilot health at all (a CSV, a tlog without SYS_STATUS or VIBRATION)."""
-    from companion.health.autopilot_view import cross_check, inconsistency_text
+    from companion.health.autopilot_view import cross_check, event_lines, inconsistency_text
 
     if view is None or not (view.fields or view.error):
         return None
     checks = cross_check(view, ours, instances)
-    lines = [c.line() for c in checks] + [e.text() for e in view.events[:10]]
+    lines = [c.line() for c in checks] + event_lines(view.events)
     if view.gyro_inconsistency_max is not None:
         lines.append(inconsistency_text(view.gyro_inconsistency_max))
     if view.error:

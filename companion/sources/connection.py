@@ -29,6 +29,12 @@ _COM = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
 DEFAULT_BAUD = 115200  #: a serial link's rate unless --baud says otherwise (ArduPilot's default telemetry rate)
 
 
+def unknown_file(s: str) -> str:
+    """The error of an existing file whose content none of the readers recognises."""
+    return (f"{s}: unknown file type: its content is none of a tlog, a DataFlash .bin, a ULog .ulg or a CSV with a "
+            "time_s header (each optionally gzip-compressed)")
+
+
 def is_connection_string(spec: str) -> bool:
     """True if ``spec`` looks like a network link (prefix) or a serial device."""
     s = str(spec)
@@ -46,6 +52,8 @@ def parse_connection(spec: str, baud: int | None = None) -> tuple[str, str]:
         return "net", f"{m.group(1).lower()}:{m.group(2)}:{port}"
     if s.split(":", 1)[0].lower() in NET_PREFIXES:
         raise CompanionError(f"{s}: expected {s.split(':', 1)[0].lower()}:HOST:PORT, e.g. udpin:0.0.0.0:14550")
+    if os.path.isfile(s):  # a file no reader took: said as every command says it, never opened as a link
+        raise CompanionError(unknown_file(s))
     if "/bin/" in s or s.lower().endswith(".elf"):
         raise CompanionError(f"{s}: not a connection string or serial device")
     if _COM.match(s) or (s.startswith("/dev/") and re.match(r"^/dev/[A-Za-z0-9._/\-:]+$", s)):

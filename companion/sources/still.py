@@ -92,8 +92,9 @@ class StillSelection:
 
     def describe(self) -> str:
         k = len(self.intervals)
-        text = (f"{k} still segment{'s' if k != 1 else ''}, {self.still_s:.0f} s in all"
-                if self.method != "all" else f"whole record (--all), {self.still_s:.0f} s")
+        used = f"{self.still_s:.0f}" if self.still_s >= 10 or self.still_s == 0 else f"{self.still_s:.2g}"  # not "0 s"
+        text = (f"{k} still segment{'s' if k != 1 else ''}, {used} s in all"
+                if self.method != "all" else f"whole record (--all), {used} s")
         left = []
         if self.moving_s >= 0.5:
             left.append(f"{self.moving_s:.0f} s of flight/motion" + (f" ({self.armed_s:.0f} s armed)" if self.armed_s >= 0.5 else ""))

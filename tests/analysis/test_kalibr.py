@@ -66,3 +66,15 @@ def test_unresolved_random_walk_takes_the_reports_bound():
     entry["bounds"] = []
     rw = axis_random_walk(entry)
     assert rw.value == np.sqrt(3.0 * 7e-4**2 / 2.0) and "no bound" in rw.note
+
+
+def test_kalibr_is_refused_where_a_sensor_would_get_noise_0(tmp_path, capsys):
+    # --axes gx,gy,gz: no accelerometer figure; a 0 noise density tells Kalibr the sensor is perfect
+    from companion.cli.main import main
+
+    ky = tmp_path / "imu.yaml"
+    assert main(["analyze", "tlogs/sample.tlog", "--quiet", "--axes", "gx,gy,gz", "--kalibr", str(ky)]) == 2
+    err = capsys.readouterr().err
+    assert "accelerometer" in err and "written as 0" in err and not ky.exists(), err
+    assert main(["analyze", "tlogs/sample.tlog", "--quiet", "--axes", "gx,gy,gz", "--kalibr", str(ky), "--force"]) == 0
+    assert "accelerometer: no usable axis" in ky.read_text()

@@ -110,6 +110,7 @@ def test_one_imu_says_what_would_help():
     p = res.per_imu[0]
     assert p["method"] == "none" and not p["axes"]
     assert "LOG_DISARMED" in p["notes"][0] and "second IMU" in p["notes"][0]
+    assert "SDLOG_MODE" in p["notes"][0]  # the PX4 user's setting too (a one-IMU ULog gets this note)
 
 
 def test_too_short_a_condition_gives_no_figure():
