@@ -3,6 +3,7 @@
     python -m benchmarks.bench_analyze_speed            # 3 runs per record (the minimum is the figure)
     python -m benchmarks.bench_analyze_speed --runs 5
     python -m benchmarks.bench_analyze_speed --quick    # 2 runs per record
+    python -m benchmarks.bench_analyze_speed --baseline ../main   # also another checkout (its .venv), interleaved
 
 Two records: the ADIS16405 recording 1 of ../shared/data (a gzip CSV, skipped with a message where the data are
 absent) and a synthetic 1 M x 6 record of the simulator (white noise, bias instability and a rate random walk on
@@ -11,7 +12,9 @@ process: its wall time, CPU time (user + system) and peak resident memory (the c
 record is written by another process, as a child's peak counts from its parent's size at the fork).
 
 Target: within 3 s and 150 MB on this machine; printed as ratios (figure / target, <= 1 meets it). The machine is
-shared: the CPU time varies less with the other processes than the wall time.
+shared: the CPU time varies less with the other processes than the wall time, but still by a third with their
+load; ``--baseline`` runs another checkout's ``analyze`` in turn with this one's (the same load for both), prints
+its figures and the ratio of the two, and whether their JSON reports are identical.
 """
 
 from __future__ import annotations
@@ -47,11 +50,13 @@ class Run(NamedTuple):
     peak_mb: float
 
 
-def analyze_once(path: Path, out_json: Path) -> Run:
-    """One `companion analyze` process on ``path``; its rusage is the child's own (os.wait4)."""
+def analyze_once(path: Path, out_json: Path, checkout: Path | None = None) -> Run:
+    """One `companion analyze` process on ``path`` (of ``checkout``, run with its .venv's python; None: this one);
+    its rusage is the child's own (os.wait4)."""
+    python = str(checkout / ".venv" / "bin" / "python") if checkout else sys.executable
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "companion", "analyze", str(path), "--quiet", "--json",
-                             str(out_json)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen([python, "-m", "companion", "analyze", str(path), "--quiet", "--json",
+                             str(out_json)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=checkout)
     _, status, ru = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
@@ -74,21 +79,35 @@ def synthetic_record(path: Path, seed: int = 49) -> None:
     write_csv(str(path), np.arange(SAMPLES) / RATE_HZ, gyro, accel)
 
 
-def report(name: str, path: Path, runs: int, tmp: Path) -> None:
-    out = [analyze_once(path, tmp / "out.json") for _ in range(runs)]
+def _line(name: str, out: list) -> str:
     wall = min(r.wall_s for r in out)
     cpu = min(r.cpu_s for r in out)
     peak = min(r.peak_mb for r in out)
-    print(f"{name}: {runs} runs, min wall {wall:.2f} s ({wall / TARGET_S:.2f} x {TARGET_S:g} s), "
-          f"min CPU {cpu:.2f} s ({cpu / TARGET_S:.2f} x), peak {peak:.0f} MB ({peak / TARGET_MB:.2f} x "
-          f"{TARGET_MB:g} MB)")
-    print("   each run (wall s, CPU s, MB): " + "; ".join(f"{r.wall_s:.2f}, {r.cpu_s:.2f}, {r.peak_mb:.0f}"
-                                                      for r in out))
+    return (f"{name}: {len(out)} runs, min wall {wall:.2f} s ({wall / TARGET_S:.2f} x {TARGET_S:g} s), "
+            f"min CPU {cpu:.2f} s ({cpu / TARGET_S:.2f} x), peak {peak:.0f} MB ({peak / TARGET_MB:.2f} x "
+            f"{TARGET_MB:g} MB)\n   each run (wall s, CPU s, MB): "
+            + "; ".join(f"{r.wall_s:.2f}, {r.cpu_s:.2f}, {r.peak_mb:.0f}" for r in out))
+
+
+def report(name: str, path: Path, runs: int, tmp: Path, baseline: Path | None = None) -> None:
+    out, base = [], []
+    for _ in range(runs):
+        if baseline is not None:
+            base.append(analyze_once(path, tmp / "base.json", baseline))
+        out.append(analyze_once(path, tmp / "out.json"))
+    print(_line(name, out))
+    if baseline is not None:
+        print(_line(f"   baseline {baseline}", base))
+        same = (tmp / "base.json").read_bytes() == (tmp / "out.json").read_bytes()
+        print(f"   CPU / baseline's (min): {min(r.cpu_s for r in out) / min(r.cpu_s for r in base):.2f}; "
+              f"JSON report identical to the baseline's: {'yes' if same else 'NO'}")
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=3, help="analyze processes per record (the minimum is printed)")
+    ap.add_argument("--baseline", type=Path, default=None,
+                    help="another checkout (with its .venv) whose analyze runs in turn with this one's")
     args = results.parse_args(ap, {"runs": 2})
     try:
         load = os.getloadavg()
@@ -99,14 +118,14 @@ def main() -> int:
         tmp = Path(d)
         shared = results.SHARED_DATA / SHARED_CSV
         if shared.exists():
-            report(f"ADIS16405 {SHARED_CSV}", shared, args.runs, tmp)
+            report(f"ADIS16405 {SHARED_CSV}", shared, args.runs, tmp, args.baseline)
         else:
             print(f"skipped the ADIS16405 recording: {shared} is absent (set COMPANION_SHARED_DATA)")
         synth = tmp / "synthetic_1M_x6.csv.gz"
         subprocess.run([sys.executable, "-c", "import sys; from pathlib import Path; "
                         "from benchmarks.bench_analyze_speed import synthetic_record; "
                         "synthetic_record(Path(sys.argv[1]))", str(synth)], check=True)
-        report(f"synthetic {SAMPLES:,} x 6 at {RATE_HZ:g} Hz", synth, args.runs, tmp)
+        report(f"synthetic {SAMPLES:,} x 6 at {RATE_HZ:g} Hz", synth, args.runs, tmp, args.baseline)
     return 0
 
 

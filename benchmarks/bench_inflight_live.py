@@ -256,8 +256,12 @@ def real_logs(paths: list[str], baseline_s: float | None, sequence: bool = False
         verdicts += len(v)
         tested += any(b for b in nz.baseline.values())
         picked += bool(pw.base)
+        # flight seconds the test saw (take-offs and landings left out), and those after its baseline
         flight = max((pr.seconds["flight"] for pr in nz.pairs.values()), default=0.0)
-        print(f"  {Path(f).name}: {flight:.0f} s in flight, figures: "
+        after = flight - nz.cfg.baseline_s if nz.baseline["flight"] else 0.0
+        rate = max((pr.rate_hz or 0.0 for pr in nz.pairs.values()), default=0.0)
+        print(f"  {Path(f).name}: {len({i for k in nz.pairs for i in k})} IMUs at {rate:.0f} Hz, {flight:.0f} s in "
+              f"flight, {max(after, 0.0):.0f} s after the baseline, figures: "
               f"{', '.join(c for c in nz.figures if nz.figures[c]) or 'none'}, baseline learned: "
               f"{', '.join(c for c in nz.baseline if nz.baseline[c]) or 'no'}; pick-up baseline: "
               f"{'yes' if pw.base else f'no ({pw.learned_s:.0f} s of windows)'}, verdicts: {v or 0}", flush=True)

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterable, Mapping
+from typing import Iterable, Mapping, NamedTuple
 
 import numpy as np
 
@@ -224,19 +224,39 @@ def _shape(term: Mapping) -> tuple:
             term.get("freq_hz"))
 
 
-def _unit_row(term, l, shift, weight, step, tau0) -> np.ndarray:
-    """c(l) = sum_pq a_p b_q G(l + q - p) of one unit term at the lags ``l`` (tap offsets ``shift``, weights
-    ``weight``)."""
-    if np.all(shift % step == 0):
-        # the nine rows of lags l + shift are shifted copies of one grid of spacing `step`: the term is
-        # evaluated once per grid point (a quarter to a ninth of the lags) and the rows gathered from it
+class _Lags(NamedTuple):
+    """The lags of one pair's rows: ``l`` with the tap ``shift`` and ``weight``; where every shift is a multiple of
+    the ``step``, the nine rows of lags l + shift are shifted copies of one ``grid`` of spacing ``step`` (the row
+    ``offsets`` into it), filled into the one ``rows`` buffer of the pair."""
+
+    l: np.ndarray
+    shift: np.ndarray
+    weight: np.ndarray
+    grid: np.ndarray | None
+    offsets: list | None
+    rows: np.ndarray | None
+
+    @classmethod
+    def of(cls, l, shift, weight, step) -> "_Lags":
+        if not np.all(shift % step == 0):
+            return cls(l, shift, weight, None, None, None)
         lo_shift = int(shift.min())
         grid = np.arange(l[0] + lo_shift, l[-1] + int(shift.max()) + 1, step, dtype=np.int64)
-        g = _gcov(term, grid, tau0)
-        n = l.shape[0]
-        # the rows as slices of the grid (the same matrix an index array gathers, at half the cost)
-        return weight @ np.stack([g[o:o + n] for o in ((shift - lo_shift) // step).tolist()])
-    return weight @ _gcov(term, l[None, :] + shift[:, None], tau0)
+        offsets = ((shift - lo_shift) // step).tolist()
+        return cls(l, shift, weight, grid, offsets, np.empty((shift.shape[0], l.shape[0])))
+
+
+def _unit_row(term, lags: _Lags, tau0) -> np.ndarray:
+    """c(l) = sum_pq a_p b_q G(l + q - p) of one unit term at the lags of ``lags``."""
+    if lags.grid is not None:
+        # the term evaluated once per grid point (a quarter to a ninth of the lags), the rows its slices (the
+        # same matrix an index array gathers, at half the cost)
+        g = _gcov(term, lags.grid, tau0)
+        rows, n = lags.rows, lags.l.shape[0]
+        for r, o in enumerate(lags.offsets):
+            rows[r] = g[o:o + n]
+        return lags.weight @ rows
+    return lags.weight @ _gcov(term, lags.l[None, :] + lags.shift[:, None], tau0)
 
 
 def _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside):
@@ -258,9 +278,14 @@ def _pair_forms(kern, has_q, m1, m2, M1, M2, lo, hi, tau0, step_div, inside):
     unit = [dict(t, **{_MAGNITUDE[t["effect"]]: 1.0}) for t in kern]
     k = len(unit) + (1 if has_q else 0)
     C = np.zeros((k, l.shape[0]))
+    lags = None
     for i, term in enumerate(unit):
-        C[i] = _UNIT_ROWS.get((_shape(term), m1, m2, lo, hi, step, tau0),
-                              lambda term=term: _unit_row(term, l, shift, weight, step, tau0))
+        key = (_shape(term), m1, m2, lo, hi, step, tau0)
+        row = _UNIT_ROWS.peek(key)
+        if row is None:
+            lags = lags or _Lags.of(l, shift, weight, step)  # once per pair, for the rows not remembered
+            row = _UNIT_ROWS.get(key, lambda term=term: _unit_row(term, lags, tau0))
+        C[i] = row
     # pairs (i, j), 0 <= i < M1, 0 <= j < M2, with j - i = l: M1 + f(l) within the record
     count = (np.minimum(M1 - 1, M2 - 1 - l) - np.maximum(0, -l) + 1).astype(float)
     f = count - M1 if inside else np.maximum(count, 0.0)

@@ -14,7 +14,15 @@ tests/allan/test_special.py compare them with scipy).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+
+def _norm(r: np.ndarray) -> float:
+    """||r||_2 of a 1-D float array: the value ``np.linalg.norm`` gives (the same sqrt of r.r), without its
+    argument checks (the fits call this thousands of times on a few dozen points)."""
+    return math.sqrt(float(r.dot(r)))
 
 
 def nnls(A, b, max_iter: int | None = None):
@@ -31,7 +39,7 @@ def nnls(A, b, max_iter: int | None = None):
         # select their terms so that this is the common case, and it is one solve instead of one per column
         z, _, rank, _ = np.linalg.lstsq(A, b, rcond=None)
         if rank == n and np.all(z > 0):
-            return z, float(np.linalg.norm(A @ z - b))
+            return z, _norm(A @ z - b)
     # the gradient w = A^T (b - A x) is "zero" below rounding of its own size
     tol = 10.0 * np.finfo(float).eps * max(m, n) * max(np.linalg.norm(A, 1), 1e-300) * max(np.linalg.norm(b), 1e-300)
     w = A.T @ b
@@ -53,7 +61,7 @@ def nnls(A, b, max_iter: int | None = None):
                 break
             if first and z[j] <= 0:  # rounding: the column that looked uphill is not; x stays optimal
                 passive[j] = False
-                return x, float(np.linalg.norm(A @ x - b))
+                return x, _norm(A @ x - b)
             first = False
             if it >= max_iter:
                 passive = x > 0
@@ -66,7 +74,7 @@ def nnls(A, b, max_iter: int | None = None):
             passive &= x > 0.0
             x[~passive] = 0.0
         w = A.T @ (b - A @ x)
-    return x, float(np.linalg.norm(A @ x - b))
+    return x, _norm(A @ x - b)
 
 
 def exp_sum(x, lam: float, s0: float) -> float:

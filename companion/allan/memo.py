@@ -56,6 +56,10 @@ class BoundedMemo:
             self._bytes += size
         return value
 
+    def peek(self, key: Hashable):
+        """The value remembered for ``key``, else None."""
+        return self._values.get(key)
+
     def __len__(self) -> int:
         return len(self._values)
 

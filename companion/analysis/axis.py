@@ -244,7 +244,8 @@ def analyze_axis(y, rate_hz: float, taus="octave", lsb: float | None = None, eff
     notes = list(fit.notes)
     refit: dict = {}
     terms, bounds = _white_rules(fit, fp, rate_hz, edf0, bounds, notes, refit)
-    terms, bounds = flat_white_level(terms, bounds, curve["tau"], np.square(curve["adev"]), curve["edf"], notes, refit)
+    terms, bounds = flat_white_level(terms, bounds, curve["tau"], np.square(curve["adev"]), curve["edf"], notes, refit,
+                                     filter_ci=(fit.filter or {}).get("ci95"))
     terms, bounds, unsure = _unsure_as_bounds(terms, bounds, notes)
     out.update(tau=curve["tau"], adev=curve["adev"], adev_lo=curve["adev_lo"], adev_hi=curve["adev_hi"],
                terms=terms, bounds=bounds, edf=curve["edf"],

@@ -20,9 +20,8 @@ body see the same rotation, so per pair (:class:`PairTrack`):
 Three IMUs: each IMU's N from the three-cornered hat with the offline method's variance
 (:func:`companion.redundancy.hat.hat_share`; a share below two of its sigmas is a 95 % upper bound). Two
 IMUs: the pair figure, an upper bound of each IMU's. One IMU: nothing (its noise cannot be separated from
-motion). Conditions: ``ground`` (armed, the body not turning)
-and ``flight`` (armed and turning), from the HEARTBEAT armed bit and the gyro's half-second means; each has
-its own estimators, baseline and test.
+motion). Conditions: ``ground`` (armed, the body not turning) and ``flight`` (armed and turning), from the
+HEARTBEAT armed bit and the gyro's half-second means; each has its own estimators, baseline and test.
 
 The baseline (per condition: the hat figures and each pair's figure) is learned from the first
 ``baseline_s`` of that condition's data and kept in the state file; then every check tests each pair's figure
@@ -50,6 +49,7 @@ from companion.health.degradation import DEGRADING, HEALTHY
 from companion.health.faults import AXES
 from companion.health.hold import debounce
 from companion.service.inflight_alarm import allan_shape, overlap_edf_gain, z_for_rate
+from companion.service.inflight_settle import SettledFlight
 
 CONDITIONS = ("ground", "flight")
 PHASES = 4  # staggered phases of the octave accumulators
@@ -110,6 +110,7 @@ class InflightConfig:
     min_edf: float = 20.0
     turning: float = 0.03  # rad/s: a half-second mean body rate above this is flight, not ground
     ground_hold_s: float = 10.0  # not turning for this long before flight becomes ground again
+    settle_s: float = 15.0  # the test leaves out each flight stretch's first and last (inflight_settle.py)
     test: InflightTest = field(default_factory=InflightTest)
 
 
@@ -160,6 +161,7 @@ class PairTrack:
         self.seconds = {c: 0.0 for c in CONDITIONS}
         self.whole_s = {c: 0.0 for c in CONDITIONS}  # behind the whole-flight figures
         self.last_cond: str | None = None
+        self.settled = SettledFlight(cfg.settle_s)  # the test's flight data: take-offs and landings left out
 
     def _banks(self, cond: str, learning: bool):
         mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=PHASES, max_tau_s=8.0, fit="diag")
@@ -179,19 +181,22 @@ class PairTrack:
         e = self.cal.update(t, gi, gj)
         if e is None or cond is None:
             self.last_cond = None
+            self.settled.end()
             return
         cur, learn, whole = self._banks(cond, learning)
         junction = gap or self.last_cond != cond
         self.last_cond = cond
         for a in range(3):
-            for est in (cur[a], whole[a], learn[a] if learn is not None else None):
-                if est is None:
-                    continue
-                if junction:
-                    est.new_segment()
-                est.update(e[:, a])
-        self.seconds[cond] += t.shape[0] / self.rate_hz
+            if junction:
+                whole[a].new_segment()
+            whole[a].update(e[:, a])
         self.whole_s[cond] += t.shape[0] / self.rate_hz
+        for eb, start in self.settled.route(t, e, cond, junction):  # the test's: take-offs, landings left out
+            for est, y in [(b[a], eb[:, a]) for b in (cur, learn) if b is not None for a in range(3)]:
+                if start:
+                    est.new_segment()
+                est.update(y)
+            self.seconds[cond] += eb.shape[0] / self.rate_hz
 
     def level(self, cond: str, a: int, which: str = "cur") -> tuple[float, float, float]:
         """(N^2, 1-sigma, EDF) of axis ``a``'s difference over ``which`` accumulators (``cur``: the last
@@ -280,6 +285,7 @@ class InflightNoise:
         self.named: set = set()  # (cond, imu, axis) the test names
         #: cond -> {(pair, axis): Z of the latest check (InflightTest)}
         self.last_z: dict[str, dict] = {}
+        self.seen: dict = {}  # (cond, pair) -> its test data's seconds at the last check
 
     # ------------------------------------------------------------------ condition
     def _condition(self, channels, armed: bool, t: float) -> str | None:
@@ -430,12 +436,14 @@ class InflightNoise:
                 zv = math.log(x / b) / sig
                 up = self.detectors.setdefault((cond, k, ax, "up"), ZDetector())
                 down = self.detectors.setdefault((cond, k, ax, "down"), ZDetector())
-                up.check(zv, z_on, test)
-                down.check(-zv, z_on, test)
+                if self.pairs[k].seconds[cond] > self.seen.get((cond, k), -1.0):  # new data: another look
+                    up.check(zv, z_on, test)
+                    down.check(-zv, z_on, test)
                 ratios[(k, ax)], zs[(k, ax)] = x / b, zv
                 if DEGRADING in (up.state, down.state):
                     changed[ax].add(k)
         self.last_z[cond] = zs
+        self.seen.update({(cond, k): p.seconds[cond] for k, p in self.pairs.items()})
         imus = sorted({i for k in self.pairs for i in k})
         for ax in AXES:
             named = set()

@@ -98,8 +98,9 @@ def iterate(d: FitData, white, floor: float) -> ModelFit:
     base = [e for e in LINEAR_EFFECTS if e in d.effects and (e in BASE_EFFECTS or not d.auto)]
     linear, nonlin, c2 = list(base), [], 0.0
     prev, v_sup, sup_terms = None, d.v, []
+    prob = _Problem(d.tau, d.v, cov, white, d.tau0)
     for _ in range(d.max_iter):
-        prob = _Problem(d.tau, d.v, cov, white, d.tau0)
+        # prob: under the covariance of the step before (its solves remembered from that step's selection)
         sup_lin = [e for e in LINEAR_EFFECTS if e in base or e in linear]
         A_sup = _columns(sup_lin, nonlin, d.tau, white)
         th_sup, _ = prob.solve(A_sup)
