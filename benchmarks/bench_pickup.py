@@ -10,7 +10,6 @@ windows (sd of one window; sd of 30-s means) and, for logs of one vehicle, the s
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -26,7 +25,10 @@ REAL = ["/work/shared/data/ardupilot/dronekit_log171.bin", "/work/reallogs/erle/
         "/work/reallogs/flightreview/crates_converter_tests_fixtures_ekf_failure.ulg",
         "/work/reallogs/flightreview/crates_converter_tests_fixtures_gps_interference.ulg",
         "/work/reallogs/robologs/robologs_test.ulg",
-        "/work/reallogs/tlogs_extra/phoenix_mission1.tlog", "/work/reallogs/tlogs_extra/phoenix_mission2.tlog"]
+        "/work/reallogs/tlogs_extra/phoenix_mission1.tlog", "/work/reallogs/tlogs_extra/phoenix_mission2.tlog"] + [
+        f"/work/reallogs/long47/{n}" for n in ("joeydouglas_2014-10-18_20-04-24.bin", "joeydouglas_2014-10-18_20-44-05.bin",
+                                               "joeydouglas_2014-10-18_21-19-07.bin", "peterbarker_1.BIN",
+                                               "peterbarker_3.BIN", "beastayyg_log_0036_mechanical_failure.bin")]
 
 
 def window_ratios(tracks, intervals, window_s=WINDOW_S):
@@ -133,4 +135,4 @@ def main():
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(main, name="bench_pickup"))
