@@ -30,7 +30,14 @@ import numpy as np
 
 from benchmarks import results
 
-NAMED = re.compile(r"IMU(\d) gyro ([XYZ]) (flight|ground) noise changed")
+#: the verdicts naming an IMU: the noise test's and the vibration pick-up test's (companion/health/pickup.py)
+NAMED = re.compile(r"IMU(\d) gyro ([XYZ]) ((flight|ground) noise changed|vibration pick-up [\d.e+-]+x)")
+
+
+def names(text: str, imu: int, axis: str) -> bool:
+    """Does ``text`` name IMU ``imu``'s gyro ``axis`` (X, Y, Z) as changed in flight?"""
+    m = NAMED.search(text)
+    return bool(m) and int(m.group(1)) == imu and m.group(2) == axis and "ground" not in m.group(3)
 PLAIN_MODEL = {"rate_hz": 100.0, "axes": {a: [{"effect": "white_noise", "N": 2.0e-4},
                                              {"effect": "bias_instability", "B": 2.0e-5},
                                              {"effect": "random_walk", "K": 2.0e-6}] for a in ("gx", "gy", "gz")}}
@@ -88,10 +95,10 @@ def _detect_one(spec: str, seed: int, imu: int, axis: str, at: float) -> tuple[f
     fault_kind = "noise" if kind == "plain" else "flight_noise"
     sim, lsb = simulator(kind, seed, at + 200.0, Fault(fault_kind, at=at, size=2.0, imu=imu, axis=axis),
                          imus=imus, rate_hz=rate)
-    want = f"IMU{imu} gyro {axis[1].upper()} flight noise changed"
-    p, v = fly(sim, lsb, at + 240.0, stop=lambda p: any(want in x for _, x in p.transitions))
-    hit = [t for t, x in v if want in x]
-    others = [x for _, x in v if want not in x and "changed" in x and (imus > 2 or axis[1].upper() not in x)]
+    ax = axis[1].upper()
+    p, v = fly(sim, lsb, at + 240.0, stop=lambda p: any(names(x, imu, ax) for _, x in p.transitions))
+    hit = [t for t, x in v if names(x, imu, ax)]
+    others = [x for _, x in v if not names(x, imu, ax) and (imus > 2 or ax not in x)]
     return (hit[0] - (sim.t_start + at) if hit else math.inf), others
 
 
@@ -137,7 +144,7 @@ def _fa_vehicle(spec: str, seed: int, flight_s: float, flights: int) -> tuple[fl
     nz = p.inflight.noise
     flown = max((pr.seconds["flight"] for pr in nz.pairs.values()), default=0.0)
     hours = imus * max(flown - nz.cfg.baseline_s, 0.0) / 3600.0 if nz.baseline["flight"] else 0.0
-    return hours, [x for _, x in v if "changed" in x], time.process_time() - t0
+    return hours, list(v), time.process_time() - t0
 
 
 def false_alarms(specs, imu_hours: float, flight_s: float, flights: int, pool, deadline: float):
@@ -200,24 +207,30 @@ def cpu(rate_hz: float, data_s: float, inflight: bool) -> float:
     return (time.process_time() - t0) / float(blk.t[-1] - blk.t[0])
 
 
-def real_logs(paths: list[str], baseline_s: float | None) -> None:
-    """Every log under ``paths`` with two or more IMUs of one system replayed as `run --no-state` does;
-    ``baseline_s``: a shorter in-flight baseline, so that the test runs on short real flights."""
+def real_logs(paths: list[str], baseline_s: float | None, sequence: bool = False) -> None:
+    """Every log under ``paths`` with two or more IMUs of one system replayed as `run --no-state` does
+    (``sequence``: one vehicle's logs in the order given, the state kept from one to the next as `run
+    --state` keeps it); ``baseline_s``: shorter in-flight baselines (noise and pick-up), so that the tests
+    run on short real flights."""
     import functools
     from pathlib import Path
 
+    import companion.health.pickup as pickup
     import companion.service.inflight_live as inflight
     from companion.errors import CompanionError
     from companion.mavlink.reporter import Reporter
     from companion.service.pipeline import Pipeline, PipelineConfig
+    from companion.service.pipeline_state import load_pipeline_state, pipeline_state
     from companion.service.replay import replay_log, replay_tlog
     from companion.sources import load
 
     if baseline_s:
         inflight.InflightConfig = functools.partial(inflight.InflightConfig, baseline_s=baseline_s)
-    files = sorted(str(f) for d in paths for f in Path(d).rglob("*")
-                   if f.is_file() and f.suffix.lower() in (".bin", ".ulg", ".tlog", ".log"))
-    multi, tested, verdicts = 0, 0, 0
+        pickup.PickupConfig = functools.partial(pickup.PickupConfig, baseline_s=baseline_s)
+    files = [f for f in paths if Path(f).is_file()] if sequence else sorted(
+        str(f) for d in paths for f in Path(d).rglob("*")
+        if f.is_file() and f.suffix.lower() in (".bin", ".ulg", ".tlog", ".log"))
+    multi, tested, verdicts, picked, state = 0, 0, 0, 0, None
     for f in files:
         try:
             streams = load(f).streams
@@ -230,14 +243,19 @@ def real_logs(paths: list[str], baseline_s: float | None) -> None:
             continue
         multi += 1
         p = Pipeline(PipelineConfig(), Reporter(_Sink(), 1.0))
+        if state is not None:
+            load_pipeline_state(p, state)
         try:
             (replay_tlog if f.lower().endswith(".tlog") else replay_log)(f, p)
         except CompanionError:
             continue
-        nz = p.inflight.noise
+        if sequence:
+            state = pipeline_state(p)
+        nz, pw = p.inflight.noise, p.inflight.pickup.watch
         v = [x for _, x in p.transitions if NAMED.search(x)]
         verdicts += len(v)
         tested += any(b for b in nz.baseline.values())
+        picked += bool(pw.base)
         # flight seconds the test saw (take-offs and landings left out), and those after its baseline
         flight = max((pr.seconds["flight"] for pr in nz.pairs.values()), default=0.0)
         after = flight - nz.cfg.baseline_s if nz.baseline["flight"] else 0.0
@@ -245,9 +263,10 @@ def real_logs(paths: list[str], baseline_s: float | None) -> None:
         print(f"  {Path(f).name}: {len({i for k in nz.pairs for i in k})} IMUs at {rate:.0f} Hz, {flight:.0f} s in "
               f"flight, {max(after, 0.0):.0f} s after the baseline, figures: "
               f"{', '.join(c for c in nz.figures if nz.figures[c]) or 'none'}, baseline learned: "
-              f"{', '.join(c for c in nz.baseline if nz.baseline[c]) or 'no'}, verdicts: {v or 0}", flush=True)
+              f"{', '.join(c for c in nz.baseline if nz.baseline[c]) or 'no'}; pick-up baseline: "
+              f"{'yes' if pw.base else f'no ({pw.learned_s:.0f} s of windows)'}, verdicts: {v or 0}", flush=True)
     print(f"REAL LOGS: {len(files)} logs, {multi} with two or more IMUs, {tested} with an in-flight baseline "
-          f"(the test ran), {verdicts} verdicts")
+          f"(the noise test ran), {picked} with a pick-up baseline (the pick-up test ran), {verdicts} verdicts")
 
 
 DETECT = ("copter:3", "copter:3:400", "px4:3", "plain:3", "copter:2")
@@ -408,10 +427,12 @@ def main():
     ap.add_argument("--real", nargs="+", metavar="DIR", help="only: replay the real logs under DIR (e.g. "
                     "/work/shared/data /work/reallogs) and count in-flight verdicts")
     ap.add_argument("--logs", nargs="*", default=[], help="with --mode compare: real logs compared too")
+    ap.add_argument("--sequence", action="store_true", help="with --real: the files given are one vehicle's "
+                    "flights, replayed in order with the state kept (as `run --state`)")
     ap.add_argument("--real-baseline-s", type=float, default=None, help="with --real: a shorter in-flight baseline")
     args = results.parse_args(ap, {"seeds": 4, "fa_hours": 10.0, "flight_s": 900.0, "cpu_s": 120.0})
     if args.real:
-        return real_logs(args.real, args.real_baseline_s)
+        return real_logs(args.real, args.real_baseline_s, args.sequence)
     if args.mode == "compare":
         return compare_mode(args.kinds, args.seeds, args.flight_s, args.logs)
     from concurrent.futures import ProcessPoolExecutor

@@ -14,6 +14,7 @@ from __future__ import annotations
 from companion.health.degradation import DEGRADING
 from companion.mavlink.reporter import MAV_SEVERITY_NOTICE, MAV_SEVERITY_WARNING
 from companion.service.inflight_live import CONDITIONS, InflightNoise
+from companion.service.pickup_hook import PickupHook
 from companion.units import to_datasheet
 
 SUFFIX = {"flight": "FN", "ground": "GN"}
@@ -28,6 +29,7 @@ class InflightReport:
     def __init__(self, pipeline):
         self.p = pipeline
         self.noise = InflightNoise(block_s=pipeline.cfg.block_s)
+        self.pickup = PickupHook(self.noise.cfg.test.per_imu_hour)  # each IMU's vibration against its twins'
         self.said: set = set()  # conditions whose figures were announced in the log
 
     def on_block(self, ch, t: float) -> None:
@@ -50,6 +52,13 @@ class InflightReport:
             for imu in v.imus():
                 if imu in p.channels:
                     p._set_state(p.channels[imu])
+        for v in self.pickup.on_block(p.channels, p.armed, self.noise.cond):
+            text = v.text()
+            p.transitions.append((t, text))
+            p.log(text)
+            p.reporter.statustext(text, MAV_SEVERITY_WARNING if v.state == DEGRADING else MAV_SEVERITY_NOTICE, t)
+            if v.who in p.channels:
+                p._set_state(p.channels[v.who])
 
     def _send(self) -> None:
         """The latest figures as NAMED_VALUE_FLOATs (a pair's figure under both IMUs' names, as a bound)."""
@@ -88,10 +97,12 @@ class InflightReport:
         return out
 
     def degrading(self, imu: int) -> bool:
-        return self.noise.degrading(imu)
+        return self.noise.degrading(imu) or self.pickup.watch.degrading(imu)
 
     def state_dict(self) -> dict:
-        return self.noise.state_dict()
+        return dict(self.noise.state_dict(), pickup=self.pickup.watch.state_dict())
 
     def load_state_dict(self, d) -> None:
         self.noise.load_state_dict(d)
+        if isinstance(d, dict) and d.get("pickup") is not None:  # a file without it: learned afresh
+            self.pickup.watch.load_state_dict(d["pickup"])
