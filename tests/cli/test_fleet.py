@@ -41,23 +41,13 @@ def _count(db):
         return 0
 
 
-@pytest.fixture(scope="module")
-def loopback_cluster():
-    """One loopback LocalCluster of 2 worker processes for the tests that pass ``--scheduler`` (a cluster
-    start is most of such a test's time; the tests that start their own use ``--workers``)."""
-    distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address="127.0.0.1:0") as cluster:
-        yield cluster
-
-
 @pytest.mark.network
-def test_dask_two_workers_interrupt_resume_report(tmp_path, loopback_cluster, capsys):
-    """Ctrl-C of a run on its own local cluster (2 workers), then the resume on a running cluster
-    (--scheduler, --batch 3). A local cluster's run to its end: tests/health/test_dead.py (--workers 1)."""
+def test_dask_two_workers_interrupt_resume_report(tmp_path):
+    pytest.importorskip("dask.distributed")
     logs = tmp_path / "logs"
-    assert main(["fleet", "simulate", str(logs), "--vehicles", "3", "--flights", "10", "--imus", "2",
-                 "--duration", "20", "--rate", "50", "--seed", "11"]) == 0
+    r = _cli("fleet", "simulate", str(logs), "--vehicles", "3", "--flights", "10", "--imus", "2",
+             "--duration", "20", "--rate", "50", "--seed", "11")
+    assert r.returncode == 0, r.stderr
     truth = json.loads((logs / "fleet_truth.json").read_text())
     (logs / "vehicle_000" / "broken.tlog").write_bytes(b"\xfe\x00not a log" * 50)
     db = str(tmp_path / "fleet.sqlite")
@@ -77,13 +67,10 @@ def test_dask_two_workers_interrupt_resume_report(tmp_path, loopback_cluster, ca
     else:  # it finished before the signal arrived
         assert proc.returncode == 0, err
     # resume: only what is missing is analysed; nothing lost, nothing twice
-    capsys.readouterr()
-    rc = main(["fleet", "analyze", str(logs), "--db", db, "--scheduler", loopback_cluster.scheduler_address,
-               "--batch", "3"])
-    r = capsys.readouterr()
-    assert rc == 0, r.err
-    assert f"{31 - first} to analyse, {first} already" in r.err
-    assert "1 failed" in r.out.splitlines()[-1] and "broken.tlog" in (r.err + r.out + out + err)
+    r = _cli("fleet", "analyze", str(logs), "--db", db, "--workers", "2", "--batch", "3")
+    assert r.returncode == 0, r.stderr
+    assert f"{31 - first} to analyse, {first} already" in r.stderr
+    assert "1 failed" in r.stdout.splitlines()[-1] and "broken.tlog" in (r.stderr + out + err)
     con = sqlite3.connect(db)
     assert con.execute("SELECT COUNT(*) FROM logs WHERE status='ok'").fetchone()[0] == 30
     err_text = con.execute("SELECT error FROM logs WHERE status='failed'").fetchone()[0]
@@ -95,8 +82,8 @@ def test_dask_two_workers_interrupt_resume_report(tmp_path, loopback_cluster, ca
     assert r.returncode == 0 and "0 to analyse, 31 already" in r.stderr
     # report: the degrading IMUs first and flagged, no healthy one flagged
     out_json, out_html = tmp_path / "r.json", tmp_path / "r.html"
-    rc = main(["fleet", "report", "--db", db, "--json", str(out_json), "--html", str(out_html)])
-    assert rc == 4, capsys.readouterr().err  # flagged IMUs: the exit status of faults found
+    r = _cli("fleet", "report", "--db", db, "--json", str(out_json), "--html", str(out_html))
+    assert r.returncode == 4, r.stderr  # flagged IMUs: the exit status of faults found
     imus = json.loads(out_json.read_text())["imus"]
     assert len(imus) == 6
     sick = _sick(truth)
@@ -188,15 +175,18 @@ def test_missing_dask_is_one_clear_line(tmp_path, monkeypatch, capsys):
 
 
 @pytest.mark.network
-def test_existing_scheduler_on_loopback(tmp_path, capsys, loopback_cluster):
+def test_existing_scheduler_on_loopback(tmp_path, capsys):
     """--scheduler: the same command on an already running cluster (here a loopback LocalCluster)."""
+    distributed = pytest.importorskip("dask.distributed")
     logs = tmp_path / "logs"
     assert main(["fleet", "simulate", str(logs), "--vehicles", "2", "--flights", "2", "--imus", "1",
                  "--duration", "10", "--rate", "50", "--degrading", "0"]) == 0
-    assert loopback_cluster.scheduler_address.startswith("tcp://127.0.0.1:")
-    db = str(tmp_path / "f.sqlite")
-    assert main(["fleet", "analyze", str(logs), "--db", db, "--scheduler", loopback_cluster.scheduler_address,
-                 "--quiet"]) == 0
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address="127.0.0.1:0") as cluster:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        db = str(tmp_path / "f.sqlite")
+        assert main(["fleet", "analyze", str(logs), "--db", db, "--scheduler", cluster.scheduler_address,
+                     "--quiet"]) == 0
     assert "4 analysed, 0 failed" in capsys.readouterr().out
 
 
