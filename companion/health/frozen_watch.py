@@ -122,7 +122,13 @@ class FrozenWatch:
         if t[0] < tr.last_in - 1.0:  # a reboot: the time starts again
             tr.t, tr.g, tr.a, tr.next_pair, tr.inbox = np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), 1, []
             tr.last_in = -math.inf
-        keep = t > np.maximum.accumulate(np.r_[tr.last_in, t[:-1]])
+        if t.size == 1:  # the live loop's one row: a float comparison (numpy's per-call cost is most of it)
+            if t[0] > tr.last_in:
+                tr.inbox.append((t, np.asarray(gyro, dtype=float).reshape(1, 3),
+                                 np.asarray(accel, dtype=float).reshape(1, 3)))
+                tr.last_in = float(t[0])
+            return
+        keep = t > np.maximum.accumulate(np.concatenate(([tr.last_in], t[:-1])))
         if not keep.all():
             t = t[keep]
             if t.size == 0:

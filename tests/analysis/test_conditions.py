@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from companion.analysis.conditions import condition_intervals
-from tests.redundancy.synthetic import RATE, body_rate, flight
+from tests.redundancy.synthetic import RATE, body_rate
 
 DEG = math.radians(1.0) / 60.0
 
@@ -42,20 +42,15 @@ def test_without_armed_state_motion_only_and_no_ground():
     assert sum(b - a for a, b in c["flight"]) >= 36.0
 
 
-def test_an_armed_throughout_log_is_analysed_in_flight(tmp_path):
+#: three IMUs of known N armed from the first sample to the last (no still data), 240 s
+ARMED = dict(seed=5, n_true=[0.8 * DEG, 1.6 * DEG, 2.4 * DEG], seconds=240.0, offsets=[0.0, 0.001, 0.0005])
+
+
+def test_an_armed_throughout_log_is_analysed_in_flight(armed_flight):
     """A DataFlash log armed from its first to its last sample (no still data) with three IMUs of known N:
     analyze gives each IMU's in-flight N (the hat) within its interval's reach instead of refusing."""
-    from companion.analysis.source import analyze_source
-    from companion.sim.dataflash_writer import write_imu_log
-
-    n_true = np.array([0.8, 1.6, 2.4]) * DEG
-    t, g, _ = flight(5, n_true, seconds=240.0, offsets=[0.0, 0.001, 0.0005])
-    t = t + 1.0
-    accel = np.zeros((3, t.shape[0], 3))
-    accel[..., 2] = -9.8
-    path = tmp_path / "armed.bin"
-    write_imu_log(path, t, np.array(g), accel, layout="4.x", armed=[(0.5, True)])
-    entries, summary = analyze_source(str(path), ["gx", "gy", "gz"])
+    res = armed_flight(**ARMED)
+    entries, summary = res.entries, res.summary
     assert any("no still data" in n for n in summary["notes"])
     assert len(entries) == 3
     for i, e in enumerate(sorted(entries, key=lambda e: e["instance"])):
@@ -66,11 +61,16 @@ def test_an_armed_throughout_log_is_analysed_in_flight(tmp_path):
             assert wn, r["bounds"]
             lo, hi = wn[0]["ci95"]["N"]
             width = hi - lo
-            assert lo - width <= n_true[i] <= hi + width
+            assert lo - width <= res.n_true[i] <= hi + width
         assert set(e["ground"]) >= {"axes", "seconds", "method"}
+
+
+def test_the_table_gives_each_imus_flight_figure(armed_flight):
+    """The same log's analysis in analyze's table: a flight line for each of the three IMUs, by the hat."""
     from companion.analysis.report_table import format_table
 
-    table = format_table({"streams": entries, "sources": [summary]})
+    res = armed_flight(**ARMED)
+    table = format_table({"streams": res.entries, "sources": [res.summary]})
     assert table.count("flight: ") == 3 and "three-cornered hat" in table
 
 

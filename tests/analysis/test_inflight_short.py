@@ -68,21 +68,12 @@ def test_hat_interval_holds_the_truth_at_the_minimum_span():
     assert hit / total >= 0.91, (hit, total)
 
 
-def test_a_short_flight_gets_figures_in_the_report(tmp_path):
+def test_a_short_flight_gets_figures_in_the_report(armed_flight):
     """A DataFlash log of two IMUs armed throughout and flying for 14 s (12 s once the edges are trimmed,
     below the 30 s the redundancy module asks by default): each IMU gets an in-flight figure (at most the
     pair's) on every axis, and the pair's figure holds its truth within its interval's reach."""
-    from companion.analysis.source import analyze_source
-    from companion.sim.dataflash_writer import write_imu_log
-
-    n_true = np.array([1.0, 2.0]) * DEG
-    t, g, _ = flight(11, n_true, seconds=14.0, offsets=[0.0, 0.001])
-    t = t + 1.0
-    accel = np.zeros((2, t.shape[0], 3))
-    accel[..., 2] = -9.8
-    path = tmp_path / "short.bin"
-    write_imu_log(path, t, np.array(g), accel, layout="4.x", armed=[(0.5, True)])
-    entries, _ = analyze_source(str(path), ["gx", "gy", "gz"])
+    res = armed_flight(seed=11, n_true=[1.0 * DEG, 2.0 * DEG], seconds=14.0, offsets=[0.0, 0.001])
+    entries, n_true = res.entries, res.n_true
     assert len(entries) == 2
     for e in entries:
         f = e["flight"]

@@ -24,7 +24,7 @@ def test_recursive_avar_equals_eq_3_2(M):
     assert r.avar == pytest.approx(a2[0], rel=1e-10)
 
 
-@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("seed", [0] + [pytest.param(s, marks=pytest.mark.soak) for s in (1, 2, 3)])
 @pytest.mark.parametrize("x0_rel", [None, 0.5, 2.0])
 def test_white_noise_N_converges_without_noise_mean(seed, x0_rel):
     fs, N = 100.0, 1e-3

@@ -25,6 +25,13 @@ LSB = 1e-3
 DEG = math.pi / 180
 
 
+def seeds(default: int, soak: int):
+    """Parametrize ``seeds``: range(default) in the README's command, range(soak) (the same assertions over
+    every seed) as a soak check (python -m benchmarks.soak_checks)."""
+    return pytest.mark.parametrize("seeds", [range(default), pytest.param(range(soak), marks=pytest.mark.soak)],
+                                   ids=[f"{default}seeds", f"{soak}seeds"])
+
+
 def rounded_noise(rng, n, sigma, mean=0.0):
     return np.round((mean + rng.normal(0.0, sigma, (n, 3))) / LSB) * LSB
 
@@ -84,11 +91,12 @@ def test_one_code_flips_of_a_sub_lsb_gyro_are_not_spikes_and_a_real_spike_still_
         assert flips > 100 and spikes == 0, (seed, flips, spikes)
 
 
+@seeds(4, 10)
 @pytest.mark.parametrize("sigma_lsb", [0.7, 3.0])
-def test_stuck_caught_fast_with_or_without_dither_and_never_on_healthy_rounded_noise(sigma_lsb):
+def test_stuck_caught_fast_with_or_without_dither_and_never_on_healthy_rounded_noise(sigma_lsb, seeds):
     sigma = sigma_lsb * LSB
     flagged_healthy, delays = 0, []
-    for seed in range(10):
+    for seed in seeds:
         rng = np.random.default_rng(seed)
         refs = learn_ref(rng, sigma)
         dets = [StuckDetector() for _ in range(3)]
@@ -105,7 +113,7 @@ def test_stuck_caught_fast_with_or_without_dither_and_never_on_healthy_rounded_n
                 delays.append(k + 1)
                 break
     assert flagged_healthy == 0
-    assert len(delays) == 10 and max(delays) <= 3
+    assert len(delays) == len(seeds) and max(delays) <= 3
 
 
 def test_stuck_without_reference_uses_equal_values():
@@ -119,9 +127,10 @@ def test_stuck_without_reference_uses_equal_values():
     assert d.update(at(moving, 0, ref)) and d.state == OK
 
 
-def test_noise_rise_detected_near_its_information_limit_and_not_on_healthy():
+@seeds(4, 12)
+def test_noise_rise_detected_near_its_information_limit_and_not_on_healthy(seeds):
     false, delays = 0, {2.0: [], 1.5: [], 1.3: []}
-    for seed in range(12):
+    for seed in seeds:
         rng = np.random.default_rng(100 + seed)
         sigma = rng.uniform(1.0, 4.0) * LSB
         refs = learn_ref(rng, sigma)
@@ -138,15 +147,17 @@ def test_noise_rise_detected_near_its_information_limit_and_not_on_healthy():
                     assert d.value == pytest.approx(f, rel=0.35)
                     break
     assert false == 0
-    assert len(delays[2.0]) == 12 and max(delays[2.0]) <= 5  # limit h / KL = 20 / (50 * 0.5 * (4 - 1 - ln 4)) = 0.5 blocks
-    assert len(delays[1.5]) == 12 and max(delays[1.5]) <= 15
-    assert len(delays[1.3]) == 12 and max(delays[1.3]) <= 60
+    n = len(seeds)
+    assert len(delays[2.0]) == n and max(delays[2.0]) <= 5  # limit h / KL = 20 / (50 * 0.5 * (4 - 1 - ln 4)) = 0.5 blocks
+    assert len(delays[1.5]) == n and max(delays[1.5]) <= 15
+    assert len(delays[1.3]) == n and max(delays[1.3]) <= 60
 
 
-def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
+@seeds(4, 8)  # even seeds warm up downwards, odd ones upwards
+def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift(seeds):
     sigma = 2e-3
     jumps, quiet = [], 0
-    for seed in range(8):
+    for seed in seeds:
         rng = np.random.default_rng(200 + seed)
         refs = learn_ref(rng, sigma)
         d = BiasDetector()
@@ -162,7 +173,7 @@ def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
                 break
     assert quiet == 0
     # evidence capped at h / 5 per block: one knock is not a jump, a step is named within 5-6 blocks
-    assert len(jumps) == 8 and max(k for k, _, _ in jumps) <= 6
+    assert len(jumps) == len(seeds) and max(k for k, _, _ in jumps) <= 6
     for _, v, s in jumps:
         assert v == pytest.approx(s, abs=0.15)
     # a step below the floor (0.6 deg/s, clearly significant against this noise) is wander, not a fault
@@ -187,9 +198,10 @@ def test_bias_step_is_a_jump_warm_up_is_nothing_and_a_ramp_is_a_drift():
     assert kinds == ["bias_drift"] and d.drift_state == FAULT
 
 
-def test_spikes_named_as_spikes_not_noise():
+@seeds(4, 10)
+def test_spikes_named_as_spikes_not_noise(seeds):
     delays, noise_flags, false = [], 0, 0
-    for seed in range(10):
+    for seed in seeds:
         rng = np.random.default_rng(300 + seed)
         sigma = rng.uniform(0.7, 4.0) * LSB
         refs = learn_ref(rng, sigma)
@@ -208,7 +220,7 @@ def test_spikes_named_as_spikes_not_noise():
                 delays.append(k + 1)
                 break
     assert false == 0 and noise_flags == 0
-    assert len(delays) == 10 and max(delays) <= 30
+    assert len(delays) == len(seeds) and max(delays) <= 30
 
 
 def test_saturation_at_a_clip_level_and_at_the_range_limit():
