@@ -137,3 +137,12 @@ def spans_by_instance(spans: list[FrozenSpan]) -> dict:
                 merged.append([a, b])
         out[i] = [(a, b) for a, b in merged]
     return out
+
+
+def leave_out(spans: list[FrozenSpan], sel, meta: dict) -> None:
+    """The IMUs' frozen spans out of their still analysis (``sel``: sources.still.StillSelection, per instance)
+    and, through ``meta["frozen"]``, out of the ground and flight figures (analysis/inflight.py)."""
+    by_imu = spans_by_instance(spans)
+    for (_, _, inst), iv in by_imu.items():
+        sel.excluded[inst] = sorted(sel.excluded.get(inst, []) + iv)
+    meta["frozen"] = by_imu

@@ -117,12 +117,10 @@ def frozen_gyros(streams, axes, sel, meta: dict, notes: list, warn=None) -> list
     """The sentences naming every gyro axis (among ``axes``) frozen while the vehicle moved
     (analysis/frozen_spans.py), said in ``notes`` and through ``warn``; the IMU's frozen spans are left out of
     its still analysis (``sel.excluded``) and, through ``meta["frozen"]``, of the ground and flight figures."""
-    from companion.analysis.frozen_spans import frozen_spans, spans_by_instance
+    from companion.analysis.frozen_spans import frozen_spans, leave_out
 
     spans = [sp for sp in frozen_spans(streams) if sp.axis in axes]
-    for (_, _, inst), iv in spans_by_instance(spans).items():
-        sel.excluded[inst] = sorted(sel.excluded.get(inst, []) + iv)
-    meta["frozen"] = spans_by_instance(spans)
+    leave_out(spans, sel, meta)
     out = [sp.text() for sp in spans]
     notes += out
     for text in out if warn is not None else []:
