@@ -135,8 +135,6 @@ def _without_frozen(cond: dict, members, frozen: dict) -> tuple[dict, str | None
     """The condition intervals less every member's frozen spans (analysis/frozen_spans.py; ``frozen``
     {(sysid, compid, instance): [(t0, t1)]}), and the note saying so: a pair's difference over a frozen gyro is
     its twin's whole motion, which would be split onto the healthy IMU."""
-    from companion.sources.still import _minus
-
     cut = sorted(iv for s in members for iv in frozen.get((s.key.sysid, s.key.compid, s.key.instance), []))
     if not cut:
         return cond, None
@@ -149,7 +147,9 @@ def _without_frozen(cond: dict, members, frozen: dict) -> tuple[dict, str | None
     cut = [(a, b) for a, b in merged]
     out = dict(cond)
     for c in CONDITIONS:
-        out[c] = _minus(cond[c], cut)
+        out[c] = [(max(a, lo), min(b, hi)) for a, b in cond[c]
+                  for lo, hi in zip([-np.inf] + [e for _, e in cut], [s for s, _ in cut] + [np.inf])
+                  if min(b, hi) > max(a, lo)]
     who = ", ".join(sorted({f"IMU {s.key.instance}" for s in members
                             if frozen.get((s.key.sysid, s.key.compid, s.key.instance))}))
     span = f"{cut[0][0]:.0f}-{max(b for _, b in cut):.0f} s"

@@ -183,11 +183,16 @@ def run(args) -> int:
         raise CompanionError(f"{len(failed)} of {len(sources)} sources not analysed: {'; '.join(failed)}",
                              EXIT_FAULTS if dead or frozen or EXIT_FAULTS in codes else EXIT_USAGE)
     if dead or frozen:  # said above as a warning; the exit status lets a script gate on it (README "Exit status")
-        found = ([f"{len(dead)} dead gyro stream(s)"] if dead else []) + \
-            ([f"{len(frozen)} gyro axis/axes frozen while moving"] if frozen else [])
-        print(f"companion analyze: gyro faults found: {', '.join(found)} (exit status {EXIT_FAULTS})", file=sys.stderr)
+        print(f"companion analyze: gyro faults found: {_found(dead, frozen)}", file=sys.stderr)
         return EXIT_FAULTS
     return 0
+
+
+def _found(dead: list, frozen: list) -> str:
+    """What the exit status says, e.g. ``1 dead gyro stream(s) (exit status 4)``."""
+    return ", ".join(([f"{len(dead)} dead gyro stream(s)"] if dead else [])
+                     + ([f"{len(frozen)} gyro axis/axes frozen while moving"] if frozen else [])) + \
+        f" (exit status {EXIT_FAULTS})"
 
 
 def _all_failed_code(codes) -> int:
