@@ -131,6 +131,32 @@ def _n_value(entry: dict):
     return None
 
 
+def _without_frozen(cond: dict, members, frozen: dict) -> tuple[dict, str | None]:
+    """The condition intervals less every member's frozen spans (analysis/frozen_spans.py; ``frozen``
+    {(sysid, compid, instance): [(t0, t1)]}), and the note saying so: a pair's difference over a frozen gyro is
+    its twin's whole motion, which would be split onto the healthy IMU."""
+    cut = sorted(iv for s in members for iv in frozen.get((s.key.sysid, s.key.compid, s.key.instance), []))
+    if not cut:
+        return cond, None
+    merged = [list(cut[0])]
+    for a, b in cut[1:]:  # the members' spans may overlap
+        if a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    cut = [(a, b) for a, b in merged]
+    out = dict(cond)
+    for c in CONDITIONS:
+        out[c] = [(max(a, lo), min(b, hi)) for a, b in cond[c]
+                  for lo, hi in zip([-np.inf] + [e for _, e in cut], [s for s, _ in cut] + [np.inf])
+                  if min(b, hi) > max(a, lo)]
+    who = ", ".join(sorted({f"IMU {s.key.instance}" for s in members
+                            if frozen.get((s.key.sysid, s.key.compid, s.key.instance))}))
+    span = f"{cut[0][0]:.0f}-{max(b for _, b in cut):.0f} s"
+    return out, (f"{who} frozen within {span} (the notes name it): that time left out of every pair's figure, "
+                 "whose difference there would be the twin's whole motion")
+
+
 def condition_reports(streams, meta: dict, filters_of, still_entries=None) -> tuple[dict, list]:
     """({StreamKey: {"ground": ..., "flight": ...}}, notes) for every vehicle of ``streams``; ``filters_of(s)``
     gives a stream's low-pass cut-offs ({"gyro": Hz}); ``still_entries`` {StreamKey: still entry} gives the
@@ -148,6 +174,7 @@ def condition_reports(streams, meta: dict, filters_of, still_entries=None) -> tu
             continue
         t, g = _monotonic(members[0])
         cond = condition_intervals(t, g, (meta or {}).get("armed"), bool((meta or {}).get("has_armed_state")))
+        cond, frozen_note = _without_frozen(cond, members, (meta or {}).get("frozen") or {})
         tracks = _tracks(members, filters_of)
         still_n = _still_n(still_entries or {}, members)
         per = {s.key: {} for s in members}
@@ -165,6 +192,8 @@ def condition_reports(streams, meta: dict, filters_of, still_entries=None) -> tu
                     d = res.per_imu[k]
                     d["intervals_s"] = [[float(a), float(b)] for a, b in iv]
                     d["condition_method"] = cond["method"]
+                    if frozen_note:
+                        d["notes"] = list(d.get("notes", [])) + [frozen_note]
                     d["pairs"] = [{"imus": [members[i].key.instance for i in pr["imus"]],
                                    "dt_s": pr["calibration"]["dt_s"],
                                    "fitted_matrix": pr["calibration"]["fitted_matrix"],

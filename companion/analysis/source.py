@@ -35,6 +35,7 @@ def analyze_source(spec, axes, taus="octave", *, config=None, duration=None, sta
                "format": res.meta.get("format", "tlog/csv/live"),
                "params": {k: v for k, v in (res.meta.get("params") or {}).items() if k in SUMMARY_PARAMS}}
     summary["notes"] += [n for n in sel.notes if sel.intervals]
+    summary["frozen_gyros"] = frozen_gyros(streams, axes, sel, res.meta, summary["notes"], warn)
     dead = dead_gyros(streams)
     # a gyro fault among the axes asked for: the exit status says it (companion.errors.EXIT_FAULTS)
     summary["dead_gyros"] = dead_gyros(streams, axes)
@@ -110,6 +111,21 @@ def autopilot_entry(res, streams, dead: list[str], sel) -> dict | None:
             found.append(f"gyro changed alone while the vehicle was still ({sel.excluded_s(s.key.instance):.0f} s)")
         ours[s.key.instance] = found
     return check_report(res.meta.get("autopilot"), ours, sorted(ours))
+
+
+def frozen_gyros(streams, axes, sel, meta: dict, notes: list, warn=None) -> list[str]:
+    """The sentences naming every gyro axis (among ``axes``) frozen while the vehicle moved
+    (analysis/frozen_spans.py), said in ``notes`` and through ``warn``; the IMU's frozen spans are left out of
+    its still analysis (``sel.excluded``) and, through ``meta["frozen"]``, of the ground and flight figures."""
+    from companion.analysis.frozen_spans import frozen_spans, leave_out
+
+    spans = [sp for sp in frozen_spans(streams) if sp.axis in axes]
+    leave_out(spans, sel, meta)
+    out = [sp.text() for sp in spans]
+    notes += out
+    for text in out if warn is not None else []:
+        warn(text)
+    return out
 
 
 def dead_gyros(streams, axes=None) -> list[str]:

@@ -129,7 +129,7 @@ def run(args) -> int:
     warn_ignored_options(args, sources, "analyze")
     report = {"source": str(sources[0]) if len(sources) == 1 else ", ".join(map(str, sources)),
               "sources": [], "streams": []}
-    failed, codes, dead = [], [], []
+    failed, codes, dead, frozen = [], [], [], []
     for spec in sources:
         try:
             entries, summary = analyze_source(spec, args, axes, progress_enabled=not args.quiet)
@@ -140,6 +140,7 @@ def run(args) -> int:
             codes.append(exc.exit_code)
             continue
         dead += summary.pop("dead_gyros", [])  # for the exit status; the notes say it in the report
+        frozen += summary.pop("frozen_gyros", [])
         report["sources"].append(summary)
         report["streams"].extend(entries)
     if not report["streams"]:
@@ -180,12 +181,18 @@ def run(args) -> int:
         print(f"wrote {args.kalibr}")
     if failed:  # a gyro fault found in any source outranks the sources that could not be read
         raise CompanionError(f"{len(failed)} of {len(sources)} sources not analysed: {'; '.join(failed)}",
-                             EXIT_FAULTS if dead or EXIT_FAULTS in codes else EXIT_USAGE)
-    if dead:  # said above as a warning; the exit status lets a script gate on it (README "Exit status")
-        print(f"companion analyze: gyro faults found: {len(dead)} dead gyro stream(s) (exit status {EXIT_FAULTS})",
-              file=sys.stderr)
+                             EXIT_FAULTS if dead or frozen or EXIT_FAULTS in codes else EXIT_USAGE)
+    if dead or frozen:  # said above as a warning; the exit status lets a script gate on it (README "Exit status")
+        print(f"companion analyze: gyro faults found: {_found(dead, frozen)}", file=sys.stderr)
         return EXIT_FAULTS
     return 0
+
+
+def _found(dead: list, frozen: list) -> str:
+    """What the exit status says, e.g. ``1 dead gyro stream(s) (exit status 4)``."""
+    return ", ".join(([f"{len(dead)} dead gyro stream(s)"] if dead else [])
+                     + ([f"{len(frozen)} gyro axis/axes frozen while moving"] if frozen else [])) + \
+        f" (exit status {EXIT_FAULTS})"
 
 
 def _all_failed_code(codes) -> int:

@@ -94,16 +94,21 @@ def _row(entry: dict, stream, axis: str, vehicle: str, ranges) -> dict:
 FAULT_STATUSES = ("dead", "stuck", "saturated")
 
 
-def fault_rows(stream, axes, vehicle: str) -> dict:
+def fault_rows(stream, axes, vehicle: str, frozen=()) -> dict:
     """{axis: row} for the gyro axes of ``stream`` (among ``axes``) that are dead, stuck or saturated: status
-    the fault's kind, note its sentence, no coefficients."""
-    from companion.health.log_faults import gyro_faults
+    the fault's kind, note its sentence, no coefficients. ``frozen``: the log's spans of gyros frozen while the
+    vehicle moved (analysis/frozen_spans.py), each a stuck (or dead) axis of its stream."""
+    from companion.health.log_faults import AxisFault, gyro_faults
 
     if stream.gyro is None or stream.samples < 1:
         return {}
     out = {}
-    for f in gyro_faults(stream.gyro, float(stream.rate_hz), stream.t, getattr(stream, "gyro_lsb", None),
-                         stream.key.label()):
+    found = gyro_faults(stream.gyro, float(stream.rate_hz), stream.t, getattr(stream, "gyro_lsb", None),
+                        stream.key.label())
+    named = {f.axis for f in found}
+    found += [AxisFault(GYRO_AXES.index(sp.axis), sp.kind, sp.text()) for sp in frozen
+              if sp.label == stream.key.label() and GYRO_AXES.index(sp.axis) not in named]
+    for f in found:
         axis = GYRO_AXES[f.axis]
         if axis not in axes:
             continue
@@ -142,6 +147,12 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         res = load(path, config=config)
         streams = res.imu_streams()
         sel = select_still(streams, getattr(res, "meta", {}) or {})
+        from companion.analysis.frozen_spans import frozen_spans, leave_out
+
+        frozen = [sp for sp in frozen_spans(streams) if sp.axis in axes]
+        if frozen:
+            res.meta = dict(getattr(res, "meta", {}) or {})
+            leave_out(frozen, sel, res.meta)
         ident = log_identity(getattr(res, "meta", None))
         sysids = sorted({s.key.sysid for s in streams})
         sysid = sysids[0] if sysids else 0
@@ -156,7 +167,7 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         for s in streams:
             v = vehicle_of(s)
             duration = max(duration, float(s.timing.duration_s))
-            faulty = fault_rows(s, axes, v)  # a dead, stuck or saturated axis: a flagged IMU, not a failed log
+            faulty = fault_rows(s, axes, v, frozen)  # a dead, stuck or saturated axis: a flagged IMU, not a failed log
             rows += faulty.values()
             ranges = sel.ranges(s)
             if not ranges:  # no still data in this stream: nothing to analyse (said in the log's error)

@@ -49,6 +49,7 @@ from companion.health.degradation import DEGRADING, HEALTHY
 from companion.health.faults import AXES
 from companion.health.hold import debounce
 from companion.service.inflight_alarm import allan_shape, overlap_edf_gain, z_for_rate
+from companion.service.inflight_align import _held_faulty, _period, aligned
 from companion.service.inflight_settle import SettledFlight
 
 CONDITIONS = ("ground", "flight")
@@ -95,8 +96,6 @@ class ZDetector:
                                              good=zval < test.z_back)
 
 
-SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
-MIN_ALIGNED = 10
 VERSION = 1
 Z95 = 1.96
 
@@ -112,35 +111,6 @@ class InflightConfig:
     ground_hold_s: float = 10.0  # not turning for this long before flight becomes ground again
     settle_s: float = 15.0  # the test leaves out each flight stretch's first and last (inflight_settle.py)
     test: InflightTest = field(default_factory=InflightTest)
-
-
-def _period(t: np.ndarray) -> float:
-    return float(np.median(np.diff(t))) if t.size > 1 else 0.0
-
-
-def aligned(ci, cj, t_done: float):
-    """(t, gi, gj) of two channels' recent blocks after ``t_done``, at the slower stream's instants (the
-    faster one linearly interpolated there, only within 1.5 of its periods of a sample), or None."""
-    ti = np.concatenate([b[0] for b in ci.recent])
-    tj = np.concatenate([b[0] for b in cj.recent])
-    gi = np.concatenate([b[1] for b in ci.recent])
-    gj = np.concatenate([b[1] for b in cj.recent])
-    pi_, pj_ = _period(ti), _period(tj)
-    base_i = pi_ >= pj_ or pj_ <= SAME_RATE * pi_
-    (ts, gs), (tf, gf), pf = ((ti, gi), (tj, gj), pj_) if base_i else ((tj, gj), (ti, gi), pi_)
-    t_end = min(ti[-1], tj[-1])
-    mask = (ts > t_done) & (ts <= t_end) & (ts >= tf[0])
-    if np.count_nonzero(mask) < MIN_ALIGNED:
-        return None
-    t = ts[mask]
-    k = np.clip(np.searchsorted(tf, t), 1, tf.size - 1)
-    ok = np.minimum(np.abs(tf[k] - t), np.abs(tf[k - 1] - t)) <= 1.5 * pf
-    if np.count_nonzero(ok) < MIN_ALIGNED:
-        return None
-    t = t[ok]
-    g_slow = gs[mask][ok]
-    g_fast = np.column_stack([np.interp(t, tf, gf[:, a]) for a in range(3)])
-    return (t, g_slow, g_fast) if base_i else (t, g_fast, g_slow)
 
 
 class PairTrack:
@@ -162,6 +132,18 @@ class PairTrack:
         self.whole_s = {c: 0.0 for c in CONDITIONS}  # behind the whole-flight figures
         self.last_cond: str | None = None
         self.settled = SettledFlight(cfg.settle_s)  # the test's flight data: take-offs and landings left out
+        self.suspended = False  # one of its IMUs is held dead, stuck or saturated (InflightNoise.on_block)
+
+    def suspend(self) -> None:
+        """Stop the pair while one of its IMUs is held faulty: its accumulators start afresh when it resumes
+        (they hold the second or two of the fault before it was named: a frozen axis' difference is the
+        twin's whole motion, hundreds of times its noise), the learned baseline (InflightNoise) is kept."""
+        if not self.suspended:
+            self.suspended = True
+            self.cur, self.learn, self.whole = {}, {}, {}
+            self.whole_s = {c: 0.0 for c in CONDITIONS}
+            self.last_cond = None
+            self.settled.end()
 
     def _banks(self, cond: str, learning: bool):
         mk = dict(rate_hz=self.rate_hz, effects=("white_noise",), phases=PHASES, max_tau_s=8.0, fit="diag")
@@ -326,6 +308,7 @@ class InflightNoise:
         self._armed = bool(armed)
         cond = self._condition(channels, armed, t)
         ch = channels[imu]
+        faulty = {i for i, c in channels.items() if _held_faulty(c)}
         for other in channels.values():
             if other is ch or not other.recent or not ch.recent:
                 continue
@@ -340,6 +323,11 @@ class InflightNoise:
             pair.filters = tuple(fc)
             pair.all_filters = tuple(c.filters.get("gyro") for c in channels.values())
             pair.lsb = tuple(c.gyro_lsb for c in (channels[key[0]], channels[key[1]]) if c.gyro_lsb)
+            if key[0] in faulty or key[1] in faulty:  # resumes through feed's gap: a fresh calibration
+                pair.suspend()
+                pair.t_done = max(pair.t_done, min(float(channels[i].recent[-1][0][-1]) for i in key))
+                continue
+            pair.suspended = False
             got = aligned(channels[key[0]], channels[key[1]], pair.t_done)
             if got is None:
                 continue
@@ -425,7 +413,13 @@ class InflightNoise:
         changed: dict[str, set] = {ax: set() for ax in AXES}
         ratios: dict = {}
         zs: dict = {}
+        for k in [k for k, p in self.pairs.items() if p.suspended]:  # afresh when it resumes
+            for ax in AXES:
+                self.detectors.pop((cond, k, ax, "up"), None)
+                self.detectors.pop((cond, k, ax, "down"), None)
         for k, axes in now.items():
+            if self.pairs[k].suspended:
+                continue
             for ax, (x, sx) in axes.items():
                 if ax not in base.get(k, {}):
                     continue
