@@ -157,6 +157,13 @@ class PickupWatch:
         """A new flight (arming): the running means start afresh, the baseline stays."""
         self.cur = {}
 
+    def drop_imu(self, imu: int) -> None:
+        """IMU ``imu`` is held dead, stuck or saturated: its pairs' running means (and learning sums) start
+        afresh, since they hold the windows of the fault before it was named (a frozen gyro's band power is
+        0, a ratio of 1e7 that would stay in the mean for minutes)."""
+        self.cur = {k: v for k, v in self.cur.items() if imu not in k}
+        self.learn = {k: v for k, v in self.learn.items() if imu not in k}
+
     def add_window(self, powers: dict[int, np.ndarray], z_on: float) -> list[PickupVerdict]:
         """One flight window's band powers {imu: (3,)} (:func:`band_power`, one time span for all)."""
         imus = sorted(powers)

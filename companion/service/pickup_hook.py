@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from companion.health.pickup import PickupConfig, PickupWatch, band, band_power
+from companion.service.inflight_align import _held_faulty
 
 MIN_FILL = 0.8  # a window with fewer of its samples (a gap) is left out
 
@@ -36,6 +37,10 @@ class PickupHook:
             self.watch.new_flight()
         self._armed = bool(armed)
         chans = [c for c in channels.values() if c.recent and c.rate_hz]
+        held = [c for c in chans if _held_faulty(c)]  # a frozen or clipped gyro's band power is not its pick-up
+        for c in held:
+            self.watch.drop_imu(c.imu)
+        chans = [c for c in chans if c not in held]
         if cond != "flight" or len(chans) < 2 or len(chans) > 3:
             self.t_done = None
             return []
