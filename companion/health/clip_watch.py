@@ -112,13 +112,13 @@ class ClipWatch:
         if _median(tr.spacing) < MIN_SPACING_S:  # a fast stream: the block test sees its plateaus
             tr.g = np.zeros((0, 3))
             return
-        if np.any(np.abs(g) >= 0.999 * self.limit):  # a sample at the limit, even in a block held back
-            for k, j in zip(*np.nonzero(np.abs(g) >= 0.999 * self.limit)):
-                st = tr.axes[j]
-                if st.state == OK:
-                    st.state, st.level, st.quiet = FAULT, float(abs(g[k, j])), 0
-                    self.pending.append((float(t[k]), FaultEvent(imu, AXES[j], "saturation", FAULT, st.level,
-                                                                 critical=True)))
+        hit = np.abs(g) >= 0.999 * self.limit  # a sample at the limit, even in a block held back
+        for k, j in zip(*np.nonzero(hit)):
+            st = tr.axes[j]
+            if st.state == OK:
+                st.state, st.level, st.quiet = FAULT, float(abs(g[k, j])), 0
+                self.pending.append((float(t[k]), FaultEvent(imu, AXES[j], "saturation", FAULT, st.level,
+                                                             critical=True)))
         allg = np.concatenate([tr.g, g])
         tr.g = allg[-(WINDOW - 1):]
         m = g.shape[0]
@@ -156,13 +156,13 @@ class ClipWatch:
         # a clip is left and reached again: visits to the level apart by a sample well below it
         below = np.cumsum(stretch < top - band)[hit]
         visits = 1 + int(np.count_nonzero(np.diff(below) > 0))
-        # the most samples at one other value just below, over the whole window (a steady turn, a biased
-        # gyro at rest: as many at the neighbouring values as at the top)
-        vals, counts = np.unique(win[(win < top) & (win >= top - band)], return_counts=True)
-        near = int(counts.max()) if counts.size else 0
         if visits < 2:  # one stay at a value is a steady turn as much as a clip (a gyro quieter than its step)
             return None
-        if at >= NEED and at >= RATIO * near:
+        # the most samples at one other value just below, over the whole window (a steady turn, a biased
+        # gyro at rest: as many at the neighbouring values as at the top)
+        _, counts = np.unique(win[(win < top) & (win >= top - band)], return_counts=True)
+        near = int(counts.max()) if counts.size else 0
+        if at >= RATIO * near:  # (at >= NEED: above)
             st.state, st.level, st.quiet = FAULT, top, 0
             return FaultEvent(imu, ax, "saturation", FAULT, top, critical=True)
         return None

@@ -47,7 +47,8 @@ def band_power(g: np.ndarray, rate_hz: float, f_lo: float, f_hi: float) -> np.nd
     if n < MIN_SAMPLES:
         return np.full(3, math.nan)
     x = np.arange(n) - 0.5 * (n - 1)
-    g = g - g.mean(axis=0) - np.outer(x, (x @ (g - g.mean(axis=0))) / float(x @ x))
+    g0 = g - g.mean(axis=0)
+    g = g0 - np.outer(x, (x @ g0) / float(x @ x))
     w = np.hanning(n)
     spec = np.abs(np.fft.rfft(g * w[:, None], axis=0)) ** 2
     f = np.fft.rfftfreq(n, 1.0 / rate_hz)
@@ -151,7 +152,6 @@ class PickupWatch:
         self.cur: dict[tuple[int, int], PairStats] = {}
         self.det: dict[tuple, tuple[int, int]] = {}  # (who, axis) -> (state, count); who an IMU or a pair
         self.named: dict[tuple[int, int], float] = {}  # (imu, axis index) -> ratio
-        self.last_z: dict[tuple[int, int], np.ndarray] = {}
 
     def new_flight(self) -> None:
         """A new flight (arming): the running means start afresh, the baseline stays."""
@@ -192,7 +192,6 @@ class PickupWatch:
                 var = b["sd"] ** 2 * (cur.w2 / cur.w ** 2 + 1.0 / b["n"]) + self.cfg.model_sigma ** 2
                 delta[k] = cur.mean() - b["mean"]
                 zs[k] = delta[k] / np.sqrt(var)
-        self.last_z = zs
         return self._test(imus, zs, delta, z_on)
 
     def _learned(self) -> None:
@@ -200,7 +199,7 @@ class PickupWatch:
         axis with fewer than 10 windows: none)."""
         for k, st in self.learn.items():
             with np.errstate(invalid="ignore", divide="ignore"):
-                mean = st.s1 / st.w
+                mean = st.mean()
                 sd = np.sqrt(np.maximum(st.s2 / st.w - mean ** 2, 0.0) * st.w / np.maximum(st.w - 1.0, 1.0))
             ok = st.w >= 10
             self.base[k] = {"mean": np.where(ok, mean, math.nan), "sd": np.where(ok, sd, math.nan), "n": st.w.copy()}

@@ -32,9 +32,10 @@ def final_analysis(ch) -> dict:
     elif rec.kept_s < MIN_FINAL_S:
         out["note"] = f"only {rec.kept_s:.0f} s of still samples kept (< {MIN_FINAL_S:g} s): too few for the analysis"
     else:
-        rate = kept_rate(ch, rec)
+        ts = rec.axis_pieces("t")  # read once: the rate and the splits both need it
+        rate = kept_rate(ch, ts)
         out["rate_hz"] = rate
-        cuts = split_points(rec, rate, ch.time_res)
+        cuts = split_points(ts, rate, ch.time_res)
         for ax in rec.axes:
             pieces = [p[a:b] for p, edges in zip(rec.axis_pieces(ax), cuts) for a, b in zip(edges[:-1], edges[1:])]
             out["axes"][ax] = axis_analysis(ch, ax, pieces, rate)
@@ -42,21 +43,21 @@ def final_analysis(ch) -> dict:
     return out
 
 
-def kept_rate(ch, rec) -> float:
-    """The sample rate of the kept still samples by the rule ``analyze`` applies to a stream's intervals
+def kept_rate(ch, ts) -> float:
+    """The sample rate of the kept still samples (``ts``: their pieces' times) by the rule ``analyze`` applies to a stream's intervals
     (:func:`companion.timebase.period_of`): the channel's rate was taken from its first blocks, and a rate
     0.2 % off moves N by 0.1 %."""
     import numpy as np
 
     from companion.timebase import period_of
 
-    d = [np.diff(t) for t in rec.axis_pieces("t") if t.shape[0] > 1]
+    d = [np.diff(t) for t in ts if t.shape[0] > 1]
     period = period_of(np.concatenate(d), ch.time_res) if d else float("nan")
     return 1.0 / period if np.isfinite(period) and period > 0 else float(ch.rate_hz)
 
 
-def split_points(rec, rate_hz: float, resolution: float) -> list[list[int]]:
-    """Per kept piece the edges of its parts: a step over ``analyze``'s split threshold (10 periods,
+def split_points(ts, rate_hz: float, resolution: float) -> list[list[int]]:
+    """Per kept piece (``ts``: the pieces' times) the edges of its parts: a step over ``analyze``'s split threshold (10 periods,
     :func:`companion.sources.timestamps.step_rules`) splits it as ``analyze`` splits a stream's segments, where
     the run's blocks go on over a shorter gap than its ``gap_s`` (0.5 s)."""
     import numpy as np
@@ -65,7 +66,7 @@ def split_points(rec, rate_hz: float, resolution: float) -> list[list[int]]:
 
     split_s = step_rules(1.0 / rate_hz, resolution).split_s
     out = []
-    for t in rec.axis_pieces("t"):
+    for t in ts:
         cuts = (np.flatnonzero(np.diff(t) > split_s) + 1).tolist()
         out.append([0, *cuts, int(t.shape[0])])
     return out

@@ -89,6 +89,16 @@ def z_for_rate(per_imu_hour: float, imus: int, hold: int, check_s: float, memory
     return hi
 
 
+def z_threshold(per_imu_hour: float, imus: int, hold: int, check_s: float, memory_s: float,
+                baseline_s: float) -> float:
+    """:func:`z_for_rate` of a test whose statistic is a running mean over ``memory_s`` against a baseline
+    learned over ``baseline_s`` (the baseline's share of the variance from the two EDFs), rounded up to two
+    decimals."""
+    base_share = 1.0 / (1.0 + baseline_s / (2.0 * memory_s))  # sigma_b^2 / sigma_L^2 from the two EDFs
+    z = z_for_rate(per_imu_hour, imus, hold, check_s, memory_s, round(base_share, 4))
+    return math.ceil(z * 100.0) / 100.0
+
+
 SHAPE_GRID = 1 << 12  # frequency points of the Allan shape's integral
 
 

@@ -5,12 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-SAME_RATE = 1.2  # periods within this ratio: the lower-numbered IMU's instants are the common ones
-MIN_ALIGNED = 10
-
-
-def _period(t: np.ndarray) -> float:
-    return float(np.median(np.diff(t))) if t.size > 1 else 0.0
+# the disagreement test's choice of common instants and its minimum count
+from companion.service.imu_group import MIN_ALIGNED, SAME_RATE, _period
 
 
 def aligned(ci, cj, t_done: float):

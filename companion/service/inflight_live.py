@@ -48,8 +48,9 @@ from companion.estimators.pair_calibration import PairCalibration
 from companion.health.degradation import DEGRADING, HEALTHY
 from companion.health.faults import AXES
 from companion.health.hold import debounce
-from companion.service.inflight_alarm import allan_shape, overlap_edf_gain, z_for_rate
-from companion.service.inflight_align import _held_faulty, _period, aligned
+from companion.service.inflight_alarm import allan_shape, overlap_edf_gain, z_threshold
+from companion.service.imu_group import _period
+from companion.service.inflight_align import _held_faulty, aligned
 from companion.service.inflight_settle import SettledFlight
 
 CONDITIONS = ("ground", "flight")
@@ -79,9 +80,7 @@ class InflightTest:
     z_stable: float = 2.0
 
     def z(self, imus: int, check_s: float, memory_s: float, baseline_s: float) -> float:
-        base_share = 1.0 / (1.0 + baseline_s / (2.0 * memory_s))  # sigma_b^2 / sigma_L^2 from the two EDFs
-        z = z_for_rate(self.per_imu_hour, imus, self.hold_on, check_s, memory_s, round(base_share, 4))
-        return math.ceil(z * 100.0) / 100.0  # two decimals, rounded up
+        return z_threshold(self.per_imu_hour, imus, self.hold_on, check_s, memory_s, baseline_s)
 
 
 @dataclass
@@ -260,7 +259,6 @@ class InflightNoise:
         self.next_check: float | None = None
         # per condition: {who: {axis: (N, 1-sigma, bound)}}; who an IMU, or a pair (i, j) of two IMUs
         self.figures: dict[str, dict] = {c: {} for c in CONDITIONS}  # this flight (since arming)
-        self.recent: dict[str, dict] = {c: {} for c in CONDITIONS}  # the last memory_s (what the test sees)
         self._armed = False
         self.baseline: dict[str, dict] = {c: {} for c in CONDITIONS}
         self.detectors: dict[tuple, ZDetector] = {}  # (cond, pair, axis, "up" | "down")
@@ -380,7 +378,6 @@ class InflightNoise:
         out: list[Verdict] = []
         for cond in CONDITIONS:
             self.figures[cond] = self._figures(cond, "whole")
-            self.recent[cond] = self._figures(cond)
             if not self.baseline[cond]:
                 if self.pairs and all(p.learned_s(cond) >= self.cfg.baseline_s for p in self.pairs.values()):
                     pairs = self._pair_levels(cond, "learn")

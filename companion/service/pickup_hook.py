@@ -1,15 +1,14 @@
 """The pipeline's side of the vibration pick-up test (:mod:`companion.health.pickup`): every ``window_s`` of
 flight (the in-flight noise's condition, service/inflight_live.py) one window of all IMUs' recent samples
 over one time span, its band powers to the test; the threshold on Z from the test's false-alarm rate per
-flight IMU-hour (:func:`companion.service.inflight_alarm.z_for_rate`, as the in-flight noise test's)."""
+flight IMU-hour (:func:`companion.service.inflight_alarm.z_threshold`, as the in-flight noise test's)."""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
 from companion.health.pickup import PickupConfig, PickupWatch, band, band_power
+from companion.service.inflight_alarm import z_threshold
 from companion.service.inflight_align import _held_faulty
 
 MIN_FILL = 0.8  # a window with fewer of its samples (a gap) is left out
@@ -17,11 +16,7 @@ MIN_FILL = 0.8  # a window with fewer of its samples (a gap) is left out
 
 def z_on(cfg: PickupConfig, imus: int, per_imu_hour: float) -> float:
     """Z threshold for ``imus`` IMUs (every pair, 3 axes, both ways) at ``per_imu_hour`` false alarms."""
-    from companion.service.inflight_alarm import z_for_rate
-
-    share = 1.0 / (1.0 + cfg.baseline_s / (2.0 * cfg.memory_s))  # the baseline's part of the variance
-    z = z_for_rate(per_imu_hour, max(imus, 2), cfg.hold_on, cfg.window_s, cfg.memory_s, round(share, 4))
-    return math.ceil(z * 100.0) / 100.0
+    return z_threshold(per_imu_hour, max(imus, 2), cfg.hold_on, cfg.window_s, cfg.memory_s, cfg.baseline_s)
 
 
 class PickupHook:

@@ -208,8 +208,9 @@ class Pipeline:
                 ch.on_break()
             else:  # gap
                 ch.on_break()
-                if ch.cutter.slower_rate() is not None:  # every interval a gap: a slower stream
-                    self._switch_rate(ch, ch.cutter.slower_rate(), np.array(ch.cutter.gap_t), ch.rate_hz)
+                slower = ch.cutter.slower_rate()
+                if slower is not None:  # every interval a gap: a slower stream
+                    self._switch_rate(ch, slower, np.array(ch.cutter.gap_t), ch.rate_hz)
             if self.failed:
                 break
         return ch.cutter.counts["samples"] - before
