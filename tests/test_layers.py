@@ -16,7 +16,7 @@ CORE, ADAPTER, SERVICE, CLI = 0, 1, 2, 3
 LAYER_NAMES = {CORE: "core", ADAPTER: "adapter", SERVICE: "service/fleet", CLI: "cli"}
 #: module prefix -> layer; the longest matching prefix decides (docs/architecture.md, "Who may import whom")
 LAYERS = {
-    "companion": CORE,  # samples, units, errors, timebase, the package itself
+    "companion": CORE,  # samples, units, errors, timebase, timespans, the package itself
     "companion.allan": CORE,
     "companion.estimators": CORE,
     "companion.sim": CORE,  # synthesis, body motion, the vehicle simulator

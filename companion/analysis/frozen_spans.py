@@ -68,15 +68,16 @@ def _monotonic(s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, g, a
 
 
-def frozen_spans(streams) -> list[FrozenSpan]:
-    """The frozen spans of every vehicle's gyros in ``streams`` (companion.samples.ImuStream), in time order."""
+def frozen_spans(streams, axes=("gx", "gy", "gz")) -> list[FrozenSpan]:
+    """The frozen spans of every vehicle's gyro ``axes`` in ``streams`` (companion.samples.ImuStream), in time
+    order."""
     by_vehicle: dict = {}
     for (sysid, compid, inst), s in _stream_per_instance(streams).items():
         by_vehicle.setdefault((sysid, compid), {})[inst] = s
     out = []
     for members in by_vehicle.values():
         out += _vehicle_spans(members)
-    return sorted(out, key=lambda sp: (sp.t0, sp.instance, sp.axis))
+    return sorted((sp for sp in out if sp.axis in axes), key=lambda sp: (sp.t0, sp.instance, sp.axis))
 
 
 def _vehicle_spans(members: dict) -> list[FrozenSpan]:
@@ -124,19 +125,12 @@ def _vehicle_spans(members: dict) -> list[FrozenSpan]:
 
 def spans_by_instance(spans: list[FrozenSpan]) -> dict:
     """{(sysid, compid, instance): [(t0, t1), ...]} merged per IMU (any axis)."""
+    from companion.timespans import merge_intervals
+
     out: dict = {}
     for sp in spans:
         out.setdefault((sp.sysid, sp.compid, sp.instance), []).append((sp.t0, sp.t1))
-    for i, iv in out.items():
-        iv.sort()
-        merged = [list(iv[0])]
-        for a, b in iv[1:]:
-            if a <= merged[-1][1]:
-                merged[-1][1] = max(merged[-1][1], b)
-            else:
-                merged.append([a, b])
-        out[i] = [(a, b) for a, b in merged]
-    return out
+    return {i: merge_intervals(iv) for i, iv in out.items()}
 
 
 def leave_out(spans: list[FrozenSpan], sel, meta: dict) -> None:

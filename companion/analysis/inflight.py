@@ -135,24 +135,18 @@ def _without_frozen(cond: dict, members, frozen: dict) -> tuple[dict, str | None
     """The condition intervals less every member's frozen spans (analysis/frozen_spans.py; ``frozen``
     {(sysid, compid, instance): [(t0, t1)]}), and the note saying so: a pair's difference over a frozen gyro is
     its twin's whole motion, which would be split onto the healthy IMU."""
-    cut = sorted(iv for s in members for iv in frozen.get((s.key.sysid, s.key.compid, s.key.instance), []))
+    from companion.timespans import merge_intervals, minus
+
+    # the members' spans may overlap
+    cut = merge_intervals(iv for s in members for iv in frozen.get((s.key.sysid, s.key.compid, s.key.instance), []))
     if not cut:
         return cond, None
-    merged = [list(cut[0])]
-    for a, b in cut[1:]:  # the members' spans may overlap
-        if a <= merged[-1][1]:
-            merged[-1][1] = max(merged[-1][1], b)
-        else:
-            merged.append([a, b])
-    cut = [(a, b) for a, b in merged]
     out = dict(cond)
     for c in CONDITIONS:
-        out[c] = [(max(a, lo), min(b, hi)) for a, b in cond[c]
-                  for lo, hi in zip([-np.inf] + [e for _, e in cut], [s for s, _ in cut] + [np.inf])
-                  if min(b, hi) > max(a, lo)]
+        out[c] = minus(cond[c], cut)
     who = ", ".join(sorted({f"IMU {s.key.instance}" for s in members
                             if frozen.get((s.key.sysid, s.key.compid, s.key.instance))}))
-    span = f"{cut[0][0]:.0f}-{max(b for _, b in cut):.0f} s"
+    span = f"{cut[0][0]:.0f}-{cut[-1][1]:.0f} s"
     return out, (f"{who} frozen within {span} (the notes name it): that time left out of every pair's figure, "
                  "whose difference there would be the twin's whole motion")
 

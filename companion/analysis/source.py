@@ -119,7 +119,7 @@ def frozen_gyros(streams, axes, sel, meta: dict, notes: list, warn=None) -> list
     its still analysis (``sel.excluded``) and, through ``meta["frozen"]``, of the ground and flight figures."""
     from companion.analysis.frozen_spans import frozen_spans, leave_out
 
-    spans = [sp for sp in frozen_spans(streams) if sp.axis in axes]
+    spans = frozen_spans(streams, axes)
     leave_out(spans, sel, meta)
     out = [sp.text() for sp in spans]
     notes += out

@@ -149,7 +149,7 @@ def analyze_log(path: str, axes=GYRO_AXES, vehicle_from: str = "auto", config=No
         sel = select_still(streams, getattr(res, "meta", {}) or {})
         from companion.analysis.frozen_spans import frozen_spans, leave_out
 
-        frozen = [sp for sp in frozen_spans(streams) if sp.axis in axes]
+        frozen = frozen_spans(streams, axes)
         if frozen:
             res.meta = dict(getattr(res, "meta", {}) or {})
             leave_out(frozen, sel, res.meta)

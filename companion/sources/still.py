@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from companion.timespans import minus
 from companion.sources.still_windows import GyroEvidence, moving_windows
 
 
@@ -78,7 +79,7 @@ class StillSelection:
         segs = stream.segments or [(0, stream.samples)]
         out = []
         key = getattr(stream, "key", None)
-        for t0, t1 in _minus(self.intervals, self.excluded.get(key.instance, []) if key is not None else []):
+        for t0, t1 in minus(self.intervals, self.excluded.get(key.instance, []) if key is not None else []):
             a = int(np.searchsorted(t, t0, side="left"))
             b = int(np.searchsorted(t, t1, side="left"))
             for s0, s1 in segs:
@@ -114,23 +115,6 @@ class StillSelection:
                 "short_s": self.short_s, "outside_s": self.outside_s, "total_s": self.total_s,
                 "description": self.describe(), "notes": list(self.notes),
                 "excluded": {str(i): [[float(a), float(b)] for a, b in iv] for i, iv in self.excluded.items()}}
-
-
-def _minus(intervals, cut) -> list[tuple[float, float]]:
-    """``intervals`` with the intervals ``cut`` taken out (both sorted, non-overlapping)."""
-    out = []
-    for a, b in intervals:
-        for c, d in cut:
-            if d <= a or c >= b:
-                continue
-            if c > a:
-                out.append((a, c))
-            a = max(a, d)
-            if a >= b:
-                break
-        if a < b:
-            out.append((a, b))
-    return out
 
 
 def armed_intervals(transitions, t_end: float) -> list[tuple[float, float]]:
@@ -335,7 +319,7 @@ def _exclude_lone_gyros(sel: StillSelection, lone: dict[int, np.ndarray], motion
     keep = sel.intervals
     for i, w in sorted(lone.items()):
         cut = [grid.interval(a, b) for a, b in _runs(_dilate(w, guard) & still)]
-        cut = [(a, b) for a, b in _minus(keep, _minus(keep, cut))]  # only what lies inside the kept intervals
+        cut = [(a, b) for a, b in minus(keep, minus(keep, cut))]  # only what lies inside the kept intervals
         if not cut:
             continue
         sel.excluded[i] = cut
